@@ -1,0 +1,44 @@
+"""The ``grutrack`` command line. Each sub-command lives in its own module of this package with
+``add_parser(subparsers)`` (registers the sub-command and sets ``func``) and is listed in COMMANDS."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from grutrack import __version__
+from grutrack.errors import GrutrackError
+
+#: sub-command modules, in the order ``grutrack --help`` lists them
+COMMANDS: tuple[str, ...] = (
+    "grutrack.cli.track",
+    "grutrack.cli.evaluate",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The top-level parser with every sub-command registered."""
+    parser = argparse.ArgumentParser(
+        prog="grutrack",
+        description="3D multi-object tracking with a semi-supervised GRU-Kalman filter: "
+                    "tracking, official submissions and evaluation for nuScenes and Argoverse 2.")
+    parser.add_argument("--version", action="version", version=f"grutrack {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        importlib.import_module(name).add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``grutrack`` console script; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except GrutrackError as exc:
+        print(f"grutrack {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,107 @@
+"""Loader of the official nuScenes detection-submission JSON into canonical per-sample box sets.
+
+Validates what a tracker relies on and says exactly what is wrong: every sample of the split present,
+known class names, finite numbers, positive sizes, unit quaternions. The 10 detection classes map to the
+7 tracking classes; boxes of the 3 untracked classes (barrier, traffic_cone, construction_vehicle) are dropped.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from grutrack.boxes import yaw_from_quaternion
+from grutrack.classes import CLASS_INDEX, DETECTION_CLASSES, DETECTION_TO_TRACKING
+from grutrack.data.scene import BoxSet
+from grutrack.errors import InputFormatError
+
+QUATERNION_TOLERANCE = 1e-2  # |‖q‖ - 1| allowed; JSON writers round quaternions to a few digits
+
+
+def read_detection_json(path: str | Path) -> dict:
+    """Parse a detection JSON and check its top level (``meta``, ``results``)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputFormatError(f"{path}: detection file does not exist")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputFormatError(f"{path}: not valid JSON ({exc})") from exc
+    if not isinstance(data, dict) or not isinstance(data.get("results"), dict):
+        raise InputFormatError(f"{path}: expected a JSON object with a 'results' object "
+                               f"{{sample_token: [box, ...]}} (official nuScenes detection format)")
+    return data
+
+
+def load_detections(path: str | Path, sample_tokens: list[str]) -> dict[str, BoxSet]:
+    """Detections of the given samples as canonical box sets (tracking classes only).
+
+    Every token in ``sample_tokens`` must be a key of ``results`` (an empty list is fine); extra samples
+    in the file are ignored. Raises :class:`InputFormatError` naming the file, sample, box and field.
+    """
+    path = Path(path)
+    results = read_detection_json(path)["results"]
+    missing = [t for t in sample_tokens if t not in results]
+    if missing:
+        raise InputFormatError(
+            f"{path}: {len(missing)} of {len(sample_tokens)} sample tokens of the split are missing from "
+            f"'results' (first: {missing[:3]}); every sample must be present, with [] when it has no boxes")
+    return {token: _sample_boxes(path, token, results[token]) for token in sample_tokens}
+
+
+def _sample_boxes(path: Path, token: str, boxes: list) -> BoxSet:
+    """Validate and convert the box dicts of one sample."""
+    if not isinstance(boxes, list):
+        raise InputFormatError(f"{path}: results['{token}'] must be a list of boxes, got {type(boxes).__name__}")
+    if not boxes:
+        return BoxSet.empty()
+    try:
+        names = [b["detection_name"] for b in boxes]
+        arr = np.array([[*b["translation"], *b["size"], *b["rotation"], *b["velocity"][:2],
+                         b["detection_score"]] for b in boxes], dtype=np.float64)
+    except KeyError as exc:
+        raise InputFormatError(f"{path}: a box of sample {token} has no field {exc} (needs translation, size, "
+                               f"rotation, velocity, detection_name, detection_score)") from exc
+    except (TypeError, ValueError) as exc:
+        raise InputFormatError(f"{path}: a box of sample {token} has a malformed numeric field: translation "
+                               f"[x,y,z], size [w,l,h], rotation [w,x,y,z], velocity [vx,vy] and "
+                               f"detection_score must be numbers ({exc})") from exc
+    if arr.shape[1] != 13:
+        raise InputFormatError(f"{path}: boxes of sample {token} have wrong field lengths (expected translation 3, "
+                               f"size 3, rotation 4, velocity 2)")
+    _check_values(path, token, names, arr)
+    keep = np.array([DETECTION_TO_TRACKING[n] is not None for n in names], dtype=bool)
+    labels = np.array([CLASS_INDEX[DETECTION_TO_TRACKING[n]] for n, k in zip(names, keep) if k], dtype=np.int64)
+    arr = arr[keep]
+    yaw = yaw_from_quaternion(arr[:, 6:10])
+    out = np.column_stack([arr[:, 0:6], yaw, arr[:, 10:12]])
+    return BoxSet(out, arr[:, 12], labels)
+
+
+def _check_values(path: Path, token: str, names: list[str], arr: np.ndarray) -> None:
+    """Raise on unknown class names, non-finite numbers, non-positive sizes and non-unit quaternions."""
+    unknown = sorted({n for n in names if n not in DETECTION_TO_TRACKING})
+    if unknown:
+        raise InputFormatError(f"{path}: sample {token} has unknown detection_name {unknown}; expected one of "
+                               f"{', '.join(DETECTION_CLASSES)}")
+    fields = ["translation"] * 3 + ["size"] * 3 + ["rotation"] * 4 + ["velocity"] * 2 + ["detection_score"]
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise InputFormatError(f"{path}: sample {token}, box {i}: field '{fields[j]}' is not a finite number "
+                               f"({arr[i, j]}); NaN/inf are not allowed")
+    if (arr[:, 3:6] <= 0).any():
+        i = int(np.argwhere((arr[:, 3:6] <= 0).any(axis=1))[0, 0])
+        raise InputFormatError(f"{path}: sample {token}, box {i}: field 'size' must be positive [w, l, h] in "
+                               f"metres, got {arr[i, 3:6].tolist()}")
+    norm = np.linalg.norm(arr[:, 6:10], axis=1)
+    if (np.abs(norm - 1.0) > QUATERNION_TOLERANCE).any():
+        i = int(np.argmax(np.abs(norm - 1.0)))
+        raise InputFormatError(f"{path}: sample {token}, box {i}: field 'rotation' must be a unit quaternion "
+                               f"[w, x, y, z], has norm {norm[i]:.4f}")
+    if ((arr[:, 12] < 0) | (arr[:, 12] > 1)).any():
+        i = int(np.argwhere((arr[:, 12] < 0) | (arr[:, 12] > 1))[0, 0])
+        raise InputFormatError(f"{path}: sample {token}, box {i}: field 'detection_score' must be in [0, 1], "
+                               f"got {arr[i, 12]}")

@@ -1,0 +1,131 @@
+"""nuScenes adapter: the scenes of a split (standard, mini or custom ``splits.json``) as canonical scenes.
+
+Reads the dataset through nuscenes-devkit. Ground truth, when asked for, is mapped to the 7 tracking classes
+(annotations of other categories are dropped) with the devkit's centred-difference velocity (NaN -> 0).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from grutrack.boxes import yaw_from_quaternion
+from grutrack.classes import CLASS_INDEX
+from grutrack.data.scene import BoxSet, Frame, Scene
+from grutrack.errors import DatasetError
+
+PREDEFINED_SPLITS = ("train", "val", "test", "mini_train", "mini_val", "train_detect", "train_track")
+
+
+def open_nuscenes(dataroot: str | Path, version: str, verbose: bool = False):
+    """Load ``NuScenes(version, dataroot)`` after checking that the folder exists and holds that version."""
+    root = Path(dataroot)
+    if not root.is_dir():
+        raise DatasetError(f"nuScenes dataroot {root} does not exist (expected a folder holding {version}/)")
+    if not (root / version).is_dir():
+        found = sorted(p.name for p in root.iterdir() if p.is_dir() and (p / "scene.json").exists())
+        raise DatasetError(f"nuScenes dataroot {root} has no version folder {version}/ "
+                           f"(found: {', '.join(found) or 'none'})")
+    from nuscenes import NuScenes
+
+    if verbose:
+        return NuScenes(version=version, dataroot=str(root), verbose=True)
+    with contextlib.redirect_stdout(io.StringIO()):
+        return NuScenes(version=version, dataroot=str(root), verbose=False)
+
+
+def available_splits(nusc) -> list[str]:
+    """Split names usable with this dataset: predefined ones matching the version, plus custom ones."""
+    names = [s for s in PREDEFINED_SPLITS if _split_matches_version(s, nusc.version)]
+    custom = Path(nusc.dataroot) / nusc.version / "splits.json"
+    if custom.is_file():
+        names += list(json.loads(custom.read_text()).keys())
+    return names
+
+
+def _split_matches_version(split: str, version: str) -> bool:
+    if split in ("mini_train", "mini_val"):
+        return version.endswith("mini")
+    if split == "test":
+        return version.endswith("test")
+    return version.endswith("trainval")
+
+
+def split_scene_names(nusc, split: str) -> list[str]:
+    """Scene names of ``split``; a predefined split, or one from ``<dataroot>/<version>/splits.json``."""
+    from nuscenes.utils.splits import create_splits_scenes
+
+    if split in PREDEFINED_SPLITS:
+        if not _split_matches_version(split, nusc.version):
+            raise DatasetError(f"split '{split}' does not belong to nuScenes version {nusc.version} "
+                               f"(available: {', '.join(available_splits(nusc))})")
+        names = create_splits_scenes()[split]
+    else:
+        custom = Path(nusc.dataroot) / nusc.version / "splits.json"
+        splits = json.loads(custom.read_text()) if custom.is_file() else {}
+        if split not in splits:
+            raise DatasetError(f"unknown split '{split}' for {nusc.dataroot}/{nusc.version} "
+                               f"(available: {', '.join(available_splits(nusc))}; custom splits are read "
+                               f"from {custom})")
+        names = list(splits[split])
+    present = {s["name"] for s in nusc.scene}
+    missing = [n for n in names if n not in present]
+    if len(missing) == len(names):
+        raise DatasetError(f"none of the {len(names)} scenes of split '{split}' is in {nusc.dataroot}/{nusc.version}")
+    return [n for n in names if n in present]
+
+
+def load_scenes(nusc, split: str, with_gt: bool = False) -> list[Scene]:
+    """Canonical scenes of ``split`` in the order of the dataset's scene table.
+
+    Each frame is a keyframe (sample) with its LIDAR_TOP ego pose; ``gt`` holds the annotations of the
+    7 tracking classes when ``with_gt`` (ids = instance tokens, ``extra['num_pts']`` = lidar + radar points).
+    """
+    wanted = set(split_scene_names(nusc, split))
+    scenes = []
+    for rec in nusc.scene:
+        if rec["name"] not in wanted:
+            continue
+        frames, token = [], rec["first_sample_token"]
+        while token:
+            sample = nusc.get("sample", token)
+            frames.append(_frame(nusc, sample, with_gt))
+            token = sample["next"]
+        scenes.append(Scene(name=rec["name"], token=rec["token"], frames=frames))
+    return scenes
+
+
+def _frame(nusc, sample: dict, with_gt: bool) -> Frame:
+    sd = nusc.get("sample_data", sample["data"]["LIDAR_TOP"])
+    pose = nusc.get("ego_pose", sd["ego_pose_token"])
+    return Frame(token=sample["token"], timestamp=int(sample["timestamp"]),
+                 ego_translation=np.asarray(pose["translation"], dtype=np.float64),
+                 ego_rotation=np.asarray(pose["rotation"], dtype=np.float64),
+                 gt=_gt_boxes(nusc, sample) if with_gt else None)
+
+
+def _gt_boxes(nusc, sample: dict) -> BoxSet:
+    """Ground-truth boxes of one sample, 7 tracking classes only."""
+    from nuscenes.eval.tracking.utils import category_to_tracking_name
+
+    rows, labels, ids, pts = [], [], [], []
+    for ann_token in sample["anns"]:
+        ann = nusc.get("sample_annotation", ann_token)
+        name = category_to_tracking_name(ann["category_name"])
+        if name is None:
+            continue
+        vel = nusc.box_velocity(ann_token)[:2]
+        vel = np.where(np.isfinite(vel), vel, 0.0)
+        yaw = yaw_from_quaternion(np.asarray(ann["rotation"]))[0]
+        rows.append([*ann["translation"], *ann["size"], yaw, *vel])
+        labels.append(CLASS_INDEX[name])
+        ids.append(ann["instance_token"])
+        pts.append(ann["num_lidar_pts"] + ann["num_radar_pts"])
+    if not rows:
+        return BoxSet.empty(with_ids=True)
+    return BoxSet(np.asarray(rows), np.ones(len(rows)), np.asarray(labels),
+                  np.asarray(ids, dtype=object), {"num_pts": np.asarray(pts, dtype=np.int64)})

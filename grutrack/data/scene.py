@@ -1,0 +1,88 @@
+"""The canonical in-memory form shared by every stage: scenes of frames of boxes.
+
+Everything after the dataset adapters (tracking, training, export) reads only these classes; nothing in
+them knows whether the data came from nuScenes, Argoverse 2 or the synthetic demo.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from grutrack.boxes import BOX_DIM, empty_boxes
+
+
+@dataclass
+class BoxSet:
+    """Boxes of one frame.
+
+    boxes:  (N, 9) float64 ``[x, y, z, w, l, h, yaw, vx, vy]``, global/city frame, metres, radians, m/s.
+    scores: (N,) float64 confidence in [0, 1] (1 for ground truth).
+    labels: (N,) int64 index into :data:`grutrack.classes.TRACKING_CLASSES`.
+    ids:    (N,) object array of identity strings (GT instance tokens / track ids) or None.
+    extra:  optional per-box arrays (e.g. ``num_pts`` for GT), each of length N.
+    """
+
+    boxes: np.ndarray
+    scores: np.ndarray
+    labels: np.ndarray
+    ids: np.ndarray | None = None
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.boxes = np.asarray(self.boxes, dtype=np.float64).reshape(-1, BOX_DIM)
+        self.scores = np.asarray(self.scores, dtype=np.float64).reshape(-1)
+        self.labels = np.asarray(self.labels, dtype=np.int64).reshape(-1)
+        n = len(self.boxes)
+        if len(self.scores) != n or len(self.labels) != n or (self.ids is not None and len(self.ids) != n):
+            raise ValueError(f"BoxSet arrays disagree in length: boxes {n}, scores {len(self.scores)}, "
+                             f"labels {len(self.labels)}, ids {None if self.ids is None else len(self.ids)}")
+
+    def __len__(self) -> int:
+        return len(self.boxes)
+
+    @classmethod
+    def empty(cls, with_ids: bool = False) -> "BoxSet":
+        """A set of zero boxes."""
+        return cls(empty_boxes(), np.zeros(0), np.zeros(0, dtype=np.int64),
+                   np.zeros(0, dtype=object) if with_ids else None)
+
+    def subset(self, index: np.ndarray) -> "BoxSet":
+        """The boxes selected by a boolean mask or an index array."""
+        return BoxSet(self.boxes[index], self.scores[index], self.labels[index],
+                      None if self.ids is None else self.ids[index],
+                      {k: v[index] for k, v in self.extra.items()})
+
+
+@dataclass
+class Frame:
+    """One keyframe: its sample token, time, ego pose, and optionally detections and ground truth.
+
+    timestamp: int, microseconds. ego_translation: (3,) float64 metres, global frame.
+    ego_rotation: (4,) float64 unit quaternion ``[w, x, y, z]`` (ego -> global).
+    """
+
+    token: str
+    timestamp: int
+    ego_translation: np.ndarray
+    ego_rotation: np.ndarray
+    detections: BoxSet | None = None
+    gt: BoxSet | None = None
+
+
+@dataclass
+class Scene:
+    """A sequence of frames in time order (nuScenes scene / AV2 log)."""
+
+    name: str
+    token: str
+    frames: list[Frame]
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    @property
+    def sample_tokens(self) -> list[str]:
+        """The frame tokens in time order."""
+        return [f.token for f in self.frames]

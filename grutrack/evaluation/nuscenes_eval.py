@@ -1,0 +1,91 @@
+"""Official nuScenes tracking evaluation (nuscenes-devkit ``TrackingEval``, ``tracking_nips_2019``) for
+standard and custom splits, and the metrics JSON every later stage reads.
+
+Metrics JSON: ``{"dataset", "version", "split", "evaluator", "submission", "overall": {metric: value},
+"per_class": {class: {metric: value}}, "devkit_summary": <the devkit's metrics_summary.json>}``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import tempfile
+from pathlib import Path
+
+from grutrack.classes import TRACKING_CLASSES
+from grutrack.errors import InputFormatError
+from grutrack.io import write_json_atomic
+
+#: metrics reported overall and per class, in the devkit's names
+METRIC_KEYS = ("amota", "amotp", "recall", "motar", "gt", "mota", "motp", "mt", "ml", "faf", "tp", "fp", "fn",
+               "ids", "frag", "tid", "lgd")
+
+
+def devkit_tracking_eval(dataroot: str | Path, version: str, split: str, submission: str | Path,
+                         verbose: bool = False) -> dict:
+    """Run the official ``TrackingEval`` and return the devkit's summary dict (metrics_summary.json)."""
+    from nuscenes.eval.common.config import config_factory
+    from nuscenes.eval.tracking.evaluate import TrackingEval
+
+    submission = Path(submission)
+    if not submission.is_file():
+        raise InputFormatError(f"{submission}: submission file does not exist")
+    with tempfile.TemporaryDirectory(prefix="grutrack-eval-") as out_dir:
+        sink = contextlib.nullcontext() if verbose else contextlib.redirect_stdout(io.StringIO())
+        with sink:
+            ev = TrackingEval(config=config_factory("tracking_nips_2019"), result_path=str(submission),
+                              eval_set=split, output_dir=out_dir, nusc_version=version,
+                              nusc_dataroot=str(dataroot), verbose=verbose)
+            ev.main(render_curves=False)
+        return json.loads((Path(out_dir) / "metrics_summary.json").read_text())
+
+
+def metrics_from_summary(summary: dict) -> tuple[dict, dict]:
+    """(overall, per_class) metric dicts from a devkit summary; NaN becomes None (valid JSON)."""
+    overall = {k: _clean(summary.get(k)) for k in METRIC_KEYS}
+    per_class = {c: {k: _clean(summary["label_metrics"].get(k, {}).get(c)) for k in METRIC_KEYS
+                     if k in summary["label_metrics"]} for c in TRACKING_CLASSES}
+    return overall, per_class
+
+
+def _clean(v):
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
+def _clean_tree(obj):
+    """A copy of a nested dict/list with non-finite floats replaced by None."""
+    if isinstance(obj, dict):
+        return {k: _clean_tree(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean_tree(v) for v in obj]
+    return _clean(obj)
+
+
+def metrics_document(summary: dict, *, dataset: str, version: str, split: str, evaluator: str,
+                     submission: str) -> dict:
+    """The metrics JSON document for a devkit-format summary."""
+    overall, per_class = metrics_from_summary(summary)
+    return {"dataset": dataset, "version": version, "split": split, "evaluator": evaluator,
+            "submission": str(submission), "overall": overall, "per_class": per_class,
+            "devkit_summary": _clean_tree(summary)}
+
+
+def write_metrics(path: str | Path, doc: dict) -> None:
+    """Write the metrics JSON atomically."""
+    write_json_atomic(path, doc, indent=2)
+
+
+def format_summary(doc: dict) -> str:
+    """A human-readable table: overall AMOTA/AMOTP/MOTA/IDS/recall and the same per class."""
+    def fmt(v, digits=3):
+        return "  nan" if v is None else (f"{v:.{digits}f}" if isinstance(v, float) else str(v))
+
+    cols = ("amota", "amotp", "mota", "recall", "ids", "frag", "tp", "fp", "fn")
+    lines = [f"{'class':<12}" + "".join(f"{c:>9}" for c in cols)]
+    for name, m in [*doc["per_class"].items(), ("OVERALL", doc["overall"])]:
+        lines.append(f"{name:<12}" + "".join(f"{fmt(m.get(c)):>9}" for c in cols))
+    return "\n".join(lines)

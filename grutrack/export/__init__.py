@@ -1,0 +1,1 @@
+"""Official submission formats: one module per format, each validating before it writes atomically."""

@@ -1,0 +1,204 @@
+"""Per-class motion configuration: which state-space model each tracking class uses and its Q, R, P0.
+
+The default file, ``grutrack/configs/motion/polymot_nusc.yaml``, holds Poly-MOT's published nuScenes values
+(every key documented there with its source). :func:`load_motion_config` validates a file strictly (a missing,
+unknown or misspelt key raises :class:`grutrack.errors.ConfigError` naming the file and the key) and returns,
+per tracking class, numpy matrices of the right dimension for the class's model.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from grutrack.boxes import BOX_DIM
+from grutrack.classes import TRACKING_CLASSES
+from grutrack.errors import ConfigError
+from grutrack.motion.models import MODELS, MotionModel, make_model
+
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs" / "motion"
+DEFAULT_CONFIG = CONFIG_DIR / "polymot_nusc.yaml"
+
+_TOP_KEYS = ("models", "classes")
+_MODEL_KEYS = ("P0", "Q", "R", "params")
+_CLASS_KEYS = ("model", "P0", "Q", "R")
+# minimum eigenvalue requirement per matrix: R and P0 positive definite, Q positive semi-definite
+_STRICT = {"P0": True, "R": True, "Q": False}
+
+
+def resolve_config_path(path: str | Path | None = None) -> Path:
+    """A config file path: None -> the default, a bare name (``polymot_nusc``) -> ``configs/motion/<name>.yaml``."""
+    if path is None:
+        return DEFAULT_CONFIG
+    p = Path(path)
+    if not p.exists() and p.suffix == "" and len(p.parts) == 1:
+        return CONFIG_DIR / f"{p.name}.yaml"
+    return p
+
+
+def _fail(path: Path, key: str, msg: str) -> ConfigError:
+    return ConfigError(f"{path}: key '{key}': {msg}")
+
+
+def _check_keys(path: Path, where: str, node, expected: tuple[str, ...]) -> None:
+    """Raise unless ``node`` is a mapping with exactly the keys ``expected``."""
+    if not isinstance(node, Mapping):
+        raise _fail(path, where or "<top level>", f"expected a mapping with keys {list(expected)}")
+    prefix = f"{where}." if where else ""
+    for key in node:
+        if key not in expected:
+            raise _fail(path, f"{prefix}{key}", f"unknown key (expected one of {list(expected)})")
+    for key in expected:
+        if key not in node:
+            raise _fail(path, f"{prefix}{key}", "missing")
+
+
+def _canonical_model(path: Path, key: str, name) -> str:
+    """The canonical model name (``CTRA``, ``Bicycle``, ``CA``, ``CV``) for a case-insensitive spelling."""
+    lookup = {k.lower(): k for k in MODELS}
+    if not isinstance(name, str) or name.lower() not in lookup:
+        raise _fail(path, key, f"unknown motion model {name!r} (expected one of {sorted(MODELS)})")
+    return lookup[name.lower()]
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _matrix(path: Path, key: str, value, dim: int, strict: bool) -> np.ndarray:
+    """A ``(dim, dim)`` matrix from a scalar (times I), a diagonal list or a full nested list; validated."""
+    if _is_number(value):
+        M = float(value) * np.eye(dim)
+    elif isinstance(value, list) and all(_is_number(v) for v in value):
+        if len(value) != dim:
+            raise _fail(path, key, f"diagonal has {len(value)} values, the model needs {dim}")
+        M = np.diag(np.asarray(value, dtype=np.float64))
+    elif isinstance(value, list) and all(isinstance(r, list) and all(_is_number(v) for v in r) for r in value):
+        M = np.asarray(value, dtype=np.float64) if len({len(r) for r in value}) <= 1 else None
+        if M is None or M.shape != (dim, dim):
+            raise _fail(path, key, f"full matrix must be {dim} x {dim}")
+        if not np.allclose(M, M.T, rtol=0.0, atol=1e-12 * max(1.0, np.abs(M).max())):
+            raise _fail(path, key, "matrix is not symmetric")
+    else:
+        raise _fail(path, key, "expected a number, a list of numbers (diagonal) or a list of lists (matrix)")
+    if not np.all(np.isfinite(M)):
+        raise _fail(path, key, "values must be finite")
+    low = np.linalg.eigvalsh(M).min()
+    if (strict and low <= 0.0) or (not strict and low < 0.0):
+        kind = "positive definite" if strict else "positive semi-definite"
+        raise _fail(path, key, f"matrix must be {kind} (smallest eigenvalue {low:g})")
+    return M
+
+
+def _noise(path: Path, where: str, node: Mapping, model: str) -> dict[str, np.ndarray]:
+    """Q, R, P0 of one config node as matrices sized for ``model``."""
+    dim_x = MODELS[model].dim_x
+    dims = {"P0": dim_x, "Q": dim_x, "R": BOX_DIM}
+    return {k: _matrix(path, f"{where}.{k}", node[k], dims[k], _STRICT[k]) for k in ("Q", "R", "P0")}
+
+
+def _model_defaults(path: Path, models_node) -> dict[str, dict]:
+    """Validated ``models`` section -> ``{model: {"Q", "R", "P0", "params"}}``."""
+    _check_keys(path, "models", models_node, tuple(MODELS))
+    out = {}
+    for name in MODELS:
+        where = f"models.{name}"
+        node = models_node[name]
+        _check_keys(path, where, node, _MODEL_KEYS)
+        params = node["params"] if node["params"] is not None else {}
+        if not isinstance(params, Mapping):
+            raise _fail(path, f"{where}.params", "expected a mapping of constructor parameters")
+        try:
+            make_model(name, **params)
+        except (TypeError, ValueError) as exc:
+            raise _fail(path, f"{where}.params", str(exc)) from None
+        out[name] = {**_noise(path, where, node, name), "params": dict(params)}
+    return out
+
+
+def _overrides(path: Path, model_override) -> dict[str, str]:
+    """``model_override`` (None, a model name for all classes, or ``{class: model}``) -> ``{class: model}``."""
+    if model_override is None:
+        return {}
+    if isinstance(model_override, str):
+        name = _canonical_model(path, "model_override", model_override)
+        return {cls: name for cls in TRACKING_CLASSES}
+    out = {}
+    for cls, name in dict(model_override).items():
+        if cls not in TRACKING_CLASSES:
+            raise _fail(path, f"model_override.{cls}", f"unknown tracking class (expected one of {list(TRACKING_CLASSES)})")
+        out[cls] = _canonical_model(path, f"model_override.{cls}", name)
+    return out
+
+
+def load_motion_config(path: str | Path | None = None, model_override=None) -> dict[str, dict]:
+    """Load and validate a motion config.
+
+    Args:
+        path: a YAML file, a bare name under ``grutrack/configs/motion/``, or None for ``polymot_nusc``.
+        model_override: None; a model name used for every class; or ``{class: model}``. A class switched to a
+            model other than its own takes that model's defaults from the file's ``models`` section.
+
+    Returns:
+        ``{class_name: {"model": str, "Q": (d, d), "R": (9, 9), "P0": (d, d), "params": dict}}`` for the 7
+        tracking classes, d the state dimension of the class's model, float64 arrays.
+
+    Raises:
+        ConfigError: unreadable file, missing / unknown key, unknown model or class, wrong matrix size,
+            non-symmetric or non-positive matrix; the message names the file and the key.
+    """
+    path = resolve_config_path(path)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            raw = yaml.safe_load(fh)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read motion config ({exc.strerror or exc})") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: invalid YAML ({exc})") from None
+    _check_keys(path, "", raw, _TOP_KEYS)
+    defaults = _model_defaults(path, raw["models"])
+    _check_keys(path, "classes", raw["classes"], TRACKING_CLASSES)
+    override = _overrides(path, model_override)
+    out = {}
+    for cls in TRACKING_CLASSES:
+        where = f"classes.{cls}"
+        node = raw["classes"][cls]
+        _check_keys(path, where, node, _CLASS_KEYS)
+        own = _canonical_model(path, f"{where}.model", node["model"])
+        noise = _noise(path, where, node, own)
+        model = override.get(cls, own)
+        if model != own:
+            noise = {k: defaults[model][k].copy() for k in ("Q", "R", "P0")}
+        out[cls] = {"model": model, **noise, "params": dict(defaults[model]["params"])}
+    return out
+
+
+def build_models(config: Mapping[str, dict]) -> dict[str, MotionModel]:
+    """One model instance per model name used in a loaded config: ``{model_name: MotionModel}``."""
+    models = {}
+    for entry in config.values():
+        if entry["model"] not in models:
+            models[entry["model"]] = make_model(entry["model"], **entry["params"])
+    return models
+
+
+def class_matrices(config: Mapping[str, dict], labels: np.ndarray, key: str) -> np.ndarray:
+    """Per-track noise ``(N, d, d)`` for class ``labels (N,)`` (indices into TRACKING_CLASSES), ``key`` in Q, R, P0.
+
+    All labels must use models of one state dimension (one filter batch); raises ValueError otherwise.
+    """
+    labels = np.asarray(labels, dtype=np.int64).reshape(-1)
+    names = [TRACKING_CLASSES[i] for i in np.unique(labels)]
+    shapes = {config[c][key].shape for c in names}
+    if len(shapes) > 1:
+        raise ValueError(f"classes {names} have {key} of different shapes {sorted(shapes)}; filter them separately")
+    if not names:
+        d = BOX_DIM if key == "R" else 0
+        return np.zeros((0, d, d))
+    table = np.zeros((len(TRACKING_CLASSES),) + shapes.pop())
+    for c in names:
+        table[TRACKING_CLASSES.index(c)] = config[c][key]
+    return table[labels]

@@ -1,0 +1,510 @@
+"""State-space motion models, batched over tracks (numpy).
+
+Every model maps a state batch ``x (N, dim_x)`` through
+
+* ``f(x, dt) -> (N, dim_x)``: the transition over ``dt`` seconds (scalar or ``(N,)``),
+* ``F(x, dt) -> (N, dim_x, dim_x)``: its Jacobian ``df/dx`` at ``x`` (exact; constant for linear models),
+* ``h(x) -> (N, 9)``: the predicted measurement in the canonical box layout
+  ``[x, y, z, w, l, h, yaw, vx, vy]`` of :mod:`grutrack.boxes` (the detector measures its velocity),
+* ``H(x) -> (N, 9, dim_x)``: the Jacobian ``dh/dx``,
+* ``init_state(z (N, 9)) -> (N, dim_x)`` and ``to_boxes(x) -> (N, 9)`` (yaw wrapped, global ``[vx, vy]``).
+
+Conventions: metres, radians, seconds, m/s. ``f`` and ``h`` never wrap angles (so that they are smooth and their
+Jacobians check against finite differences); the filter wraps the yaw state and the yaw residual. The singular
+limits (turn rate or steering angle -> 0, speed -> 0) use series expansions of the arc integrals, never a division
+by a small number. The arithmetic is plain elementwise numpy so that a torch mirror is a line-by-line copy.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from grutrack.boxes import BOX_DIM, wrap_angle
+
+# ----------------------------------------------------------------------------------------------------------------
+# Arc integrals E_n(phi) = int_0^1 s^n exp(i phi s) ds, n = 0, 1, 2, as (real, imaginary) pairs.
+# A body moving along a circle of curvature kappa for an arc length L is displaced by exp(i psi) * L * E_0(kappa L);
+# dE_n/dphi = i E_{n+1}. Closed form by the recursion E_0 = (e^{i phi} - 1) / (i phi),
+# E_n = (e^{i phi} - n E_{n-1}) / (i phi); a power series below |phi| < _SERIES_LIMIT (no cancellation).
+# ----------------------------------------------------------------------------------------------------------------
+
+_SERIES_LIMIT = 0.25
+_SERIES_TERMS = 8  # error < 1e-18 at |phi| = 0.25
+
+
+def _series_coefficients(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients of Re E_n = sum_k c_k phi^(2k) and Im E_n = phi * sum_k d_k phi^(2k)."""
+    k = np.arange(_SERIES_TERMS)
+    sign = (-1.0) ** k
+    c = np.array([sign[j] / (math.factorial(2 * j) * (2 * j + n + 1)) for j in k])
+    d = np.array([sign[j] / (math.factorial(2 * j + 1) * (2 * j + n + 2)) for j in k])
+    return c, d
+
+
+_COEFFS = [_series_coefficients(n) for n in range(3)]
+
+
+def _poly(coeffs: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Horner evaluation of sum_k coeffs[k] * u**k."""
+    out = np.full_like(u, coeffs[-1])
+    for c in coeffs[-2::-1]:
+        out = out * u + c
+    return out
+
+
+def arc_moments(phi: np.ndarray, order: int = 2) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``[(Re E_n, Im E_n) for n in 0..order]`` for ``phi (N,)`` (radians turned over the step)."""
+    phi = np.asarray(phi, dtype=np.float64)
+    small = np.abs(phi) < _SERIES_LIMIT
+    p = np.where(small, 1.0, phi)  # a safe divisor for the closed form; its value is discarded where small
+    cp, sp = np.cos(p), np.sin(p)
+    u = phi * phi
+    out = []
+    prev_r, prev_i = np.ones_like(p), np.zeros_like(p)  # "n E_{n-1}" term for n = 0 is 1
+    for n in range(order + 1):
+        # (e^{ip} - n E_{n-1}) / (i p) = (b / p, -a / p) with a + ib the numerator
+        num_r = cp - (prev_r if n == 0 else n * prev_r)
+        num_i = sp - (prev_i if n == 0 else n * prev_i)
+        closed_r, closed_i = num_i / p, -num_r / p
+        c, d = _COEFFS[n]
+        er = np.where(small, _poly(c, u), closed_r)
+        ei = np.where(small, phi * _poly(d, u), closed_i)
+        out.append((er, ei))
+        prev_r, prev_i = closed_r, closed_i
+    return out
+
+
+def _as_dt(dt, n: int) -> np.ndarray:
+    """``dt`` (scalar or ``(N,)`` seconds) as a ``(N,)`` float64 array."""
+    return np.broadcast_to(np.asarray(dt, dtype=np.float64), (n,)).astype(np.float64)
+
+
+def _eye_batch(n: int, d: int) -> np.ndarray:
+    """``(n, d, d)`` stack of identities (writable)."""
+    return np.repeat(np.eye(d)[None], n, axis=0)
+
+
+class MotionModel:
+    """Interface of a batched state-space model; see the module docstring for the method contracts."""
+
+    name: str = ""
+    dim_x: int = 0
+    dim_z: int = BOX_DIM
+    yaw_index: int = -1
+    state_names: tuple[str, ...] = ()
+    linear: bool = False
+
+    def init_state(self, z: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def f(self, x: np.ndarray, dt) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def F(self, x: np.ndarray, dt) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def h(self, x: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def H(self, x: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def to_boxes(self, x: np.ndarray) -> np.ndarray:
+        """Boxes ``(N, 9)`` to write out: ``h(x)`` with the yaw wrapped to [-pi, pi)."""
+        boxes = self.h(x)
+        boxes[:, 6] = wrap_angle(boxes[:, 6])
+        return boxes
+
+    def wrap_state(self, x: np.ndarray) -> np.ndarray:
+        """A copy of ``x (N, dim_x)`` with the yaw component wrapped to [-pi, pi)."""
+        x = np.array(x, dtype=np.float64, copy=True)
+        x[:, self.yaw_index] = wrap_angle(x[:, self.yaw_index])
+        return x
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# CTRA
+# ----------------------------------------------------------------------------------------------------------------
+
+
+class CTRA(MotionModel):
+    """Constant turn rate and acceleration.
+
+    State ``[x, y, z, w, l, h, v, a, yaw, omega]``: centre (m), size (m), signed speed along the heading v (m/s),
+    its rate a (m/s^2), heading yaw (rad), turn rate omega (rad/s). Over dt the body follows
+    ``d/dt (x + i y) = (v + a t) exp(i (yaw + omega t))`` exactly: v' = v + a dt, yaw' = yaw + omega dt,
+    ``(x + i y)' = (x + i y) + exp(i yaw) (v dt E_0(omega dt) + a dt^2 E_1(omega dt))``. z, w, l, h, a, omega stay.
+    Measurement: ``[x, y, z, w, l, h, yaw, v cos yaw, v sin yaw]``.
+    """
+
+    name = "CTRA"
+    dim_x = 10
+    yaw_index = 8
+    state_names = ("x", "y", "z", "w", "l", "h", "v", "a", "yaw", "omega")
+
+    def init_state(self, z: np.ndarray) -> np.ndarray:
+        """State from detections ``z (N, 9)``: v = |(vx, vy)| (as Poly-MOT), a = omega = 0."""
+        z = np.asarray(z, dtype=np.float64).reshape(-1, BOX_DIM)
+        x = np.zeros((z.shape[0], self.dim_x))
+        x[:, 0:6] = z[:, 0:6]
+        x[:, 6] = np.hypot(z[:, 7], z[:, 8])
+        x[:, 8] = wrap_angle(z[:, 6])
+        return x
+
+    def _displacement(self, x: np.ndarray, dt: np.ndarray):
+        """Shared terms of f and F: (dx, dy, c, s, E0, E1, E2)."""
+        v, a, yaw, om = x[:, 6], x[:, 7], x[:, 8], x[:, 9]
+        e0, e1, e2 = arc_moments(om * dt)
+        ar = v * dt * e0[0] + a * dt * dt * e1[0]
+        ai = v * dt * e0[1] + a * dt * dt * e1[1]
+        c, s = np.cos(yaw), np.sin(yaw)
+        return c * ar - s * ai, s * ar + c * ai, c, s, e0, e1, e2
+
+    def f(self, x: np.ndarray, dt) -> np.ndarray:
+        """Transition ``(N, 10) -> (N, 10)`` over ``dt`` s."""
+        x = np.asarray(x, dtype=np.float64)
+        dt = _as_dt(dt, x.shape[0])
+        dx, dy, *_ = self._displacement(x, dt)
+        out = x.copy()
+        out[:, 0] += dx
+        out[:, 1] += dy
+        out[:, 6] = x[:, 6] + x[:, 7] * dt
+        out[:, 8] = x[:, 8] + x[:, 9] * dt
+        return out
+
+    def F(self, x: np.ndarray, dt) -> np.ndarray:
+        """Jacobian ``(N, 10, 10)`` of :meth:`f` at ``x``."""
+        x = np.asarray(x, dtype=np.float64)
+        n = x.shape[0]
+        dt = _as_dt(dt, n)
+        v, a = x[:, 6], x[:, 7]
+        dx, dy, c, s, e0, e1, e2 = self._displacement(x, dt)
+        J = _eye_batch(n, self.dim_x)
+        # d/dv: exp(i yaw) dt E0 ; d/da: exp(i yaw) dt^2 E1
+        J[:, 0, 6] = dt * (c * e0[0] - s * e0[1])
+        J[:, 1, 6] = dt * (s * e0[0] + c * e0[1])
+        J[:, 0, 7] = dt * dt * (c * e1[0] - s * e1[1])
+        J[:, 1, 7] = dt * dt * (s * e1[0] + c * e1[1])
+        # d/dyaw: i * displacement
+        J[:, 0, 8] = -dy
+        J[:, 1, 8] = dx
+        # d/domega: exp(i yaw) * i * (v dt^2 E1 + a dt^3 E2)
+        br = v * dt**2 * e1[0] + a * dt**3 * e2[0]
+        bi = v * dt**2 * e1[1] + a * dt**3 * e2[1]
+        J[:, 0, 9] = -c * bi - s * br
+        J[:, 1, 9] = -s * bi + c * br
+        J[:, 6, 7] = dt
+        J[:, 8, 9] = dt
+        return J
+
+    def h(self, x: np.ndarray) -> np.ndarray:
+        """Predicted measurement ``(N, 9)`` ``[x, y, z, w, l, h, yaw, v cos yaw, v sin yaw]``."""
+        x = np.asarray(x, dtype=np.float64)
+        out = np.empty((x.shape[0], BOX_DIM))
+        out[:, 0:6] = x[:, 0:6]
+        out[:, 6] = x[:, 8]
+        out[:, 7] = x[:, 6] * np.cos(x[:, 8])
+        out[:, 8] = x[:, 6] * np.sin(x[:, 8])
+        return out
+
+    def H(self, x: np.ndarray) -> np.ndarray:
+        """Jacobian ``(N, 9, 10)`` of :meth:`h`."""
+        x = np.asarray(x, dtype=np.float64)
+        n = x.shape[0]
+        v, c, s = x[:, 6], np.cos(x[:, 8]), np.sin(x[:, 8])
+        J = np.zeros((n, BOX_DIM, self.dim_x))
+        J[:, np.arange(6), np.arange(6)] = 1.0
+        J[:, 6, 8] = 1.0
+        J[:, 7, 6], J[:, 7, 8] = c, -v * s
+        J[:, 8, 6], J[:, 8, 8] = s, v * c
+        return J
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Bicycle
+# ----------------------------------------------------------------------------------------------------------------
+
+
+class Bicycle(MotionModel):
+    """Kinematic bicycle model (Poly-MOT's assumptions).
+
+    State ``[x, y, z, w, l, h, v, a, yaw, delta]``: (x, y) is the reference point (Poly-MOT's "gravity centre"),
+    ``d = l * wheelbase_ratio * (0.5 - front_ratio)`` metres ahead of the box centre along the heading (0 with
+    the defaults), v the signed speed of that point (m/s), a its rate (m/s^2), yaw the heading, delta the
+    (constant) steering angle (rad). Wheelbase ``l * wheelbase_ratio``; front / rear axle distances
+    ``lf = front_ratio * wheelbase``, ``lr = (1 - front_ratio) * wheelbase``; slip angle
+    ``beta = atan2(lr/(lf+lr) sin delta, cos delta)`` (= atan(lr/(lf+lr) tan delta) for |delta| < pi/2).
+    Over dt the point runs an arc of length ``ds = v dt + a dt^2 / 2`` with constant curvature
+    ``kappa = sin(beta) / lr`` in direction yaw + beta: ``(x + i y)' = (x + i y) + exp(i (yaw + beta)) ds
+    E_0(kappa ds)``, yaw' = yaw + kappa ds, v' = v + a dt; z, w, l, h, a, delta stay.
+    Measurement: ``[x - d cos yaw, y - d sin yaw, z, w, l, h, yaw, v cos(yaw + beta), v sin(yaw + beta)]``.
+
+    Differences from Poly-MOT's BICYCLE: Poly-MOT drops the acceleration (a' = 0, v' = v) once |beta| > 0.001 and
+    switches to a straight line below it; here the same arc formula holds for every beta (continuous at beta = 0)
+    and the Jacobians include the l and delta derivatives that Poly-MOT leaves out.
+    """
+
+    name = "Bicycle"
+    dim_x = 10
+    yaw_index = 8
+    state_names = ("x", "y", "z", "w", "l", "h", "v", "a", "yaw", "delta")
+    _MIN_LENGTH = 1e-3  # m; a shorter box is treated as this long for the curvature (no division by ~0)
+
+    def __init__(self, wheelbase_ratio: float = 0.8, front_ratio: float = 0.5) -> None:
+        """Poly-MOT's values: wheelbase 0.8 l (``w_r``), front axle ratio 0.5 (``lf_r``)."""
+        if not 0.0 < wheelbase_ratio <= 1.0:
+            raise ValueError(f"wheelbase_ratio must be in (0, 1], got {wheelbase_ratio}")
+        if not 0.0 <= front_ratio < 1.0:
+            raise ValueError(f"front_ratio must be in [0, 1), got {front_ratio}")
+        self.wheelbase_ratio = float(wheelbase_ratio)
+        self.front_ratio = float(front_ratio)
+        self._k = 1.0 - self.front_ratio  # lr / (lf + lr)
+        self._offset_ratio = self.wheelbase_ratio * (0.5 - self.front_ratio)  # d / l
+
+    def __repr__(self) -> str:
+        return f"Bicycle(wheelbase_ratio={self.wheelbase_ratio}, front_ratio={self.front_ratio})"
+
+    def init_state(self, z: np.ndarray) -> np.ndarray:
+        """State from detections ``z (N, 9)``: v = |(vx, vy)| (as Poly-MOT), a = delta = 0."""
+        z = np.asarray(z, dtype=np.float64).reshape(-1, BOX_DIM)
+        x = np.zeros((z.shape[0], self.dim_x))
+        yaw = wrap_angle(z[:, 6])
+        d = self._offset_ratio * z[:, 4]
+        x[:, 0] = z[:, 0] + d * np.cos(yaw)
+        x[:, 1] = z[:, 1] + d * np.sin(yaw)
+        x[:, 2:6] = z[:, 2:6]
+        x[:, 6] = np.hypot(z[:, 7], z[:, 8])
+        x[:, 8] = yaw
+        return x
+
+    def _slip(self, delta: np.ndarray):
+        """Slip angle beta (N,) and dbeta/ddelta (N,)."""
+        k = self._k
+        cd, sd = np.cos(delta), np.sin(delta)
+        beta = np.arctan2(k * sd, cd)
+        dbeta = k / (cd * cd + k * k * sd * sd)
+        return beta, dbeta
+
+    def _curvature(self, x: np.ndarray):
+        """(beta, dbeta/ddelta, kappa, dkappa/ddelta, dkappa/dl), each (N,)."""
+        length = x[:, 4]
+        long_enough = length > self._MIN_LENGTH
+        l_safe = np.where(long_enough, length, self._MIN_LENGTH)
+        lr = l_safe * self.wheelbase_ratio * self._k
+        beta, dbeta = self._slip(x[:, 9])
+        kappa = np.sin(beta) / lr
+        dkappa_ddelta = np.cos(beta) * dbeta / lr
+        dkappa_dl = np.where(long_enough, -kappa / l_safe, 0.0)
+        return beta, dbeta, kappa, dkappa_ddelta, dkappa_dl
+
+    def f(self, x: np.ndarray, dt) -> np.ndarray:
+        """Transition ``(N, 10) -> (N, 10)`` over ``dt`` s."""
+        x = np.asarray(x, dtype=np.float64)
+        dt = _as_dt(dt, x.shape[0])
+        v, a, yaw = x[:, 6], x[:, 7], x[:, 8]
+        beta, _, kappa, _, _ = self._curvature(x)
+        ds = v * dt + 0.5 * a * dt * dt
+        (e0r, e0i), = arc_moments(kappa * ds, order=0)
+        cp, sp = np.cos(yaw + beta), np.sin(yaw + beta)
+        out = x.copy()
+        out[:, 0] += ds * (cp * e0r - sp * e0i)
+        out[:, 1] += ds * (sp * e0r + cp * e0i)
+        out[:, 6] = v + a * dt
+        out[:, 8] = yaw + kappa * ds
+        return out
+
+    def F(self, x: np.ndarray, dt) -> np.ndarray:
+        """Jacobian ``(N, 10, 10)`` of :meth:`f` at ``x``."""
+        x = np.asarray(x, dtype=np.float64)
+        n = x.shape[0]
+        dt = _as_dt(dt, n)
+        v, a, yaw = x[:, 6], x[:, 7], x[:, 8]
+        beta, dbeta, kappa, dk_ddelta, dk_dl = self._curvature(x)
+        ds = v * dt + 0.5 * a * dt * dt
+        phi = kappa * ds
+        (e0r, e0i), (e1r, e1i) = arc_moments(phi, order=1)
+        psi = yaw + beta
+        cp, sp = np.cos(psi), np.sin(psi)
+        disp_r, disp_i = ds * (cp * e0r - sp * e0i), ds * (sp * e0r + cp * e0i)
+        # d disp / d ds = exp(i (psi + phi)); d disp / d kappa = exp(i psi) i ds^2 E1; d disp / d psi = i disp
+        g_r, g_i = np.cos(psi + phi), np.sin(psi + phi)
+        k_r = ds * ds * (-cp * e1i - sp * e1r)
+        k_i = ds * ds * (-sp * e1i + cp * e1r)
+        ddt_a = 0.5 * dt * dt
+        J = _eye_batch(n, self.dim_x)
+        J[:, 0, 4], J[:, 1, 4] = k_r * dk_dl, k_i * dk_dl
+        J[:, 0, 6], J[:, 1, 6] = g_r * dt, g_i * dt
+        J[:, 0, 7], J[:, 1, 7] = g_r * ddt_a, g_i * ddt_a
+        J[:, 0, 8], J[:, 1, 8] = -disp_i, disp_r
+        J[:, 0, 9] = -disp_i * dbeta + k_r * dk_ddelta
+        J[:, 1, 9] = disp_r * dbeta + k_i * dk_ddelta
+        J[:, 6, 7] = dt
+        J[:, 8, 4] = ds * dk_dl
+        J[:, 8, 6] = kappa * dt
+        J[:, 8, 7] = kappa * ddt_a
+        J[:, 8, 9] = ds * dk_ddelta
+        return J
+
+    def h(self, x: np.ndarray) -> np.ndarray:
+        """Predicted measurement ``(N, 9)``: box centre, size, yaw, velocity of the reference point."""
+        x = np.asarray(x, dtype=np.float64)
+        yaw, v = x[:, 8], x[:, 6]
+        beta, _ = self._slip(x[:, 9])
+        d = self._offset_ratio * x[:, 4]
+        out = np.empty((x.shape[0], BOX_DIM))
+        out[:, 0] = x[:, 0] - d * np.cos(yaw)
+        out[:, 1] = x[:, 1] - d * np.sin(yaw)
+        out[:, 2:6] = x[:, 2:6]
+        out[:, 6] = yaw
+        out[:, 7] = v * np.cos(yaw + beta)
+        out[:, 8] = v * np.sin(yaw + beta)
+        return out
+
+    def H(self, x: np.ndarray) -> np.ndarray:
+        """Jacobian ``(N, 9, 10)`` of :meth:`h`."""
+        x = np.asarray(x, dtype=np.float64)
+        n = x.shape[0]
+        yaw, v = x[:, 8], x[:, 6]
+        beta, dbeta = self._slip(x[:, 9])
+        c, s = np.cos(yaw), np.sin(yaw)
+        cp, sp = np.cos(yaw + beta), np.sin(yaw + beta)
+        d = self._offset_ratio * x[:, 4]
+        J = np.zeros((n, BOX_DIM, self.dim_x))
+        J[:, np.arange(6), np.arange(6)] = 1.0
+        J[:, 0, 4], J[:, 0, 8] = -self._offset_ratio * c, d * s
+        J[:, 1, 4], J[:, 1, 8] = -self._offset_ratio * s, -d * c
+        J[:, 6, 8] = 1.0
+        J[:, 7, 6], J[:, 7, 8], J[:, 7, 9] = cp, -v * sp, -v * sp * dbeta
+        J[:, 8, 6], J[:, 8, 8], J[:, 8, 9] = sp, v * cp, v * cp * dbeta
+        return J
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Linear models
+# ----------------------------------------------------------------------------------------------------------------
+
+
+class _LinearModel(MotionModel):
+    """A linear model: ``f(x) = F(dt) x``, ``h(x) = H x`` with H a selection matrix."""
+
+    linear = True
+    _meas_index: tuple[int, ...] = ()  # state index measured by each of the 9 box components
+
+    def _H0(self) -> np.ndarray:
+        """The constant ``(9, dim_x)`` measurement matrix."""
+        H0 = np.zeros((BOX_DIM, self.dim_x))
+        H0[np.arange(BOX_DIM), list(self._meas_index)] = 1.0
+        return H0
+
+    def h(self, x: np.ndarray) -> np.ndarray:
+        """Predicted measurement ``(N, 9)`` (a selection of state components)."""
+        return np.asarray(x, dtype=np.float64)[:, list(self._meas_index)].copy()
+
+    def H(self, x: np.ndarray) -> np.ndarray:
+        """Constant Jacobian ``(N, 9, dim_x)``."""
+        return np.repeat(self._H0()[None], np.asarray(x).shape[0], axis=0)
+
+
+class CA(_LinearModel):
+    """Constant acceleration (linear).
+
+    State ``[x, y, z, w, l, h, vx, vy, ax, ay, yaw]``: ground-plane velocity (m/s) and acceleration (m/s^2) in the
+    global frame; yaw a random walk. x' = x + vx dt + ax dt^2 / 2, vx' = vx + ax dt (same in y).
+    Poly-MOT's CA has 13 states with vz, az that its F maps to 0 and nothing observes; dropping them leaves the
+    filter on the other 11 unchanged. Measurement: ``[x, y, z, w, l, h, yaw, vx, vy]``.
+    """
+
+    name = "CA"
+    dim_x = 11
+    yaw_index = 10
+    state_names = ("x", "y", "z", "w", "l", "h", "vx", "vy", "ax", "ay", "yaw")
+    _meas_index = (0, 1, 2, 3, 4, 5, 10, 6, 7)
+
+    def init_state(self, z: np.ndarray) -> np.ndarray:
+        """State from detections ``z (N, 9)``: velocity from the detection, acceleration 0."""
+        z = np.asarray(z, dtype=np.float64).reshape(-1, BOX_DIM)
+        x = np.zeros((z.shape[0], self.dim_x))
+        x[:, 0:6] = z[:, 0:6]
+        x[:, 6:8] = z[:, 7:9]
+        x[:, 10] = wrap_angle(z[:, 6])
+        return x
+
+    def f(self, x: np.ndarray, dt) -> np.ndarray:
+        """Transition ``(N, 11) -> (N, 11)`` over ``dt`` s."""
+        x = np.asarray(x, dtype=np.float64)
+        dt = _as_dt(dt, x.shape[0])[:, None]
+        out = x.copy()
+        out[:, 0:2] = x[:, 0:2] + x[:, 6:8] * dt + 0.5 * x[:, 8:10] * dt * dt
+        out[:, 6:8] = x[:, 6:8] + x[:, 8:10] * dt
+        return out
+
+    def F(self, x: np.ndarray, dt) -> np.ndarray:
+        """Transition matrix ``(N, 11, 11)``."""
+        n = np.asarray(x).shape[0]
+        dt = _as_dt(dt, n)
+        J = _eye_batch(n, self.dim_x)
+        for i in (0, 1):
+            J[:, i, 6 + i] = dt
+            J[:, i, 8 + i] = 0.5 * dt * dt
+            J[:, 6 + i, 8 + i] = dt
+        return J
+
+
+class CV(_LinearModel):
+    """Constant velocity (linear).
+
+    State ``[x, y, z, w, l, h, vx, vy, yaw]``; x' = x + vx dt (same in y); yaw a random walk.
+    Poly-MOT's CV additionally carries a vz that its F maps to 0 and nothing observes (dropped here, no effect).
+    Measurement: ``[x, y, z, w, l, h, yaw, vx, vy]``.
+    """
+
+    name = "CV"
+    dim_x = 9
+    yaw_index = 8
+    state_names = ("x", "y", "z", "w", "l", "h", "vx", "vy", "yaw")
+    _meas_index = (0, 1, 2, 3, 4, 5, 8, 6, 7)
+
+    def init_state(self, z: np.ndarray) -> np.ndarray:
+        """State from detections ``z (N, 9)``: velocity from the detection."""
+        z = np.asarray(z, dtype=np.float64).reshape(-1, BOX_DIM)
+        x = np.zeros((z.shape[0], self.dim_x))
+        x[:, 0:6] = z[:, 0:6]
+        x[:, 6:8] = z[:, 7:9]
+        x[:, 8] = wrap_angle(z[:, 6])
+        return x
+
+    def f(self, x: np.ndarray, dt) -> np.ndarray:
+        """Transition ``(N, 9) -> (N, 9)`` over ``dt`` s."""
+        x = np.asarray(x, dtype=np.float64)
+        dt = _as_dt(dt, x.shape[0])[:, None]
+        out = x.copy()
+        out[:, 0:2] = x[:, 0:2] + x[:, 6:8] * dt
+        return out
+
+    def F(self, x: np.ndarray, dt) -> np.ndarray:
+        """Transition matrix ``(N, 9, 9)``."""
+        n = np.asarray(x).shape[0]
+        dt = _as_dt(dt, n)
+        J = _eye_batch(n, self.dim_x)
+        J[:, 0, 6] = dt
+        J[:, 1, 7] = dt
+        return J
+
+
+#: Model classes by the name used in configuration files.
+MODELS: dict[str, type[MotionModel]] = {"CTRA": CTRA, "Bicycle": Bicycle, "CA": CA, "CV": CV}
+
+
+def make_model(name: str, **params) -> MotionModel:
+    """Instantiate a model by name (``CTRA``, ``Bicycle``, ``CA``, ``CV``; case-insensitive)."""
+    lookup = {k.lower(): v for k, v in MODELS.items()}
+    try:
+        cls = lookup[name.lower()]
+    except KeyError:
+        raise ValueError(f"unknown motion model {name!r}; choose one of {sorted(MODELS)}") from None
+    return cls(**params)

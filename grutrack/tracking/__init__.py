@@ -1,0 +1,1 @@
+"""Tracking-by-detection: pre-processing, association, lifecycle and the tracker loop."""

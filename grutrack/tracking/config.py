@@ -1,0 +1,152 @@
+"""Tracker presets: YAML files under ``grutrack/configs/trackers/`` validated against a fixed schema.
+
+A preset is named (``ekf``) or given as a path. Every key is required, unknown keys are rejected, and
+per-class maps must list all 7 tracking classes: a misspelt key fails with the file and the key path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from grutrack.classes import TRACKING_CLASSES
+from grutrack.errors import ConfigError
+
+PRESET_DIR = Path(__file__).resolve().parents[1] / "configs" / "trackers"
+METRICS = ("giou_3d", "giou_bev", "iou_3d", "iou_bev")
+MOTION_MODELS = ("CTRA", "BICYCLE", "CA", "CV")
+
+# schema: section -> key -> kind; "per_class_float" etc. are maps over the 7 tracking classes
+SCHEMA: dict[str, dict[str, str]] = {
+    "preprocessing": {"score_threshold": "per_class_unit", "nms_threshold": "unit", "nms_class_aware": "bool"},
+    "association": {"first_metric": "per_class_metric", "first_threshold": "per_class_cost",
+                    "two_stage": "bool", "second_metric": "metric", "second_threshold": "per_class_cost"},
+    "lifecycle": {"max_age": "per_class_posint", "decay_rate": "per_class_unit", "punish_num": "nonnegint"},
+    "motion": {"config": "str", "model_override": "class_model_map"},
+    "output": {"max_boxes_per_sample": "posint"},
+}
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """A validated preset. Per-class values are (7,) arrays indexed by tracking-class label."""
+
+    source: str
+    score_threshold: np.ndarray
+    nms_threshold: float
+    nms_class_aware: bool
+    first_metric: tuple[str, ...]
+    first_threshold: np.ndarray
+    two_stage: bool
+    second_metric: str
+    second_threshold: np.ndarray
+    max_age: np.ndarray
+    decay_rate: np.ndarray
+    punish_num: int
+    motion_config: str
+    model_override: dict[str, str]
+    max_boxes_per_sample: int
+    raw: dict
+
+
+def preset_path(name_or_path: str | Path) -> Path:
+    """Resolve a preset name (``ekf``) or a path to a YAML file."""
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml") or p.exists():
+        if not p.is_file():
+            raise ConfigError(f"tracker config {p} does not exist")
+        return p
+    cand = PRESET_DIR / f"{name_or_path}.yaml"
+    if not cand.is_file():
+        names = sorted(q.stem for q in PRESET_DIR.glob("*.yaml"))
+        raise ConfigError(f"unknown tracker preset '{name_or_path}' (available: {', '.join(names)}; "
+                          f"or give a path to a YAML file)")
+    return cand
+
+
+def load_tracker_config(name_or_path: str | Path = "ekf") -> TrackerConfig:
+    """Load and validate a tracker preset; raises :class:`ConfigError` naming the file and key."""
+    path = preset_path(name_or_path)
+    try:
+        raw = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML ({exc})") from exc
+    return config_from_dict(raw, str(path))
+
+
+def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
+    """Validate a preset given as a dict (see :data:`SCHEMA`)."""
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{source}: expected a mapping of sections {', '.join(SCHEMA)}")
+    _check_keys(source, "", raw, SCHEMA)
+    v = {f"{sec}.{key}": _value(source, f"{sec}.{key}", raw[sec][key], kind)
+         for sec, keys in SCHEMA.items() for key, kind in keys.items()}
+    return TrackerConfig(
+        source=source,
+        score_threshold=v["preprocessing.score_threshold"], nms_threshold=v["preprocessing.nms_threshold"],
+        nms_class_aware=v["preprocessing.nms_class_aware"],
+        first_metric=v["association.first_metric"], first_threshold=v["association.first_threshold"],
+        two_stage=v["association.two_stage"], second_metric=v["association.second_metric"],
+        second_threshold=v["association.second_threshold"],
+        max_age=v["lifecycle.max_age"], decay_rate=v["lifecycle.decay_rate"],
+        punish_num=v["lifecycle.punish_num"],
+        motion_config=v["motion.config"], model_override=v["motion.model_override"],
+        max_boxes_per_sample=v["output.max_boxes_per_sample"], raw=raw)
+
+
+def _check_keys(source: str, prefix: str, given: dict, expected: dict) -> None:
+    unknown = [k for k in given if k not in expected]
+    missing = [k for k in expected if k not in given]
+    if unknown:
+        raise ConfigError(f"{source}: unknown key '{prefix}{unknown[0]}' (expected one of: "
+                          f"{', '.join(prefix + k for k in expected)})")
+    if missing:
+        raise ConfigError(f"{source}: missing key '{prefix}{missing[0]}'")
+    for k, sub in expected.items():
+        if isinstance(sub, dict):
+            if not isinstance(given[k], dict):
+                raise ConfigError(f"{source}: '{prefix}{k}' must be a mapping with keys {', '.join(sub)}")
+            _check_keys(source, f"{prefix}{k}.", given[k], sub)
+
+
+def _value(source: str, key: str, val: Any, kind: str) -> Any:
+    """Check and convert one value of the given kind."""
+    def fail(expected: str):
+        raise ConfigError(f"{source}: '{key}' must be {expected}, got {val!r}")
+
+    if kind.startswith("per_class_"):
+        if not isinstance(val, dict):
+            fail(f"a mapping over the tracking classes {', '.join(TRACKING_CLASSES)}")
+        _check_keys(source, f"{key}.", val, {c: None for c in TRACKING_CLASSES})
+        items = [_value(source, f"{key}.{c}", val[c], kind[len("per_class_"):]) for c in TRACKING_CLASSES]
+        return tuple(items) if kind == "per_class_metric" else np.asarray(items)
+    if kind == "class_model_map":
+        if not isinstance(val, dict):
+            fail("a mapping {class: model}")
+        for c, m in val.items():
+            if c not in TRACKING_CLASSES:
+                raise ConfigError(f"{source}: '{key}' has unknown class '{c}' (expected one of "
+                                  f"{', '.join(TRACKING_CLASSES)})")
+            if str(m).upper() not in MOTION_MODELS:
+                raise ConfigError(f"{source}: '{key}.{c}' must be one of {', '.join(MOTION_MODELS)}, got {m!r}")
+        return {c: str(m).upper() for c, m in val.items()}
+    if kind == "bool":
+        return val if isinstance(val, bool) else fail("true or false")
+    if kind == "str":
+        return val if isinstance(val, str) and val else fail("a non-empty string")
+    if kind == "metric":
+        return val if val in METRICS else fail(f"one of {', '.join(METRICS)}")
+    if isinstance(val, bool) or not isinstance(val, (int, float)) or not np.isfinite(val):
+        fail("a number")
+    if kind == "unit":
+        return float(val) if 0 <= val <= 1 else fail("a number in [0, 1]")
+    if kind == "cost":
+        return float(val) if 0 <= val <= 2 else fail("a cost threshold in [0, 2] (cost = 1 - similarity)")
+    if kind in ("posint", "nonnegint"):
+        lo = 1 if kind == "posint" else 0
+        return int(val) if float(val).is_integer() and val >= lo else fail(f"an integer >= {lo}")
+    raise AssertionError(kind)
