@@ -28,11 +28,11 @@ measured by the same formulas, with two conventions for vanishing denominators:
 * GIoU equals IoU (so 0) when the hull ``C`` (or ``V_C``) is 0; otherwise the formula applies, so two
   zero-area boxes with a hull of positive area have GIoU -1 (union 0, penalty term 1).
 
-A zero-area box has zero intersection with anything, so its IoU with any box is 0. Negative sizes are
-rejected with ``ValueError``.
+A zero-area box has zero intersection with anything, so its IoU with any box is 0. Negative sizes and
+non-finite values in columns 0-6 are rejected with ``ValueError``.
 
-Method: the intersection of two rectangles is a convex polygon whose vertices are among 24
-candidates (corners of either box inside the other, and crossings of the edges of ``a`` with those of
+Method: the intersection of two rectangles is a convex polygon whose vertices are among 16
+candidates (corners of either box inside the other, and where each edge of ``a`` enters and leaves
 ``b``); its area is the shoelace area of the valid candidates sorted by angle about their mean. The
 convex hull's vertices are picked among the 8 corners with a support-function test (a corner of ``a``
 is on the hull iff ``a`` reaches at least as far as ``b`` in some direction of that corner's normal
@@ -54,12 +54,14 @@ TOL = 1e-9
 CHUNK_PAIRS = 1 << 16
 """Pairs handled at once by the ``pairwise_*`` functions (bounds temporary memory)."""
 
+BLOCK = 512
+"""Pairs per block of the polygon work: keeps each temporary array under 128 KiB, which avoids
+fresh memory mappings (and their page faults) for every numpy temporary."""
+
 # Corner order in the box frame (+x along l, +y along w): front-left, rear-left, rear-right,
 # front-right, i.e. counter-clockwise. Edge k runs from corner k to corner k+1.
 _SU = np.array([1.0, -1.0, -1.0, 1.0])
 _SV = np.array([1.0, 1.0, -1.0, -1.0])
-# Outward unit normals of the edges of an axis-aligned box (left, rear, right, front).
-_AXIS_NORMALS = np.array([[0.0, 1.0], [-1.0, 0.0], [0.0, -1.0], [1.0, 0.0]])
 
 
 class _PairFrame(NamedTuple):
@@ -80,10 +82,16 @@ class _PairFrame(NamedTuple):
 
 
 def _check_boxes(boxes: np.ndarray, name: str, min_cols: int = 7) -> np.ndarray:
-    """``boxes`` as a ``(N, >=min_cols) float64`` array; ``ValueError`` on a bad shape or negative size."""
+    """``boxes`` as a ``(N, >=min_cols) float64`` array.
+
+    ``ValueError`` on a bad shape, a non-finite value in the first ``min_cols`` columns, or (boxes
+    with sizes) a negative size.
+    """
     arr = np.asarray(boxes, dtype=np.float64)
     if arr.ndim != 2 or arr.shape[1] < min_cols:
         raise ValueError(f"{name} must have shape (N, >={min_cols}), got {arr.shape}")
+    if not np.isfinite(arr[:, :min_cols]).all():
+        raise ValueError(f"{name} has non-finite values in its first {min_cols} columns")
     if min_cols >= 7 and np.any(arr[:, 3:6] < 0.0):
         raise ValueError(f"{name} has negative sizes (columns w, l, h)")
     return arr
@@ -117,121 +125,168 @@ def _pair_frame(a: np.ndarray, b: np.ndarray) -> _PairFrame:
     cb, sb = np.cos(b[:, 6]), np.sin(b[:, 6])
     dx, dy = a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]
     dyaw = a[:, 6] - b[:, 6]
-    return _PairFrame(cx=dx * cb + dy * sb, cy=-dx * sb + dy * cb, c=np.cos(dyaw), s=np.sin(dyaw),
+    return _PairFrame(cx=dx * cb + dy * sb, cy=dy * cb - dx * sb, c=np.cos(dyaw), s=np.sin(dyaw),
                       al=0.5 * a[:, 4], aw=0.5 * a[:, 3], bl=0.5 * b[:, 4], bw=0.5 * b[:, 3])
 
 
+# Internally, per-pair quantities are laid out points-first, ``(P, K)`` with the K pairs last, so
+# that every numpy operation runs over long contiguous rows.
+
+
 def _corners_a(f: _PairFrame) -> tuple[np.ndarray, np.ndarray]:
-    """Corners of ``a`` in ``b``'s frame: x, y ``(K, 4)`` metres, counter-clockwise."""
-    du = f.al[:, None] * _SU
-    dv = f.aw[:, None] * _SV
-    x = f.cx[:, None] + du * f.c[:, None] - dv * f.s[:, None]
-    y = f.cy[:, None] + du * f.s[:, None] + dv * f.c[:, None]
+    """Corners of ``a`` in ``b``'s frame: x, y ``(4, K)`` metres, counter-clockwise."""
+    su, sv = _SU[:, None], _SV[:, None]
+    x = f.cx + su * (f.al * f.c) - sv * (f.aw * f.s)
+    y = f.cy + su * (f.al * f.s) + sv * (f.aw * f.c)
     return x, y
 
 
 def _corners_b(f: _PairFrame) -> tuple[np.ndarray, np.ndarray]:
-    """Corners of ``b`` in its own frame: x, y ``(K, 4)`` metres, counter-clockwise."""
-    return f.bl[:, None] * _SU, f.bw[:, None] * _SV
+    """Corners of ``b`` in its own frame: x, y ``(4, K)`` metres, counter-clockwise."""
+    return _SU[:, None] * f.bl, _SV[:, None] * f.bw
+
+
+def _rows(*rows: np.ndarray) -> np.ndarray:
+    """Stack equal-shaped arrays along a new first axis (a cheaper ``np.stack(rows)``)."""
+    out = np.empty((len(rows),) + rows[0].shape)
+    for i, row in enumerate(rows):
+        out[i] = row
+    return out
 
 
 def _pseudo_angle(dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
-    """A key in [0, 4) increasing with the angle of ``(dx, dy)`` (any equal shapes) from +x, CCW."""
-    den = np.abs(dx) + np.abs(dy)
-    p = np.divide(dx, den, out=np.zeros_like(dx), where=den > 0.0)
-    return np.where(dy >= 0.0, 1.0 - p, 3.0 + p)
+    """A key in [0, 4) increasing with the angle of ``(dx, dy)`` (any equal shapes) from +x, CCW.
+
+    ``(0, 0)`` gets key 1.
+    """
+    p = dx / (np.abs(dx) + np.abs(dy) + 1e-300)
+    return 1.0 - p + (dy < 0.0) * (2.0 + 2.0 * p)
+
+
+def _batcher_network(n: int) -> list[tuple[int, int]]:
+    """Comparators ``(i, j)``, ``i < j``, of Batcher's odd-even merge sort for ``n`` (a power of 2) keys."""
+    pairs = []
+    p = 1
+    while p < n:
+        k = p
+        while k >= 1:
+            for j in range(k % p, n - k, 2 * k):
+                for i in range(min(k, n - j - k)):
+                    if (i + j) // (2 * p) == (i + j + k) // (2 * p):
+                        pairs.append((i + j, i + j + k))
+            k //= 2
+        p *= 2
+    return pairs
+
+
+_NETWORKS = {8: _batcher_network(8), 16: _batcher_network(16)}
+
+
+def _sort_columns(keys: np.ndarray) -> np.ndarray:
+    """``keys (P, K)`` (P = 8 or 16) sorted ascending within each column, by a sorting network."""
+    rows = list(keys)
+    for i, j in _NETWORKS[len(rows)]:
+        lo = np.minimum(rows[i], rows[j])
+        rows[j] = np.maximum(rows[i], rows[j])
+        rows[i] = lo
+    return np.stack(rows)
 
 
 def _ring_area(x: np.ndarray, y: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Area ``(K,)`` m² of the convex polygon through the valid points of each row.
+    """Area ``(K,) float64`` m² of the convex polygon through the valid points of each column.
 
-    ``x, y, valid`` are ``(K, P)``; every valid point must lie on the boundary of the row's convex
-    polygon, and together they must include its vertices (repeats and points on edges are harmless).
-    Points are sorted by angle about their mean and summed by the shoelace formula.
+    ``x, y`` (metres, finite) and ``valid`` are ``(P, K)`` with P = 8 or 16. The valid points of a
+    column must lie on the boundary of its convex polygon and include its vertices; repeats and
+    points along edges add nothing. They are sorted by angle about their mean and summed by the
+    shoelace formula. No valid point gives area 0.
     """
-    if x.shape[0] == 0:
-        return np.zeros(0)
-    n = np.maximum(valid.sum(axis=1), 1)
-    mx = np.where(valid, x, 0.0).sum(axis=1) / n
-    my = np.where(valid, y, 0.0).sum(axis=1) / n
-    dx, dy = x - mx[:, None], y - my[:, None]
-    key = np.where(valid, _pseudo_angle(dx, dy), 5.0)
-    order = np.argsort(key, axis=1)
-    dx = np.take_along_axis(dx, order, axis=1)
-    dy = np.take_along_axis(dy, order, axis=1)
-    ok = np.take_along_axis(valid, order, axis=1)
-    # Invalid points sort last; make them copies of the first point so they add no area.
-    dx = np.where(ok, dx, dx[:, :1])
-    dy = np.where(ok, dy, dy[:, :1])
-    cross = dx * np.roll(dy, -1, axis=1) - dy * np.roll(dx, -1, axis=1)
-    return 0.5 * cross.sum(axis=1)
+    p, k = x.shape
+    vf = valid.astype(np.float64)
+    n = vf.sum(axis=0)
+    nn = np.maximum(n, 1.0)
+    dx = (x - (x * vf).sum(axis=0) / nn) * vf  # invalid points sit on the mean: they add no area
+    dy = (y - (y * vf).sum(axis=0) / nn) * vf
+    key = _pseudo_angle(dx, dy) + 8.0 * (1.0 - vf)  # in [0, 12); invalid points sort last
+    # Quantise to integers and put the row index in the low 4 bits: distinct keys that carry
+    # their point along through the sort.
+    ikey = (key * 2.0**44).astype(np.int64) * 16 + np.arange(p)[:, None]
+    idx = (_sort_columns(ikey) & 15) * k + np.arange(k)
+    sx, sy = dx.ravel()[idx], dy.ravel()[idx]  # (P, K) in angular order
+    twice = (sx[:-1] * sy[1:] - sy[:-1] * sx[1:]).sum(axis=0)
+    last = np.maximum(n.astype(np.intp) - 1, 0)  # close the ring: last valid point -> first
+    cols = np.arange(k)
+    twice += sx[last, cols] * sy[0] - sy[last, cols] * sx[0]
+    return 0.5 * twice
+
+
+_NEXT = np.array([1, 2, 3, 0])  # corner k+1 (end of edge k)
+_PREV = np.array([3, 0, 1, 2])  # corner k-1
 
 
 def _intersection_area(f: _PairFrame) -> np.ndarray:
     """BEV intersection area ``(K,) float64`` m² of each pair (frame from :func:`_pair_frame`)."""
-    ax, ay = _corners_a(f)  # (K, 4) in b's frame
+    ax, ay = _corners_a(f)  # (4, K) in b's frame, where b is the box |x| <= bl, |y| <= bw
     bx, by = _corners_b(f)
-    bl, bw = f.bl[:, None], f.bw[:, None]
-    # Corners of a inside b (b is the axis-aligned box |x| <= bl, |y| <= bw).
-    a_in = (np.abs(ax) <= bl + TOL) & (np.abs(ay) <= bw + TOL)
-    # Corners of b inside a: coordinates along a's axes.
-    ex, ey = bx - f.cx[:, None], by - f.cy[:, None]
-    u = ex * f.c[:, None] + ey * f.s[:, None]
-    v = -ex * f.s[:, None] + ey * f.c[:, None]
-    b_in = (np.abs(u) <= f.al[:, None] + TOL) & (np.abs(v) <= f.aw[:, None] + TOL)
-    # Edges of a against the lines of b's edges: y = bw, x = -bl, y = -bw, x = bl.
-    # sd[k, i, j]: signed distance of corner i of a outside line j.
-    sd = np.stack([ay - bw, -ax - bl, -ay - bw, ax - bl], axis=-1)  # (K, 4, 4)
-    s0, s1 = sd, np.roll(sd, -1, axis=1)  # edge i runs corner i -> corner i+1
-    crosses = (np.minimum(s0, s1) <= 0.0) & (np.maximum(s0, s1) >= 0.0) & (s0 != s1)
-    t = s0 / np.where(crosses, s0 - s1, 1.0)
-    x0, y0 = ax[:, :, None], ay[:, :, None]
-    x1, y1 = np.roll(ax, -1, axis=1)[:, :, None], np.roll(ay, -1, axis=1)[:, :, None]
-    px, py = x0 + t * (x1 - x0), y0 + t * (y1 - y0)  # (K, 4, 4)
-    # The crossing must fall within the extent of b's edge (along x for j even, y for j odd).
-    along = np.where(np.arange(4) % 2 == 0, np.abs(px) - bl[:, :, None], np.abs(py) - bw[:, :, None])
-    cross_ok = crosses & (along <= TOL)
-    k = ax.shape[0]
-    x = np.concatenate([ax, bx, px.reshape(k, 16)], axis=1)
-    y = np.concatenate([ay, by, py.reshape(k, 16)], axis=1)
-    valid = np.concatenate([a_in, b_in, cross_ok.reshape(k, 16)], axis=1)
+    a_in = (np.abs(ax) <= f.bl + TOL) & (np.abs(ay) <= f.bw + TOL)
+    ex, ey = bx - f.cx, by - f.cy  # corners of b along a's axes
+    b_in = ((np.abs(ex * f.c + ey * f.s) <= f.al + TOL)
+            & (np.abs(ey * f.c - ex * f.s) <= f.aw + TOL))
+    # Edges of a against the lines of b's edges y = bw, x = -bl, y = -bw, x = bl:
+    # s0[i, j] / s1[i, j] = signed distance outside line j of the start / end of a's edge i.
+    s0 = np.stack([ay - f.bw, -ax - f.bl, -ay - f.bw, ax - f.bl], axis=1)  # (4, 4, K)
+    s1 = s0[_NEXT]
+    crosses = (((s0 <= 0.0) & (s1 >= 0.0)) | ((s0 >= 0.0) & (s1 <= 0.0))) & (s0 != s1)
+    den = s0 - s1
+    den[~crosses] = 1.0
+    t = s0 / den  # in [0, 1] where the edge crosses the line
+    dxe, dye = ax[_NEXT] - ax, ay[_NEXT] - ay  # (4, K) edge vectors
+    px, py = ax[:, None] + t * dxe[:, None], ay[:, None] + t * dye[:, None]
+    # The crossing must fall within b's edge (|x| <= bl on lines 0 and 2, |y| <= bw on 1 and 3).
+    along = np.stack([np.abs(px[:, 0]) - f.bl, np.abs(py[:, 1]) - f.bw,
+                      np.abs(px[:, 2]) - f.bl, np.abs(py[:, 3]) - f.bw], axis=1)
+    bad = ~(crosses & (along <= TOL))
+    # Each edge of a enters and leaves b at most once: keep its first and last valid crossing.
+    t_in = np.where(bad, 2.0, t).min(axis=1)  # (4, K); > 1 if none
+    t_out = np.where(bad, -1.0, t).max(axis=1)  # < 0 if none
+    x = np.concatenate([ax, bx, ax + t_in * dxe, ax + t_out * dxe])
+    y = np.concatenate([ay, by, ay + t_in * dye, ay + t_out * dye])
+    valid = np.concatenate([a_in, b_in, t_in <= 1.0, t_out >= 0.0])
     return _ring_area(x, y, valid)
 
 
 def _hull_area(f: _PairFrame) -> np.ndarray:
-    """Area ``(K,) float64`` m² of the convex hull of the 8 BEV corners of each pair."""
+    """Area ``(K,) float64`` m² of the convex hull of the 8 BEV corners of each pair.
+
+    A corner of ``a`` is on the hull iff, for some direction ``m`` in its normal cone, ``a`` reaches
+    at least as far as ``b`` along ``m``; checking ``a``'s two edge normals at the corner and ``b``'s
+    edge normals inside the cone suffices (the support of ``b`` is linear between those). Likewise
+    for the corners of ``b``.
+    """
+    c, s, al, aw, bl, bw = f.c, f.s, f.al, f.aw, f.bl, f.bw
+    # Outward normals of a's edges (left, rear, right, front) in b's frame, (4, K) components.
+    nax, nay = _rows(-s, -c, s, c), _rows(c, -s, -c, s)
+    abs_s, abs_c = np.abs(s), np.abs(c)
+    e_s = al * abs_s + aw * abs_c  # reach of a from its centre along b's y axis
+    e_c = al * abs_c + aw * abs_s  # ... along b's x axis
+    f_s = bl * abs_s + bw * abs_c  # reach of b from its centre along a's w axis
+    f_c = bl * abs_c + bw * abs_s  # ... along a's l axis
+    # Support of a and b along a's normals, and along b's normals (+y, -x, -y, +x).
+    ha_na = nax * f.cx + nay * f.cy + _rows(aw, al, aw, al)
+    hb_na = _rows(f_s, f_c, f_s, f_c)
+    ha_nb = _rows(f.cy + e_s, e_c - f.cx, e_s - f.cy, f.cx + e_c)
+    hb_nb = _rows(bw, bl, bw, bl)
+    a_na, a_nb = ha_na >= hb_na - TOL, ha_nb >= hb_nb - TOL  # (4, K): a reaches as far as b
+    b_na, b_nb = hb_na >= ha_na - TOL, hb_nb >= ha_nb - TOL
+    # pos[i, j]: (a's normal i) . (b's normal j) >= 0.
+    pos = _rows(nay, -nax, -nay, nax).transpose(1, 0, 2) >= 0.0  # (4, 4, K)
+    a_cone = pos[_PREV] & pos  # [i, j]: b's normal j lies in the cone of a's corner i
+    b_cone = pos[:, _PREV] & pos  # [i, j]: a's normal i lies in the cone of b's corner j
+    a_on = a_na[_PREV] | a_na | (a_cone & a_nb[None]).any(axis=1)
+    b_on = b_nb[_PREV] | b_nb | (b_cone & b_na[:, None]).any(axis=0)
     ax, ay = _corners_a(f)
     bx, by = _corners_b(f)
-    c, s = f.c[:, None], f.s[:, None]
-    # Outward normals of a's edges (left, rear, right, front) in b's frame: (K, 4) components.
-    nax = np.concatenate([-s, -c, s, c], axis=1)
-    nay = np.concatenate([c, -s, -c, s], axis=1)
-    a_off = np.stack([f.aw, f.al, f.aw, f.al], axis=1)
-    b_off = np.stack([f.bw, f.bl, f.bw, f.bl], axis=1)
-    # Support of a and b along a's normals, and along b's normals (the axes of b's frame).
-    ha_na = nax * f.cx[:, None] + nay * f.cy[:, None] + a_off
-    hb_na = f.bl[:, None] * np.abs(nax) + f.bw[:, None] * np.abs(nay)
-    gx, gy = _AXIS_NORMALS[:, 0], _AXIS_NORMALS[:, 1]  # (4,)
-    ha_nb = (gx * f.cx[:, None] + gy * f.cy[:, None]
-             + f.al[:, None] * np.abs(gx * c + gy * s) + f.aw[:, None] * np.abs(-gx * s + gy * c))
-    hb_nb = b_off
-    a_wins_na = ha_na >= hb_na - TOL  # (K, 4): a reaches as far as b along a's normal j
-    a_wins_nb = ha_nb >= hb_nb - TOL  # (K, 4): ... along b's normal j
-    b_wins_na = hb_na >= ha_na - TOL
-    b_wins_nb = hb_nb >= ha_nb - TOL
-    # dot[k, i, j] = (a's normal i) . (b's normal j)
-    dot = nax[:, :, None] * gx + nay[:, :, None] * gy
-    pos = dot >= 0.0
-    # Corner i of a has normal cone spanned by a's normals i-1 and i; likewise for b.
-    a_cone = np.roll(pos, 1, axis=1) & pos  # (K, 4 corners of a, 4 normals of b)
-    b_cone = np.roll(pos, 1, axis=2) & pos  # (K, 4 normals of a, 4 corners of b)
-    a_on = (np.roll(a_wins_na, 1, axis=1) | a_wins_na
-            | np.any(a_cone & a_wins_nb[:, None, :], axis=2))
-    b_on = (np.roll(b_wins_nb, 1, axis=1) | b_wins_nb
-            | np.any(b_cone & b_wins_na[:, :, None], axis=1))
-    x = np.concatenate([ax, bx], axis=1)
-    y = np.concatenate([ay, by], axis=1)
-    return _ring_area(x, y, np.concatenate([a_on, b_on], axis=1))
+    return _ring_area(np.concatenate([ax, bx]), np.concatenate([ay, by]),
+                      np.concatenate([a_on, b_on]))
 
 
 def _may_overlap(f: _PairFrame) -> np.ndarray:
@@ -255,6 +310,17 @@ class _BevTerms(NamedTuple):
     hull: np.ndarray | None
 
 
+def _blocked(fn, f: _PairFrame) -> np.ndarray:
+    """``fn(f) (K,)`` evaluated on blocks of at most :data:`BLOCK` pairs."""
+    k = f.cx.shape[0]
+    if k <= BLOCK:
+        return fn(f)
+    out = np.empty(k)
+    for start in range(0, k, BLOCK):
+        out[start:start + BLOCK] = fn(_PairFrame(*(arr[start:start + BLOCK] for arr in f)))
+    return out
+
+
 def _bev_terms(a: np.ndarray, b: np.ndarray, with_hull: bool) -> _BevTerms:
     """BEV areas of aligned pairs ``a, b (K, >=7)``; the hull only when ``with_hull``."""
     f = _pair_frame(a, b)
@@ -262,9 +328,9 @@ def _bev_terms(a: np.ndarray, b: np.ndarray, with_hull: bool) -> _BevTerms:
     inter = np.zeros(a.shape[0])
     near = _may_overlap(f) & (area_a > 0.0) & (area_b > 0.0)
     if np.any(near):
-        inter[near] = _intersection_area(_subset(f, near))
+        inter[near] = _blocked(_intersection_area, _subset(f, near))
     inter = np.clip(inter, 0.0, np.minimum(area_a, area_b))
-    hull = _hull_area(f) if with_hull else None
+    hull = _blocked(_hull_area, f) if with_hull else None
     return _BevTerms(inter, area_a, area_b, hull)
 
 
@@ -288,19 +354,14 @@ def _vertical(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return overlap, span
 
 
-def paired_bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """BEV IoU ``(K,) float64`` in [0, 1] of aligned pairs ``a[k], b[k]``, both ``(K, >=7)``."""
-    a, b = _check_paired(a, b)
+def _bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """BEV IoU ``(K,)`` of validated aligned pairs ``(K, >=7)``."""
     t = _bev_terms(a, b, with_hull=False)
     return np.clip(_ratio(t.inter, t.area_a + t.area_b - t.inter), 0.0, 1.0)
 
 
-def paired_bev_giou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """BEV GIoU ``(K,) float64`` in [-1, 1] of aligned pairs ``a[k], b[k]``, both ``(K, >=7)``.
-
-    The enclosing region is the convex hull of the 8 BEV corners.
-    """
-    a, b = _check_paired(a, b)
+def _bev_giou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """BEV GIoU ``(K,)`` of validated aligned pairs ``(K, >=7)``."""
     t = _bev_terms(a, b, with_hull=True)
     union = t.area_a + t.area_b - t.inter
     iou = np.clip(_ratio(t.inter, union), 0.0, 1.0)
@@ -315,10 +376,34 @@ def _volumes(a: np.ndarray, b: np.ndarray, t: _BevTerms) -> tuple[np.ndarray, np
     return np.clip(_ratio(inter, union), 0.0, 1.0), union, span
 
 
+def _iou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """3D IoU ``(K,)`` of validated aligned pairs ``(K, >=7)``."""
+    return _volumes(a, b, _bev_terms(a, b, with_hull=False))[0]
+
+
+def _giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """3D GIoU ``(K,)`` of validated aligned pairs ``(K, >=7)``."""
+    t = _bev_terms(a, b, with_hull=True)
+    iou, union, span = _volumes(a, b, t)
+    return _giou(iou, union, t.hull * span)
+
+
+def paired_bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """BEV IoU ``(K,) float64`` in [0, 1] of aligned pairs ``a[k], b[k]``, both ``(K, >=7)``."""
+    return _bev_iou(*_check_paired(a, b))
+
+
+def paired_bev_giou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """BEV GIoU ``(K,) float64`` in [-1, 1] of aligned pairs ``a[k], b[k]``, both ``(K, >=7)``.
+
+    The enclosing region is the convex hull of the 8 BEV corners.
+    """
+    return _bev_giou(*_check_paired(a, b))
+
+
 def paired_iou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """3D IoU ``(K,) float64`` in [0, 1] of aligned pairs ``a[k], b[k]``, both ``(K, >=7)``."""
-    a, b = _check_paired(a, b)
-    return _volumes(a, b, _bev_terms(a, b, with_hull=False))[0]
+    return _iou_3d(*_check_paired(a, b))
 
 
 def paired_giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -326,10 +411,7 @@ def paired_giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
     The enclosing volume is the convex hull of the 8 BEV corners times the vertical span of both.
     """
-    a, b = _check_paired(a, b)
-    t = _bev_terms(a, b, with_hull=True)
-    iou, union, span = _volumes(a, b, t)
-    return _giou(iou, union, t.hull * span)
+    return _giou_3d(*_check_paired(a, b))
 
 
 def _pairwise(fn, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -349,22 +431,22 @@ def _pairwise(fn, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def pairwise_bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """BEV IoU ``(N, M) float64`` in [0, 1] between ``a (N, >=7)`` and ``b (M, >=7)``."""
-    return _pairwise(paired_bev_iou, a, b)
+    return _pairwise(_bev_iou, a, b)
 
 
 def pairwise_bev_giou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """BEV GIoU ``(N, M) float64`` in [-1, 1] between ``a (N, >=7)`` and ``b (M, >=7)``."""
-    return _pairwise(paired_bev_giou, a, b)
+    return _pairwise(_bev_giou, a, b)
 
 
 def pairwise_iou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """3D IoU ``(N, M) float64`` in [0, 1] between ``a (N, >=7)`` and ``b (M, >=7)``."""
-    return _pairwise(paired_iou_3d, a, b)
+    return _pairwise(_iou_3d, a, b)
 
 
 def pairwise_giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """3D GIoU ``(N, M) float64`` in [-1, 1] between ``a (N, >=7)`` and ``b (M, >=7)``."""
-    return _pairwise(paired_giou_3d, a, b)
+    return _pairwise(_giou_3d, a, b)
 
 
 def pairwise_centre_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -19,7 +19,7 @@ def test_ekf_preset_values():
     cfg = load_tracker_config("ekf")
     assert cfg.nms_threshold == 0.08 and cfg.two_stage and cfg.second_metric == "giou_bev"
     assert cfg.first_metric[1] == "giou_bev" and cfg.first_metric[2] == "giou_3d"  # bus, car
-    assert cfg.max_age.tolist() == [10] * 7 and cfg.punish_num == 1
+    assert cfg.max_age.tolist() == [10, 10, 15, 20, 10, 10, 20] and cfg.punish_num == 1
 
 
 def test_every_preset_key_has_a_comment():

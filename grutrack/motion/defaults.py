@@ -129,7 +129,8 @@ def _overrides(path: Path, model_override) -> dict[str, str]:
     out = {}
     for cls, name in dict(model_override).items():
         if cls not in TRACKING_CLASSES:
-            raise _fail(path, f"model_override.{cls}", f"unknown tracking class (expected one of {list(TRACKING_CLASSES)})")
+            expected = list(TRACKING_CLASSES)
+            raise _fail(path, f"model_override.{cls}", f"unknown tracking class (expected one of {expected})")
         out[cls] = _canonical_model(path, f"model_override.{cls}", name)
     return out
 

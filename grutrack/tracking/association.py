@@ -45,14 +45,16 @@ def pair_costs(det_boxes: np.ndarray, trk_boxes: np.ndarray, di: np.ndarray, ti:
 
 
 def hungarian(cost: np.ndarray, threshold: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Minimum-cost assignment keeping only pairs with ``cost < threshold`` (elementwise).
+    """Minimum-cost assignment among the pairs with ``cost < threshold`` (elementwise).
 
     cost (D, T) with forbidden pairs at a large value; threshold (D, T) or broadcastable -> (rows, cols).
     """
     if cost.size == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    rows, cols = linear_sum_assignment(cost)
-    ok = cost[rows, cols] < np.broadcast_to(threshold, cost.shape)[rows, cols]
+    allowed = cost < np.broadcast_to(threshold, cost.shape)
+    # forbid pairs above threshold before solving, so they cannot displace an acceptable assignment
+    rows, cols = linear_sum_assignment(np.where(allowed, cost, _INVALID))
+    ok = allowed[rows, cols]
     return rows[ok].astype(np.int64), cols[ok].astype(np.int64)
 
 

@@ -26,8 +26,8 @@ SCHEMA: dict[str, dict[str, str]] = {
     "association": {"first_metric": "per_class_metric", "first_threshold": "per_class_cost",
                     "two_stage": "bool", "second_metric": "metric", "second_threshold": "per_class_cost"},
     "lifecycle": {"max_age": "per_class_posint", "decay_rate": "per_class_unit", "punish_num": "nonnegint"},
-    "motion": {"config": "str", "model_override": "class_model_map"},
-    "output": {"max_boxes_per_sample": "posint"},
+    "motion": {"config": "str", "model_override": "class_model_map", "yaw_flip": "bool"},
+    "output": {"matched_box": "matched_box", "max_boxes_per_sample": "posint"},
 }
 
 
@@ -49,6 +49,8 @@ class TrackerConfig:
     punish_num: int
     motion_config: str
     model_override: dict[str, str]
+    yaw_flip: bool
+    matched_box: str
     max_boxes_per_sample: int
     raw: dict
 
@@ -95,6 +97,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         max_age=v["lifecycle.max_age"], decay_rate=v["lifecycle.decay_rate"],
         punish_num=v["lifecycle.punish_num"],
         motion_config=v["motion.config"], model_override=v["motion.model_override"],
+        yaw_flip=v["motion.yaw_flip"], matched_box=v["output.matched_box"],
         max_boxes_per_sample=v["output.max_boxes_per_sample"], raw=raw)
 
 
@@ -138,6 +141,8 @@ def _value(source: str, key: str, val: Any, kind: str) -> Any:
         return val if isinstance(val, bool) else fail("true or false")
     if kind == "str":
         return val if isinstance(val, str) and val else fail("a non-empty string")
+    if kind == "matched_box":
+        return val if val in ("filter", "detection") else fail("'filter' or 'detection'")
     if kind == "metric":
         return val if val in METRICS else fail(f"one of {', '.join(METRICS)}")
     if isinstance(val, bool) or not isinstance(val, (int, float)) or not np.isfinite(val):

@@ -25,9 +25,9 @@ class KalmanBackend:
     Q, R, P0: per-class tables (7, d, d) indexed by label; classes this backend never sees may be zeros.
     """
 
-    def __init__(self, model: MotionModel, Q: np.ndarray, R: np.ndarray, P0: np.ndarray):
+    def __init__(self, model: MotionModel, Q: np.ndarray, R: np.ndarray, P0: np.ndarray, yaw_flip: bool = True):
         self.model = model
-        self.kf = BatchKalmanFilter(model)
+        self.kf = BatchKalmanFilter(model, yaw_flip=yaw_flip)
         self.Q, self.R, self.P0 = Q, R, P0
 
     def initiate(self, z: np.ndarray, labels: np.ndarray) -> KFState:

@@ -144,7 +144,10 @@ class Tracker:
             g.scores[~matched] *= self.cfg.decay_rate[g.labels[~matched]]
             alive = g.misses < self.cfg.max_age[g.labels]
             emit = alive & (matched | (g.misses <= self.cfg.punish_num))
-            out.append(BoxSet(g.backend.boxes(g.state)[emit], g.scores[emit], g.labels[emit], g.ids[emit]))
+            boxes = g.backend.boxes(g.state)
+            if self.cfg.matched_box == "detection" and len(rows):
+                boxes[rows, :6] = dets.boxes[drows, :6]  # detection centre and size; filter yaw, velocity
+            out.append(BoxSet(boxes[emit], g.scores[emit], g.labels[emit], g.ids[emit]))
             g.keep(alive)
         return out
 

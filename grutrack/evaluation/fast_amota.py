@@ -1,0 +1,715 @@
+"""Fast, exact nuScenes tracking evaluation (AMOTA, AMOTP, MOTA, IDS, ... as ``tracking_nips_2019``).
+
+The official evaluation (``nuscenes.eval.tracking.evaluate.TrackingEval`` in nuscenes-devkit 1.2.0) runs a
+motmetrics 1.4.0 ``MOTAccumulator`` frame by frame for every class and every one of its 40 recall thresholds,
+builds pandas event tables and computes per-object metrics (FRAG, TID, LGD) with one pandas filter per object.
+This module gives the same numbers, to the last digit, much faster:
+
+* loading and filtering reuse the devkit itself (``load_prediction`` / ``load_gt`` or their custom-split
+  variants, ``add_center_dist``, ``filter_eval_boxes``, ``create_tracks``), so the ground-truth filtering,
+  the track-score averaging and the interpolation of gaps are the devkit's by construction;
+* the accumulation is re-implemented: the centre distances are computed exactly as the devkit's
+  ``sklearn.metrics.pairwise.euclidean_distances`` call does (same formula, same BLAS call on the same matrix
+  shape, so bit-identical), once per frame and per distinct set of kept predictions, and cached across
+  thresholds; a frame whose candidate pairs (distance < ``dist_th_tp``) form a one-to-one matching is resolved
+  without any solver (motmetrics would take all of them whatever its state), so whole scenes are matched with
+  array operations and MATCH / SWITCH follow from the previous partner of each object; a frame with competing
+  candidates replays motmetrics' ``MOTAccumulator.update`` (keep previous pairings that are still within
+  distance, then ``motmetrics.lap.linear_sum_assignment`` on the very matrix motmetrics would build, so the
+  tie-breaking is the solver's own);
+* the per-threshold metrics (MOTAR, MOTA, MOTP, FAF, MT, ML, FP, FN, IDS, FRAG, TID, LGD, recall) are array
+  reductions over the ground-truth boxes sorted by object, following ``nuscenes.eval.tracking.metrics`` and
+  ``motmetrics.metrics``; thresholds, their de-duplication, the unachieved-recall padding, the best-MOTA pick and
+  the AMOTA/AMOTP averaging follow ``TrackingEvaluation.accumulate`` and ``TrackingEval.evaluate``; the result
+  is a devkit ``TrackingMetrics`` / ``TrackingMetricDataList``, serialised by the devkit.
+
+Public entry points: :func:`fast_tracking_eval` (the ``metrics_summary.json`` dict), :func:`load_tracks`
+(the devkit's loading and filtering) and :func:`evaluate_tracks` (the fast accumulation on loaded tracks).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import time
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Tuple, Union
+
+import numpy as np
+
+__all__ = ["fast_tracking_eval", "load_tracks", "evaluate_tracks", "exact_center_distances"]
+
+_MOT_METRICS = ("gt", "tp", "motar", "mota", "motp", "faf", "mt", "ml", "fp", "fn", "ids", "frag", "recall",
+                "tid", "lgd")
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Loading (the devkit's own loaders)
+# ----------------------------------------------------------------------------------------------------------------
+
+def _default_config():
+    from nuscenes.eval.common.config import config_factory
+
+    return config_factory("tracking_nips_2019")
+
+
+def _quiet(verbose: bool):
+    """The devkit's GT loaders draw a tqdm bar on stderr even when not verbose; hide it unless verbose."""
+    return contextlib.nullcontext() if verbose else contextlib.redirect_stderr(io.StringIO())
+
+
+def load_tracks(nusc, submission: Union[dict, str, os.PathLike], eval_split: str, config=None,
+                verbose: bool = False):
+    """Load, filter and convert ground truth and predictions to tracks exactly as ``TrackingEval.__init__``.
+
+    :return: ``(tracks_gt, tracks_pred, meta)`` as the devkit's ``create_tracks`` gives them.
+    """
+    from nuscenes.eval.common.data_classes import EvalBoxes
+    from nuscenes.eval.common.loaders import (add_center_dist, filter_eval_boxes, get_samples_of_custom_split,
+                                              load_gt, load_gt_of_sample_tokens, load_prediction,
+                                              load_prediction_of_sample_tokens)
+    from nuscenes.eval.tracking.data_classes import TrackingBox
+    from nuscenes.eval.tracking.loaders import create_tracks
+    from nuscenes.utils.splits import is_predefined_split
+
+    cfg = config if config is not None else _default_config()
+    predefined = is_predefined_split(split_name=eval_split)
+    custom_tokens = None if predefined else get_samples_of_custom_split(split_name=eval_split, nusc=nusc)
+
+    if isinstance(submission, (str, os.PathLike)):
+        path = os.fspath(submission)
+        assert os.path.exists(path), "Error: The result file does not exist!"
+        with _quiet(verbose):
+            if predefined:
+                pred_boxes, meta = load_prediction(path, cfg.max_boxes_per_sample, TrackingBox, verbose=verbose)
+            else:
+                pred_boxes, meta = load_prediction_of_sample_tokens(
+                    path, cfg.max_boxes_per_sample, TrackingBox, sample_tokens=custom_tokens, verbose=verbose)
+    else:
+        # Same steps as load_prediction / load_prediction_of_sample_tokens, on an in-memory submission.
+        data = submission
+        assert "results" in data, "Error: No field `results` in result file."
+        if predefined:
+            results = data["results"]
+        else:
+            assert isinstance(data["results"], dict), "Error: results must be a dict."
+            results = {token: data["results"][token] for token in custom_tokens}
+        pred_boxes = EvalBoxes.deserialize(results, TrackingBox)
+        meta = data["meta"]
+        for sample_token in pred_boxes.sample_tokens:
+            assert len(pred_boxes.boxes[sample_token]) <= cfg.max_boxes_per_sample, \
+                "Error: Only <= %d boxes per sample allowed!" % cfg.max_boxes_per_sample
+
+    with _quiet(verbose):
+        if predefined:
+            gt_boxes = load_gt(nusc, eval_split, TrackingBox, verbose=verbose)
+        else:
+            gt_boxes = load_gt_of_sample_tokens(nusc, custom_tokens, TrackingBox, verbose=verbose)
+
+    assert set(pred_boxes.sample_tokens) == set(gt_boxes.sample_tokens), \
+        "Samples in split don't match samples in predicted tracks."
+
+    pred_boxes = add_center_dist(nusc, pred_boxes)
+    gt_boxes = add_center_dist(nusc, gt_boxes)
+    pred_boxes = filter_eval_boxes(nusc, pred_boxes, cfg.class_range, verbose=verbose)
+    gt_boxes = filter_eval_boxes(nusc, gt_boxes, cfg.class_range, verbose=verbose)
+
+    tracks_gt = create_tracks(gt_boxes, nusc, eval_split, gt=True)
+    tracks_pred = create_tracks(pred_boxes, nusc, eval_split, gt=False)
+    return tracks_gt, tracks_pred, meta
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Exact distances
+# ----------------------------------------------------------------------------------------------------------------
+
+def exact_center_distances(gt_xy: np.ndarray, pred_xy: np.ndarray) -> np.ndarray:
+    """BEV centre distances, bit-identical to the devkit's ``euclidean_distances(gt_xy, pred_xy)``.
+
+    scikit-learn computes ``sqrt(max(-2 X.Y^T + |X|^2 + |Y|^2, 0))`` with a BLAS product whose last bit depends
+    on the matrix shape; the devkit calls it once per frame on the kept predictions, so this must be called on
+    the same rows, in the same order. Inputs are fresh C-contiguous float64 arrays of shape (n, 2) and (m, 2).
+    """
+    xx = np.einsum("ij,ij->i", gt_xy, gt_xy)[:, None]
+    yy = np.einsum("ij,ij->i", pred_xy, pred_xy)[None, :]
+    d = -2 * (gt_xy @ pred_xy.T)
+    d += xx
+    d += yy
+    np.maximum(d, 0, out=d)
+    return np.sqrt(d, out=d)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Flat arrays
+# ----------------------------------------------------------------------------------------------------------------
+
+@dataclass
+class _Flat:
+    """All boxes of all scenes as arrays, frames numbered in the devkit's iteration order."""
+    n_frames: int
+    g_frame: np.ndarray
+    g_cls: np.ndarray
+    g_obj: np.ndarray
+    g_xy: np.ndarray
+    p_frame: np.ndarray
+    p_cls: np.ndarray
+    p_hyp: np.ndarray
+    p_xy: np.ndarray
+    p_score: np.ndarray
+
+
+def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
+    cls_index = {name: i for i, name in enumerate(class_names)}
+    g_frame: List[int] = []
+    g_cls: List[int] = []
+    g_obj: List[int] = []
+    g_xy: List[Tuple[float, float]] = []
+    p_frame: List[int] = []
+    p_cls: List[int] = []
+    p_hyp: List[int] = []
+    p_xy: List[Tuple[float, float]] = []
+    p_score: List[float] = []
+    n_obj = 0
+    n_hyp = 0
+    f = 0
+    # The devkit iterates the GT scenes and, within each, the GT timestamps; prediction ids are per scene
+    # (each scene has its own accumulator), hence the per-scene id maps.
+    for scene_token, scene_gt in tracks_gt.items():
+        scene_pred = tracks_pred[scene_token]
+        obj_ids: Dict[Any, int] = {}
+        hyp_ids: Dict[Any, int] = {}
+        for timestamp, frame_gt in scene_gt.items():
+            frame_pred = scene_pred[timestamp]
+            for box in frame_gt:
+                c = cls_index.get(box.tracking_name, -1)
+                if c < 0:
+                    continue
+                o = obj_ids.get(box.tracking_id)
+                if o is None:
+                    o = obj_ids[box.tracking_id] = n_obj
+                    n_obj += 1
+                g_frame.append(f)
+                g_cls.append(c)
+                g_obj.append(o)
+                g_xy.append((box.translation[0], box.translation[1]))
+            for box in frame_pred:
+                c = cls_index.get(box.tracking_name, -1)
+                if c < 0:
+                    continue
+                h = hyp_ids.get(box.tracking_id)
+                if h is None:
+                    h = hyp_ids[box.tracking_id] = n_hyp
+                    n_hyp += 1
+                p_frame.append(f)
+                p_cls.append(c)
+                p_hyp.append(h)
+                p_xy.append((box.translation[0], box.translation[1]))
+                p_score.append(box.tracking_score)
+            f += 1
+    return _Flat(
+        n_frames=f,
+        g_frame=np.asarray(g_frame, dtype=np.int64),
+        g_cls=np.asarray(g_cls, dtype=np.int64),
+        g_obj=np.asarray(g_obj, dtype=np.int64),
+        g_xy=np.asarray(g_xy, dtype=np.float64).reshape(-1, 2),
+        p_frame=np.asarray(p_frame, dtype=np.int64),
+        p_cls=np.asarray(p_cls, dtype=np.int64),
+        p_hyp=np.asarray(p_hyp, dtype=np.int64),
+        p_xy=np.asarray(p_xy, dtype=np.float64).reshape(-1, 2),
+        p_score=np.asarray(p_score, dtype=np.float64),
+    )
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# One class
+# ----------------------------------------------------------------------------------------------------------------
+
+@dataclass
+class _Subset:
+    """Candidate pairs of one frame for one set of kept predictions (cached across thresholds)."""
+    g: np.ndarray           # class-level GT index of each candidate pair
+    p: np.ndarray           # class-level prediction index of each candidate pair
+    d: np.ndarray           # exact distance of each pair
+    simple: bool            # candidate pairs form a one-to-one matching
+    g0: int = 0             # class-level index of the frame's first GT
+    dist: Optional[np.ndarray] = None   # n x k distance matrix, NaN where >= threshold (only if not simple)
+    kept: Optional[np.ndarray] = None   # class-level indices of the kept predictions (only if not simple)
+
+
+@dataclass
+class _PassResult:
+    g: np.ndarray           # matched GT indices
+    p: np.ndarray           # matched prediction indices
+    d: np.ndarray           # distances of the matches
+    switch: np.ndarray      # SWITCH (True) or MATCH (False)
+    n_kept: int
+    n_frames: int
+    frame_id: np.ndarray    # devkit frame id of every frame (-1 where the frame has no event)
+
+
+class _ClassEval:
+    """Accumulation for one class, all thresholds."""
+
+    def __init__(self, flat: _Flat, c: int, dist_th: float):
+        self.dist_th = float(dist_th)
+        gi = np.flatnonzero(flat.g_cls == c)
+        pi = np.flatnonzero(flat.p_cls == c)
+        self.n_frames = flat.n_frames
+        self.gf = flat.g_frame[gi]
+        self.go = flat.g_obj[gi]
+        self.gxy = np.ascontiguousarray(flat.g_xy[gi])
+        self.pf = flat.p_frame[pi]
+        self.ph = flat.p_hyp[pi]
+        self.pxy = np.ascontiguousarray(flat.p_xy[pi])
+        self.ps = flat.p_score[pi]
+        self.n_gt = len(gi)
+        frames = np.arange(flat.n_frames + 1)
+        self.g_ptr = np.searchsorted(self.gf, frames)
+        self.p_ptr = np.searchsorted(self.pf, frames)
+        self.n_f = np.diff(self.g_ptr)
+        self._cache: Dict[Tuple[int, int], _Subset] = {}
+        self._pass_cache: Dict[int, _PassResult] = {}
+        self._objects()
+        self._near()
+
+    # -- static structure ------------------------------------------------------------------------------------
+
+    def _objects(self) -> None:
+        """GT boxes sorted by object (stable: by frame within an object)."""
+        self.obj_order = np.argsort(self.go, kind="stable")
+        go_sorted = self.go[self.obj_order]
+        starts = np.flatnonzero(np.r_[True, go_sorted[1:] != go_sorted[:-1]]) if self.n_gt else np.zeros(0, int)
+        self.obj_starts = starts
+        self.obj_counts = np.diff(np.r_[starts, self.n_gt])
+        self.obj_of_sorted = np.repeat(np.arange(len(starts)), self.obj_counts)
+        # The devkit expects one event per object and frame (true for nuScenes ground truth).
+        gf_sorted = self.gf[self.obj_order]
+        dup = (go_sorted[1:] == go_sorted[:-1]) & (gf_sorted[1:] == gf_sorted[:-1])
+        self.has_duplicate_gt = bool(dup.any())
+
+    def _near(self) -> None:
+        """Predictions that could be within the distance threshold of some GT of their frame (conservative)."""
+        self.p_near = np.zeros(len(self.ps), dtype=bool)
+        both = np.flatnonzero((self.n_f > 0) & (np.diff(self.p_ptr) > 0))
+        th = self.dist_th
+        for f in both:
+            g0, g1 = self.g_ptr[f], self.g_ptr[f + 1]
+            p0, p1 = self.p_ptr[f], self.p_ptr[f + 1]
+            gxy = self.gxy[g0:g1]
+            pxy = self.pxy[p0:p1]
+            dx = gxy[:, 0, None] - pxy[None, :, 0]
+            dy = gxy[:, 1, None] - pxy[None, :, 1]
+            approx = np.hypot(dx, dy)
+            # Rounding of the devkit's |x|^2 - 2xy + |y|^2 formula is far below this margin near the threshold.
+            scale = max(float(np.abs(gxy).max()), float(np.abs(pxy).max()), 1.0)
+            margin = 1e-3 + 1e-12 * scale * scale
+            self.p_near[p0:p1] = (approx < th + margin).any(axis=0)
+
+    # -- candidate pairs ---------------------------------------------------------------------------------------
+
+    def _subset(self, f: int, kept: np.ndarray, n_kept: int) -> _Subset:
+        """Exact distances and candidate pairs of frame ``f`` with its kept predictions (cached by count: the
+        kept sets of one frame are nested, so the count identifies the set)."""
+        g0, g1 = int(self.g_ptr[f]), int(self.g_ptr[f + 1])
+        p0, p1 = int(self.p_ptr[f]), int(self.p_ptr[f + 1])
+        idx = p0 + np.flatnonzero(kept[p0:p1])
+        assert len(idx) == n_kept
+        # Fresh C-contiguous arrays of the devkit's shapes (n_gt x 2, n_kept x 2).
+        dist = exact_center_distances(self.gxy[g0:g1].copy(), self.pxy[idx])
+        cand = dist < self.dist_th          # the devkit sets distances >= dist_th_tp to NaN
+        ii, jj = np.nonzero(cand)
+        simple = not (len(ii) > 1 and ((ii[1:] == ii[:-1]).any() or np.bincount(jj).max() > 1))
+        sub = _Subset(g=g0 + ii, p=idx[jj], d=dist[ii, jj], simple=simple, g0=g0)
+        if not simple:
+            dist[~cand] = np.nan
+            sub.dist = dist
+            sub.kept = idx
+        self._cache[(f, n_kept)] = sub
+        return sub
+
+    # -- one threshold -----------------------------------------------------------------------------------------
+
+    def run_pass(self, kept: np.ndarray) -> _PassResult:
+        """Replay the devkit's per-frame accumulation with the predictions in ``kept`` (bool mask)."""
+        n_kept = int(kept.sum())
+        cached = self._pass_cache.get(n_kept)
+        if cached is not None:   # kept sets are nested: same count, same set, same result
+            return cached
+        ck = np.r_[0, np.cumsum(kept)]
+        k_f = ck[self.p_ptr[1:]] - ck[self.p_ptr[:-1]]
+        cn = np.r_[0, np.cumsum(kept & self.p_near)]
+        near_f = cn[self.p_ptr[1:]] - cn[self.p_ptr[:-1]]
+        nonempty = (self.n_f > 0) | (k_f > 0)
+        frame_id = np.where(nonempty, np.cumsum(nonempty) - 1, -1)
+
+        # Frames with at least one candidate pair; the others only produce misses and false positives.
+        active = np.flatnonzero((self.n_f > 0) & (near_f > 0))
+        cache = self._cache
+        simple: List[_Subset] = []
+        hard: List[Tuple[int, _Subset]] = []
+        for f, k in zip(active.tolist(), k_f[active].tolist()):
+            sub = cache.get((f, k))
+            if sub is None:
+                sub = self._subset(f, kept, k)
+            if sub.simple:
+                simple.append(sub)
+            else:
+                hard.append((f, sub))
+
+        # One-to-one frames: motmetrics matches every candidate pair whatever its state.
+        if simple:
+            g = np.concatenate([s.g for s in simple])
+            p = np.concatenate([s.p for s in simple])
+            d = np.concatenate([s.d for s in simple])
+        else:
+            g = np.zeros(0, np.int64)
+            p = np.zeros(0, np.int64)
+            d = np.zeros(0, np.float64)
+        if hard:
+            hg, hp, hd = self._replay_hard(hard, g, p)
+            g = np.concatenate([g, hg])
+            p = np.concatenate([p, hp])
+            d = np.concatenate([d, hd])
+
+        # SWITCH: the object's previous partner (MOTAccumulator.m, last match in an earlier frame) differs.
+        o = self.go[g]
+        h = self.ph[p]
+        order = np.lexsort((self.gf[g], o))
+        o_s, h_s = o[order], h[order]
+        sw = np.zeros(len(order), dtype=bool)
+        if len(order) > 1:
+            sw[order[1:]] = (o_s[1:] == o_s[:-1]) & (h_s[1:] != h_s[:-1])
+
+        res = _PassResult(g=g, p=p, d=d, switch=sw, n_kept=n_kept, n_frames=int(nonempty.sum()),
+                          frame_id=frame_id)
+        self._pass_cache[n_kept] = res
+        return res
+
+    def _replay_hard(self, hard: List[Tuple[int, "_Subset"]], g_simple: np.ndarray, p_simple: np.ndarray):
+        """motmetrics' ``MOTAccumulator.update`` for the frames with competing candidates, in time order.
+
+        The state it needs (each object's last partner before the frame) comes from the matches of the
+        one-to-one frames (all known) and of the earlier competing frames (replayed here first).
+        """
+        go, ph, gf = self.go, self.ph, self.gf
+        nf = self.n_frames + 1
+        # Last one-to-one match of each object before a frame: binary search on (object, frame) keys.
+        key_s = go[g_simple] * nf + gf[g_simple]
+        order = np.argsort(key_s, kind="stable")
+        key_sorted = key_s[order]
+        h_sorted = ph[p_simple][order]
+        last_hard: Dict[int, Tuple[int, int]] = {}   # object -> (frame, hypothesis) of its last replayed match
+        out_g: List[int] = []
+        out_p: List[int] = []
+        out_d: List[float] = []
+        for f, sub in hard:
+            dist = sub.dist
+            n, k = dist.shape
+            g0 = sub.g0
+            # Rows without any pairing within distance can neither keep a pairing nor be assigned.
+            rows = np.flatnonzero(np.isfinite(dist).any(axis=1))
+            objs = go[g0 + rows]
+            pos = np.searchsorted(key_sorted, objs * nf + f) - 1
+            hids = ph[sub.kept].tolist()
+            cols_of: Dict[int, List[int]] = {}
+            for j, hid in enumerate(hids):
+                cols_of.setdefault(hid, []).append(j)
+            omask = np.zeros(n, dtype=bool)
+            hmask = np.zeros(k, dtype=bool)
+            kept_prev: List[Tuple[int, int]] = []
+            # 1. Keep previous pairings still within distance (first unmasked hypothesis with that id).
+            for r, o, q in zip(rows.tolist(), objs.tolist(), pos.tolist()):
+                hp, fp = None, -1
+                if q >= 0 and key_sorted[q] // nf == o:
+                    hp, fp = int(h_sorted[q]), int(key_sorted[q] % nf)
+                lh = last_hard.get(o)
+                if lh is not None and lh[0] > fp:
+                    hp = lh[1]
+                if hp is None:
+                    continue
+                j = next((j for j in cols_of.get(hp, ()) if not hmask[j]), None)
+                if j is None or not np.isfinite(dist[r, j]):
+                    continue
+                omask[r] = True
+                hmask[j] = True
+                out_g.append(g0 + r)
+                out_p.append(int(sub.kept[j]))
+                out_d.append(float(dist[r, j]))
+                kept_prev.append((o, hp))
+            # 2. The rest: motmetrics' solver on motmetrics' matrix (ties broken as the devkit breaks them).
+            dm = dist.copy()
+            dm[omask, :] = np.nan
+            dm[:, hmask] = np.nan
+            for i, j in _assign(dm):
+                out_g.append(g0 + i)
+                out_p.append(int(sub.kept[j]))
+                out_d.append(float(dm[i, j]))
+                last_hard[int(go[g0 + i])] = (f, hids[j])
+            for o, hp in kept_prev:
+                last_hard[o] = (f, hp)
+        return (np.asarray(out_g, dtype=np.int64), np.asarray(out_p, dtype=np.int64),
+                np.asarray(out_d, dtype=np.float64))
+
+    # -- metrics of one threshold --------------------------------------------------------------------------------
+
+    def pass_metrics(self, res: _PassResult) -> Dict[str, float]:
+        n_obj = self.n_gt
+        n_det = len(res.g)
+        n_sw = int(res.switch.sum())
+        n_match = n_det - n_sw
+        n_miss = n_obj - n_det
+        n_fp = res.n_kept - n_det
+
+        matched = np.zeros(self.n_gt, dtype=bool)
+        matched[res.g] = True
+        ms = matched[self.obj_order]
+        fid = res.frame_id[self.gf[self.obj_order]]
+        starts = self.obj_starts
+        counts = self.obj_counts
+        n_objects = len(starts)
+        tracked = np.add.reduceat(ms.astype(np.int64), starts) if n_objects else np.zeros(0, np.int64)
+        ratio = tracked / counts
+        mt = int(np.count_nonzero(ratio >= 0.8))
+        ml = int(np.count_nonzero(ratio < 0.2))
+
+        pos = np.arange(self.n_gt)
+        big = self.n_gt + 1
+        first_m = np.minimum.reduceat(np.where(ms, pos, big), starts) if n_objects else pos[:0]
+        last_m = np.maximum.reduceat(np.where(ms, pos, -1), starts) if n_objects else pos[:0]
+        is_tracked = tracked > 0
+        first_fid = fid[starts]
+        last_fid = fid[starts + counts - 1]
+        n_tracked = int(is_tracked.sum())
+
+        # TID: frames from first appearance to first match; LGD: longest run of unmatched frame ids in the span.
+        ft = first_m[is_tracked]
+        lt = last_m[is_tracked]
+        lead = fid[ft] - first_fid[is_tracked]
+        trail = last_fid[is_tracked] - fid[lt]
+        gaps = np.maximum(lead, trail)
+        mpos = np.flatnonzero(ms)
+        if len(mpos) > 1:
+            same = self.obj_of_sorted[mpos[1:]] == self.obj_of_sorted[mpos[:-1]]
+            inner = fid[mpos[1:]] - fid[mpos[:-1]] - 1
+            inner_gap = np.zeros(n_objects, dtype=np.int64)
+            np.maximum.at(inner_gap, self.obj_of_sorted[mpos[1:]][same], inner[same])
+            gaps = np.maximum(gaps, inner_gap[is_tracked])
+        # FRAG: matched -> missed transitions inside [first match, last match] of each object.
+        frag = 0
+        if self.n_gt > 1:
+            trans = np.flatnonzero(ms[:-1] & ~ms[1:]) + 1
+            if len(trans):
+                obj_t = self.obj_of_sorted[trans]
+                same = obj_t == self.obj_of_sorted[trans - 1]
+                frag = int(np.count_nonzero(same & (trans <= last_m[obj_t])))
+
+        if n_tracked == 0:
+            tid = np.nan
+            lgd = np.nan
+        else:
+            tid = float(np.sum(lead * 0.5)) / n_tracked
+            lgd = float(np.sum(gaps * 0.5)) / n_tracked
+
+        # motmetrics / devkit formulas, same operation order.
+        recall_m = n_match / n_obj
+        nominator = (n_miss + n_sw + n_fp) - (1 - recall_m) * n_obj
+        denominator = recall_m * n_obj
+        motar = np.nan if denominator == 0 else max(0.0, 1 - 1.0 * nominator / denominator)
+        mota = max(0.0, 1. - (n_miss + n_sw + n_fp) / n_obj)
+        motp = np.nan if n_det == 0 else float(np.sum(res.d)) / n_det
+        faf = n_fp / res.n_frames * 100
+        recall = n_det / n_obj
+        return {"gt": n_obj, "tp": n_match, "motar": motar, "mota": mota, "motp": motp, "faf": faf, "mt": mt,
+                "ml": ml, "fp": n_fp, "fn": n_miss, "ids": n_sw, "frag": frag, "recall": recall, "tid": tid,
+                "lgd": lgd}
+
+    def match_scores(self, res: _PassResult) -> np.ndarray:
+        """Scores the devkit collects without a threshold: every prediction of a frame whose id had a MATCH
+        (not SWITCH) event in that frame."""
+        mp = res.p[~res.switch]
+        keys = self.pf[mp] * (int(self.ph.max()) + 1 if len(self.ph) else 1) + self.ph[mp]
+        all_keys = self.pf * (int(self.ph.max()) + 1 if len(self.ph) else 1) + self.ph
+        return self.ps[np.isin(all_keys, keys)]
+
+
+def _assign(dm: np.ndarray) -> List[Tuple[int, int]]:
+    """Pairs (row, col) motmetrics' step 2 keeps for the masked distance matrix ``dm`` (NaN: no pairing).
+
+    When the finite entries form a one-to-one matching, every optimal assignment contains all of them (the
+    solver first maximises the number of finite pairs: motmetrics makes the others expensive enough), so no
+    solver is needed; otherwise ``motmetrics.lap.linear_sum_assignment`` is called on the same matrix.
+    """
+    ii, jj = np.nonzero(np.isfinite(dm))
+    if len(ii) == 0:
+        return []
+    if not ((ii[1:] == ii[:-1]).any() or np.bincount(jj).max() > 1):
+        return list(zip(ii.tolist(), jj.tolist()))
+    from motmetrics.lap import linear_sum_assignment
+
+    rids, cids = linear_sum_assignment(dm)
+    return [(int(i), int(j)) for i, j in zip(rids, cids) if np.isfinite(dm[i, j])]
+
+
+class _NeedsDevkit(Exception):
+    """Raised for inputs outside the fast path's assumptions (duplicate GT ids in a frame)."""
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Thresholds and metric data (TrackingEvaluation.accumulate)
+# ----------------------------------------------------------------------------------------------------------------
+
+def _compute_thresholds(scores: np.ndarray, gt_box_count: int, min_recall: float, num_thresholds: int):
+    if len(scores) == 0:
+        return [np.nan] * num_thresholds, [np.nan] * num_thresholds
+    scores = np.array(scores)
+    scores.sort()
+    scores = scores[::-1]
+    tps = np.array(range(1, len(scores) + 1))
+    rec = tps / gt_box_count
+    assert len(scores) / gt_box_count <= 1
+    max_recall_achieved = np.max(rec)
+    rec_interp = np.linspace(min_recall, 1, num_thresholds).round(12)
+    thresholds = np.interp(rec_interp, rec, scores, right=0)
+    thresholds[rec_interp > max_recall_achieved] = np.nan
+    thresholds = list(thresholds.tolist())
+    rec_interp = list(rec_interp.tolist())
+    thresholds.reverse()
+    rec_interp.reverse()
+    return thresholds, rec_interp
+
+
+def _accumulate_class(ce: _ClassEval, cfg, nelem: int):
+    from nuscenes.eval.tracking.data_classes import TrackingMetricData
+
+    md = TrackingMetricData()
+    if ce.n_gt == 0:
+        return md
+    if ce.has_duplicate_gt:
+        raise _NeedsDevkit()
+
+    all_kept = np.ones(len(ce.ps), dtype=bool)
+    scores = ce.match_scores(ce.run_pass(all_kept))
+    thresholds, recalls = _compute_thresholds(scores, ce.n_gt, cfg.min_recall, nelem)
+    md.confidence = thresholds
+    md.recall_hypo = recalls
+
+    thresh_metrics: List[Dict[str, float]] = []
+    for t, threshold in enumerate(thresholds):
+        if np.isnan(threshold) or threshold in thresholds[:t]:
+            continue
+        thresh_metrics.append(ce.pass_metrics(ce.run_pass(ce.ps >= threshold)))
+
+    num_unachieved = len([t for t in thresholds if np.isnan(t)])
+    valid = [t for t in thresholds if not np.isnan(t)]
+    assert valid == sorted(valid)
+    assert num_unachieved + len(valid) - len(np.unique(valid)) + len(thresh_metrics) == nelem
+    rep_counts = [int(np.sum(np.asarray(thresholds) == t)) for t in np.unique(valid)]
+
+    n_objects = len(ce.obj_starts)
+    for name in _MOT_METRICS:
+        if not thresh_metrics:
+            worst = cfg.metric_worst[name]
+            if worst == -1:
+                if name == "ml":
+                    worst = n_objects
+                elif name in ("gt", "fn"):
+                    worst = ce.n_gt
+                elif name in ("fp", "ids", "frag"):
+                    worst = np.nan
+                else:
+                    raise NotImplementedError
+            values = [worst] * nelem
+        else:
+            per = [m[name] for m in thresh_metrics]
+            assert len(rep_counts) == len(per)
+            values = [np.nan] * num_unachieved
+            for v, r in zip(per, rep_counts):
+                values.extend([v] * r)
+        md.set_metric(name, values)
+    return md
+
+
+def _devkit_accumulate(tracks_gt, tracks_pred, class_name: str, cfg, nelem: int):
+    """Fallback to the devkit's own accumulation for one class (inputs the fast path does not model)."""
+    from nuscenes.eval.tracking.algo import TrackingEvaluation
+
+    ev = TrackingEvaluation(tracks_gt, tracks_pred, class_name, cfg.dist_fcn_callable, cfg.dist_th_tp,
+                            cfg.min_recall, num_thresholds=nelem, metric_worst=cfg.metric_worst, verbose=False)
+    return ev.accumulate()
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Public API
+# ----------------------------------------------------------------------------------------------------------------
+
+def evaluate_tracks(tracks_gt, tracks_pred, config=None):
+    """The fast equivalent of ``TrackingEval.evaluate`` on tracks from :func:`load_tracks`.
+
+    :return: ``(TrackingMetrics, TrackingMetricDataList)`` (devkit classes), eval_time set to this call's time.
+    """
+    from nuscenes.eval.tracking.constants import AVG_METRIC_MAP, MOT_METRIC_MAP
+    from nuscenes.eval.tracking.data_classes import TrackingMetricData, TrackingMetricDataList, TrackingMetrics
+
+    start = time.time()
+    cfg = config if config is not None else _default_config()
+    assert cfg.dist_fcn == "center_distance"
+    nelem = TrackingMetricData.nelem
+    metrics = TrackingMetrics(cfg)
+    md_list = TrackingMetricDataList()
+
+    flat = _flatten(tracks_gt, tracks_pred, cfg.class_names)
+    for c, class_name in enumerate(cfg.class_names):
+        ce = _ClassEval(flat, c, cfg.dist_th_tp)
+        try:
+            md = _accumulate_class(ce, cfg, nelem)
+        except _NeedsDevkit:
+            md = _devkit_accumulate(tracks_gt, tracks_pred, class_name, cfg, nelem)
+        md_list.set(class_name, md)
+
+    for class_name in cfg.class_names:
+        md = md_list[class_name]
+        best = None if np.all(np.isnan(md.mota)) else np.nanargmax(md.mota)
+        if best is not None:
+            for metric_name in MOT_METRIC_MAP.values():
+                if metric_name == "":
+                    continue
+                metrics.add_label_metric(metric_name, class_name, md.get_metric(metric_name)[best])
+        for metric_name, per_threshold in AVG_METRIC_MAP.items():
+            values = np.array(md.get_metric(per_threshold))
+            if np.all(np.isnan(values)):
+                value = np.nan
+            else:
+                values[np.isnan(values)] = cfg.metric_worst[metric_name]
+                value = float(np.nanmean(values))
+            metrics.add_label_metric(metric_name, class_name, value)
+
+    metrics.add_runtime(time.time() - start)
+    return metrics, md_list
+
+
+def fast_tracking_eval(nusc, submission: Union[dict, str, os.PathLike], eval_split: str, config=None,
+                       verbose: bool = False) -> dict:
+    """Evaluate a nuScenes tracking submission; returns what ``TrackingEval.main`` writes as
+    ``metrics_summary.json`` (``TrackingMetrics.serialize()`` plus ``meta``), with the same numbers.
+
+    :param nusc: a loaded ``nuscenes.NuScenes``.
+    :param submission: the tracking-submission dict (``{"meta": ..., "results": {sample_token: [box, ...]}}``)
+        or the path of its JSON file.
+    :param eval_split: a predefined split name (``mini_val``, ``val``, ...) or a custom split of
+        ``<dataroot>/<version>/splits.json``.
+    :param config: a devkit ``TrackingConfig``; default ``config_factory('tracking_nips_2019')``.
+    :param verbose: print the devkit's loading messages and the final metrics table.
+    ``eval_time`` is this implementation's accumulation + metrics time (what the devkit times there too).
+    """
+    cfg = config if config is not None else _default_config()
+    tracks_gt, tracks_pred, meta = load_tracks(nusc, submission, eval_split, cfg, verbose=verbose)
+    metrics, _ = evaluate_tracks(tracks_gt, tracks_pred, cfg)
+    summary = metrics.serialize()
+    summary["meta"] = meta.copy()
+    if verbose:
+        from nuscenes.eval.tracking.utils import print_final_metrics
+
+        print_final_metrics(metrics)
+    return summary
