@@ -478,40 +478,44 @@ def _moving_objects(rng, name: str, spec: ClassSpec, road: np.ndarray, s_lo: flo
     ms = MOTION_SPECS[spec.motion]
     agents = Agents(x, y, yaw, v_t[:, 0].copy(), v_t, curv, yr, np.full(n, ms.tau),
                     np.tile(np.asarray(ms.accel_limits, float), (n, 1)))
-    states = integrate(agents, DT / SUBSTEPS, SUBSTEPS)
-    return [np.full(n, name, dtype=object), cats, size, states, np.ones(n, bool), np.zeros(n, bool)]
+    return [np.full(n, name, dtype=object), cats, size, agents]
+
+
+def _concat_agents(parts: list[Agents]) -> Agents:
+    """One Agents batch from several (integrated together: one loop per scene)."""
+    return Agents(*(np.concatenate([getattr(a, f) for a in parts]) for f in
+                    ("x", "y", "yaw", "v", "v_target", "curvature", "yaw_rate", "tau", "accel_limits")))
 
 
 def _remove_overlaps(size: np.ndarray, states: np.ndarray, ego: np.ndarray) -> np.ndarray:
     """Keep-mask (M,) such that no two kept objects (nor an object and the ego) overlap at any keyframe.
 
-    Boxes are approximated by chains of discs of radius w/2 along their length; earlier objects win.
+    Boxes are approximated by chains of 1-6 discs of radius 0.45 w along their length; earlier objects win,
+    the ego always stays.
     """
     m, frames = states.shape[:2]
-    n_disc = np.clip(np.ceil(size[:, 1] / np.maximum(size[:, 0], 0.1)), 1, 6).astype(int)
-    owner = np.repeat(np.arange(m + 1), np.append(n_disc, 2))
-    rank = np.arange(len(owner)) - np.repeat(np.cumsum(np.append(n_disc, 2)) - np.append(n_disc, 2),
-                                            np.append(n_disc, 2))
-    lengths = np.append(size[:, 1], 4.6)
-    widths = np.append(size[:, 0], 1.95)
-    counts = np.append(n_disc, 2)
-    offs = (rank / np.maximum(counts[owner] - 1, 1) - 0.5) * np.maximum(lengths[owner] - widths[owner], 0.0)
-    offs = np.where(counts[owner] == 1, 0.0, offs)
-    radius = 0.5 * widths[owner] * 0.9
-    pairs = set()
-    all_states = np.concatenate([states, ego[None]], axis=0)
+    lengths, widths = np.append(size[:, 1], 4.6), np.append(size[:, 0], 1.95)   # the ego is a car
+    counts = np.clip(np.ceil(lengths / np.maximum(widths, 0.1)), 1, 6).astype(int)
+    owner = np.repeat(np.arange(m + 1), counts)
+    rank = np.arange(len(owner)) - np.repeat(np.cumsum(counts) - counts, counts)
+    frac = np.where(counts[owner] > 1, rank / np.maximum(counts[owner] - 1, 1) - 0.5, 0.0)
+    offs = frac * np.maximum(lengths[owner] - widths[owner], 0.0)
+    radius = 0.45 * widths[owner]
+    all_states = np.concatenate([states, ego[None]], axis=0)[owner]          # (C, F, 4)
+    cx = all_states[:, :, 0] + offs[:, None] * np.cos(all_states[:, :, 2])
+    cy = all_states[:, :, 1] + offs[:, None] * np.sin(all_states[:, :, 2])
+    found = []
     for f in range(frames):
-        st = all_states[owner, f]
-        cx = st[:, 0] + offs * np.cos(st[:, 2])
-        cy = st[:, 1] + offs * np.sin(st[:, 2])
-        tree = cKDTree(np.column_stack([cx, cy]))
-        for i, j in tree.query_pairs(2.0 * radius.max()):
-            if owner[i] != owner[j] and np.hypot(cx[i] - cx[j], cy[i] - cy[j]) < radius[i] + radius[j]:
-                pairs.add((min(owner[i], owner[j]), max(owner[i], owner[j])))
+        pairs = cKDTree(np.column_stack([cx[:, f], cy[:, f]])).query_pairs(2.0 * radius.max(), output_type="ndarray")
+        if len(pairs):
+            i, j = pairs[:, 0], pairs[:, 1]
+            hit = (owner[i] != owner[j]) & (np.hypot(cx[i, f] - cx[j, f], cy[i, f] - cy[j, f]) < radius[i] + radius[j])
+            found.append(np.sort(np.column_stack([owner[i][hit], owner[j][hit]]), axis=1))
     keep = np.ones(m + 1, bool)
-    for a, b in sorted(pairs):
-        if keep[a] and keep[b]:
-            keep[b if b != m else a] = False              # never drop the ego (index m)
+    if found:
+        for a, b in np.unique(np.concatenate(found), axis=0):
+            if keep[a] and keep[b]:
+                keep[a if b == m else b] = False          # never drop the ego (index m)
     return keep[:m]
 
 
@@ -522,12 +526,18 @@ def simulate_scene(index: int, frames: int, seed: int) -> SimScene:
     margin = 90.0
     road, _, s0, s1 = _road(ego, margin + 150.0)
     crossing_s = 0.5 * (s0 + s1) + rng.uniform(-20, 20) if rng.random() < 0.5 else None
-    parts = []
+    movers = []
     for name, spec in CLASS_SPECS.items():
         if spec.moving_per_100m > 0:
             got = _moving_objects(rng, name, spec, road, s0 - margin - 60.0, s1 + margin + 60.0, frames, crossing_s)
             if got is not None:
-                parts.append(got)
+                movers.append(got)
+    parts = []
+    if movers:
+        states = integrate(_concat_agents([g[3] for g in movers]), DT / SUBSTEPS, SUBSTEPS)
+        n = len(states)
+        parts.append([np.concatenate([g[i] for g in movers]) for i in range(3)] +
+                     [states, np.ones(n, bool), np.zeros(n, bool)])
     for name, spec in CLASS_SPECS.items():
         if spec.static_per_100m > 0:
             parts.append(_static_objects(rng, name, spec, road, s0 - margin, s1 + margin, frames))
@@ -767,8 +777,8 @@ def readme_text(scenes: int, frames: int, seed: int, version: str, splits: dict,
 
 
 def _dump(path: Path, obj) -> None:
-    with open(path, "w") as f:
-        json.dump(obj, f, separators=(",", ":"))
+    """Compact JSON (json.dumps uses the C encoder; json.dump would not)."""
+    path.write_text(json.dumps(obj, separators=(",", ":")))
 
 
 def generate_demo(out: str | os.PathLike, scenes: int = DEFAULT_SCENES, frames: int = FRAMES_PER_SCENE,

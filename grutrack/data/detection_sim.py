@@ -554,6 +554,6 @@ def simulate_nuscenes(dataroot: str | os.PathLike, version: str, split: str, pro
 
 def write_detection_json(path: str | os.PathLike, sub: dict) -> None:
     """Write a detection-submission object atomically (compact JSON)."""
+    text = json.dumps(sub, separators=(",", ":"))          # dumps uses the C encoder, dump does not
     with atomic_path(path) as tmp:
-        with open(tmp, "w") as f:
-            json.dump(sub, f, separators=(",", ":"))
+        Path(tmp).write_text(text)

@@ -44,6 +44,31 @@ def pair_costs(det_boxes: np.ndarray, trk_boxes: np.ndarray, di: np.ndarray, ti:
     return cost
 
 
+def similarity_upper_bound(a: np.ndarray, b: np.ndarray, metric: str) -> np.ndarray:
+    """A cheap upper bound of ``metric`` between aligned pairs of boxes a, b (K, 9) -> (K,).
+
+    When the BEV centre distance d exceeds the sum of circumradii the footprints are disjoint (IoU = 0) and
+    the convex hull contains the trapezoid spanned by the inscribed discs, of area >= d (rho_a + rho_b), so
+    GIoU_bev <= (area_a + area_b) / (d (rho_a + rho_b)) - 1; in 3D the enclosing volume is at least that area
+    times max(h_a, h_b). Elsewhere the bound is the trivial 1. Pairs whose bound cannot beat a threshold are
+    skipped without computing the polygon geometry; the result is identical.
+    """
+    d = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1])
+    circum = 0.5 * (np.hypot(a[:, 3], a[:, 4]) + np.hypot(b[:, 3], b[:, 4]))
+    rho = 0.5 * (np.minimum(a[:, 3], a[:, 4]) + np.minimum(b[:, 3], b[:, 4]))
+    disjoint = d > circum
+    if metric.startswith("iou"):
+        return np.where(disjoint, 0.0, 1.0)
+    area = a[:, 3] * a[:, 4] + b[:, 3] * b[:, 4]
+    hull = np.maximum(d * rho, 1e-12)
+    if metric == "giou_3d":
+        vol = a[:, 3] * a[:, 4] * a[:, 5] + b[:, 3] * b[:, 4] * b[:, 5]
+        bound = vol / (hull * np.maximum(a[:, 5], b[:, 5])) - 1.0
+    else:
+        bound = area / hull - 1.0
+    return np.where(disjoint, np.minimum(bound, 1.0), 1.0)
+
+
 def hungarian(cost: np.ndarray, threshold: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Minimum-cost assignment among the pairs with ``cost < threshold`` (elementwise).
 
@@ -66,10 +91,19 @@ def _stage(det_boxes, det_labels, trk_boxes, trk_labels, dets, trks, metric_name
     same = det_labels[dets][:, None] == trk_labels[trks][None, :]
     li, lj = np.nonzero(same)
     cost = np.full(same.shape, _INVALID)
+    thr = threshold_of_class[det_labels[dets]][:, None]
     if len(li):
         di, ti = dets[li], trks[lj]
-        cost[li, lj] = pair_costs(det_boxes, trk_boxes, di, ti, metric_of_class[det_labels[di]], metric_names)
-    thr = threshold_of_class[det_labels[dets]][:, None]
+        metric = metric_of_class[det_labels[di]]
+        # skip pairs whose similarity bound cannot reach the threshold (cost < t  <=>  similarity > 1 - t)
+        need = np.zeros(len(li), dtype=bool)
+        for m, name in enumerate(metric_names):
+            sel = metric == m
+            if sel.any():
+                ub = similarity_upper_bound(det_boxes[di[sel]], trk_boxes[ti[sel]], name)
+                need[sel] = ub > 1.0 - thr[li[sel], 0]
+        li, lj, di, ti, metric = li[need], lj[need], di[need], ti[need], metric[need]
+        cost[li, lj] = pair_costs(det_boxes, trk_boxes, di, ti, metric, metric_names)
     r, c = hungarian(cost, thr)
     return dets[r], trks[c]
 

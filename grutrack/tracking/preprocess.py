@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from grutrack.data.scene import BoxSet
-from grutrack.geometry import pairwise_bev_iou
+from grutrack.geometry import paired_bev_iou
 
 
 def score_filter(dets: BoxSet, thresholds: np.ndarray) -> BoxSet:
@@ -14,6 +14,25 @@ def score_filter(dets: BoxSet, thresholds: np.ndarray) -> BoxSet:
     thresholds: (7,) float64 indexed by tracking-class label.
     """
     return dets.subset(dets.scores >= thresholds[dets.labels])
+
+
+def overlap_matrix(boxes: np.ndarray, labels: np.ndarray | None, threshold: float) -> np.ndarray:
+    """(N, N) bool: BEV IoU of boxes i, j above ``threshold`` (and same label when ``labels`` is given).
+
+    Only pairs whose circumscribed circles intersect can overlap, so IoU is computed for those alone.
+    """
+    n = len(boxes)
+    i, j = np.triu_indices(n, k=1)
+    radius = 0.5 * np.hypot(boxes[:, 3], boxes[:, 4])
+    near = np.hypot(boxes[i, 0] - boxes[j, 0], boxes[i, 1] - boxes[j, 1]) < radius[i] + radius[j]
+    if labels is not None:
+        near &= labels[i] == labels[j]
+    i, j = i[near], j[near]
+    over = np.zeros((n, n), dtype=bool)
+    hit = paired_bev_iou(boxes[i], boxes[j]) > threshold
+    over[i[hit], j[hit]] = True
+    over[j[hit], i[hit]] = True
+    return over
 
 
 def nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, threshold: float,
@@ -27,9 +46,7 @@ def nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, threshol
     n = len(boxes)
     if n <= 1:
         return np.arange(n, dtype=np.int64)
-    over = pairwise_bev_iou(boxes, boxes) > threshold
-    if class_aware:
-        over &= labels[:, None] == labels[None, :]
+    over = overlap_matrix(boxes, labels if class_aware else None, threshold)
     order = np.argsort(-scores, kind="stable")
     removed = np.zeros(n, dtype=bool)
     keep = []

@@ -1,0 +1,109 @@
+"""Pre-processing, association and the lifecycle of the tracker on small hand-made scenes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from grutrack import geometry
+from grutrack.classes import CLASS_INDEX
+from grutrack.data.scene import BoxSet, Frame, Scene
+from grutrack.tracking.association import associate, similarity_upper_bound
+from grutrack.tracking.config import load_tracker_config
+from grutrack.tracking.factory import build_tracker
+from grutrack.tracking.preprocess import nms_keep, preprocess
+from grutrack.tracking.tracker import track_scenes
+
+CAR, PED = CLASS_INDEX["car"], CLASS_INDEX["pedestrian"]
+
+
+def _box(x, y, yaw=0.0, w=1.8, l=4.5, h=1.6, z=0.8, vx=0.0, vy=0.0):
+    return [x, y, z, w, l, h, yaw, vx, vy]
+
+
+def test_nms_blend_class_aware():
+    boxes = np.array([_box(0, 0), _box(0.3, 0), _box(0.2, 0.1), _box(20, 0)])
+    scores = np.array([0.5, 0.9, 0.7, 0.4])
+    labels = np.array([CAR, CAR, PED, CAR])
+    assert nms_keep(boxes, scores, labels, 0.08, class_aware=True).tolist() == [1, 2, 3]
+    assert nms_keep(boxes, scores, labels, 0.08, class_aware=False).tolist() == [1, 3]
+
+
+def test_score_filter_per_class():
+    cfg = load_tracker_config("ekf")
+    dets = BoxSet(np.array([_box(0, 0), _box(10, 0), _box(20, 0)]), np.array([0.10, 0.20, 0.10]),
+                  np.array([CAR, CAR, CLASS_INDEX["bus"]]))
+    kept = preprocess(dets, cfg.score_threshold, cfg.nms_threshold)
+    assert kept.scores.tolist() == [0.20, 0.10]  # car threshold 0.16, bus 0.0
+
+
+def test_upper_bound_never_below_true_similarity():
+    rng = np.random.default_rng(3)
+    n = 4000
+    a = np.column_stack([rng.uniform(-15, 15, (n, 2)), rng.uniform(-1, 1, n), rng.uniform(0.3, 8, (n, 3)),
+                         rng.uniform(-np.pi, np.pi, n), np.zeros((n, 2))])
+    b = np.column_stack([rng.uniform(-15, 15, (n, 2)), rng.uniform(-1, 1, n), rng.uniform(0.3, 8, (n, 3)),
+                         rng.uniform(-np.pi, np.pi, n), np.zeros((n, 2))])
+    for name, fn in (("giou_3d", geometry.paired_giou_3d), ("giou_bev", geometry.paired_bev_giou),
+                     ("iou_bev", geometry.paired_bev_iou), ("iou_3d", geometry.paired_iou_3d)):
+        ub, true = similarity_upper_bound(a, b, name), fn(a, b)
+        assert np.all(ub >= true - 1e-12), name
+        assert (ub < 1).mean() > 0.5  # the bound prunes most far pairs
+
+
+def _assoc(det, dl, trk, tl, **kw):
+    cfg = load_tracker_config("ekf")
+    args = dict(first_metric=cfg.first_metric, first_threshold=cfg.first_threshold, two_stage=True,
+                second_metric="giou_bev", second_threshold=cfg.second_threshold)
+    args.update(kw)
+    return associate(np.array(det), np.array(dl), np.array(trk), np.array(tl), **args)
+
+
+def test_association_classes_never_match_and_threshold():
+    m = _assoc([_box(0, 0)], [PED], [_box(0, 0)], [CAR])
+    assert len(m.dets) == 0 and m.unmatched_dets.tolist() == [0] and m.unmatched_tracks.tolist() == [0]
+    m = _assoc([_box(0, 0), _box(30, 0)], [CAR, CAR], [_box(30.5, 0), _box(0.4, 0.2)], [CAR, CAR])
+    assert sorted(zip(m.dets.tolist(), m.tracks.tolist())) == [(0, 1), (1, 0)]
+    m = _assoc([_box(0, 0)], [CAR], [_box(12, 0)], [CAR])  # far apart: cost above 1.31
+    assert len(m.dets) == 0
+
+
+def test_second_stage_rescues_vertical_offset():
+    # same footprint, 3 m apart vertically: 3D GIoU is low (stage 1 rejects), BEV GIoU is 1 (stage 2 accepts)
+    det, trk = [_box(0, 0, z=4.0)], [_box(0, 0, z=0.8)]
+    thr = np.full(7, 1.0)  # stage-1 cost threshold 1.0: needs 3D GIoU > 0
+    m1 = _assoc(det, [CAR], trk, [CAR], first_threshold=thr, two_stage=False)
+    m2 = _assoc(det, [CAR], trk, [CAR], first_threshold=thr, two_stage=True)
+    assert len(m1.dets) == 0 and m2.dets.tolist() == [0]
+
+
+def _scene(dets_per_frame):
+    frames = [Frame(f"s{i}", 1_000_000 + 500_000 * i, np.zeros(3), np.array([1.0, 0, 0, 0])) for i in
+              range(len(dets_per_frame))]
+    dets = {f.token: BoxSet(np.array(d).reshape(-1, 9), np.full(len(d), 0.9), np.full(len(d), CAR))
+            for f, d in zip(frames, dets_per_frame)}
+    return Scene("synthetic", "tok", frames), dets
+
+
+def test_lifecycle_ids_punish_decay_and_death():
+    # a car moving at 10 m/s along x, detected for 6 frames, then missed for 20 frames
+    det = [[_box(5.0 * i, 0, vx=10.0)] for i in range(6)] + [[] for _ in range(20)]
+    scene, dets = _scene(det)
+    tracker = build_tracker("ekf")
+    run = track_scenes(tracker, [scene], dets)
+    out = [run.results[f.token] for f in scene.frames]
+    ids = {int(i) for o in out for i in o.ids}
+    assert ids == {0}  # one identity throughout
+    assert [len(o) for o in out[:8]] == [1] * 7 + [0]  # punish_num = 1: one predicted box after the last hit
+    assert np.isclose(out[6].scores[0], 0.9 * 0.2)  # car decay rate 0.2
+    assert out[6].boxes[0, 0] == pytest.approx(30.0, abs=1.0)  # predicted ahead at ~10 m/s
+    assert len(tracker.groups[[g.classes[CAR] for g in tracker.groups].index(True)]) == 0  # died (max_age 15)
+
+
+def test_track_ids_unique_across_scenes():
+    scene, dets = _scene([[_box(0, 0)], [_box(0.5, 0)]])
+    scene2 = Scene("b", "t2", [Frame(f"b{i}", f.timestamp, f.ego_translation, f.ego_rotation)
+                               for i, f in enumerate(scene.frames)])
+    dets.update({f"b{i}": dets[f"s{i}"] for i in range(2)})
+    run = track_scenes(build_tracker("ekf"), [scene, scene2], dets)
+    assert int(run.results["s0"].ids[0]) != int(run.results["b0"].ids[0])
