@@ -265,6 +265,9 @@ class _ClassEval:
         self.pxy = np.ascontiguousarray(flat.p_xy[pi])
         self.ps = flat.p_score[pi]
         self.n_gt = len(gi)
+        # Squared norms as scikit-learn computes them (row-wise einsum: independent of the other rows).
+        self.gxx = np.einsum("ij,ij->i", self.gxy, self.gxy)
+        self.pyy = np.einsum("ij,ij->i", self.pxy, self.pxy)
         frames = np.arange(flat.n_frames + 1)
         self.g_ptr = np.searchsorted(self.gf, frames)
         self.p_ptr = np.searchsorted(self.pf, frames)
@@ -316,8 +319,13 @@ class _ClassEval:
         p0, p1 = int(self.p_ptr[f]), int(self.p_ptr[f + 1])
         idx = p0 + np.flatnonzero(kept[p0:p1])
         assert len(idx) == n_kept
-        # Fresh C-contiguous arrays of the devkit's shapes (n_gt x 2, n_kept x 2).
-        dist = exact_center_distances(self.gxy[g0:g1].copy(), self.pxy[idx])
+        # Same formula and operation order as exact_center_distances; the BLAS product on fresh C-contiguous
+        # arrays of the devkit's shapes (n_gt x 2, n_kept x 2), the norms precomputed.
+        dist = -2 * (self.gxy[g0:g1].copy() @ self.pxy[idx].T)
+        dist += self.gxx[g0:g1, None]
+        dist += self.pyy[None, idx]
+        np.maximum(dist, 0, out=dist)
+        np.sqrt(dist, out=dist)
         cand = dist < self.dist_th          # the devkit sets distances >= dist_th_tp to NaN
         ii, jj = np.nonzero(cand)
         simple = not (len(ii) > 1 and ((ii[1:] == ii[:-1]).any() or np.bincount(jj).max() > 1))
@@ -390,8 +398,8 @@ class _ClassEval:
     def _replay_hard(self, hard: List[Tuple[int, "_Subset"]], g_simple: np.ndarray, p_simple: np.ndarray):
         """motmetrics' ``MOTAccumulator.update`` for the frames with competing candidates, in time order.
 
-        The state it needs (each object's last partner before the frame) comes from the matches of the
-        one-to-one frames (all known) and of the earlier competing frames (replayed here first).
+        The state it needs (each object's last partner before the frame, ``MOTAccumulator.m``) comes from the
+        matches of the one-to-one frames (all known) and of the earlier competing frames (replayed first).
         """
         go, ph, gf = self.go, self.ph, self.gf
         nf = self.n_frames + 1
@@ -400,57 +408,73 @@ class _ClassEval:
         order = np.argsort(key_s, kind="stable")
         key_sorted = key_s[order]
         h_sorted = ph[p_simple][order]
-        last_hard: Dict[int, Tuple[int, int]] = {}   # object -> (frame, hypothesis) of its last replayed match
-        out_g: List[int] = []
-        out_p: List[int] = []
-        out_d: List[float] = []
+        n_obj = int(go.max()) + 1 if len(go) else 0
+        hard_frame = np.full(n_obj, -1, dtype=np.int64)   # frame and partner of each object's last replayed match
+        hard_h = np.full(n_obj, -1, dtype=np.int64)
+        out_g: List[np.ndarray] = []
+        out_p: List[np.ndarray] = []
+        out_d: List[np.ndarray] = []
         for f, sub in hard:
             dist = sub.dist
-            n, k = dist.shape
+            finite = ~np.isnan(dist)
             g0 = sub.g0
             # Rows without any pairing within distance can neither keep a pairing nor be assigned.
-            rows = np.flatnonzero(np.isfinite(dist).any(axis=1))
+            rows = np.flatnonzero(finite.any(axis=1))
             objs = go[g0 + rows]
-            pos = np.searchsorted(key_sorted, objs * nf + f) - 1
-            hids = ph[sub.kept].tolist()
-            cols_of: Dict[int, List[int]] = {}
-            for j, hid in enumerate(hids):
-                cols_of.setdefault(hid, []).append(j)
-            omask = np.zeros(n, dtype=bool)
-            hmask = np.zeros(k, dtype=bool)
-            kept_prev: List[Tuple[int, int]] = []
-            # 1. Keep previous pairings still within distance (first unmasked hypothesis with that id).
-            for r, o, q in zip(rows.tolist(), objs.tolist(), pos.tolist()):
-                hp, fp = None, -1
-                if q >= 0 and key_sorted[q] // nf == o:
-                    hp, fp = int(h_sorted[q]), int(key_sorted[q] % nf)
-                lh = last_hard.get(o)
-                if lh is not None and lh[0] > fp:
-                    hp = lh[1]
-                if hp is None:
-                    continue
-                j = next((j for j in cols_of.get(hp, ()) if not hmask[j]), None)
-                if j is None or not np.isfinite(dist[r, j]):
-                    continue
-                omask[r] = True
-                hmask[j] = True
-                out_g.append(g0 + r)
-                out_p.append(int(sub.kept[j]))
-                out_d.append(float(dist[r, j]))
-                kept_prev.append((o, hp))
+            q = np.searchsorted(key_sorted, objs * nf + f) - 1
+            qc = np.maximum(q, 0)
+            has_s = (q >= 0) & (key_sorted[qc] // nf == objs) if len(key_sorted) else np.zeros(len(rows), bool)
+            prev_f = np.where(has_s, key_sorted[qc] % nf if len(key_sorted) else -1, -1)
+            prev_h = np.where(has_s, h_sorted[qc] if len(key_sorted) else -1, -1)
+            later = hard_frame[objs] > prev_f
+            prev_h = np.where(later, hard_h[objs], prev_h)
+            hids = ph[sub.kept]
+            omask = np.zeros(dist.shape[0], dtype=bool)
+            hmask = np.zeros(dist.shape[1], dtype=bool)
+            # 1. Keep previous pairings still within distance: the first unmasked hypothesis with the previous
+            #    partner's id, taken row by row.
+            if len(np.unique(hids)) == len(hids):
+                # Unique ids: each row has at most one column; a column wanted twice goes to the first row.
+                col = np.full(len(rows), -1, dtype=np.int64)
+                if len(hids):
+                    srt = np.argsort(hids)
+                    at = np.minimum(np.searchsorted(hids[srt], prev_h), len(hids) - 1)
+                    hit = (prev_h >= 0) & (hids[srt][at] == prev_h)
+                    col = np.where(hit, srt[at], -1)
+                ok = col >= 0
+                ok[ok] = finite[rows[ok], col[ok]]
+                r_ok, c_ok = rows[ok], col[ok]
+                _, first = np.unique(c_ok, return_index=True)
+                r1, c1 = r_ok[first], c_ok[first]
+            else:
+                r1_list: List[int] = []
+                c1_list: List[int] = []
+                for r, hp in zip(rows.tolist(), prev_h.tolist()):
+                    if hp < 0:
+                        continue
+                    js = np.flatnonzero(~hmask & (hids == hp))
+                    if len(js) and finite[r, js[0]]:
+                        hmask[js[0]] = True
+                        r1_list.append(r)
+                        c1_list.append(int(js[0]))
+                r1 = np.asarray(r1_list, dtype=np.int64)
+                c1 = np.asarray(c1_list, dtype=np.int64)
+            omask[r1] = True
+            hmask[c1] = True
             # 2. The rest: motmetrics' solver on motmetrics' matrix (ties broken as the devkit breaks them).
             dm = dist.copy()
             dm[omask, :] = np.nan
             dm[:, hmask] = np.nan
-            for i, j in _assign(dm):
-                out_g.append(g0 + i)
-                out_p.append(int(sub.kept[j]))
-                out_d.append(float(dm[i, j]))
-                last_hard[int(go[g0 + i])] = (f, hids[j])
-            for o, hp in kept_prev:
-                last_hard[o] = (f, hp)
-        return (np.asarray(out_g, dtype=np.int64), np.asarray(out_p, dtype=np.int64),
-                np.asarray(out_d, dtype=np.float64))
+            r2, c2 = _assign(dm)
+            rr = np.concatenate([r1, r2])
+            cc = np.concatenate([c1, c2])
+            out_g.append(g0 + rr)
+            out_p.append(sub.kept[cc])
+            out_d.append(dist[rr, cc])
+            mo = go[g0 + rr]
+            hard_frame[mo] = f
+            hard_h[mo] = hids[cc]
+        return np.concatenate(out_g), np.concatenate(out_p), np.concatenate(out_d)
 
     # -- metrics of one threshold --------------------------------------------------------------------------------
 
@@ -534,22 +558,21 @@ class _ClassEval:
         return self.ps[np.isin(all_keys, keys)]
 
 
-def _assign(dm: np.ndarray) -> List[Tuple[int, int]]:
-    """Pairs (row, col) motmetrics' step 2 keeps for the masked distance matrix ``dm`` (NaN: no pairing).
+def _assign(dm: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Pairs (rows, cols) motmetrics' step 2 keeps for the masked distance matrix ``dm`` (NaN: no pairing).
 
     When the finite entries form a one-to-one matching, every optimal assignment contains all of them (the
     solver first maximises the number of finite pairs: motmetrics makes the others expensive enough), so no
     solver is needed; otherwise ``motmetrics.lap.linear_sum_assignment`` is called on the same matrix.
     """
-    ii, jj = np.nonzero(np.isfinite(dm))
-    if len(ii) == 0:
-        return []
-    if not ((ii[1:] == ii[:-1]).any() or np.bincount(jj).max() > 1):
-        return list(zip(ii.tolist(), jj.tolist()))
+    ii, jj = np.nonzero(~np.isnan(dm))
+    if len(ii) == 0 or not ((ii[1:] == ii[:-1]).any() or np.bincount(jj).max() > 1):
+        return ii, jj
     from motmetrics.lap import linear_sum_assignment
 
     rids, cids = linear_sum_assignment(dm)
-    return [(int(i), int(j)) for i, j in zip(rids, cids) if np.isfinite(dm[i, j])]
+    keep = np.isfinite(dm[rids, cids])
+    return rids[keep].astype(np.int64), cids[keep].astype(np.int64)
 
 
 class _NeedsDevkit(Exception):

@@ -1,0 +1,106 @@
+"""Sub-commands of the embedded default: ``demo-data`` (a SYNTHETIC nuScenes-format dataset),
+``simulate-detections`` (detector-like detections from any split's ground truth) and ``dataset-stats``
+(per-class statistics of a dataset, optionally side by side with another)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from grutrack.errors import InputFormatError
+
+
+def add_parser(subparsers) -> None:
+    """Register ``demo-data``, ``simulate-detections`` and ``dataset-stats``."""
+    from grutrack.data.demo import DEFAULT_SCENES, FRAMES_PER_SCENE, VERSION
+
+    p = subparsers.add_parser("demo-data", help="write the SYNTHETIC nuScenes-format demo dataset",
+                              description="Generate a synthetic dataset in nuScenes table format (devkit-loadable, "
+                                          "custom splits demo_train / demo_val / demo_all). Deterministic per seed.")
+    p.add_argument("--out", required=True, help="dataroot to write (replaced if it is a previous demo)")
+    p.add_argument("--scenes", type=int, default=DEFAULT_SCENES, help=f"number of scenes (default {DEFAULT_SCENES})")
+    p.add_argument("--frames-per-scene", type=int, default=FRAMES_PER_SCENE,
+                   help=f"keyframes per scene at 2 Hz (default {FRAMES_PER_SCENE})")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--version", default=VERSION, help=f"version folder name (default {VERSION})")
+    p.set_defaults(func=run_demo_data)
+
+    p = subparsers.add_parser("simulate-detections", help="simulate detector output from ground truth",
+                              description="Sample detections (official nuScenes detection-submission JSON) from the "
+                                          "ground truth of a split with a detector profile.")
+    p.add_argument("--dataroot", required=True, help="nuScenes(-format) dataroot")
+    p.add_argument("--version", default=VERSION, help=f"dataset version (default {VERSION})")
+    p.add_argument("--split", required=True, help="split name (predefined or from <version>/splits.json)")
+    p.add_argument("--profile", default="centerpoint",
+                   help="detector profile: a shipped name (centerpoint, pointpillars) or a YAML path")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", required=True, help="detection JSON to write")
+    p.set_defaults(func=run_simulate)
+
+    p = subparsers.add_parser("dataset-stats", help="per-class statistics of a dataset's ground truth",
+                              description="Box share, mean size, speed, moving share, |yaw rate|, 0-point share per "
+                                          "tracking class, over the union of the given splits.")
+    p.add_argument("--dataroot", required=True, help="nuScenes(-format) dataroot")
+    p.add_argument("--version", default=VERSION, help=f"dataset version (default {VERSION})")
+    p.add_argument("--split", action="append", required=True, help="split name; repeat for a union")
+    p.add_argument("--json", dest="json_out", help="also write the statistics to this JSON file")
+    p.add_argument("--compare", help="statistics JSON (from --json) to print side by side")
+    p.set_defaults(func=run_stats)
+
+
+def run_demo_data(args: argparse.Namespace) -> int:
+    """``grutrack demo-data``."""
+    from grutrack.data.demo import generate_demo
+
+    summary = generate_demo(args.out, scenes=args.scenes, frames=args.frames_per_scene, seed=args.seed,
+                            version=args.version)
+    print(f"wrote SYNTHETIC demo dataset {summary['dataroot']}/{summary['version']}: {summary['scenes']} scenes, "
+          f"{summary['samples']} samples, {summary['instances']} instances, {summary['annotations']} annotations; "
+          f"splits " + ", ".join(f"{k} ({v} scenes)" for k, v in summary["splits"].items()))
+    return 0
+
+
+def run_simulate(args: argparse.Namespace) -> int:
+    """``grutrack simulate-detections``."""
+    from grutrack.data.detection_sim import load_profile, simulate_nuscenes
+
+    profile = load_profile(args.profile)
+    sub = simulate_nuscenes(args.dataroot, args.version, args.split, profile, args.seed, args.out)
+    n = sum(len(v) for v in sub["results"].values())
+    print(f"wrote {args.out}: {n} SYNTHETIC detections ({profile.name}, seed {args.seed}) on "
+          f"{len(sub['results'])} samples of {args.version}/{args.split}")
+    return 0
+
+
+def run_stats(args: argparse.Namespace) -> int:
+    """``grutrack dataset-stats``."""
+    from grutrack.data.nusc_stats import format_comparison, format_table, nuscenes_statistics, write_stats_json
+
+    stats = nuscenes_statistics(args.dataroot, args.version, args.split)
+    label = f"{Path(args.dataroot).name}/{args.version} {'+'.join(args.split)}"
+    print(format_table(stats, title=f"ground truth of {label}, 7 tracking classes, all annotations"))
+    if args.json_out:
+        write_stats_json(args.json_out, stats, {"dataroot": str(args.dataroot), "version": args.version,
+                                                "splits": args.split})
+        print(f"wrote {args.json_out}")
+    if args.compare:
+        ref = _read_stats(Path(args.compare))
+        print()
+        print(f"this dataset ({label}) vs {args.compare}")
+        print(format_comparison(stats, ref["classes"], ("this", "ref")))
+    return 0
+
+
+def _read_stats(path: Path) -> dict:
+    """A statistics JSON written by ``dataset-stats --json`` (NaN stored as null)."""
+    if not path.is_file():
+        raise InputFormatError(f"{path}: statistics file does not exist (write one with dataset-stats --json)")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputFormatError(f"{path}: not valid JSON ({exc})") from exc
+    if not isinstance(data, dict) or not isinstance(data.get("classes"), dict):
+        raise InputFormatError(f"{path}: expected an object with 'classes' (written by dataset-stats --json)")
+    return {"classes": {c: {k: (float("nan") if v is None else v) for k, v in row.items()}
+                        for c, row in data["classes"].items()}}
