@@ -42,7 +42,11 @@ def _reference(a: np.ndarray, b: np.ndarray) -> dict[str, np.ndarray]:
     pa, pb = shapely.polygons(ca), shapely.polygons(cb)
     inter = shapely.area(shapely.intersection(pa, pb))
     union = shapely.area(shapely.union(pa, pb))
-    hull = shapely.area(shapely.convex_hull(shapely.multipoints(np.concatenate([ca, cb], axis=1))))
+    points = np.concatenate([ca, cb], axis=1)
+    hull = shapely.area(shapely.convex_hull(shapely.multipoints(points)))
+    # Documented convention: a hull that is rounding noise of collinear points has area 0.
+    extent = np.ptp(points, axis=1).max(axis=1)
+    hull[hull <= 1e-13 * extent**2] = 0.0
 
     def iou_giou(i, u, c):
         iou = np.divide(i, u, out=np.zeros_like(i), where=u > 0)

@@ -107,3 +107,15 @@ def test_track_ids_unique_across_scenes():
     dets.update({f"b{i}": dets[f"s{i}"] for i in range(2)})
     run = track_scenes(build_tracker("ekf"), [scene, scene2], dets)
     assert int(run.results["s0"].ids[0]) != int(run.results["b0"].ids[0])
+
+
+def test_param_classes_keep_labels_distinct():
+    # two dataset labels that both take car parameters (e.g. AV2 BOX_TRUCK and TRUCK -> truck) never match
+    tracker = build_tracker("ekf", param_classes=("car", "car"))
+    scene, dets = _scene([[_box(0, 0)], [_box(0.2, 0)]])
+    dets["s0"] = BoxSet(dets["s0"].boxes, dets["s0"].scores, np.array([0]))
+    dets["s1"] = BoxSet(dets["s1"].boxes, dets["s1"].scores, np.array([1]))
+    run = track_scenes(tracker, [scene], dets)
+    assert int(run.results["s0"].ids[0]) != int(run.results["s1"].ids[0])
+    assert run.results["s1"].labels.tolist() == [1]
+    assert tracker.cfg.max_age.tolist() == [15, 15]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,19 +18,47 @@ TRACKERS: tuple[str, ...] = ("ekf",)
 DEFAULT_PRESET = {"ekf": "ekf"}
 
 
-def build_tracker(name: str = "ekf", config: str | Path | None = None) -> Tracker:
-    """A :class:`Tracker` for ``name`` with the preset ``config`` (default: the preset named ``name``)."""
+def build_tracker(name: str = "ekf", config: str | Path | None = None,
+                  param_classes: tuple[str, ...] | None = None) -> Tracker:
+    """A :class:`Tracker` for ``name`` with the preset ``config`` (default: the preset named ``name``).
+
+    ``param_classes``: for a dataset whose labels are not the 7 nuScenes tracking classes (e.g. AV2
+    categories), the nuScenes tracking class whose parameters each dataset label uses; labels stay distinct
+    (boxes of different labels never match) while thresholds and motion models come from the mapped class.
+    """
     if name not in TRACKERS:
         raise ConfigError(f"unknown tracker '{name}' (available: {', '.join(TRACKERS)})")
     cfg = load_tracker_config(config or DEFAULT_PRESET[name])
-    return Tracker(cfg, ekf_groups(cfg))
+    index = _param_index(param_classes)
+    cfg = remap_config(cfg, index)
+    return Tracker(cfg, ekf_groups(cfg, index))
 
 
-def ekf_groups(cfg: TrackerConfig) -> list[TrackGroup]:
-    """One track group per state-space model in use, each with per-class (7, d, d) Q, R, P0 tables.
+def _param_index(param_classes: tuple[str, ...] | None) -> np.ndarray:
+    """(n_labels,) int: the tracking-class row each dataset label takes its parameters from."""
+    if param_classes is None:
+        return np.arange(len(TRACKING_CLASSES))
+    unknown = [c for c in param_classes if c not in TRACKING_CLASSES]
+    if unknown:
+        raise ConfigError(f"class map names {unknown}, expected tracking classes {', '.join(TRACKING_CLASSES)}")
+    return np.array([TRACKING_CLASSES.index(c) for c in param_classes], dtype=np.int64)
 
-    Classes of other groups keep zero rows in a group's tables; they are never indexed there.
+
+def remap_config(cfg: TrackerConfig, index: np.ndarray) -> TrackerConfig:
+    """The config with every per-class array re-indexed by dataset label (``index`` (n_labels,))."""
+    return replace(cfg, score_threshold=cfg.score_threshold[index],
+                   first_metric=tuple(cfg.first_metric[i] for i in index),
+                   first_threshold=cfg.first_threshold[index], second_threshold=cfg.second_threshold[index],
+                   max_age=cfg.max_age[index], decay_rate=cfg.decay_rate[index])
+
+
+def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None) -> list[TrackGroup]:
+    """One track group per state-space model in use, each with per-label (n_labels, d, d) Q, R, P0 tables.
+
+    ``index`` (n_labels,) maps dataset labels to tracking classes (identity for nuScenes). Labels of other
+    groups keep zero rows in a group's tables; they are never indexed there.
     """
+    index = np.arange(len(TRACKING_CLASSES)) if index is None else index
     from grutrack.motion.defaults import load_motion_config
     from grutrack.motion.models import make_model
     from grutrack.tracking.ekf_backend import KalmanBackend
@@ -37,14 +66,16 @@ def ekf_groups(cfg: TrackerConfig) -> list[TrackGroup]:
     motion = load_motion_config(cfg.motion_config, cfg.model_override or None)
     groups = []
     for model_name in sorted({m["model"] for m in motion.values()}):
-        members = np.array([motion[c]["model"] == model_name for c in TRACKING_CLASSES])
-        first = motion[TRACKING_CLASSES[int(np.argmax(members))]]
+        members = np.array([motion[TRACKING_CLASSES[i]]["model"] == model_name for i in index])
+        if not members.any():
+            continue
+        first = motion[TRACKING_CLASSES[index[int(np.argmax(members))]]]
         model = make_model(model_name, **first["params"])
         tables = {}
         for key in ("Q", "R", "P0"):
             d = first[key].shape[0]
-            tables[key] = np.stack([motion[c][key] if members[i] else np.zeros((d, d))
-                                    for i, c in enumerate(TRACKING_CLASSES)])
+            tables[key] = np.stack([motion[TRACKING_CLASSES[c]][key] if members[i] else np.zeros((d, d))
+                                    for i, c in enumerate(index)])
         backend = KalmanBackend(model, tables["Q"], tables["R"], tables["P0"], yaw_flip=cfg.yaw_flip)
         groups.append(TrackGroup(backend, members))
     return groups
