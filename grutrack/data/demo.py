@@ -129,7 +129,7 @@ CLASS_SPECS: dict[str, ClassSpec] = {
                             points_fit=(8.48, -2.21, 0.82), annot_range=65.0, occlusion=0.025),
     # bicycle: 1.7 % of boxes, 0.6 per keyframe, 28 % moving at 4.3 m/s; size (0.64, 1.82, 1.39) (mini).
     "bicycle": ClassSpec(categories=(("vehicle.bicycle", 1.0),), size=(0.62, 1.80, 1.35), size_logsd=(0.15, 0.08, 0.15),
-                         static_per_100m=0.3, moving_per_100m=0.35, motion="cycle", speed=(4.3, 1.0),
+                         static_per_100m=0.6, moving_per_100m=0.2, motion="cycle", speed=(4.3, 1.0),
                          kerb_offset=(3.0, 6.0), cluster=4, points_fit=(6.97, -1.67, 0.81), annot_range=60.0,
                          occlusion=0.05),
     # detection-only classes, static: barrier 5.75, traffic cone 3.41, construction vehicle 0.49 boxes per
@@ -170,7 +170,7 @@ class MotionSpec:
 MOTION_SPECS = {
     # Cars: urban manoeuvres every 2-6 s; braking up to 4 m/s^2 and accelerating up to 2.5 m/s^2 (typical urban
     # driving); minimum radius 5 m (a passenger car's turning circle).
-    "vehicle": MotionSpec(seg_duration=(2.0, 6.0), p_turn=0.10, p_curve=0.15, p_lane_change=0.08, p_stop=0.08,
+    "vehicle": MotionSpec(seg_duration=(2.0, 6.0), p_turn=0.08, p_curve=0.12, p_lane_change=0.08, p_stop=0.08,
                           speed_jitter=(0.75, 1.15), tau=1.5, accel_limits=(4.0, 2.5), min_radius=5.0,
                           wiggle=0.001),
     # Cyclists (bicycle model with a steering wobble): tighter turns, more steering noise.
@@ -186,7 +186,7 @@ MOTION_SPECS = {
 EGO_SPEED_CHOICES = ((0.0, 0.15), (4.0, 0.3), (8.0, 0.4), (12.0, 0.15))  # (cruise speed, probability)
 EGO_TURN_PROB = 0.35        # share of scenes with an intersection turn (mini descriptions: 5 of 10 mention turns)
 ANNOT_NOISE_POS = 0.015     # m; per-keyframe annotation jitter (mini parked-car |yaw rate| 0.013 rad/s, ~cm boxes)
-ANNOT_NOISE_YAW = 0.005     # rad
+ANNOT_NOISE_YAW = 0.003     # rad
 
 
 # ----------------------------------------------------------------------------------------------------------------
