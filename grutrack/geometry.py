@@ -4,12 +4,14 @@ Boxes follow :mod:`grutrack.boxes`: rows ``[x, y, z, w, l, h, yaw, ...]`` (``(N,
 and radians; ``w`` across the heading, ``l`` along it, ``z`` the box centre so the box spans
 ``z - h/2 .. z + h/2``). Extra columns (velocities) are ignored.
 
-Two forms of every measure:
+Four measures, ``bev_iou``, ``bev_giou``, ``iou_3d`` and ``giou_3d``, each in two forms:
 
 * ``paired_*(a, b)`` with ``a`` and ``b`` both ``(K, >=7)``: the measure of each aligned pair
   ``(a[k], b[k])``, a ``(K,) float64`` array. Use it for a selected list of pairs.
 * ``pairwise_*(a, b)`` with ``a`` ``(N, >=7)`` and ``b`` ``(M, >=7)``: all pairs, an ``(N, M) float64``
-  array (computed with the paired form in chunks of pairs).
+  array (``[i, j]`` = measure of ``(a[i], b[j])``, equal to the paired form on that pair).
+
+Also :func:`bev_corners` ``(N, 4, 2)`` and :func:`pairwise_centre_distance` ``(N, M)`` in metres.
 
 Definitions (those of Poly-MOT's GIoU): with ``I`` the BEV intersection area, ``U`` the BEV union area
 and ``C`` the area of the convex hull of the 8 BEV corners of both boxes,
@@ -25,7 +27,8 @@ Degenerate boxes (zero width, length or height: zero area or volume) never give 
 measured by the same formulas, with two conventions for vanishing denominators:
 
 * IoU is 0 when the union (area or volume) is 0, e.g. two identical zero-size boxes;
-* GIoU equals IoU (so 0) when the hull ``C`` (or ``V_C``) is 0; otherwise the formula applies, so two
+* GIoU equals IoU (so 0) when the hull ``C`` (or ``V_C``) is 0, e.g. collinear segments (a hull area
+  below :data:`HULL_EPS` times the squared extent counts as 0); otherwise the formula applies, so two
   zero-area boxes with a hull of positive area have GIoU -1 (union 0, penalty term 1).
 
 A zero-area box has zero intersection with anything, so its IoU with any box is 0. Negative sizes and
@@ -104,14 +107,6 @@ def _check_boxes(boxes: np.ndarray, name: str, min_cols: int = 7) -> np.ndarray:
     return arr
 
 
-def _check_paired(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Validate two aligned ``(K, >=7)`` box arrays."""
-    a, b = _check_boxes(a, "a"), _check_boxes(b, "b")
-    if a.shape[0] != b.shape[0]:
-        raise ValueError(f"paired boxes need equal counts, got {a.shape[0]} and {b.shape[0]}")
-    return a, b
-
-
 def bev_corners(boxes: np.ndarray) -> np.ndarray:
     """Bird's-eye-view corners of ``boxes`` ``(N, >=7)``: ``(N, 4, 2) float64`` metres ``[x, y]``.
 
@@ -127,13 +122,76 @@ def bev_corners(boxes: np.ndarray) -> np.ndarray:
     return np.stack([x, y], axis=-1)
 
 
-def _pair_frame(a: np.ndarray, b: np.ndarray) -> _PairFrame:
-    """Express each ``a[k]`` ``(K, >=7)`` in the frame of ``b[k]`` ``(K, >=7)``."""
-    cb, sb = np.cos(b[:, 6]), np.sin(b[:, 6])
-    dx, dy = a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]
-    dyaw = a[:, 6] - b[:, 6]
-    return _PairFrame(cx=dx * cb + dy * sb, cy=dy * cb - dx * sb, c=np.cos(dyaw), s=np.sin(dyaw),
-                      al=0.5 * a[:, 4], aw=0.5 * a[:, 3], bl=0.5 * b[:, 4], bw=0.5 * b[:, 3])
+class _Boxes(NamedTuple):
+    """Per-box terms, all ``(N,) float64``: centre ``x, y`` (m); ``c, s`` cosine and sine of the yaw;
+    half length ``hl`` and half width ``hw`` (m); bottom ``lo`` and top ``hi`` (m); footprint ``area``
+    (m²); volume ``vol`` (m³); circumradius ``radius`` of the footprint (m)."""
+
+    x: np.ndarray
+    y: np.ndarray
+    c: np.ndarray
+    s: np.ndarray
+    hl: np.ndarray
+    hw: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    area: np.ndarray
+    vol: np.ndarray
+    radius: np.ndarray
+
+
+def _box_terms(boxes: np.ndarray) -> _Boxes:
+    """Per-box terms of validated ``boxes (N, >=7)``."""
+    hl, hw, half_h = 0.5 * boxes[:, 4], 0.5 * boxes[:, 3], 0.5 * boxes[:, 5]
+    area = boxes[:, 3] * boxes[:, 4]
+    return _Boxes(x=boxes[:, 0].copy(), y=boxes[:, 1].copy(), c=np.cos(boxes[:, 6]),
+                  s=np.sin(boxes[:, 6]), hl=hl, hw=hw, lo=boxes[:, 2] - half_h,
+                  hi=boxes[:, 2] + half_h, area=area, vol=area * boxes[:, 5], radius=np.hypot(hl, hw))
+
+
+def _take(boxes: _Boxes, start: int, stop: int) -> _Boxes:
+    """Boxes ``start:stop`` of ``boxes``."""
+    return _Boxes(*(v[start:stop] for v in boxes))
+
+
+class _Pairs(NamedTuple):
+    """K pairs of boxes: ``frame`` (box ``a`` in the frame of box ``b``) and ``(K,) float64`` terms:
+    centre distance ``dist`` and sum of circumradii ``reach`` (m), footprint areas (m²), volumes
+    (m³), vertical ``overlap`` and ``span`` (m) of the two boxes."""
+
+    frame: _PairFrame
+    dist: np.ndarray
+    reach: np.ndarray
+    area_a: np.ndarray
+    area_b: np.ndarray
+    vol_a: np.ndarray
+    vol_b: np.ndarray
+    overlap: np.ndarray
+    span: np.ndarray
+
+
+def _pairs(a: _Boxes, b: _Boxes, outer: bool) -> _Pairs:
+    """Aligned pairs ``(a[k], b[k])`` or, if ``outer``, all ``N * M`` pairs (``a``-major order)."""
+    if outer:
+        shape = (a.x.shape[0], b.x.shape[0])
+        a, b = _Boxes(*(v[:, None] for v in a)), _Boxes(*(v[None, :] for v in b))
+    else:
+        shape = a.x.shape
+
+    def flat(v: np.ndarray) -> np.ndarray:
+        """The per-pair term ``v`` broadcast to all pairs, as a contiguous ``(K,)`` array."""
+        return np.ascontiguousarray(np.broadcast_to(v, shape)).ravel()
+
+    dx, dy = a.x - b.x, a.y - b.y
+    # Centre of a rotated into b's frame; cosine and sine of yaw_a - yaw_b.
+    frame = _PairFrame(cx=flat(dx * b.c + dy * b.s), cy=flat(dy * b.c - dx * b.s),
+                       c=flat(a.c * b.c + a.s * b.s), s=flat(a.s * b.c - a.c * b.s),
+                       al=flat(a.hl), aw=flat(a.hw), bl=flat(b.hl), bw=flat(b.hw))
+    overlap = np.maximum(0.0, np.minimum(a.hi, b.hi) - np.maximum(a.lo, b.lo))
+    span = np.maximum(a.hi, b.hi) - np.minimum(a.lo, b.lo)
+    return _Pairs(frame=frame, dist=flat(np.hypot(dx, dy)), reach=flat(a.radius + b.radius),
+                  area_a=flat(a.area), area_b=flat(b.area), vol_a=flat(a.vol), vol_b=flat(b.vol),
+                  overlap=flat(overlap), span=flat(span))
 
 
 # Internally, per-pair quantities are laid out points-first, ``(P, K)`` with the K pairs last, so
@@ -171,7 +229,7 @@ def _pseudo_angle(dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
 
 
 def _batcher_network(n: int) -> list[tuple[int, int]]:
-    """Comparators ``(i, j)``, ``i < j``, of Batcher's odd-even merge sort for ``n`` (a power of 2) keys."""
+    """Comparators ``(i, j)``, ``i < j``, of Batcher's odd-even merge sort of ``n`` keys (a power of 2)."""
     pairs = []
     p = 1
     while p < n:
@@ -231,7 +289,7 @@ _PREV = np.array([3, 0, 1, 2])  # corner k-1
 
 
 def _intersection_area(f: _PairFrame) -> np.ndarray:
-    """BEV intersection area ``(K,) float64`` m² of each pair (frame from :func:`_pair_frame`)."""
+    """BEV intersection area ``(K,) float64`` m² of each pair (frame from :func:`_pairs`)."""
     ax, ay = _corners_a(f)  # (4, K) in b's frame, where b is the box |x| <= bl, |y| <= bw
     bx, by = _corners_b(f)
     a_in = (np.abs(ax) <= f.bl + TOL) & (np.abs(ay) <= f.bw + TOL)
@@ -301,15 +359,6 @@ def _subset(f: _PairFrame, mask: np.ndarray) -> _PairFrame:
     return _PairFrame(*(arr[mask] for arr in f))
 
 
-class _BevTerms(NamedTuple):
-    """Per-pair BEV areas ``(K,) float64`` m²: intersection, both boxes, hull (None if not needed)."""
-
-    inter: np.ndarray
-    area_a: np.ndarray
-    area_b: np.ndarray
-    hull: np.ndarray | None
-
-
 def _blocked(fn, f: _PairFrame) -> np.ndarray:
     """``fn(f) (K,)`` evaluated on blocks of at most :data:`BLOCK` pairs."""
     k = f.cx.shape[0]
@@ -321,22 +370,20 @@ def _blocked(fn, f: _PairFrame) -> np.ndarray:
     return out
 
 
-def _bev_terms(a: np.ndarray, b: np.ndarray, with_hull: bool) -> _BevTerms:
-    """BEV areas of aligned pairs ``a, b (K, >=7)``; the hull only when ``with_hull``."""
-    f = _pair_frame(a, b)
-    area_a, area_b = a[:, 3] * a[:, 4], b[:, 3] * b[:, 4]
-    dist = np.hypot(f.cx, f.cy)  # (K,) m between centres
-    reach = np.hypot(f.al, f.aw) + np.hypot(f.bl, f.bw)  # (K,) m: sum of the circumradii
-    inter = np.zeros(a.shape[0])
-    near = (dist <= reach + TOL) & (area_a > 0.0) & (area_b > 0.0)  # else no intersection
+def _intersection(p: _Pairs) -> np.ndarray:
+    """BEV intersection areas ``(K,) float64`` m² (0 for a zero-area box or far-apart boxes)."""
+    inter = np.zeros(p.dist.shape[0])
+    near = (p.dist <= p.reach + TOL) & (p.area_a > 0.0) & (p.area_b > 0.0)
     if np.any(near):
-        inter[near] = _blocked(_intersection_area, _subset(f, near))
-    inter = np.clip(inter, 0.0, np.minimum(area_a, area_b))
-    hull = None
-    if with_hull:
-        hull = _blocked(_hull_area, f)
-        hull[hull <= HULL_EPS * (dist + reach) ** 2] = 0.0
-    return _BevTerms(inter, area_a, area_b, hull)
+        inter[near] = _blocked(_intersection_area, _subset(p.frame, near))
+    return np.clip(inter, 0.0, np.minimum(p.area_a, p.area_b))
+
+
+def _hull(p: _Pairs) -> np.ndarray:
+    """Areas ``(K,) float64`` m² of the convex hulls of the 8 BEV corners of the pairs."""
+    hull = _blocked(_hull_area, p.frame)
+    hull[hull <= HULL_EPS * (p.dist + p.reach) ** 2] = 0.0
+    return hull
 
 
 def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
@@ -350,52 +397,68 @@ def _giou(iou: np.ndarray, union: np.ndarray, hull: np.ndarray) -> np.ndarray:
     return np.clip(iou - _ratio(hull - union, hull), -1.0, 1.0)
 
 
-def _vertical(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Overlap and enclosing heights ``(K,) float64`` metres of aligned pairs."""
-    a_lo, a_hi = a[:, 2] - 0.5 * a[:, 5], a[:, 2] + 0.5 * a[:, 5]
-    b_lo, b_hi = b[:, 2] - 0.5 * b[:, 5], b[:, 2] + 0.5 * b[:, 5]
-    overlap = np.maximum(0.0, np.minimum(a_hi, b_hi) - np.maximum(a_lo, b_lo))
-    span = np.maximum(a_hi, b_hi) - np.minimum(a_lo, b_lo)
-    return overlap, span
+def _bev_iou_union(p: _Pairs) -> tuple[np.ndarray, np.ndarray]:
+    """BEV IoU ``(K,)`` and union area ``(K,)`` m²."""
+    inter = _intersection(p)
+    union = p.area_a + p.area_b - inter
+    return np.clip(_ratio(inter, union), 0.0, 1.0), union
 
 
-def _bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """BEV IoU ``(K,)`` of validated aligned pairs ``(K, >=7)``."""
-    t = _bev_terms(a, b, with_hull=False)
-    return np.clip(_ratio(t.inter, t.area_a + t.area_b - t.inter), 0.0, 1.0)
+def _iou_3d_union(p: _Pairs) -> tuple[np.ndarray, np.ndarray]:
+    """3D IoU ``(K,)`` and union volume ``(K,)`` m³."""
+    inter = _intersection(p) * p.overlap
+    union = p.vol_a + p.vol_b - inter
+    return np.clip(_ratio(inter, union), 0.0, 1.0), union
 
 
-def _bev_giou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """BEV GIoU ``(K,)`` of validated aligned pairs ``(K, >=7)``."""
-    t = _bev_terms(a, b, with_hull=True)
-    union = t.area_a + t.area_b - t.inter
-    iou = np.clip(_ratio(t.inter, union), 0.0, 1.0)
-    return _giou(iou, union, t.hull)
+def _bev_iou(p: _Pairs) -> np.ndarray:
+    """BEV IoU ``(K,)`` of pairs."""
+    return _bev_iou_union(p)[0]
 
 
-def _volumes(a: np.ndarray, b: np.ndarray, t: _BevTerms) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """3D IoU ``(K,)``, union volume ``(K,)`` m³ and vertical span ``(K,)`` m of aligned pairs."""
-    overlap, span = _vertical(a, b)
-    inter = t.inter * overlap
-    union = t.area_a * a[:, 5] + t.area_b * b[:, 5] - inter
-    return np.clip(_ratio(inter, union), 0.0, 1.0), union, span
+def _bev_giou(p: _Pairs) -> np.ndarray:
+    """BEV GIoU ``(K,)`` of pairs."""
+    iou, union = _bev_iou_union(p)
+    return _giou(iou, union, _hull(p))
 
 
-def _iou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """3D IoU ``(K,)`` of validated aligned pairs ``(K, >=7)``."""
-    return _volumes(a, b, _bev_terms(a, b, with_hull=False))[0]
+def _iou_3d(p: _Pairs) -> np.ndarray:
+    """3D IoU ``(K,)`` of pairs."""
+    return _iou_3d_union(p)[0]
 
 
-def _giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """3D GIoU ``(K,)`` of validated aligned pairs ``(K, >=7)``."""
-    t = _bev_terms(a, b, with_hull=True)
-    iou, union, span = _volumes(a, b, t)
-    return _giou(iou, union, t.hull * span)
+def _giou_3d(p: _Pairs) -> np.ndarray:
+    """3D GIoU ``(K,)`` of pairs."""
+    iou, union = _iou_3d_union(p)
+    return _giou(iou, union, _hull(p) * p.span)
+
+
+def _paired(fn, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Apply the pair measure ``fn`` to aligned pairs of ``a, b (K, >=7)`` -> ``(K,)``."""
+    a, b = _check_boxes(a, "a"), _check_boxes(b, "b")
+    if a.shape[0] != b.shape[0]:
+        raise ValueError(f"paired boxes need equal counts, got {a.shape[0]} and {b.shape[0]}")
+    return fn(_pairs(_box_terms(a), _box_terms(b), outer=False))
+
+
+def _pairwise(fn, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Apply the pair measure ``fn`` to all pairs of ``a (N, >=7)`` x ``b (M, >=7)`` -> ``(N, M)``."""
+    a, b = _check_boxes(a, "a"), _check_boxes(b, "b")
+    n, m = a.shape[0], b.shape[0]
+    out = np.zeros((n, m))
+    if n == 0 or m == 0:
+        return out
+    terms_a, terms_b = _box_terms(a), _box_terms(b)
+    rows = max(1, CHUNK_PAIRS // m)
+    for start in range(0, n, rows):
+        stop = min(n, start + rows)
+        out[start:stop] = fn(_pairs(_take(terms_a, start, stop), terms_b, outer=True)).reshape(-1, m)
+    return out
 
 
 def paired_bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """BEV IoU ``(K,) float64`` in [0, 1] of aligned pairs ``a[k], b[k]``, both ``(K, >=7)``."""
-    return _bev_iou(*_check_paired(a, b))
+    return _paired(_bev_iou, a, b)
 
 
 def paired_bev_giou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -403,12 +466,12 @@ def paired_bev_giou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
     The enclosing region is the convex hull of the 8 BEV corners.
     """
-    return _bev_giou(*_check_paired(a, b))
+    return _paired(_bev_giou, a, b)
 
 
 def paired_iou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """3D IoU ``(K,) float64`` in [0, 1] of aligned pairs ``a[k], b[k]``, both ``(K, >=7)``."""
-    return _iou_3d(*_check_paired(a, b))
+    return _paired(_iou_3d, a, b)
 
 
 def paired_giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -416,22 +479,7 @@ def paired_giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
     The enclosing volume is the convex hull of the 8 BEV corners times the vertical span of both.
     """
-    return _giou_3d(*_check_paired(a, b))
-
-
-def _pairwise(fn, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Apply the paired measure ``fn`` to all pairs of ``a (N, >=7)`` x ``b (M, >=7)`` -> ``(N, M)``."""
-    a, b = _check_boxes(a, "a"), _check_boxes(b, "b")
-    n, m = a.shape[0], b.shape[0]
-    out = np.zeros((n, m))
-    if n == 0 or m == 0:
-        return out
-    rows = max(1, CHUNK_PAIRS // m)
-    for start in range(0, n, rows):
-        block = a[start:start + rows]
-        out[start:start + block.shape[0]] = fn(np.repeat(block, m, axis=0),
-                                               np.tile(b, (block.shape[0], 1))).reshape(-1, m)
-    return out
+    return _paired(_giou_3d, a, b)
 
 
 def pairwise_bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -455,6 +503,6 @@ def pairwise_giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def pairwise_centre_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """BEV distance ``(N, M) float64`` in metres between the centres of ``a (N, >=2)`` and ``b (M, >=2)``."""
+    """BEV centre distance ``(N, M) float64`` in metres between ``a (N, >=2)`` and ``b (M, >=2)``."""
     a, b = _check_boxes(a, "a", min_cols=2), _check_boxes(b, "b", min_cols=2)
     return np.hypot(a[:, None, 0] - b[None, :, 0], a[:, None, 1] - b[None, :, 1])

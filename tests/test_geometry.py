@@ -23,7 +23,7 @@ MEASURES = {
 
 
 def _ref_corners(boxes: np.ndarray) -> np.ndarray:
-    """(K, 4, 2) corners by explicit rotation matrices (front-left, rear-left, rear-right, front-right)."""
+    """(K, 4, 2) corners by rotation matrices: front-left, rear-left, rear-right, front-right."""
     local = np.stack([
         np.stack([boxes[:, 4] / 2, boxes[:, 3] / 2], axis=-1),
         np.stack([-boxes[:, 4] / 2, boxes[:, 3] / 2], axis=-1),
@@ -80,7 +80,8 @@ def _assert_matches_reference(a: np.ndarray, b: np.ndarray, atol: float = 1e-6) 
         err = np.abs(got[name] - ref[name])
         worst = int(np.argmax(err)) if err.size else 0
         assert err.size == 0 or err[worst] <= atol, (
-            f"{name}: error {err[worst]:.3g} at pair {worst}: a={a[worst].tolist()} b={b[worst].tolist()}")
+            f"{name}: error {err[worst]:.3g} at pair {worst}: "
+            f"a={a[worst].tolist()} b={b[worst].tolist()}")
     return got
 
 
@@ -282,8 +283,8 @@ def test_same_centre_rotated():
     inter = 8.0 * (np.sqrt(2.0) - 1.0)
     union = 8.0 - inter
     np.testing.assert_allclose(got["bev_iou"], 1.0 / np.sqrt(2.0), atol=1e-9)
-    np.testing.assert_allclose(got["bev_giou"], inter / union - (4 * np.sqrt(2) - union) / (4 * np.sqrt(2)),
-                               atol=1e-9)
+    hull = 4.0 * np.sqrt(2.0)
+    np.testing.assert_allclose(got["bev_giou"], inter / union - (hull - union) / hull, atol=1e-9)
     _assert_matches_reference(rect, _box(w=2.0, l=4.0, yaw=np.pi / 4))
 
 
@@ -370,7 +371,8 @@ def test_random_3d_offsets_match_shapely():
     a, b = _random_pairs(rng, 1500)
     b[:, 2] = a[:, 2] + rng.uniform(-1.2, 1.2, 1500) * (a[:, 5] + b[:, 5])
     got = _assert_matches_reference(a, b)
-    assert np.any((got["bev_iou"] > 0) & (got["iou_3d"] == 0))  # overlapping footprints, no height overlap
+    # Some pairs overlap in BEV but not in height.
+    assert np.any((got["bev_iou"] > 0) & (got["iou_3d"] == 0))
 
 
 # --------------------------------------------------------------------------------------------------

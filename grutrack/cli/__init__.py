@@ -14,6 +14,7 @@ from grutrack.errors import GrutrackError
 COMMANDS: tuple[str, ...] = (
     "grutrack.cli.track",
     "grutrack.cli.evaluate",
+    "grutrack.cli.train",
     "grutrack.cli.demo",
 )
 

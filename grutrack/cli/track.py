@@ -25,6 +25,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tracker", default="ekf", choices=TRACKERS, help="tracker (default: ekf)")
     p.add_argument("--config", default=None,
                    help="tracker preset name or YAML path (default: the preset named like --tracker)")
+    p.add_argument("--checkpoint", default=None, help="trained GRU-KF model (with --tracker grukf)")
+    p.add_argument("--device", default="auto", help="torch device for grukf: auto (GPU when present), cpu, cuda")
     p.add_argument("--out", required=True, help="output submission JSON")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -36,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     scenes = load_scenes(nusc, args.split)
     tokens = [f.token for s in scenes for f in s.frames]
     dets = load_detections(args.detections, tokens)
-    tracker = build_tracker(args.tracker, args.config)
+    tracker = build_tracker(args.tracker, args.config, checkpoint=args.checkpoint, device=args.device)
     with tqdm(total=len(tokens), unit="frame", desc=f"tracking {args.split}", disable=args.no_progress,
               file=sys.stderr) as bar:
         run_ = tracker_run(tracker, scenes, dets, bar.update)

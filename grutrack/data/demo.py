@@ -41,7 +41,8 @@ DT = 0.5                    # s between keyframes: nuScenes keyframes are at 2 H
 SUBSTEPS = 5                # motion integrated at 10 Hz (nuScenes annotations are interpolated at 10 Hz too)
 FRAMES_PER_SCENE = 40       # nuScenes scenes are 20 s long: 39-41 keyframes in mini
 DEFAULT_SCENES = 10         # quick demo: 8 demo_train + 2 demo_val scenes (mini has 8 + 2)
-VAL_EVERY = 5               # every 5th scene is demo_val: 80/20 like nuScenes train/val (700/150)
+VAL_EVERY = 5               # every 5th scene is demo_val: 80/20 like nuScenes train/val (700/150); with fewer
+                            # than 5 scenes the last one is demo_val (1 scene: demo_val is empty)
 TIME_ORIGIN_US = 1_533_000_000_000_000  # 2018-07-31, the nuScenes recording period (2018-07 .. 2018-11)
 LIDAR_TRANSLATION = [0.943713, 0.0, 1.84023]  # nuScenes n015 LIDAR_TOP extrinsics (mini calibrated_sensor)
 LIDAR_ROTATION = [0.7071067812, 0.0, 0.0, -0.7071067812]  # LIDAR_TOP is yawed -90 deg on nuScenes cars
@@ -745,6 +746,8 @@ def build_tables(scenes: int, frames: int, seed: int, version: str) -> tuple[dic
     tables["map"] = [{"token": map_tok, "log_tokens": [r["token"] for r in tables["log"]],
                       "category": "semantic_prior", "filename": f"maps/{map_tok}.png"}]
     val = [n for i, n in enumerate(names) if i % VAL_EVERY == VAL_EVERY - 1]
+    if not val and len(names) > 1:
+        val = names[-1:]                                  # small demos still get a validation scene
     splits = {"demo_train": [n for n in names if n not in val], "demo_val": val, "demo_all": names}
     return tables, splits
 

@@ -420,8 +420,10 @@ def simulate_frame(gt: GTFrame, profile: DetectorProfile, rng: np.random.Generat
     labels = np.concatenate([tp_cls, d_cls, n_cls, f_cls]).astype(np.int64)
     scores = _sigmoid(np.concatenate([tp_logit, d_logit, n_logit, f_logit]))
     is_tp = np.concatenate([np.ones(len(tp_boxes), bool), np.zeros(len(boxes) - len(tp_boxes), bool)])
+    ego = np.asarray(gt.ego_translation, dtype=np.float64)
+    in_range = np.hypot(boxes[:, 0] - ego[0], boxes[:, 1] - ego[1]) <= profile.detection_range_m
     order = np.argsort(-scores, kind="stable")
-    order = order[scores[order] >= profile.score_threshold][:profile.max_boxes_per_sample]
+    order = order[(scores[order] >= profile.score_threshold) & in_range[order]][:profile.max_boxes_per_sample]
     names = np.asarray(DETECTION_CLASSES, dtype=object)[labels[order]]
     return DetFrame(gt.token, boxes[order], scores[order], names, is_tp[order])
 

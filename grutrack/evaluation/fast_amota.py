@@ -228,14 +228,26 @@ def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
 
 @dataclass
 class _Subset:
-    """Candidate pairs of one frame for one set of kept predictions (cached across thresholds)."""
+    """Candidate pairs of one frame for one set of kept predictions (cached across thresholds).
+
+    A pair is *isolated* when its GT row and its prediction column have no other candidate: motmetrics matches
+    such a pair whatever its state (every optimal assignment contains it), so only the other ("contested")
+    rows need the state machine.
+    """
+    g0: int                 # class-level index of the frame's first GT
     g: np.ndarray           # class-level GT index of each candidate pair
     p: np.ndarray           # class-level prediction index of each candidate pair
     d: np.ndarray           # exact distance of each pair
-    simple: bool            # candidate pairs form a one-to-one matching
-    g0: int = 0             # class-level index of the frame's first GT
-    dist: Optional[np.ndarray] = None   # n x k distance matrix, NaN where >= threshold (only if not simple)
-    kept: Optional[np.ndarray] = None   # class-level indices of the kept predictions (only if not simple)
+    iso: np.ndarray         # pair is isolated
+    simple: bool            # every pair isolated
+    # Only for frames with contested rows:
+    dist: Optional[np.ndarray] = None       # n x k distances, NaN where >= threshold (motmetrics' matrix)
+    kept: Optional[np.ndarray] = None       # class-level indices of the kept predictions (matrix columns)
+    hids: Optional[List[int]] = None        # hypothesis id of each column
+    col_of: Optional[Dict[int, int]] = None  # hypothesis id -> column, when the ids are unique in the frame
+    rows: Optional[List[int]] = None        # contested rows (local), ascending
+    iso_rows: Optional[np.ndarray] = None   # isolated rows (local) and their columns
+    iso_cols: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -328,12 +340,21 @@ class _ClassEval:
         np.sqrt(dist, out=dist)
         cand = dist < self.dist_th          # the devkit sets distances >= dist_th_tp to NaN
         ii, jj = np.nonzero(cand)
-        simple = not (len(ii) > 1 and ((ii[1:] == ii[:-1]).any() or np.bincount(jj).max() > 1))
-        sub = _Subset(g=g0 + ii, p=idx[jj], d=dist[ii, jj], simple=simple, g0=g0)
+        row_deg = np.bincount(ii, minlength=g1 - g0)
+        col_deg = np.bincount(jj, minlength=n_kept)
+        iso = (row_deg[ii] == 1) & (col_deg[jj] == 1)
+        simple = bool(iso.all())
+        sub = _Subset(g0=g0, g=g0 + ii, p=idx[jj], d=dist[ii, jj], iso=iso, simple=simple)
         if not simple:
             dist[~cand] = np.nan
             sub.dist = dist
             sub.kept = idx
+            sub.hids = self.ph[idx].tolist()
+            if len(set(sub.hids)) == len(sub.hids):
+                sub.col_of = {h: j for j, h in enumerate(sub.hids)}
+            sub.rows = np.unique(ii[~iso]).tolist()
+            sub.iso_rows = ii[iso]
+            sub.iso_cols = jj[iso]
         self._cache[(f, n_kept)] = sub
         return sub
 
@@ -355,28 +376,27 @@ class _ClassEval:
         # Frames with at least one candidate pair; the others only produce misses and false positives.
         active = np.flatnonzero((self.n_f > 0) & (near_f > 0))
         cache = self._cache
-        simple: List[_Subset] = []
+        subs: List[_Subset] = []
         hard: List[Tuple[int, _Subset]] = []
         for f, k in zip(active.tolist(), k_f[active].tolist()):
             sub = cache.get((f, k))
             if sub is None:
                 sub = self._subset(f, kept, k)
-            if sub.simple:
-                simple.append(sub)
-            else:
+            subs.append(sub)
+            if not sub.simple:
                 hard.append((f, sub))
 
-        # One-to-one frames: motmetrics matches every candidate pair whatever its state.
-        if simple:
-            g = np.concatenate([s.g for s in simple])
-            p = np.concatenate([s.p for s in simple])
-            d = np.concatenate([s.d for s in simple])
+        # Isolated pairs: matched whatever the state.
+        if subs:
+            g = np.concatenate([s.g if s.simple else s.g[s.iso] for s in subs])
+            p = np.concatenate([s.p if s.simple else s.p[s.iso] for s in subs])
+            d = np.concatenate([s.d if s.simple else s.d[s.iso] for s in subs])
         else:
             g = np.zeros(0, np.int64)
             p = np.zeros(0, np.int64)
             d = np.zeros(0, np.float64)
         if hard:
-            hg, hp, hd = self._replay_hard(hard, g, p)
+            hg, hp, hd = self._replay_contested(hard, g, p)
             g = np.concatenate([g, hg])
             p = np.concatenate([p, hp])
             d = np.concatenate([d, hd])
@@ -395,86 +415,152 @@ class _ClassEval:
         self._pass_cache[n_kept] = res
         return res
 
-    def _replay_hard(self, hard: List[Tuple[int, "_Subset"]], g_simple: np.ndarray, p_simple: np.ndarray):
-        """motmetrics' ``MOTAccumulator.update`` for the frames with competing candidates, in time order.
+    def _replay_contested(self, hard: List[Tuple[int, _Subset]], g_iso: np.ndarray, p_iso: np.ndarray):
+        """motmetrics' ``MOTAccumulator.update`` for the contested rows, frame by frame in time order.
 
-        The state it needs (each object's last partner before the frame, ``MOTAccumulator.m``) comes from the
-        matches of the one-to-one frames (all known) and of the earlier competing frames (replayed first).
+        1. an object keeps its previous partner (``MOTAccumulator.m``) if that hypothesis (the first unmasked
+           column with its id) is within distance; 2. the rest goes to ``motmetrics.lap.linear_sum_assignment``
+           on the very matrix motmetrics builds, unless what is left is one-to-one (then all of it matches).
+        The previous partner of an object is its last match before the frame: among the isolated pairs (all
+        known) or the contested matches replayed before.
         """
         go, ph, gf = self.go, self.ph, self.gf
         nf = self.n_frames + 1
-        # Last one-to-one match of each object before a frame: binary search on (object, frame) keys.
-        key_s = go[g_simple] * nf + gf[g_simple]
-        order = np.argsort(key_s, kind="stable")
-        key_sorted = key_s[order]
-        h_sorted = ph[p_simple][order]
-        n_obj = int(go.max()) + 1 if len(go) else 0
-        hard_frame = np.full(n_obj, -1, dtype=np.int64)   # frame and partner of each object's last replayed match
-        hard_h = np.full(n_obj, -1, dtype=np.int64)
-        out_g: List[np.ndarray] = []
-        out_p: List[np.ndarray] = []
-        out_d: List[np.ndarray] = []
+        key_iso = go[g_iso] * nf + gf[g_iso]
+        order = np.argsort(key_iso, kind="stable")
+        key_sorted = key_iso[order]
+        h_sorted = ph[p_iso][order]
+
+        def prev_of(objs: np.ndarray, f: int) -> Tuple[np.ndarray, np.ndarray]:
+            """(frame, hypothesis) of each object's last isolated match before frame f; (-1, -1) if none."""
+            q = np.searchsorted(key_sorted, objs * nf + f) - 1
+            if len(key_sorted) == 0:
+                return np.full(len(objs), -1), np.full(len(objs), -1)
+            qc = np.maximum(q, 0)
+            ok = (q >= 0) & (key_sorted[qc] // nf == objs)
+            return np.where(ok, key_sorted[qc] % nf, -1), np.where(ok, h_sorted[qc], -1)
+
+        last: Dict[int, Tuple[int, int]] = {}   # object -> (frame, hypothesis) of its last contested match
+
+        def iso_prev(sub: _Subset, f: int) -> List[int]:
+            """Previous partner of each isolated row of a contested frame (rarely needed)."""
+            objs = go[sub.g0 + sub.iso_rows]
+            pf_i, ph_i = prev_of(objs, f)
+            out = []
+            for o, hf, hh in zip(objs.tolist(), pf_i.tolist(), ph_i.tolist()):
+                lc = last.get(o)
+                out.append(lc[1] if lc is not None and lc[0] > hf else hh)
+            return out
+
+        # Isolated-match state of all contested rows, in one search.
+        all_rows = [sub.g0 + np.asarray(sub.rows, dtype=np.int64) for _, sub in hard]
+        all_f = np.concatenate([np.full(len(r), f) for r, (f, _) in zip(all_rows, hard)])
+        all_objs = go[np.concatenate(all_rows)]
+        q = np.searchsorted(key_sorted, all_objs * nf + all_f) - 1
+        if len(key_sorted):
+            qc = np.maximum(q, 0)
+            ok = (q >= 0) & (key_sorted[qc] // nf == all_objs)
+            pf_all = np.where(ok, key_sorted[qc] % nf, -1).tolist()
+            ph_all = np.where(ok, h_sorted[qc], -1).tolist()
+        else:
+            pf_all = [-1] * len(all_objs)
+            ph_all = [-1] * len(all_objs)
+        objs_all = all_objs.tolist()
+
+        out_g: List[int] = []
+        out_p: List[int] = []
+        out_d: List[float] = []
+        at = 0
         for f, sub in hard:
             dist = sub.dist
-            finite = ~np.isnan(dist)
-            g0 = sub.g0
-            # Rows without any pairing within distance can neither keep a pairing nor be assigned.
-            rows = np.flatnonzero(finite.any(axis=1))
-            objs = go[g0 + rows]
-            q = np.searchsorted(key_sorted, objs * nf + f) - 1
-            qc = np.maximum(q, 0)
-            has_s = (q >= 0) & (key_sorted[qc] // nf == objs) if len(key_sorted) else np.zeros(len(rows), bool)
-            prev_f = np.where(has_s, key_sorted[qc] % nf if len(key_sorted) else -1, -1)
-            prev_h = np.where(has_s, h_sorted[qc] if len(key_sorted) else -1, -1)
-            later = hard_frame[objs] > prev_f
-            prev_h = np.where(later, hard_h[objs], prev_h)
-            hids = ph[sub.kept]
-            omask = np.zeros(dist.shape[0], dtype=bool)
-            hmask = np.zeros(dist.shape[1], dtype=bool)
-            # 1. Keep previous pairings still within distance: the first unmasked hypothesis with the previous
-            #    partner's id, taken row by row.
-            if len(np.unique(hids)) == len(hids):
-                # Unique ids: each row has at most one column; a column wanted twice goes to the first row.
-                col = np.full(len(rows), -1, dtype=np.int64)
-                if len(hids):
-                    srt = np.argsort(hids)
-                    at = np.minimum(np.searchsorted(hids[srt], prev_h), len(hids) - 1)
-                    hit = (prev_h >= 0) & (hids[srt][at] == prev_h)
-                    col = np.where(hit, srt[at], -1)
-                ok = col >= 0
-                ok[ok] = finite[rows[ok], col[ok]]
-                r_ok, c_ok = rows[ok], col[ok]
-                _, first = np.unique(c_ok, return_index=True)
-                r1, c1 = r_ok[first], c_ok[first]
+            hids = sub.hids
+            n_rows = len(sub.rows)
+            prev: List[int] = []
+            for t in range(at, at + n_rows):
+                o = objs_all[t]
+                hp = ph_all[t]
+                lc = last.get(o)
+                if lc is not None and lc[0] > pf_all[t]:
+                    hp = lc[1]
+                prev.append(hp)
+            rows_objs = objs_all[at:at + n_rows]
+            at += n_rows
+
+            col_of = sub.col_of
+            if col_of is None:
+                prev_all = dict(zip(sub.rows, prev))
+                prev_all.update(zip(sub.iso_rows.tolist(), iso_prev(sub, f)))
+                matched = self._update_generic(sub, prev_all)
             else:
-                r1_list: List[int] = []
-                c1_list: List[int] = []
-                for r, hp in zip(rows.tolist(), prev_h.tolist()):
+                hmask = set()
+                omask = set()
+                matched = []
+                for r, hp in zip(sub.rows, prev):
                     if hp < 0:
                         continue
-                    js = np.flatnonzero(~hmask & (hids == hp))
-                    if len(js) and finite[r, js[0]]:
-                        hmask[js[0]] = True
-                        r1_list.append(r)
-                        c1_list.append(int(js[0]))
-                r1 = np.asarray(r1_list, dtype=np.int64)
-                c1 = np.asarray(c1_list, dtype=np.int64)
-            omask[r1] = True
-            hmask[c1] = True
-            # 2. The rest: motmetrics' solver on motmetrics' matrix (ties broken as the devkit breaks them).
-            dm = dist.copy()
-            dm[omask, :] = np.nan
-            dm[:, hmask] = np.nan
-            r2, c2 = _assign(dm)
-            rr = np.concatenate([r1, r2])
-            cc = np.concatenate([c1, c2])
-            out_g.append(g0 + rr)
-            out_p.append(sub.kept[cc])
-            out_d.append(dist[rr, cc])
-            mo = go[g0 + rr]
-            hard_frame[mo] = f
-            hard_h[mo] = hids[cc]
-        return np.concatenate(out_g), np.concatenate(out_p), np.concatenate(out_d)
+                    j = col_of.get(hp)
+                    if j is None or j in hmask or dist[r, j] != dist[r, j]:
+                        continue
+                    hmask.add(j)
+                    omask.add(r)
+                    matched.append((r, j))
+                # What the contested rows have left; isolated pairs never share a row or column with them.
+                rest = [(r, j) for r in sub.rows if r not in omask
+                        for j in np.flatnonzero(~np.isnan(dist[r])).tolist() if j not in hmask]
+                rr = [r for r, _ in rest]
+                cc = [j for _, j in rest]
+                if len(set(rr)) == len(rr) and len(set(cc)) == len(cc):
+                    matched.extend(rest)
+                else:
+                    # Solver needed, on motmetrics' matrix: the isolated rows that kept their previous
+                    # partner in step 1 are masked there too.
+                    for r, j, hh in zip(sub.iso_rows.tolist(), sub.iso_cols.tolist(), iso_prev(sub, f)):
+                        if hh == hids[j]:
+                            omask.add(r)
+                            hmask.add(j)
+                    dm = dist.copy()
+                    dm[sorted(omask), :] = np.nan
+                    dm[:, sorted(hmask)] = np.nan
+                    contested = set(sub.rows)
+                    r2, c2 = _assign(dm)
+                    matched.extend((r, j) for r, j in zip(r2.tolist(), c2.tolist()) if r in contested)
+            row_obj = dict(zip(sub.rows, rows_objs))
+            for r, j in matched:
+                out_g.append(sub.g0 + r)
+                out_p.append(int(sub.kept[j]))
+                out_d.append(float(dist[r, j]))
+                last[row_obj[r]] = (f, hids[j])
+        return (np.asarray(out_g, dtype=np.int64), np.asarray(out_p, dtype=np.int64),
+                np.asarray(out_d, dtype=np.float64))
+
+    @staticmethod
+    def _update_generic(sub: _Subset, prev: Dict[int, int]) -> List[Tuple[int, int]]:
+        """Full ``MOTAccumulator.update`` of a frame whose hypothesis ids repeat (``prev``: previous partner of
+        every row with a candidate, -1 if none); returns the matches of the contested rows."""
+        dist = sub.dist
+        n, k = dist.shape
+        finite = ~np.isnan(dist)
+        hids = np.asarray(sub.hids)
+        omask = np.zeros(n, dtype=bool)
+        hmask = np.zeros(k, dtype=bool)
+        pairs: List[Tuple[int, int]] = []
+        for r in np.flatnonzero(finite.any(axis=1)).tolist():
+            hp = prev.get(r, -1)
+            if hp < 0:
+                continue
+            js = np.flatnonzero(~hmask & (hids == hp))
+            if len(js) == 0 or not finite[r, js[0]]:
+                continue
+            omask[r] = True
+            hmask[js[0]] = True
+            pairs.append((r, int(js[0])))
+        dm = dist.copy()
+        dm[omask, :] = np.nan
+        dm[:, hmask] = np.nan
+        r2, c2 = _assign(dm)
+        pairs.extend(zip(r2.tolist(), c2.tolist()))
+        contested = set(sub.rows)
+        return [(r, j) for r, j in pairs if r in contested]
 
     # -- metrics of one threshold --------------------------------------------------------------------------------
 

@@ -13,25 +13,41 @@ from grutrack.tracking.config import TrackerConfig, load_tracker_config
 from grutrack.tracking.tracker import Tracker, TrackGroup
 
 #: trackers selectable with ``--tracker``
-TRACKERS: tuple[str, ...] = ("ekf",)
-#: tracker name -> preset used when --config is not given
-DEFAULT_PRESET = {"ekf": "ekf"}
+TRACKERS: tuple[str, ...] = ("ekf", "grukf")
+#: tracker name -> preset used when --config is not given (the GRU-KF shares the EKF tracker's preset:
+#: pre-processing, association, lifecycle and output are the same, only the motion backend differs)
+DEFAULT_PRESET = {"ekf": "ekf", "grukf": "ekf"}
 
 
 def build_tracker(name: str = "ekf", config: str | Path | None = None,
-                  param_classes: tuple[str, ...] | None = None) -> Tracker:
+                  param_classes: tuple[str, ...] | None = None, checkpoint: str | Path | None = None,
+                  device: str = "auto") -> Tracker:
     """A :class:`Tracker` for ``name`` with the preset ``config`` (default: the preset named ``name``).
 
     ``param_classes``: for a dataset whose labels are not the 7 nuScenes tracking classes (e.g. AV2
     categories), the nuScenes tracking class whose parameters each dataset label uses; labels stay distinct
     (boxes of different labels never match) while thresholds and motion models come from the mapped class.
+    ``checkpoint``: the trained GRU-KF (``grukf`` only); ``device``: auto, cpu, cuda, ...
     """
     if name not in TRACKERS:
         raise ConfigError(f"unknown tracker '{name}' (available: {', '.join(TRACKERS)})")
     cfg = load_tracker_config(config or DEFAULT_PRESET[name])
     index = _param_index(param_classes)
     cfg = remap_config(cfg, index)
+    if name == "grukf":
+        if checkpoint is None:
+            raise ConfigError("--tracker grukf needs --checkpoint CKPT (a model written by `grutrack train`)")
+        from grutrack.training.checkpoint import load_network
+
+        return Tracker(cfg, [grukf_group(load_network(checkpoint), len(index), device)])
     return Tracker(cfg, ekf_groups(cfg, index))
+
+
+def grukf_group(net, n_labels: int, device: str = "auto", train: bool = False) -> TrackGroup:
+    """One track group for every label, run by the GRU-Kalman filter ``net``."""
+    from grutrack.tracking.grukf_backend import GRUKFBackend
+
+    return TrackGroup(GRUKFBackend(net, device, train=train), np.ones(n_labels, dtype=bool))
 
 
 def _param_index(param_classes: tuple[str, ...] | None) -> np.ndarray:

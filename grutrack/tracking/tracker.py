@@ -92,6 +92,9 @@ class Tracker:
         self.group_of_class = np.argmax(np.stack([g.classes for g in groups]), axis=0)
         self.next_id = 0
         self.last_timestamp: int | None = None
+        #: optional callable(group, rows, det_rows) run right after a group's matched tracks are corrected
+        #: (training reads the corrected states there, before expired tracks are dropped)
+        self.update_hook = None
 
     def reset(self) -> None:
         """Forget all tracks (start of a scene); track ids keep counting so they stay unique."""
@@ -136,6 +139,8 @@ class Tracker:
                 continue
             if len(rows):
                 g.state = g.backend.update(g.state, rows, dets.boxes[drows])
+                if self.update_hook is not None:
+                    self.update_hook(g, rows, drows)
             matched = np.zeros(n, dtype=bool)
             matched[rows] = True
             g.scores[rows] = dets.scores[drows]

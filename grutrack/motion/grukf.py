@@ -1,0 +1,179 @@
+"""The GRU-Kalman filter: a KalmanNet-style ("architecture 2") learned Kalman gain on a fixed SS model.
+
+Prediction uses the SS transition f (CTRA by default, Bicycle selectable) for every class. The update is
+``x = x^- + K (y - h(x^-))`` with the yaw residual wrapped, where the gain K comes from a network with
+separate GRUs tracking the process noise Q, the prior state covariance Sigma and the innovation covariance
+S, fully connected layers between them, and dedicated input and output layers (DESIGN §1):
+
+    Q-GRU   <- FC(forward-update difference  x_{n-1|n-1} - x_{n-1|n-2})
+    Σ-GRU   <- [h_Q, FC(forward-evolution difference  x_{n-1|n-1} - x_{n-2|n-2})]
+    S-GRU   <- [FC(h_Σ), FC([observation difference y_n - y_{n-1}, innovation y_n - y_{n|n-1}])]
+    K       =  output layer([h_Σ, h_S])                      (dim_x x 9)
+    h_Σ     <- FC([h_Σ, FC([h_S, K])])                       (backward flow, as in KalmanNet)
+
+Each input is L2-normalised per track. Hidden states live per track and are carried across frames.
+The ``four_gru`` variant (the authors' public code) adds an R-GRU over the observation difference whose
+state joins the S-GRU input; it is off by default (the paper has three GRUs).
+
+Heading frame (a grutrack choice, documented): the planar components of every input (x, y and vx, vy) are
+expressed in the track's heading frame (longitudinal / lateral) and the planar part of the correction is
+rotated back to the global frame, so the learned gain does not depend on the direction of travel. The
+output layer's bias starts at a given gain (the EKF's mean gain on the training data, see
+:mod:`grutrack.training`), so an untrained network is a constant-gain filter close to the EKF.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+from torch import nn
+
+from grutrack.motion.torch_models import make_torch_model, wrap_angle_t
+
+MEAS_DIM = 9
+_YAW_Z = 6
+
+
+@dataclass(frozen=True)
+class GRUKFConfig:
+    """Architecture of the GRU-Kalman filter (stored in checkpoints).
+
+    ss_model: CTRA or Bicycle; in_mult / out_mult: widths of the input / output FC layers as multiples of
+    the feature size (KalmanNet's defaults 5 and 40); four_gru: the authors' four-GRU variant.
+    """
+
+    ss_model: str = "CTRA"
+    in_mult: int = 5
+    out_mult: int = 40
+    four_gru: bool = False
+
+
+def _fc(i: int, o: int) -> nn.Sequential:
+    return nn.Sequential(nn.Linear(i, o), nn.ReLU())
+
+
+def _normalise(v: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
+    """Rows of (N, d) scaled to unit L2 norm (zero rows stay zero)."""
+    return v / (v.norm(dim=1, keepdim=True) + eps)
+
+
+def to_heading_frame(v: torch.Tensor, yaw: torch.Tensor, pairs: tuple[tuple[int, int], ...]) -> torch.Tensor:
+    """Rotate the planar column pairs of v (N, d) by -yaw (N,) into the heading frame."""
+    c, s = torch.cos(yaw), torch.sin(yaw)
+    cols = list(v.unbind(1))
+    for i, j in pairs:
+        a, b = cols[i], cols[j]
+        cols[i], cols[j] = c * a + s * b, -s * a + c * b
+    return torch.stack(cols, dim=1)
+
+
+def from_heading_frame(v: torch.Tensor, yaw: torch.Tensor, pairs: tuple[tuple[int, int], ...]) -> torch.Tensor:
+    """Inverse of :func:`to_heading_frame`."""
+    return to_heading_frame(v, -yaw, pairs)
+
+
+MEAS_PLANAR = ((0, 1), (7, 8))   # (x, y), (vx, vy) in the measurement
+STATE_PLANAR = ((0, 1),)         # (x, y) in the CTRA / Bicycle state
+
+
+class GRUKalmanNet(nn.Module):
+    """The learned gain network; see the module docstring. m = state dim (10), n = measurement dim (9)."""
+
+    def __init__(self, cfg: GRUKFConfig = GRUKFConfig()):
+        super().__init__()
+        self.cfg = cfg
+        self.ss = make_torch_model(cfg.ss_model)
+        m, n = self.ss.dim_x, MEAS_DIM
+        self.m, self.n = m, n
+        self.h_q, self.h_sigma, self.h_s = m * m, m * m, n * n
+        self.fc_fwd_update = _fc(m, m * cfg.in_mult)                     # input layer of the Q-GRU
+        self.gru_q = nn.GRUCell(m * cfg.in_mult, self.h_q)
+        self.fc_fwd_evol = _fc(m, m * cfg.in_mult)                       # input layer of the Σ-GRU
+        self.gru_sigma = nn.GRUCell(self.h_q + m * cfg.in_mult, self.h_sigma)
+        self.fc_sigma_to_s = _fc(self.h_sigma, n * n)
+        self.fc_obs = _fc(2 * n, 2 * n * cfg.in_mult)                    # input layer of the S-GRU
+        r_dim = 0
+        if cfg.four_gru:
+            self.gru_r = nn.GRUCell(n * cfg.in_mult, n * n)
+            self.fc_r_in = _fc(n, n * cfg.in_mult)
+            r_dim = n * n
+        self.gru_s = nn.GRUCell(n * n + 2 * n * cfg.in_mult + r_dim, self.h_s)
+        hidden = (self.h_sigma + self.h_s) * cfg.out_mult // 10
+        self.fc_gain = nn.Sequential(nn.Linear(self.h_sigma + self.h_s, hidden), nn.ReLU(),
+                                     nn.Linear(hidden, m * n))            # output layer: K
+        self.fc_back1 = _fc(self.h_s + m * n, m * m)
+        self.fc_back2 = _fc(self.h_sigma + m * m, self.h_sigma)
+        nn.init.zeros_(self.fc_gain[2].weight)
+        nn.init.zeros_(self.fc_gain[2].bias)
+
+    def set_gain_prior(self, K0: torch.Tensor) -> None:
+        """Start from the constant gain K0 (m, n) in the heading frame: output bias = K0, small weights."""
+        with torch.no_grad():
+            self.fc_gain[2].bias.copy_(K0.reshape(-1).to(self.fc_gain[2].bias))
+            self.fc_gain[2].weight.mul_(0.0).add_(torch.randn_like(self.fc_gain[2].weight) * 1e-3)
+
+    def init_hidden(self, n_tracks: int, device=None) -> dict[str, torch.Tensor]:
+        """Zero hidden states for new tracks (N, hidden) each."""
+        dt = self.fc_gain[2].weight.dtype
+        h = {"q": torch.zeros(n_tracks, self.h_q, device=device, dtype=dt),
+             "sigma": torch.zeros(n_tracks, self.h_sigma, device=device, dtype=dt),
+             "s": torch.zeros(n_tracks, self.h_s, device=device, dtype=dt)}
+        if self.cfg.four_gru:
+            h["r"] = torch.zeros(n_tracks, self.n * self.n, device=device, dtype=dt)
+        return h
+
+    def gain(self, feats: dict[str, torch.Tensor], hidden: dict[str, torch.Tensor]
+             ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """Gain K (N, m, n) from the four normalised features and the hidden states; returns new hidden states."""
+        dt = self.fc_gain[2].weight.dtype
+        f_upd, f_evol = feats["fwd_update"].to(dt), feats["fwd_evol"].to(dt)
+        f_obs = torch.cat([feats["obs_diff"], feats["innovation"]], dim=1).to(dt)
+        h_q = self.gru_q(self.fc_fwd_update(f_upd), hidden["q"])
+        h_sigma = self.gru_sigma(torch.cat([h_q, self.fc_fwd_evol(f_evol)], dim=1), hidden["sigma"])
+        s_in = [self.fc_sigma_to_s(h_sigma), self.fc_obs(f_obs)]
+        new = {"q": h_q}
+        if self.cfg.four_gru:
+            h_r = self.gru_r(self.fc_r_in(feats["obs_diff"].to(dt)), hidden["r"])
+            s_in.append(h_r)
+            new["r"] = h_r
+        h_s = self.gru_s(torch.cat(s_in, dim=1), hidden["s"])
+        K = self.fc_gain(torch.cat([h_sigma, h_s], dim=1))
+        back = self.fc_back1(torch.cat([h_s, K], dim=1))
+        new["sigma"] = self.fc_back2(torch.cat([h_sigma, back], dim=1))
+        new["s"] = h_s
+        return K.reshape(-1, self.m, self.n), new
+
+    def correct(self, x_prior: torch.Tensor, y: torch.Tensor, y_prev: torch.Tensor, x_post_prev: torch.Tensor,
+                x_prior_prev: torch.Tensor, x_post_prev2: torch.Tensor, hidden: dict[str, torch.Tensor]
+                ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """One update of K tracks (all (K, ·) float64): prior x^-_n, measurement y_n, previous measurement,
+        previous posterior x_{n-1|n-1}, previous prior x_{n-1|n-2}, posterior before that x_{n-2|n-2}.
+        Returns the posterior (K, m) and the new hidden states.
+        """
+        yaw = x_prior[:, self.ss.yaw_index]
+        innov = y - self.ss.h(x_prior)
+        innov = torch.cat([innov[:, :_YAW_Z], wrap_angle_t(innov[:, _YAW_Z:_YAW_Z + 1]), innov[:, _YAW_Z + 1:]], 1)
+        obs_diff = y - y_prev
+        obs_diff = torch.cat([obs_diff[:, :_YAW_Z], wrap_angle_t(obs_diff[:, _YAW_Z:_YAW_Z + 1]),
+                              obs_diff[:, _YAW_Z + 1:]], 1)
+        yi = self.ss.yaw_index
+        fwd_evol = x_post_prev - x_post_prev2
+        fwd_upd = x_post_prev - x_prior_prev
+        fwd_evol = torch.cat([fwd_evol[:, :yi], wrap_angle_t(fwd_evol[:, yi:yi + 1]), fwd_evol[:, yi + 1:]], 1)
+        fwd_upd = torch.cat([fwd_upd[:, :yi], wrap_angle_t(fwd_upd[:, yi:yi + 1]), fwd_upd[:, yi + 1:]], 1)
+        innov_h = to_heading_frame(innov, yaw, MEAS_PLANAR)
+        feats = {"innovation": _normalise(innov_h),
+                 "obs_diff": _normalise(to_heading_frame(obs_diff, yaw, MEAS_PLANAR)),
+                 "fwd_evol": _normalise(to_heading_frame(fwd_evol, yaw, STATE_PLANAR)),
+                 "fwd_update": _normalise(to_heading_frame(fwd_upd, yaw, STATE_PLANAR))}
+        K, new_hidden = self.gain(feats, hidden)
+        delta = torch.einsum("kmn,kn->km", K.to(innov_h.dtype), innov_h)
+        delta = from_heading_frame(delta, yaw, STATE_PLANAR)
+        x = x_prior + delta
+        x = torch.cat([x[:, :yi], wrap_angle_t(x[:, yi:yi + 1]), x[:, yi + 1:]], 1)
+        return x, new_hidden
+
+    def config_dict(self) -> dict:
+        """The architecture as a plain dict (for checkpoints)."""
+        return asdict(self.cfg)

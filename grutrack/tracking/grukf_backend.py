@@ -1,0 +1,116 @@
+"""The GRU-Kalman filter as a tracker motion backend: all tracks of a frame form one batch.
+
+Per-track tensors (state, the previous posteriors/prior and measurement that feed the network, and the GRU
+hidden states) are rows of arrays indexed like the track group; they are born and removed with the tracks.
+In inference no autograd graph is kept; in training (``train=True``) the graph spans the frames of a scene.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+import torch
+
+from grutrack.motion.grukf import GRUKalmanNet
+
+
+def resolve_device(device: str = "auto") -> torch.device:
+    """``auto`` -> CUDA when available, else CPU; otherwise the named torch device."""
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(device)
+
+
+@dataclass
+class GRUState:
+    """N tracks: x current state (posterior after an update, prior after a predict) (N, m) float64; y_prev
+    last measurement (N, 9); post1 / post2 the last two posteriors, prior1 the prior of the last update
+    (N, m); hidden GRU states {name: (N, hidden)}; labels (N,) int64 (numpy)."""
+
+    x: torch.Tensor
+    y_prev: torch.Tensor
+    post1: torch.Tensor
+    post2: torch.Tensor
+    prior1: torch.Tensor
+    hidden: dict
+    labels: np.ndarray
+
+    def map(self, fn_t, fn_np) -> "GRUState":
+        """Apply fn_t to every tensor, fn_np to the labels."""
+        kw = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            kw[f.name] = ({k: fn_t(t) for k, t in v.items()} if isinstance(v, dict)
+                          else fn_np(v) if isinstance(v, np.ndarray) else fn_t(v))
+        return GRUState(**kw)
+
+
+class GRUKFBackend:
+    """Batched GRU-KF over the tracks of one group (every class shares the network and SS model)."""
+
+    def __init__(self, net: GRUKalmanNet, device: torch.device | str = "auto", train: bool = False):
+        self.net = net
+        self.device = resolve_device(device) if isinstance(device, str) else device
+        self.net.to(self.device)
+        self.train = train
+        self.ss = net.ss
+
+    def _t(self, a: np.ndarray) -> torch.Tensor:
+        return torch.as_tensor(np.asarray(a, dtype=np.float64), device=self.device)
+
+    def _ctx(self):
+        return torch.enable_grad() if self.train else torch.no_grad()
+
+    def initiate(self, z: np.ndarray, labels: np.ndarray) -> GRUState:
+        """New tracks from detections z (N, 9)."""
+        with self._ctx():
+            zt = self._t(z)
+            x = self.ss.init_state(zt)
+            return GRUState(x, zt, x, x, x, self.net.init_hidden(len(z), self.device), labels.copy())
+
+    def predict(self, s: GRUState, dt: float) -> GRUState:
+        """x <- f(x, dt) for every track."""
+        with self._ctx():
+            return GRUState(self.ss.f(s.x, dt), s.y_prev, s.post1, s.post2, s.prior1, s.hidden, s.labels)
+
+    def update(self, s: GRUState, rows: np.ndarray, z: np.ndarray) -> GRUState:
+        """Correct tracks ``rows`` (K,) with measurements z (K, 9) through the learned gain."""
+        with self._ctx():
+            r = torch.as_tensor(rows, device=self.device, dtype=torch.long)
+            y = self._t(z)
+            prior = s.x[r]
+            post, hid = self.net.correct(prior, y, s.y_prev[r], s.post1[r], s.prior1[r], s.post2[r],
+                                         {k: v[r] for k, v in s.hidden.items()})
+
+            def put(t: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+                out = t.clone()
+                out[r] = v.to(out.dtype)
+                return out
+
+            return GRUState(put(s.x, post), put(s.y_prev, y), put(s.post1, post), put(s.post2, s.post1[r]),
+                            put(s.prior1, prior), {k: put(s.hidden[k], hid[k]) for k in s.hidden}, s.labels)
+
+    def measure(self, s: GRUState) -> torch.Tensor:
+        """h(x) (N, 9) as a tensor (keeps the graph in training)."""
+        return self.ss.h(s.x)
+
+    def boxes(self, s: GRUState) -> np.ndarray:
+        """Canonical boxes (N, 9) float64 of the current state."""
+        with torch.no_grad():
+            b = self.ss.h(s.x).detach().cpu().numpy().astype(np.float64)
+        b[:, 6] = (b[:, 6] + np.pi) % (2 * np.pi) - np.pi
+        return b
+
+    def select(self, s: GRUState, index: np.ndarray) -> GRUState:
+        """Subset of the tracks (mask or indices)."""
+        idx = np.flatnonzero(index) if np.asarray(index).dtype == bool else np.asarray(index)
+        it = torch.as_tensor(idx, device=self.device, dtype=torch.long)
+        return s.map(lambda t: t[it], lambda a: a[idx])
+
+    def concat(self, a: GRUState, b: GRUState) -> GRUState:
+        """Tracks of a then b."""
+        return GRUState(*(torch.cat([getattr(a, n), getattr(b, n)]) for n in ("x", "y_prev", "post1", "post2",
+                                                                             "prior1")),
+                        {k: torch.cat([a.hidden[k], b.hidden[k]]) for k in a.hidden},
+                        np.concatenate([a.labels, b.labels]))

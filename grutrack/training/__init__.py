@@ -1,0 +1,1 @@
+"""Training of the GRU-Kalman filter: GT association, EKF pseudo-labels, the loop, checkpoints."""

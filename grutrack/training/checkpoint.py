@@ -1,0 +1,45 @@
+"""GRU-KF checkpoints: weights, architecture, optimizer, scheduler, RNG states and position, written atomically."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from grutrack import __version__
+from grutrack.errors import InputFormatError
+from grutrack.io import atomic_path
+from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
+
+FORMAT = "grutrack-grukf/1"
+
+
+def save_checkpoint(path: str | Path, net: GRUKalmanNet, extra: dict | None = None) -> None:
+    """Write ``{format, version, arch, model, **extra}`` to ``path`` atomically."""
+    payload = {"format": FORMAT, "grutrack_version": __version__, "arch": net.config_dict(),
+               "model": net.state_dict(), **(extra or {})}
+    with atomic_path(path) as tmp:
+        torch.save(payload, tmp)
+
+
+def read_checkpoint(path: str | Path, map_location="cpu") -> dict:
+    """The checkpoint dict; clear error for a missing or foreign file."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputFormatError(f"{path}: checkpoint does not exist (train one with `grutrack train`)")
+    try:
+        ck = torch.load(path, map_location=map_location, weights_only=False)
+    except Exception as exc:  # torch raises many types for a corrupt file
+        raise InputFormatError(f"{path}: not a readable torch checkpoint ({exc})") from exc
+    if not isinstance(ck, dict) or ck.get("format") != FORMAT:
+        raise InputFormatError(f"{path}: not a grutrack GRU-KF checkpoint (expected format {FORMAT})")
+    return ck
+
+
+def load_network(path: str | Path, map_location="cpu") -> GRUKalmanNet:
+    """The trained network of a checkpoint (weights loaded once, never re-initialised afterwards)."""
+    ck = read_checkpoint(path, map_location)
+    net = GRUKalmanNet(GRUKFConfig(**ck["arch"]))
+    net.load_state_dict(ck["model"])
+    net.eval()
+    return net

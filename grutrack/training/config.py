@@ -1,0 +1,85 @@
+"""Training configuration (YAML under ``grutrack/configs/training/``), validated key by key."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import yaml
+
+from grutrack.errors import ConfigError
+
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs" / "training"
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """See ``grutrack/configs/training/grukf.yaml`` for the meaning of every field."""
+
+    mode: str
+    epochs: int
+    lr: float
+    weight_decay: float
+    seed: int
+    device: str
+    ss_model: str
+    four_gru: bool
+    tracker_preset: str
+    motion_config: str
+    gt_match_distance: float
+    loss_weights: tuple
+    val_every: int
+    checkpoint_every: int
+
+
+_CHECKS = {
+    "mode": (lambda v: v in ("semi_supervised", "supervised"), "'semi_supervised' or 'supervised'"),
+    "epochs": (lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "an integer >= 1"),
+    "lr": (lambda v: isinstance(v, (int, float)) and v > 0, "a positive number"),
+    "weight_decay": (lambda v: isinstance(v, (int, float)) and v >= 0, "a number >= 0"),
+    "seed": (lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer"),
+    "device": (lambda v: isinstance(v, str) and v != "", "a device name such as auto, cpu or cuda"),
+    "ss_model": (lambda v: str(v).upper() in ("CTRA", "BICYCLE"), "CTRA or Bicycle"),
+    "four_gru": (lambda v: isinstance(v, bool), "true or false"),
+    "tracker_preset": (lambda v: isinstance(v, str) and v != "", "a tracker preset name or path"),
+    "motion_config": (lambda v: isinstance(v, str) and v != "", "a motion config name or path"),
+    "gt_match_distance": (lambda v: isinstance(v, (int, float)) and v > 0, "a positive distance in metres"),
+    "loss_weights": (lambda v: isinstance(v, list) and len(v) == 9 and all(isinstance(x, (int, float)) and x >= 0
+                                                                            for x in v), "9 non-negative numbers"),
+    "val_every": (lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
+    "checkpoint_every": (lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
+}
+
+
+def load_train_config(name_or_path: str | Path = "grukf", overrides: dict | None = None) -> TrainConfig:
+    """Load a training config by name or path, apply ``overrides`` (key -> value), and validate."""
+    p = Path(name_or_path)
+    if not p.suffix:
+        p = CONFIG_DIR / f"{name_or_path}.yaml"
+    if not p.is_file():
+        raise ConfigError(f"training config {p} does not exist")
+    try:
+        raw = yaml.safe_load(p.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{p}: not valid YAML ({exc})") from exc
+    raw.update(overrides or {})
+    return config_from_dict(raw, str(p))
+
+
+def config_from_dict(raw: dict, source: str = "<dict>") -> TrainConfig:
+    """Validate a training config dict; unknown, missing or ill-typed keys raise :class:`ConfigError`."""
+    names = [f.name for f in fields(TrainConfig)]
+    for k in raw:
+        if k not in names:
+            raise ConfigError(f"{source}: unknown key '{k}' (expected one of: {', '.join(names)})")
+    for k in names:
+        if k not in raw:
+            raise ConfigError(f"{source}: missing key '{k}'")
+        ok, expected = _CHECKS[k]
+        if not ok(raw[k]):
+            raise ConfigError(f"{source}: '{k}' must be {expected}, got {raw[k]!r}")
+    vals = dict(raw)
+    vals["loss_weights"] = tuple(float(x) for x in raw["loss_weights"])
+    vals["lr"], vals["weight_decay"] = float(raw["lr"]), float(raw["weight_decay"])
+    vals["gt_match_distance"] = float(raw["gt_match_distance"])
+    return TrainConfig(**{k: vals[k] for k in names})

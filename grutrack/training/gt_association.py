@@ -1,0 +1,56 @@
+"""Track-to-ground-truth association for training: same class, BEV centre distance below a gate, Hungarian,
+sticky once matched.
+
+A track keeps its GT instance for the rest of the scene; in a frame where that instance is absent the track
+has no GT (its pseudo-label is used). Free tracks are matched only to instances that no track holds. Indices
+always refer to the current frame's arrays (the authors' code reads ids from the wrong list once some GT is
+taken; here the free-GT subset is indexed explicitly).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+
+class StickyGTAssociation:
+    """Per-scene state: which GT instance each track holds."""
+
+    def __init__(self, max_distance: float = 2.0):
+        self.max_distance = max_distance
+        self.held: dict[int, str] = {}   # track id -> GT instance id
+
+    def reset(self) -> None:
+        """Start of a scene."""
+        self.held.clear()
+
+    def match(self, track_ids: np.ndarray, track_xy: np.ndarray, track_labels: np.ndarray,
+              gt_ids: np.ndarray, gt_xy: np.ndarray, gt_labels: np.ndarray) -> np.ndarray:
+        """GT row per track (K,) int64, -1 where the track has no GT this frame.
+
+        track_ids (K,), track_xy (K, 2) metres, track_labels (K,); gt_ids (G,) instance ids, gt_xy (G, 2),
+        gt_labels (G,).
+        """
+        out = np.full(len(track_ids), -1, dtype=np.int64)
+        row_of = {g: i for i, g in enumerate(gt_ids)}
+        taken = set(self.held.values())
+        free_tracks = []
+        for k, tid in enumerate(track_ids):
+            g = self.held.get(int(tid))
+            if g is None:
+                free_tracks.append(k)
+            elif g in row_of:
+                out[k] = row_of[g]
+        free_gt = np.array([i for i, g in enumerate(gt_ids) if g not in taken], dtype=np.int64)
+        ft = np.asarray(free_tracks, dtype=np.int64)
+        if len(ft) == 0 or len(free_gt) == 0:
+            return out
+        d = np.linalg.norm(track_xy[ft][:, None, :] - gt_xy[free_gt][None, :, :], axis=2)
+        ok = (d < self.max_distance) & (track_labels[ft][:, None] == gt_labels[free_gt][None, :])
+        cost = np.where(ok, d, 1e6)
+        r, c = linear_sum_assignment(cost)
+        keep = ok[r, c]
+        for k, gi in zip(ft[r[keep]], free_gt[c[keep]]):
+            out[k] = gi
+            self.held[int(track_ids[k])] = gt_ids[gi]
+        return out

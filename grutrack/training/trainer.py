@@ -1,0 +1,304 @@
+"""Semi-supervised training of the GRU-Kalman filter (DESIGN §1).
+
+The tracker runs online over each training scene with the GRU-KF as its motion backend. An EKF with the
+same SS model runs in parallel on every track (same births, deaths and matched detections) and its
+posterior is the pseudo-label of a track in a frame where the track holds no ground truth. The loss of a
+scene sums, over the frames and the tracks corrected in them, the weighted squared measurement-space error
+of the GRU-KF posterior to the GT box (sticky GT association) or, in semi-supervised mode, to the EKF
+posterior; it is divided by the number of terms. Gradients accumulate over the frames of a scene; one
+AdamW step per scene; cosine annealing over all steps.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import random
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from grutrack.data.scene import BoxSet, Scene
+from grutrack.io import atomic_path
+from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig, MEAS_PLANAR, STATE_PLANAR
+from grutrack.motion.torch_models import wrap_angle_t
+from grutrack.tracking.config import TrackerConfig, load_tracker_config
+from grutrack.tracking.ekf_backend import KalmanBackend, KFState
+from grutrack.tracking.factory import grukf_group
+from grutrack.tracking.grukf_backend import GRUKFBackend, GRUState, resolve_device
+from grutrack.tracking.tracker import Tracker, TrackGroup, track_scenes
+from grutrack.training.checkpoint import read_checkpoint, save_checkpoint
+from grutrack.training.config import TrainConfig
+from grutrack.training.gt_association import StickyGTAssociation
+
+LOG_FIELDS = ("step", "epoch", "scene", "loss", "gt_terms", "pseudo_terms", "lr", "val_amota", "seconds")
+
+
+def ekf_backend(cfg: TrainConfig) -> KalmanBackend:
+    """The parallel EKF: the training SS model for every class, with the motion config's Q, R, P0 for it."""
+    from grutrack.classes import TRACKING_CLASSES
+    from grutrack.motion.defaults import load_motion_config
+    from grutrack.motion.models import make_model
+
+    motion = load_motion_config(cfg.motion_config, cfg.ss_model)
+    first = motion[TRACKING_CLASSES[0]]
+    tables = {k: np.stack([motion[c][k] for c in TRACKING_CLASSES]) for k in ("Q", "R", "P0")}
+    return KalmanBackend(make_model(first["model"], **first["params"]), tables["Q"], tables["R"], tables["P0"])
+
+
+class PairedBackend:
+    """GRU-KF and EKF on the same tracks; boxes (for association and output) come from the GRU-KF.
+
+    After each update, ``last`` holds the corrected rows' GRU-KF measurement-space posterior (K, 9) tensor
+    and the EKF posterior (K, 9) numpy array.
+    """
+
+    def __init__(self, gru: GRUKFBackend, ekf: KalmanBackend):
+        self.gru, self.ekf = gru, ekf
+        self.last = None
+
+    def initiate(self, z, labels):
+        return (self.gru.initiate(z, labels), self.ekf.initiate(z, labels))
+
+    def predict(self, s, dt):
+        return (self.gru.predict(s[0], dt), self.ekf.predict(s[1], dt))
+
+    def update(self, s, rows, z):
+        g, e = self.gru.update(s[0], rows, z), self.ekf.update(s[1], rows, z)
+        r = torch.as_tensor(rows, dtype=torch.long, device=self.gru.device)
+        self.last = (self.gru.measure(g)[r], self.ekf.model.h(e.x[rows]))
+        return (g, e)
+
+    def boxes(self, s):
+        return self.gru.boxes(s[0])
+
+    def select(self, s, index):
+        return (self.gru.select(s[0], index), self.ekf.select(s[1], index))
+
+    def concat(self, a, b):
+        return (self.gru.concat(a[0], b[0]), self.ekf.concat(a[1], b[1]))
+
+
+def _residual(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """pred - target (K, 9) with the yaw component wrapped."""
+    r = pred - target
+    return torch.cat([r[:, :6], wrap_angle_t(r[:, 6:7]), r[:, 7:]], dim=1)
+
+
+class SceneLoss:
+    """Collects the loss terms of one scene from the tracker's update hook."""
+
+    def __init__(self, cfg: TrainConfig, device: torch.device):
+        self.cfg = cfg
+        self.w = torch.tensor(cfg.loss_weights, dtype=torch.float64, device=device)
+        self.assoc = StickyGTAssociation(cfg.gt_match_distance)
+        self.total = torch.zeros((), dtype=torch.float64, device=device)
+        self.gt_terms = self.pseudo_terms = 0
+        self.frame_gt: BoxSet | None = None
+
+    def hook(self, group: TrackGroup, rows: np.ndarray, det_rows: np.ndarray) -> None:
+        """Add the terms of the tracks just corrected (called by the tracker)."""
+        pred, ekf = group.backend.last
+        gt = self.frame_gt
+        ids, labels = group.ids[rows], group.labels[rows]
+        xy = pred.detach().cpu().numpy()[:, :2]
+        match = self.assoc.match(ids, xy, labels, gt.ids, gt.boxes[:, :2], gt.labels) if len(gt) else \
+            np.full(len(rows), -1)
+        has = match >= 0
+        if has.any():
+            target = torch.as_tensor(gt.boxes[match[has]], dtype=torch.float64, device=pred.device)
+            self.total = self.total + (_residual(pred[torch.as_tensor(np.flatnonzero(has))], target) ** 2
+                                       * self.w).sum()
+            self.gt_terms += int(has.sum())
+        if self.cfg.mode == "semi_supervised" and (~has).any():
+            idx = np.flatnonzero(~has)
+            target = torch.as_tensor(ekf[idx], dtype=torch.float64, device=pred.device)
+            self.total = self.total + (_residual(pred[torch.as_tensor(idx)], target) ** 2 * self.w).sum()
+            self.pseudo_terms += len(idx)
+
+    def value(self) -> torch.Tensor:
+        """Mean over terms (0 when the scene produced none)."""
+        return self.total / max(self.gt_terms + self.pseudo_terms, 1)
+
+
+def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
+              cfg: TrainConfig, device: torch.device) -> SceneLoss:
+    """Track one scene with gradients on; returns its collected loss."""
+    gru = grukf_group(net, 7, device, train=True).backend
+    group = TrackGroup(PairedBackend(gru, ekf_backend(cfg)), np.ones(7, dtype=bool))
+    tracker = Tracker(tracker_cfg, [group])
+    loss = SceneLoss(cfg, device)
+    tracker.update_hook = loss.hook
+    for frame in scene.frames:
+        loss.frame_gt = frame.gt
+        tracker.step(dets[frame.token], frame.timestamp)
+    return loss
+
+
+class GainRecorder(KalmanBackend):
+    """An EKF backend that accumulates the heading-frame Kalman gain of every update of established tracks."""
+
+    def __init__(self, *a, min_hits: int = 3, **kw):
+        super().__init__(*a, **kw)
+        self.sum, self.count, self.min_hits = None, 0, min_hits
+        self.hits = None
+
+    def update(self, s: KFState, rows, z):
+        x, P = s.x[rows], s.P[rows]
+        R = self.R[s.labels[rows]]
+        _, H, S = self.kf.project(x, P, R)
+        K = np.swapaxes(np.linalg.solve(S, H @ P), -1, -2)  # (K, m, 9) global frame
+        yaw = x[:, self.model.yaw_index]
+        Kh = _rotate_gain(K, yaw)
+        self.sum = Kh.sum(0) if self.sum is None else self.sum + Kh.sum(0)
+        self.count += len(rows)
+        return super().update(s, rows, z)
+
+
+def _rotate_gain(K: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """Global-frame gains (N, m, 9) -> heading-frame gains: Rs(-yaw) K Rm(-yaw)^T."""
+    def rot(n, pairs):
+        R = np.tile(np.eye(n), (len(yaw), 1, 1))
+        c, s = np.cos(yaw), np.sin(yaw)
+        for i, j in pairs:
+            R[:, i, i], R[:, i, j], R[:, j, i], R[:, j, j] = c, s, -s, c
+        return R
+    return rot(K.shape[1], STATE_PLANAR) @ K @ np.swapaxes(rot(9, MEAS_PLANAR), -1, -2)
+
+
+def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
+                  cfg: TrainConfig) -> np.ndarray:
+    """The EKF's mean heading-frame gain (m, 9) over all updates on the training scenes."""
+    base = ekf_backend(cfg)
+    rec = GainRecorder(base.model, base.Q, base.R, base.P0)
+    track_scenes(Tracker(tracker_cfg, [TrackGroup(rec, np.ones(7, dtype=bool))]), scenes, dets)
+    if rec.count == 0:
+        return np.zeros((base.model.dim_x, 9))
+    return rec.sum / rec.count
+
+
+@dataclass
+class TrainState:
+    """Position of a run (saved in checkpoints so a resumed run continues exactly)."""
+
+    step: int = 0
+    epoch: int = 0
+    index: int = 0              # position within the epoch's scene order
+    order: list | None = None   # the epoch's scene order
+
+
+def _rng_state(np_rng: np.random.Generator) -> dict:
+    return {"numpy": np_rng.bit_generator.state, "torch": torch.get_rng_state(), "python": random.getstate()}
+
+
+def _set_rng_state(np_rng: np.random.Generator, st: dict) -> None:
+    np_rng.bit_generator.state = st["numpy"]
+    torch.set_rng_state(st["torch"])
+    random.setstate(st["python"])
+
+
+class Trainer:
+    """Runs :func:`run_scene` over the training scenes, one optimizer step per scene, with logging,
+    validation every ``val_every`` steps and resumable checkpoints in ``out_dir``."""
+
+    def __init__(self, cfg: TrainConfig, scenes: list[Scene], dets: dict[str, BoxSet], out_dir: str | Path,
+                 validate=None, progress: bool = True):
+        self.cfg, self.scenes, self.dets = cfg, scenes, dets
+        self.out = Path(out_dir)
+        self.validate = validate            # callable(net) -> AMOTA, or None
+        self.progress = progress
+        self.device = resolve_device(cfg.device)
+        self.tracker_cfg = load_tracker_config(cfg.tracker_preset)
+        torch.manual_seed(cfg.seed)
+        self.np_rng = np.random.default_rng(cfg.seed)
+        random.seed(cfg.seed)
+        self.net = GRUKalmanNet(GRUKFConfig(ss_model=cfg.ss_model, four_gru=cfg.four_gru))
+        self.net.set_gain_prior(torch.as_tensor(mean_ekf_gain(scenes, dets, self.tracker_cfg, cfg)))
+        self.net.to(self.device)
+        self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+        self.total_steps = cfg.epochs * len(scenes)
+        self.sched = torch.optim.lr_scheduler.CosineAnnealingLR(self.opt, T_max=max(self.total_steps, 1))
+        self.state = TrainState()
+        self.log_rows: list[dict] = []
+
+    # -- checkpoints ------------------------------------------------------------------------------------
+    def save(self, name: str = "last.pt") -> Path:
+        """Write a resumable checkpoint (and the CSV log) into the output folder."""
+        path = self.out / name
+        save_checkpoint(path, self.net, {
+            "optimizer": self.opt.state_dict(), "scheduler": self.sched.state_dict(),
+            "rng": _rng_state(self.np_rng), "train_state": asdict(self.state), "train_config": asdict(self.cfg),
+            "log": self.log_rows})
+        self._write_log()
+        return path
+
+    def resume(self, path: str | Path) -> None:
+        """Continue exactly from a checkpoint written by :meth:`save`."""
+        ck = read_checkpoint(path, map_location=self.device)
+        self.net.load_state_dict(ck["model"])
+        self.opt.load_state_dict(ck["optimizer"])
+        self.sched.load_state_dict(ck["scheduler"])
+        _set_rng_state(self.np_rng, ck["rng"])
+        self.state = TrainState(**ck["train_state"])
+        self.log_rows = list(ck["log"])
+
+    def _write_log(self) -> None:
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, fieldnames=LOG_FIELDS)
+        w.writeheader()
+        w.writerows(self.log_rows)
+        with atomic_path(self.out / "train_log.csv") as tmp:
+            tmp.write_text(buf.getvalue())
+
+    # -- the loop --------------------------------------------------------------------------------------
+    def run(self, max_steps: int | None = None) -> Path:
+        """Train until all epochs are done (or ``max_steps`` more steps); returns the final checkpoint."""
+        from tqdm import tqdm
+
+        self.out.mkdir(parents=True, exist_ok=True)
+        done = 0
+        bar = tqdm(total=self.total_steps, initial=self.state.step, unit="step", desc="training GRU-KF",
+                   disable=not self.progress)
+        while self.state.epoch < self.cfg.epochs and (max_steps is None or done < max_steps):
+            if self.state.order is None:
+                self.state.order = [int(i) for i in self.np_rng.permutation(len(self.scenes))]
+            while self.state.index < len(self.state.order) and (max_steps is None or done < max_steps):
+                self._step(self.scenes[self.state.order[self.state.index]])
+                self.state.index += 1
+                done += 1
+                bar.update(1)
+            if self.state.index >= len(self.state.order):
+                self.state.epoch, self.state.index, self.state.order = self.state.epoch + 1, 0, None
+        bar.close()
+        if self.state.epoch >= self.cfg.epochs and self.validate is not None and \
+                (not self.log_rows or self.log_rows[-1]["val_amota"] == ""):
+            self.log_rows[-1]["val_amota"] = round(float(self.validate(self.net)), 6)
+        self.save()
+        final = self.save("model.pt") if self.state.epoch >= self.cfg.epochs else self.out / "last.pt"
+        return final
+
+    def _step(self, scene: Scene) -> None:
+        t0 = time.perf_counter()
+        self.net.train()
+        loss = run_scene(self.net, scene, self.dets, self.tracker_cfg, self.cfg, self.device)
+        value = loss.value()
+        self.opt.zero_grad()
+        if value.requires_grad:
+            value.backward()
+            self.opt.step()
+        lr = self.opt.param_groups[0]["lr"]
+        self.sched.step()
+        self.state.step += 1
+        row = {"step": self.state.step, "epoch": self.state.epoch, "scene": scene.name,
+               "loss": round(float(value.detach()), 8), "gt_terms": loss.gt_terms,
+               "pseudo_terms": loss.pseudo_terms, "lr": lr, "val_amota": "",
+               "seconds": round(time.perf_counter() - t0, 4)}
+        if self.validate is not None and self.cfg.val_every and self.state.step % self.cfg.val_every == 0:
+            self.net.eval()
+            row["val_amota"] = round(float(self.validate(self.net)), 6)
+        self.log_rows.append(row)
+        if self.cfg.checkpoint_every and self.state.step % self.cfg.checkpoint_every == 0:
+            self.save()

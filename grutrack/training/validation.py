@@ -1,0 +1,33 @@
+"""Validation during training: track a split with the current network and score it (AMOTA)."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+
+from grutrack.data.scene import BoxSet, Scene
+from grutrack.export.nuscenes_json import build_submission
+from grutrack.tracking.config import TrackerConfig
+from grutrack.tracking.factory import grukf_group
+from grutrack.tracking.tracker import Tracker, track_scenes
+
+
+def make_validator(nusc, split: str, scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
+                   device: str = "auto"):
+    """A callable(net) -> overall AMOTA of the GRU-KF tracker on ``split`` (official semantics, computed by
+    grutrack's exact fast evaluator)."""
+    from grutrack.evaluation.fast_amota import fast_tracking_eval
+
+    tokens = [f.token for s in scenes for f in s.frames]
+
+    def validate(net) -> float:
+        was_training = net.training
+        net.eval()
+        run = track_scenes(Tracker(tracker_cfg, [grukf_group(net, 7, device)]), scenes, dets)
+        net.train(was_training)
+        sub = build_submission(run.results, tokens, tracker_cfg.max_boxes_per_sample)
+        with contextlib.redirect_stdout(io.StringIO()):
+            summary = fast_tracking_eval(nusc, sub, split)
+        return float(summary["amota"])
+
+    return validate

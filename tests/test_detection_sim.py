@@ -1,0 +1,224 @@
+"""The detector simulator: profiles, the format-free core, official DetectionEval APs on real nuScenes
+mini_val against published CenterPoint numbers, determinism, and clear errors for bad input."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grutrack.cli import main
+from grutrack.data import demo
+from grutrack.data import detection_sim as ds
+from grutrack.errors import ConfigError, DatasetError, GrutrackError
+
+
+def _detection_eval(nusc, result_path: Path, split: str, out_dir: Path) -> dict:
+    """Official DetectionEval (detection_cvpr_2019) metrics as a dict."""
+    from nuscenes.eval.common.config import config_factory
+    from nuscenes.eval.detection.evaluate import DetectionEval
+
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        ev = DetectionEval(nusc, config_factory("detection_cvpr_2019"), str(result_path), split, str(out_dir),
+                           verbose=False)
+        metrics, _ = ev.evaluate()
+    return metrics.serialize()
+
+
+@pytest.fixture(scope="module")
+def mini_val_centerpoint(nusc_mini, tmp_path_factory):
+    """Simulated CenterPoint detections on mini_val (seed 0) and their DetectionEval metrics."""
+    out = tmp_path_factory.mktemp("sim") / "cp.json"
+    sub = ds.simulate_nuscenes(None, None, "mini_val", "centerpoint", 0, out, nusc=nusc_mini)
+    return out, sub, _detection_eval(nusc_mini, out, "mini_val", out.parent / "eval")
+
+
+def _frame(n: int = 400, pts: float = 50.0, seed: int = 0) -> ds.GTFrame:
+    """A hand-made GT frame: n cars 10-40 m ahead of an ego at the origin (no dataset involved)."""
+    rng = np.random.default_rng(seed)
+    boxes = np.zeros((n, 9))
+    boxes[:, 0], boxes[:, 1] = rng.uniform(10, 40, n), rng.uniform(-20, 20, n)
+    boxes[:, 2:6] = [0.8, 1.9, 4.6, 1.7]
+    boxes[:, 7] = 5.0
+    return ds.GTFrame(token=f"frame-{seed}", scene="s", timestamp=0, ego_translation=np.zeros(3), boxes=boxes,
+                      names=np.array(["car"] * n, dtype=object), num_lidar_pts=np.full(n, int(pts)),
+                      num_radar_pts=np.zeros(n, np.int64), instance_ids=np.arange(n).astype(str).astype(object))
+
+
+# ---------------------------------------------------------------------------------------------------- profiles
+
+def test_shipped_profiles_load():
+    assert {"centerpoint", "pointpillars"} <= set(ds.available_profiles())
+    for name in ("centerpoint", "pointpillars"):
+        prof = ds.load_profile(name)
+        assert set(prof.classes) == set(ds.DETECTION_CLASSES)
+        assert set(prof.reference["ap"]) == set(ds.DETECTION_CLASSES)
+        assert 0 < prof.max_boxes_per_sample <= 500
+
+
+def test_unknown_profile_name():
+    with pytest.raises(ConfigError, match=r"unknown detector profile 'centrepoint'.*centerpoint"):
+        ds.load_profile("centrepoint")
+
+
+def test_misspelt_keys_are_named(tmp_path):
+    text = (ds.PROFILE_DIR / "centerpoint.yaml").read_text()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text.replace("  pedestrian:\n    recall_max:", "  pedestrian:\n    recal_max:"))
+    with pytest.raises(ConfigError) as err:
+        ds.load_profile(bad)
+    assert str(bad) in str(err.value) and "recal_max" in str(err.value) and "recall_max" in str(err.value)
+    assert "classes.pedestrian" in str(err.value)
+    bad.write_text(text.replace("score_threshold:", "score_treshold:"))
+    with pytest.raises(ConfigError, match="score_treshold.*did you mean 'score_threshold'"):
+        ds.load_profile(bad)
+    bad.write_text(text.replace("  bicycle:\n", "  bicyle:\n"))
+    with pytest.raises(ConfigError, match="bicyle"):
+        ds.load_profile(bad)
+    bad.write_text(text.replace("recall_max: 0.985", "recall_max: lots"))
+    with pytest.raises(ConfigError, match="classes.car.recall_max"):
+        ds.load_profile(bad)
+    assert main(["simulate-detections", "--dataroot", str(tmp_path), "--split", "x", "--profile", str(bad),
+                 "--out", str(tmp_path / "o.json")]) == 2
+
+
+# -------------------------------------------------------------------------------------------- the format-free core
+
+def test_core_without_any_dataset():
+    prof = ds.load_profile("centerpoint")
+    gt = _frame()
+    det = ds.simulate_frame(gt, prof, ds.frame_rng(0, prof.name, gt.token))
+    assert det.boxes.shape == (len(det), 9) and det.scores.shape == det.names.shape == (len(det),)
+    assert np.all(np.diff(det.scores) <= 0) and det.scores.min() >= prof.score_threshold
+    tp = det.is_tp
+    assert 0.9 * len(gt) < tp.sum() <= len(gt)                    # well-observed cars: high recall
+    assert (~tp).sum() > 0                                        # duplicates and false positives
+    err = np.hypot(*(det.boxes[tp, :2][:, None, :] - gt.boxes[None, :, :2]).transpose(2, 0, 1)).min(axis=1)
+    assert np.median(err) < 0.3 and err.max() > 0.6               # heavy tails
+    names = set(det.names[tp])
+    assert "car" in names and len(names) > 1                      # class confusions
+    same = ds.simulate_frame(gt, prof, ds.frame_rng(0, prof.name, gt.token))
+    assert np.array_equal(same.boxes, det.boxes)
+    other = ds.simulate_frame(gt, prof, ds.frame_rng(1, prof.name, gt.token))
+    assert not np.array_equal(other.boxes[:5], det.boxes[:5])
+
+
+def test_recall_depends_on_points_and_distance():
+    prof = ds.load_profile("centerpoint")
+    tab = ds._Tables(prof)
+    cls = np.full(4, ds.DET_INDEX["car"])
+    p = ds.detection_probability(cls, np.array([20.0, 20.0, 20.0, 60.0]), np.array([1, 5, 0, 50]), tab,
+                                 prof.detection_range_m)
+    assert p[1] > p[0] > p[2] and p[3] == 0.0                     # more points, more recall; none out of range
+    few = ds.simulate([_frame(pts=1, seed=s) for s in range(3)], prof, 0)
+    lots = ds.simulate([_frame(pts=100, seed=s) for s in range(3)], prof, 0)
+    assert sum(d.is_tp.sum() for d in few) < sum(d.is_tp.sum() for d in lots)
+
+
+def test_yaw_flips_and_score_separation():
+    prof = ds.load_profile("centerpoint")
+    frames = [_frame(pts=p, seed=s) for s, p in enumerate([2, 5, 20, 100, 400] * 4)]
+    dets = ds.simulate(frames, prof, 5)
+    dyaw = []
+    for gt, det in zip(frames, dets):
+        b = det.boxes[det.is_tp]
+        nearest = np.argmin(np.hypot(b[:, None, 0] - gt.boxes[None, :, 0], b[:, None, 1] - gt.boxes[None, :, 1]), axis=1)
+        dyaw.append(np.abs((b[:, 6] - gt.boxes[nearest, 6] + np.pi) % (2 * np.pi) - np.pi))
+    dyaw = np.concatenate(dyaw)
+    assert 0.002 < np.mean(dyaw > 2.5) < 0.1                      # occasional 180 degree flips
+    scores = np.concatenate([d.scores for d in dets])
+    is_tp = np.concatenate([d.is_tp for d in dets])
+    order = np.argsort(scores)
+    ranks = np.empty(len(scores))
+    ranks[order] = np.arange(len(scores))
+    auc = (ranks[is_tp].mean() - (is_tp.sum() - 1) / 2) / (~is_tp).sum()
+    assert 0.7 < auc < 0.995                                      # scores separate TP from FP, imperfectly
+
+
+# ------------------------------------------------------------------------------------- real nuScenes mini_val
+
+def test_centerpoint_ap_matches_published_on_mini_val(mini_val_centerpoint, nusc_mini):
+    _, sub, metrics = mini_val_centerpoint
+    ref = ds.load_profile("centerpoint").reference["ap"]
+    aps = metrics["mean_dist_aps"]
+    for cls in ("car", "pedestrian"):
+        assert abs(aps[cls] - ref[cls]) < 0.1, (cls, aps[cls], ref[cls])
+    assert 0.3 < metrics["mean_ap"] < 0.7
+    assert metrics["tp_errors"]["trans_err"] < 0.5
+
+
+def test_detection_json_format(mini_val_centerpoint, nusc_mini):
+    from nuscenes.eval.common.data_classes import EvalBoxes
+    from nuscenes.eval.detection.data_classes import DetectionBox
+    from nuscenes.utils.splits import create_splits_scenes
+
+    path, sub, _ = mini_val_centerpoint
+    data = json.loads(path.read_text())
+    assert data["meta"]["use_lidar"] is True and "SYNTHETIC" in data["synthetic"]["note"]
+    val = set(create_splits_scenes()["mini_val"])
+    tokens = {s["token"] for s in nusc_mini.sample if nusc_mini.get("scene", s["scene_token"])["name"] in val}
+    assert set(data["results"]) == tokens                         # every sample of the split, nothing else
+    boxes = EvalBoxes.deserialize(data["results"], DetectionBox)  # the devkit's own validation
+    names = {b.detection_name for b in boxes.all}
+    assert "traffic_cone" in names                                # mini_val GT has cones (no barrier / CV there)
+    assert all(len(v) <= 500 for v in data["results"].values())
+
+
+def test_non_tracking_classes_on_mini_train(nusc_mini):
+    sub = ds.simulate_nuscenes(None, None, "mini_train", "centerpoint", 0, None, nusc=nusc_mini)
+    names = {b["detection_name"] for v in sub["results"].values() for b in v}
+    assert {"barrier", "traffic_cone", "construction_vehicle"} <= names
+    assert len(sub["results"]) == 323
+
+
+def test_pointpillars_is_weaker(nusc_mini, mini_val_centerpoint, tmp_path):
+    out = tmp_path / "pp.json"
+    ds.simulate_nuscenes(None, None, "mini_val", "pointpillars", 0, out, nusc=nusc_mini)
+    pp = _detection_eval(nusc_mini, out, "mini_val", tmp_path / "eval")
+    cp = mini_val_centerpoint[2]
+    assert pp["mean_ap"] < cp["mean_ap"] - 0.1
+    assert pp["mean_dist_aps"]["car"] < cp["mean_dist_aps"]["car"]
+
+
+def test_deterministic_files(nusc_root, tmp_path):
+    args = ["simulate-detections", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val"]
+    assert main(args + ["--seed", "3", "--out", str(tmp_path / "a.json")]) == 0
+    assert main(args + ["--seed", "3", "--out", str(tmp_path / "b.json")]) == 0
+    assert main(args + ["--seed", "4", "--out", str(tmp_path / "c.json")]) == 0
+    a, b, c = ((tmp_path / f"{x}.json").read_bytes() for x in "abc")
+    assert a == b and a != c
+
+
+# ------------------------------------------------------------------------------------------------- bad input
+
+def test_missing_dataroot_and_unknown_split(tmp_path, nusc_root, capsys):
+    with pytest.raises(DatasetError, match="does not exist"):
+        ds.simulate_nuscenes(tmp_path / "nowhere", "v1.0-mini", "mini_val", "centerpoint", 0)
+    with pytest.raises(DatasetError, match="v1.0-trainval"):
+        ds.simulate_nuscenes(nusc_root, "v1.0-trainval", "val", "centerpoint", 0)
+    with pytest.raises(DatasetError, match="demo_val"):
+        ds.simulate_nuscenes(nusc_root, "v1.0-mini", "demo_val", "centerpoint", 0)
+    assert main(["simulate-detections", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split",
+                 "mini_vall", "--out", str(tmp_path / "x.json")]) == 2
+    err = capsys.readouterr().err
+    assert "mini_vall" in err and "splits.json" in err
+    assert main(["simulate-detections", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split",
+                 "mini_val", "--profile", "nosuch", "--out", str(tmp_path / "x.json")]) == 2
+    assert "unknown detector profile" in capsys.readouterr().err
+    assert not (tmp_path / "x.json").exists()
+    assert issubclass(DatasetError, GrutrackError)
+
+
+# -------------------------------------------------------------------------------------------- on the demo
+
+def test_simulate_on_demo_split(tmp_path):
+    root = tmp_path / "demo"
+    demo.generate_demo(root, scenes=3, frames=10, seed=2)
+    out = tmp_path / "det.json"
+    assert main(["simulate-detections", "--dataroot", str(root), "--split", "demo_val", "--out", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert len(data["results"]) == 10 and sum(len(v) for v in data["results"].values()) > 50
