@@ -27,7 +27,7 @@ import shutil
 import struct
 import tempfile
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -165,7 +165,6 @@ class MotionSpec:
     accel_limits: tuple        # (max braking, max acceleration), m/s^2
     min_radius: float          # smallest turning radius, m
     wiggle: float              # std of the AR(1) curvature (1/m) or, for pedestrians, yaw-rate (rad/s) noise
-    wheelbase: float = 2.7     # only for documentation of the curvature scale
 
 
 MOTION_SPECS = {
@@ -195,23 +194,46 @@ ANNOT_NOISE_YAW = 0.003     # rad
 # ----------------------------------------------------------------------------------------------------------------
 
 @dataclass
-class Agents:
-    """Initial states and controls of M agents over S substeps (dt = DT / SUBSTEPS).
+class Controls:
+    """Controls of M agents over S substeps (dt = DT / SUBSTEPS), from :func:`manoeuvre_controls`.
 
-    x, y, yaw, v: (M,) initial state (m, rad, m/s). v_target: (M, S) m/s. curvature: (M, S) 1/m (used as
-    yaw rate = v * curvature) and yaw_rate: (M, S) rad/s (added directly; pedestrians). tau: (M,) s.
-    accel_limits: (M, 2) braking, acceleration m/s^2.
+    v_target: (M, S) m/s. curvature: (M, S) 1/m of turns, curves and lane changes (used when not following the
+    road). wiggle: (M, S) 1/m steering noise, or yaw-rate noise rad/s for pedestrians. yaw_rate: (M, S) rad/s of
+    pedestrian turns. lane_phase: (M, S) lane changes done so far (fractional while one is under way).
+    free: (M, S) bool, True from the first turn on (the agent leaves the road it followed).
+    """
+
+    v_target: np.ndarray
+    curvature: np.ndarray
+    wiggle: np.ndarray
+    yaw_rate: np.ndarray
+    lane_phase: np.ndarray
+    free: np.ndarray
+
+
+@dataclass
+class Agents:
+    """Initial states, controls and road-following setup of M agents.
+
+    x, y, yaw, v: (M,) initial state (m, rad, m/s). tau: (M,) s speed time constant. accel_limits: (M, 2)
+    braking, acceleration m/s^2. min_radius: (M,) m. follow: (M,) bool, keeps to its lane of the road.
+    lane: (M,) lateral lane offset (m, left +), lane_step: (M,) offset of a lane change, direction: (M,) +1 along
+    the road, -1 against it, s: (M,) initial arc length on the road.
     """
 
     x: np.ndarray
     y: np.ndarray
     yaw: np.ndarray
     v: np.ndarray
-    v_target: np.ndarray
-    curvature: np.ndarray
-    yaw_rate: np.ndarray
+    controls: Controls
     tau: np.ndarray
     accel_limits: np.ndarray
+    min_radius: np.ndarray
+    follow: np.ndarray
+    lane: np.ndarray
+    lane_step: np.ndarray
+    direction: np.ndarray
+    s: np.ndarray
 
 
 def _ar1(rng: np.random.Generator, shape: tuple, sigma: float, corr_time: float, dt: float) -> np.ndarray:
@@ -222,82 +244,117 @@ def _ar1(rng: np.random.Generator, shape: tuple, sigma: float, corr_time: float,
     return lfilter([1.0], [1.0, -rho], eps, axis=1, zi=rho * y_prev)[0]
 
 
-def manoeuvre_controls(rng: np.random.Generator, kind: str, cruise: np.ndarray, n_steps: int, dt: float,
-                       forced_turn: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Controls of M agents of one motion family over n_steps substeps.
-
-    cruise: (M,) cruise speed m/s. forced_turn: optional (M,) heading change (rad) executed in the segment that
-    covers the middle of the scene (the ego's intersection turn); 0 = none.
-    Returns v_target (M, S), curvature (M, S) 1/m, yaw_rate (M, S) rad/s.
-    """
-    spec = MOTION_SPECS[kind]
-    m = len(cruise)
+def _segments(rng: np.random.Generator, spec: "MotionSpec", m: int, n_steps: int, dt: float,
+              forced_turn: np.ndarray | None) -> dict[str, np.ndarray]:
+    """Random manoeuvre segments of M agents: per-segment kinds and parameters (M, K), and for every substep
+    the segment index ``seg`` (M, S) and the phase ``u`` in [0, 1] within it."""
     t = np.arange(n_steps) * dt
     horizon = n_steps * dt
     k_max = int(np.ceil(horizon / spec.seg_duration[0])) + 1
     dur = rng.uniform(*spec.seg_duration, size=(m, k_max))
     offset = rng.uniform(0, spec.seg_duration[0], (m, 1))
-    start = np.concatenate([-offset, -offset + np.cumsum(dur[:, :-1], axis=1)], axis=1)
-    kind_draw = rng.random((m, k_max))
+    draw = rng.random((m, k_max))
     c_turn, c_curve, c_lc, c_stop = np.cumsum([spec.p_turn, spec.p_curve, spec.p_lane_change, spec.p_stop])
-    is_turn, is_curve = kind_draw < c_turn, (kind_draw >= c_turn) & (kind_draw < c_curve)
-    is_lc, is_stop = (kind_draw >= c_curve) & (kind_draw < c_lc), (kind_draw >= c_lc) & (kind_draw < c_stop)
+    kinds = {"turn": draw < c_turn, "curve": (draw >= c_turn) & (draw < c_curve),
+             "lc": (draw >= c_curve) & (draw < c_lc), "stop": (draw >= c_lc) & (draw < c_stop)}
     sign = rng.choice([-1.0, 1.0], size=(m, k_max))
-    if kind == "pedestrian":
-        dpsi = np.where(is_turn, rng.uniform(np.pi / 4, np.pi, (m, k_max)), 0.0)
-    else:
-        dpsi = np.where(is_turn, rng.uniform(np.pi / 3, np.pi / 2, (m, k_max)), 0.0)
-    dpsi = dpsi + np.where(is_curve, rng.uniform(0.1, 0.45, (m, k_max)), 0.0)
+    turn_range = (np.pi / 4, np.pi) if spec.min_radius == 0 else (np.pi / 3, np.pi / 2)
+    dpsi = np.where(kinds["turn"], rng.uniform(*turn_range, (m, k_max)), 0.0)
+    dpsi = dpsi + np.where(kinds["curve"], rng.uniform(0.1, 0.45, (m, k_max)), 0.0)
+    start = np.concatenate([-offset, -offset + np.cumsum(dur[:, :-1], axis=1)], axis=1)
     if forced_turn is not None:
         rows = np.flatnonzero(forced_turn != 0)
         mid = np.clip((horizon / 2 >= start[rows]).sum(axis=1) - 1, 0, k_max - 1)
-        dpsi[rows, mid] = np.abs(forced_turn[rows])
-        sign[rows, mid] = np.sign(forced_turn[rows])
-        is_turn[rows, mid], is_curve[rows, mid], is_stop[rows, mid], is_lc[rows, mid] = True, False, False, False
+        for key in kinds:
+            kinds[key][rows, mid] = key == "turn"
+        dpsi[rows, mid], sign[rows, mid] = np.abs(forced_turn[rows]), np.sign(forced_turn[rows])
         dur[rows, mid] = np.maximum(dur[rows, mid], 5.0)
         start = np.concatenate([-offset, -offset + np.cumsum(dur[:, :-1], axis=1)], axis=1)
-    seg = np.clip((t[None, :, None] >= start[:, None, :]).sum(axis=2) - 1, 0, k_max - 1)   # (M, S)
+    seg = np.clip((t[None, :, None] >= start[:, None, :]).sum(axis=2) - 1, 0, k_max - 1)
     seg_dur = np.take_along_axis(dur, seg, 1)
     u = np.clip((t[None, :] - np.take_along_axis(start, seg, 1)) / seg_dur, 0.0, 1.0)
-    speed_f = rng.uniform(*spec.speed_jitter, size=(m, k_max))
-    speed_f = np.where(is_turn & (kind != "pedestrian"), speed_f * 0.6, speed_f)
-    speed_f = np.where(is_stop, 0.0, speed_f)
-    v_target = cruise[:, None] * np.take_along_axis(speed_f, seg, 1)
+    return {"seg": seg, "u": u, "seg_dur": seg_dur, "psi": sign * dpsi, "sign": sign, **kinds}
 
-    psi_seg = (sign * dpsi)
-    shape = np.sin(np.pi * u) ** 2                          # yaw rate rises and falls within the manoeuvre
-    lc = np.take_along_axis(is_lc.astype(float) * sign, seg, 1)
+
+def manoeuvre_controls(rng: np.random.Generator, kind: str, cruise: np.ndarray, n_steps: int, dt: float,
+                       forced_turn: np.ndarray | None = None) -> Controls:
+    """Controls of M agents of one motion family ("vehicle", "cycle", "pedestrian") over n_steps substeps.
+
+    cruise: (M,) cruise speed m/s. forced_turn: optional (M,) heading change (rad) made in the segment covering
+    the middle of the scene (the ego's intersection turn); 0 = none. Turns and curves have a yaw rate that rises
+    and falls (sin^2 profile); stops brake to 0 and wait for the segment's end.
+    """
+    spec = MOTION_SPECS[kind]
+    m = len(cruise)
+    sg = _segments(rng, spec, m, n_steps, dt, forced_turn)
+    seg, u, seg_dur = sg["seg"], sg["u"], sg["seg_dur"]
+
+    def per_step(x):
+        return np.take_along_axis(x, seg, 1)
+
+    speed_f = rng.uniform(*spec.speed_jitter, size=sg["turn"].shape)
+    if kind != "pedestrian":
+        speed_f = np.where(sg["turn"], speed_f * 0.6, speed_f)          # slow down for turns
+    v_target = cruise[:, None] * per_step(np.where(sg["stop"], 0.0, speed_f))
+    free = np.maximum.accumulate(per_step(sg["turn"]), axis=1)
+    lc_done = np.concatenate([np.zeros((m, 1)), np.cumsum(sg["lc"], axis=1)[:, :-1]], axis=1)
+    smooth = u * u * (3.0 - 2.0 * u)
+    lane_phase = per_step(lc_done) + per_step(sg["lc"].astype(float)) * smooth
+    zeros = np.zeros((m, n_steps))
     if kind == "pedestrian":
-        turn_time = np.minimum(seg_dur, 2.0)                # pedestrians turn within 2 s
-        tu = np.clip((u * seg_dur) / turn_time, 0.0, 1.0)
-        yaw_rate = np.take_along_axis(psi_seg, seg, 1) * 2.0 / turn_time * np.sin(np.pi * tu) ** 2
-        yaw_rate = yaw_rate + _ar1(rng, (m, n_steps), spec.wiggle, 1.0, dt)
-        return v_target, np.zeros((m, n_steps)), yaw_rate
+        turn_time = np.minimum(seg_dur, 2.0)                            # pedestrians turn within 2 s
+        tu = np.clip(u * seg_dur / turn_time, 0.0, 1.0)
+        yaw_rate = per_step(sg["psi"]) * 2.0 / turn_time * np.sin(np.pi * tu) ** 2
+        wiggle = _ar1(rng, (m, n_steps), spec.wiggle, 1.0, dt)
+        return Controls(v_target, zeros, wiggle, yaw_rate, zeros, np.ones((m, n_steps), bool))
     v_plan = np.maximum(v_target, 1.0)
-    curv = np.take_along_axis(psi_seg, seg, 1) * 2.0 / (v_plan * seg_dur) * shape
-    curv = curv + lc * 2.0 * np.pi * 3.5 / (v_plan * seg_dur) ** 2 * np.sin(2 * np.pi * u)
-    curv = curv + _ar1(rng, (m, n_steps), spec.wiggle, 1.0, dt)
-    if spec.min_radius > 0:
-        curv = np.clip(curv, -1.0 / spec.min_radius, 1.0 / spec.min_radius)
-    return v_target, curv, np.zeros((m, n_steps))
+    curv = per_step(sg["psi"]) * 2.0 / (v_plan * seg_dur) * np.sin(np.pi * u) ** 2
+    curv = curv + per_step(sg["lc"] * sg["sign"]) * 2.0 * np.pi * 3.5 / (v_plan * seg_dur) ** 2 * np.sin(2 * np.pi * u)
+    wiggle = _ar1(rng, (m, n_steps), spec.wiggle, 1.0, dt)
+    return Controls(v_target, curv, wiggle, zeros, lane_phase, free)
 
 
-def integrate(agents: Agents, dt: float, record_every: int) -> np.ndarray:
-    """Integrate the agents' kinematics; returns states (M, F, 4) ``[x, y, yaw, v]`` at every ``record_every``-th
-    substep (F = S / record_every + 1, starting at the initial state)."""
-    x, y, yaw, v = (a.astype(np.float64).copy() for a in (agents.x, agents.y, agents.yaw, agents.v))
-    n_steps = agents.v_target.shape[1]
+def _lane_shift(phase: np.ndarray) -> np.ndarray:
+    """0 -> 1 -> 0 ... as lane changes complete (a triangle wave of the lane-change count)."""
+    p = np.mod(phase, 2.0)
+    return np.where(p <= 1.0, p, 2.0 - p)
+
+
+def integrate(agents: Agents, dt: float, record_every: int, road: np.ndarray | None = None) -> np.ndarray:
+    """Integrate the agents' kinematics (speed lag, curvature or yaw rate, midpoint rule).
+
+    Agents with ``follow`` keep to their lane of ``road`` (pure pursuit on a point ``max(6, 1.2 v)`` metres
+    ahead, with lane changes) until their first turn. Returns states (M, F, 4) ``[x, y, yaw, v]`` at every
+    ``record_every``-th substep (F = S / record_every + 1, starting with the initial state).
+    """
+    c = agents.controls
+    x, y, yaw, v, s = (np.asarray(a, np.float64).copy() for a in (agents.x, agents.y, agents.yaw, agents.v, agents.s))
+    n_steps = c.v_target.shape[1]
+    k_max = np.where(agents.min_radius > 0, 1.0 / np.maximum(agents.min_radius, 1e-6), np.inf)
+    s_max = road[-1, 2] if road is not None else 0.0
     out = np.empty((len(x), n_steps // record_every + 1, 4))
     out[:, 0] = np.stack([x, y, yaw, v], axis=1)
     for k in range(n_steps):
-        acc = np.clip((agents.v_target[:, k] - v) / agents.tau, -agents.accel_limits[:, 0], agents.accel_limits[:, 1])
+        acc = np.clip((c.v_target[:, k] - v) / agents.tau, -agents.accel_limits[:, 0], agents.accel_limits[:, 1])
         v_new = np.maximum(v + acc * dt, 0.0)
         v_mid = 0.5 * (v + v_new)
-        omega = v_mid * agents.curvature[:, k] + agents.yaw_rate[:, k]
+        curv = c.curvature[:, k]
+        if road is not None:
+            look = np.maximum(6.0, 1.2 * v_mid)
+            s_look = s + agents.direction * look
+            follow = agents.follow & ~c.free[:, k] & (s_look > 0.0) & (s_look < s_max)
+            if follow.any():
+                lat = agents.lane + agents.lane_step * _lane_shift(c.lane_phase[:, k])
+                tx, ty, _ = _on_road(road, s_look, lat)
+                alpha = np.arctan2(ty - y, tx - x) - yaw
+                curv = np.where(follow, 2.0 * np.sin(alpha) / look, curv)
+        curv = np.clip(curv + c.wiggle[:, k] * (agents.min_radius > 0), -k_max, k_max)
+        omega = v_mid * curv + c.yaw_rate[:, k] + c.wiggle[:, k] * (agents.min_radius == 0)
         yaw_mid = yaw + 0.5 * omega * dt
         x = x + v_mid * np.cos(yaw_mid) * dt
         y = y + v_mid * np.sin(yaw_mid) * dt
         yaw = yaw + omega * dt
+        s = s + agents.direction * v_mid * dt
         v = v_new
         if (k + 1) % record_every == 0:
             out[:, (k + 1) // record_every] = np.stack([x, y, yaw, v], axis=1)
@@ -333,7 +390,6 @@ class SimScene:
     ego: np.ndarray
     objects: SceneObjects
     description: str
-    extra: dict = field(default_factory=dict)
 
 
 def _ego(rng: np.random.Generator, frames: int) -> tuple[np.ndarray, str]:
@@ -355,10 +411,10 @@ def _ego(rng: np.random.Generator, frames: int) -> tuple[np.ndarray, str]:
     return states, what
 
 
-def _road(ego: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """A road centre line along the ego path, extended straight by ``margin`` metres at both ends.
+def _road(ego: np.ndarray, margin: float) -> tuple[np.ndarray, float, float]:
+    """A road centre line along the ego path (F, 4), extended straight by ``margin`` metres at both ends.
 
-    Returns points (P, 2), headings (P,), and the arc length of the ego's start and end on it.
+    Returns the line (P, 4) ``[x, y, arc length, heading]`` and the arc lengths of the ego's start and end.
     """
     pts = ego[:, :2]
     step = np.linalg.norm(np.diff(pts, axis=0), axis=1)
@@ -375,7 +431,7 @@ def _road(ego: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray, float
     d = np.diff(line, axis=0)
     heading = np.arctan2(d[:, 1], d[:, 0])
     heading = np.concatenate([heading, heading[-1:]])
-    return np.column_stack([line, s, heading]), heading, float(s[len(before)]), float(s[len(before) + len(pts) - 1])
+    return np.column_stack([line, s, heading]), float(s[len(before)]), float(s[len(before) + len(pts) - 1])
 
 
 def _on_road(road: np.ndarray, s: np.ndarray, lateral: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -525,7 +581,7 @@ def simulate_scene(index: int, frames: int, seed: int) -> SimScene:
     rng = np.random.default_rng(np.random.SeedSequence([int(seed) & 0xFFFFFFFF, int(index)]))
     ego, what = _ego(rng, frames)
     margin = 90.0
-    road, _, s0, s1 = _road(ego, margin + 150.0)
+    road, s0, s1 = _road(ego, margin + 150.0)
     crossing_s = 0.5 * (s0 + s1) + rng.uniform(-20, 20) if rng.random() < 0.5 else None
     movers = []
     for name, spec in CLASS_SPECS.items():

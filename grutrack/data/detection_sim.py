@@ -36,7 +36,7 @@ import yaml
 
 from grutrack.boxes import BOX_DIM, VX, VY, W, H, YAW, quaternion_from_yaw, wrap_angle, yaw_from_quaternion
 from grutrack.classes import DETECTION_CLASSES
-from grutrack.errors import ConfigError, DatasetError
+from grutrack.errors import ConfigError
 from grutrack.io import atomic_path
 
 PROFILE_DIR = Path(__file__).resolve().parents[1] / "configs" / "detector_profiles"
@@ -439,14 +439,15 @@ def simulate(frames: Iterable[GTFrame], profile: DetectorProfile, seed: int) -> 
 # ----------------------------------------------------------------------------------------------------------------
 
 def open_dataset(dataroot: str | os.PathLike, version: str):
-    """``NuScenes(version, dataroot)`` quietly, with a :class:`DatasetError` when the folder or version is missing."""
+    """``NuScenes(version, dataroot)`` quietly; :class:`grutrack.errors.DatasetError` when the folder or version
+    is missing (shared with the nuScenes adapter)."""
     from grutrack.data.nuscenes import open_nuscenes
 
     return open_nuscenes(dataroot, version)
 
 
 def split_scenes(nusc, split: str) -> list[str]:
-    """Scene names of a predefined or custom (``splits.json``) split; :class:`DatasetError` when unknown."""
+    """Scene names of a predefined or custom (``splits.json``) split; ``DatasetError`` when unknown."""
     from grutrack.data.nuscenes import split_scene_names
 
     return split_scene_names(nusc, split)

@@ -1,0 +1,189 @@
+"""The GRU-Kalman filter: torch SS models, batching, yaw wrap, gain prior, training determinism and resume,
+sticky GT association, checkpoints."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from grutrack.data.scene import Scene
+from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
+from grutrack.motion.models import CTRA, Bicycle
+from grutrack.motion.torch_models import TorchBicycle, TorchCTRA
+from grutrack.training.gt_association import StickyGTAssociation
+
+
+def _states(n, seed=0):
+    rng = np.random.default_rng(seed)
+    return np.column_stack([rng.normal(0, 500, (n, 3)), rng.uniform(0.5, 5, (n, 3)), rng.normal(0, 8, n),
+                            rng.normal(0, 1, n), rng.uniform(-3, 3, n), rng.uniform(-0.4, 0.4, n)])
+
+
+def test_torch_ss_models_match_numpy():
+    x = _states(2000)
+    assert np.abs(CTRA().f(x, 0.5) - TorchCTRA().f(torch.tensor(x), 0.5).numpy()).max() < 1e-8
+    assert np.abs(CTRA().h(x) - TorchCTRA().h(torch.tensor(x)).numpy()).max() < 1e-12
+    beta = np.arctan2(0.5 * np.sin(x[:, 9]), np.cos(x[:, 9]))
+    ds = x[:, 6] * 0.5 + 0.125 * x[:, 7]
+    ok = np.abs(np.sin(beta) / (0.4 * x[:, 4]) * ds) < 1.0  # turns of less than a radian per frame
+    diff = Bicycle().f(x, 0.5) - TorchBicycle().f(torch.tensor(x), 0.5).numpy()
+    assert np.abs(diff[ok]).max() < 1e-6 and ok.mean() > 0.5
+
+
+def _net(seed=0, **kw):
+    torch.manual_seed(seed)
+    net = GRUKalmanNet(GRUKFConfig(**kw))
+    K0 = torch.zeros(10, 9)
+    for i in range(6):
+        K0[i, i] = 0.6
+    K0[8, 6], K0[6, 7] = 0.5, 0.5
+    net.set_gain_prior(K0)
+    return net.double()
+
+
+def _correct_inputs(n, seed=1):
+    rng = np.random.default_rng(seed)
+    prior = torch.tensor(_states(n, seed))
+    y = TorchCTRA().h(prior) + torch.tensor(rng.normal(0, 0.3, (n, 9)))
+    args = [prior, y, y + 0.1, prior - 0.05, prior + 0.02, prior - 0.1]
+    return args
+
+
+def test_batching_equals_one_by_one():
+    net = _net()
+    args = _correct_inputs(6)
+    hidden = net.init_hidden(6)
+    hidden = {k: torch.randn_like(v) * 0.1 for k, v in hidden.items()}
+    with torch.no_grad():
+        x_all, h_all = net.correct(*args, hidden)
+        for i in range(6):
+            xi, hi = net.correct(*[a[i:i + 1] for a in args], {k: v[i:i + 1] for k, v in hidden.items()})
+            assert torch.allclose(xi, x_all[i:i + 1], atol=1e-9)
+            assert all(torch.allclose(hi[k], h_all[k][i:i + 1], atol=1e-9) for k in hi)
+
+
+def test_yaw_residual_wrapped():
+    net = _net()
+    prior = torch.tensor(_states(1))
+    prior[0, 8] = -math.pi + 0.01
+    y = TorchCTRA().h(prior)
+    y[0, 6] = math.pi - 0.01  # 0.02 rad away across the +-pi seam
+    with torch.no_grad():
+        x, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(1))
+    step = (x[0, 8] - prior[0, 8] + math.pi) % (2 * math.pi) - math.pi
+    assert abs(float(step)) < 0.03 and -math.pi <= float(x[0, 8]) < math.pi
+
+
+def test_gain_prior_gives_constant_gain_filter_in_heading_frame():
+    net = _net()
+    with torch.no_grad():
+        net.fc_gain[2].weight.zero_()
+    prior = torch.tensor(_states(3))
+    y = TorchCTRA().h(prior)
+    y[:, 0] += 1.0  # 1 m innovation along global x
+    with torch.no_grad():
+        x, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(3))
+    # K0 has 0.6 on x and y in the heading frame: the global correction is 0.6 m along x for any heading
+    assert torch.allclose(x[:, 0] - prior[:, 0], torch.full((3,), 0.6, dtype=torch.float64), atol=1e-9)
+    assert torch.allclose(x[:, 1], prior[:, 1], atol=1e-9)
+
+
+def test_four_gru_variant_is_separate_and_runs():
+    a, b = _net(), _net(four_gru=True)
+    assert sum(p.numel() for p in b.parameters()) > sum(p.numel() for p in a.parameters())
+    assert not hasattr(a, "gru_r") and hasattr(b, "gru_r")
+    with torch.no_grad():
+        x, h = b.correct(*_correct_inputs(4), b.init_hidden(4))
+    assert x.shape == (4, 10) and set(h) == {"q", "sigma", "s", "r"}
+
+
+def test_sticky_gt_association_no_index_bug():
+    a = StickyGTAssociation(2.0)
+    gt_ids = np.array(["g0", "g1", "g2"], dtype=object)
+    gt_xy = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0]])
+    lab = np.zeros(3, dtype=np.int64)
+    # frame 1: track 7 takes g1
+    assert a.match(np.array([7]), np.array([[10.2, 0.0]]), np.array([0]), gt_ids, gt_xy, lab).tolist() == [1]
+    # frame 2: GT order changes and g0 disappears; track 7 keeps g1 (sticky, even 3 m away), the new track 8
+    # near g2 gets g2 (the row of the *current* list, not of the free subset)
+    ids2 = np.array(["g1", "g2"], dtype=object)
+    xy2 = np.array([[10.0, 0.0], [20.0, 0.0]])
+    got = a.match(np.array([7, 8]), np.array([[13.0, 0.0], [20.5, 0.0]]), np.array([0, 0]), ids2, xy2,
+                  np.zeros(2, dtype=np.int64))
+    assert got.tolist() == [0, 1]
+    # a free track cannot take a held instance, and classes must agree
+    got = a.match(np.array([9]), np.array([[10.0, 0.0]]), np.array([0]), ids2, xy2, np.zeros(2, dtype=np.int64))
+    assert got.tolist() == [-1]
+
+
+# ----- training on real mini_train ground truth with simulated detections ------------------------------------
+@pytest.fixture(scope="module")
+def small_training_set(nusc_mini):
+    from grutrack.data.detection_sim import simulate_nuscenes
+    from grutrack.data.nusc_detections import load_detections
+    from grutrack.data.nuscenes import load_scenes
+
+    scenes = load_scenes(nusc_mini, "mini_train", with_gt=True)[:2]
+    scenes = [Scene(s.name, s.token, s.frames[:12]) for s in scenes]
+    sub = simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5, nusc=nusc_mini)
+    import json, tempfile, os
+    with tempfile.TemporaryDirectory() as d:
+        p = os.path.join(d, "dets.json")
+        with open(p, "w") as f:
+            json.dump(sub, f)
+        dets = load_detections(p, [f.token for s in scenes for f in s.frames])
+    return scenes, dets
+
+
+def _trainer(scenes, dets, out, **over):
+    from grutrack.training.config import load_train_config
+    from grutrack.training.trainer import Trainer
+
+    cfg = load_train_config("grukf", {"epochs": 2, "checkpoint_every": 0, "device": "cpu", "lr": 1e-3, **over})
+    return Trainer(cfg, scenes, dets, out, progress=False)
+
+
+def test_training_is_deterministic_and_resumes_exactly(small_training_set, tmp_path):
+    scenes, dets = small_training_set
+    a = _trainer(scenes, dets, tmp_path / "a")
+    a.run()
+    b = _trainer(scenes, dets, tmp_path / "b")
+    b.run(max_steps=3)            # stop mid-epoch 2 ...
+    c = _trainer(scenes, dets, tmp_path / "b")
+    c.resume(tmp_path / "b" / "last.pt")
+    c.run()                       # ... and continue from the checkpoint
+    sa, sc = a.net.state_dict(), c.net.state_dict()
+    assert all(torch.equal(sa[k], sc[k]) for k in sa)
+    assert [r["loss"] for r in a.log_rows] == [r["loss"] for r in c.log_rows]
+    assert len(a.log_rows) == 4 and a.log_rows[0]["gt_terms"] > 0 and a.log_rows[0]["pseudo_terms"] > 0
+    # training moved the weights away from the gain prior
+    init = _trainer(scenes, dets, tmp_path / "d").net.state_dict()
+    assert any(not torch.equal(init[k], sa[k]) for k in sa)
+    text = (tmp_path / "a" / "train_log.csv").read_text().splitlines()
+    assert text[0].startswith("step,epoch,scene,loss") and len(text) == 5
+
+
+def test_supervised_mode_has_no_pseudo_labels(small_training_set, tmp_path):
+    scenes, dets = small_training_set
+    t = _trainer(scenes, dets, tmp_path, mode="supervised", epochs=1)
+    t.run()
+    assert all(r["pseudo_terms"] == 0 for r in t.log_rows) and any(r["gt_terms"] > 0 for r in t.log_rows)
+
+
+def test_checkpoint_loads_without_reinitialising(small_training_set, tmp_path):
+    from grutrack.tracking.factory import build_tracker
+    from grutrack.tracking.tracker import track_scenes
+
+    scenes, dets = small_training_set
+    t = _trainer(scenes, dets, tmp_path, epochs=1)
+    final = t.run()
+    tracker = build_tracker("grukf", checkpoint=final, device="cpu")
+    loaded = tracker.groups[0].backend.net.state_dict()
+    assert all(torch.equal(loaded[k], t.net.state_dict()[k]) for k in loaded)
+    run = track_scenes(tracker, scenes[:1], dets)
+    assert sum(len(r) for r in run.results.values()) > 0
+    with pytest.raises(Exception, match="needs --checkpoint"):
+        build_tracker("grukf")
