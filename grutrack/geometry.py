@@ -482,6 +482,42 @@ def paired_giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return _paired(_giou_3d, a, b)
 
 
+SIMILARITIES = ("iou_bev", "giou_bev", "iou_3d", "giou_3d")
+
+
+def paired_similarities(a: np.ndarray, b: np.ndarray, names) -> dict[str, np.ndarray]:
+    """Several measures of aligned pairs ``a[k], b[k]`` (both ``(K, >=7)``) from one geometry pass.
+
+    names: any of :data:`SIMILARITIES`. Returns ``{name: (K,) float64}``, each equal to the matching
+    ``paired_*`` function; the intersection and the hull are computed once for all of them.
+    """
+    names = set(names)
+    unknown = names - set(SIMILARITIES)
+    if unknown:
+        raise ValueError(f"unknown similarity {sorted(unknown)}; expected {SIMILARITIES}")
+    a, b = _check_boxes(a, "a"), _check_boxes(b, "b")
+    if a.shape[0] != b.shape[0]:
+        raise ValueError(f"paired boxes need equal counts, got {a.shape[0]} and {b.shape[0]}")
+    p = _pairs(_box_terms(a), _box_terms(b), outer=False)
+    inter = _intersection(p)
+    hull = _hull(p) if names & {"giou_bev", "giou_3d"} else None
+    out = {}
+    if names & {"iou_bev", "giou_bev"}:
+        union = p.area_a + p.area_b - inter
+        iou = np.clip(_ratio(inter, union), 0.0, 1.0)
+        out["iou_bev"] = iou
+        if "giou_bev" in names:
+            out["giou_bev"] = _giou(iou, union, hull)
+    if names & {"iou_3d", "giou_3d"}:
+        inter3 = inter * p.overlap
+        union3 = p.vol_a + p.vol_b - inter3
+        iou3 = np.clip(_ratio(inter3, union3), 0.0, 1.0)
+        out["iou_3d"] = iou3
+        if "giou_3d" in names:
+            out["giou_3d"] = _giou(iou3, union3, hull * p.span)
+    return {k: v for k, v in out.items() if k in names}
+
+
 def pairwise_bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """BEV IoU ``(N, M) float64`` in [0, 1] between ``a (N, >=7)`` and ``b (M, >=7)``."""
     return _pairwise(_bev_iou, a, b)

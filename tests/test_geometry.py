@@ -471,3 +471,19 @@ def test_sorting_network_sorts_every_binary_input():
     for n in (8, 16):
         bits = (np.arange(2**n)[None, :] >> np.arange(n)[:, None]) & 1  # (n, 2**n) every 0/1 column
         np.testing.assert_array_equal(geo._sort_columns(bits), np.sort(bits, axis=0))
+
+
+def test_paired_similarities_equal_the_single_measures():
+    from grutrack import geometry as g
+
+    rng = np.random.default_rng(11)
+    n = 3000
+    a = np.column_stack([rng.uniform(-8, 8, (n, 2)), rng.uniform(-1, 1, n), rng.uniform(0.3, 6, (n, 3)),
+                         rng.uniform(-np.pi, np.pi, n)])
+    b = np.column_stack([rng.uniform(-8, 8, (n, 2)), rng.uniform(-1, 1, n), rng.uniform(0.3, 6, (n, 3)),
+                         rng.uniform(-np.pi, np.pi, n)])
+    got = g.paired_similarities(a, b, g.SIMILARITIES)
+    for name, fn in (("iou_bev", g.paired_bev_iou), ("giou_bev", g.paired_bev_giou),
+                     ("iou_3d", g.paired_iou_3d), ("giou_3d", g.paired_giou_3d)):
+        np.testing.assert_array_equal(got[name], fn(a, b))
+    assert set(g.paired_similarities(a[:5], b[:5], ["giou_3d"])) == {"giou_3d"}

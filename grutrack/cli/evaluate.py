@@ -1,4 +1,6 @@
-"""``grutrack evaluate``: official nuScenes tracking metrics of a submission, as a metrics JSON."""
+"""``grutrack evaluate``: official tracking metrics of a submission, as a metrics JSON (``--dataset nuscenes``
+(default): nuscenes-devkit TrackingEval or the fast evaluator; ``--dataset av2``: the official AV2 tracking
+evaluation, HOTA)."""
 
 from __future__ import annotations
 
@@ -7,31 +9,71 @@ import json
 import time
 
 from grutrack.data.nuscenes import open_nuscenes, split_scene_names
-from grutrack.errors import InputFormatError
+from grutrack.errors import ConfigError, InputFormatError
 from grutrack.evaluation.nuscenes_eval import (devkit_tracking_eval, format_summary, metrics_document,
                                                write_metrics)
 
-EVALUATORS = ("devkit", "fast")
+EVALUATORS = ("devkit", "fast", "official")
+DATASETS = ("nuscenes", "av2")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``grutrack evaluate``."""
     p = sub.add_parser("evaluate", help="official tracking metrics of a submission",
                        description="Score a tracking submission with the official nuScenes evaluation "
-                                   "(tracking_nips_2019) and write a metrics JSON (overall and per class).")
-    p.add_argument("--dataroot", required=True, help="nuScenes dataroot (holds <version>/)")
-    p.add_argument("--version", required=True, help="dataset version, e.g. v1.0-trainval, v1.0-mini")
+                                   "(tracking_nips_2019) or, with --dataset av2, the official AV2 tracking "
+                                   "evaluation (HOTA, 50 m, drivable-area ROI), and write a metrics JSON "
+                                   "(overall and per class).")
+    p.add_argument("--dataset", default="nuscenes", choices=DATASETS, help="dataset (default: nuscenes)")
+    p.add_argument("--dataroot", required=True,
+                   help="nuScenes dataroot (holds <version>/) or AV2 sensor root (holds <split>/<log_id>/)")
+    p.add_argument("--version", default=None, help="nuScenes version, e.g. v1.0-trainval, v1.0-mini (nuScenes only)")
     p.add_argument("--split", required=True, help="split with ground truth: val, mini_val, ... or custom")
-    p.add_argument("--submission", required=True, help="tracking-submission JSON")
+    p.add_argument("--submission", required=True, help="tracking submission: JSON (nuscenes) or pickle (av2)")
     p.add_argument("--out", required=True, help="metrics JSON to write")
-    p.add_argument("--evaluator", default="devkit", choices=EVALUATORS,
-                   help="devkit: nuscenes-devkit TrackingEval (reference); fast: grutrack's exact vectorised "
-                        "re-implementation (default: devkit)")
+    p.add_argument("--evaluator", default=None, choices=EVALUATORS,
+                   help="nuscenes: devkit (nuscenes-devkit TrackingEval, reference, the default) or fast "
+                        "(grutrack's exact vectorised re-implementation); av2: official (the only one)")
+    g = p.add_argument_group("av2 only")
+    g.add_argument("--rate", type=float, default=2.0, help="evaluated frame rate of the labels (default 2 Hz)")
+    g.add_argument("--max-range", type=int, default=50, help="evaluation range around the ego, metres (default 50)")
+    g.add_argument("--workers", type=int, default=None,
+                   help="worker processes of the evaluator (default: the cores this process may use)")
+    g.add_argument("--trackeval-dir", default=None,
+                   help="keep TrackEval's summary files and curves in this folder (default: not written)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    """Dispatch to the dataset's evaluation."""
+    return {"nuscenes": run_nuscenes, "av2": run_av2}[args.dataset](args)
+
+
+def run_av2(args: argparse.Namespace) -> int:
+    """AV2: official evaluation of a tracking pickle; metrics JSON with the Table I average."""
+    from grutrack.evaluation import av2_eval
+
+    if args.evaluator not in (None, "official"):
+        raise ConfigError(f"--evaluator {args.evaluator} is for nuScenes; AV2 has the official evaluator only")
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError("--workers must be at least 1")
+    doc = av2_eval.evaluate_submission(args.dataroot, args.split, args.submission, rate_hz=args.rate,
+                                       max_range_m=args.max_range, workers=args.workers,
+                                       trackeval_dir=args.trackeval_dir)
+    av2_eval.write_metrics(args.out, doc)
+    print(av2_eval.format_summary(doc))
+    print(f"wrote {args.out} (official AV2 evaluator, ROI {'on' if doc['settings']['drivable_area_roi'] else 'off'}"
+          f", {doc['settings']['workers']} worker(s), {doc['seconds']:.1f} s)")
+    return 0
+
+
+def run_nuscenes(args: argparse.Namespace) -> int:
     """Evaluate, write the metrics JSON, print a summary table."""
+    if not args.version:
+        raise ConfigError("--version is required with --dataset nuscenes (e.g. v1.0-trainval, v1.0-mini)")
+    args.evaluator = args.evaluator or "devkit"
+    if args.evaluator not in ("devkit", "fast"):
+        raise ConfigError(f"--evaluator {args.evaluator} is for AV2; nuScenes has devkit and fast")
     nusc = open_nuscenes(args.dataroot, args.version)
     split_scene_names(nusc, args.split)  # clear error for an unknown split before the devkit asserts
     t0 = time.perf_counter()

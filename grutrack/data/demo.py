@@ -11,8 +11,10 @@ stop and starting again, pedestrians that stop and turn around, cyclists that st
 the ego's range; lidar point counts fall with distance and drop to 0 while an object is occluded.
 
 Each class's parameter carries, in a comment, the nuScenes statistic it imitates. "mini" means nuScenes
-v1.0-mini (mini_train + mini_val), computed with ``grutrack dataset-stats`` on ../shared/data; the
-``points_fit`` values are least-squares fits ln(num_lidar_pts) = a + b ln(distance) on mini_val (exact counts).
+v1.0-mini (mini_train + mini_val), computed with ``grutrack dataset-stats`` on ../shared/data. The
+``points_fit`` values are least-squares fits ln(num_lidar_pts) = a + b ln(distance) over the boxes with points:
+on mini_val (exact counts), except barrier, trailer and construction vehicle, which mini_val lacks (fitted on
+mini_train, whose counts are approximate).
 
 Output is byte-identical for a seed: every random draw comes from a stream seeded by (seed, scene index),
 tokens are hashes of (seed, version, names), and floats are rounded before they are written.
@@ -38,7 +40,7 @@ from grutrack.errors import ConfigError
 
 VERSION = "v1.0-demo"
 DT = 0.5                    # s between keyframes: nuScenes keyframes are at 2 Hz (mini: 0.40-0.60 s, mean 0.50)
-SUBSTEPS = 5                # motion integrated at 10 Hz (nuScenes annotations are interpolated at 10 Hz too)
+SUBSTEPS = 5                # motion integrated at 10 Hz, fine enough for manoeuvres seen at 2 Hz
 FRAMES_PER_SCENE = 40       # nuScenes scenes are 20 s long: 39-41 keyframes in mini
 DEFAULT_SCENES = 10         # quick demo: 8 demo_train + 2 demo_val scenes (mini has 8 + 2)
 VAL_EVERY = 5               # every 5th scene is demo_val: 80/20 like nuScenes train/val (700/150); with fewer
@@ -67,7 +69,8 @@ VISIBILITY = (("1", "v0-40"), ("2", "v40-60"), ("3", "v60-80"), ("4", "v80-100")
 # direction (+3.5) and two oncoming lanes (-3.5, -7.0), 3.5 m wide (a common urban lane width); kerbs at
 # +5.25 and -8.75. Static objects are placed at an offset beyond a kerb.
 ROAD_LEFT, ROAD_RIGHT = 5.25, -8.75
-LANES = ((0.0, 0.0, 0.15), (3.5, 0.0, 0.3), (-3.5, np.pi, 0.3), (-7.0, np.pi, 0.25))  # (offset, heading, share)
+# (offset, heading, share of moving vehicles, lane-change step to the neighbouring lane of the same direction)
+LANES = ((0.0, 0.0, 0.15, 3.5), (3.5, 0.0, 0.3, -3.5), (-3.5, np.pi, 0.3, -3.5), (-7.0, np.pi, 0.25, 3.5))
 
 
 @dataclass(frozen=True)
@@ -95,7 +98,7 @@ CLASS_SPECS: dict[str, ClassSpec] = {
     # 27.5 % of car boxes moving, mean moving speed 8.9 m/s; mean size (1.95, 4.61, 1.70), per-instance log-sd
     # (0.09, 0.07, 0.11); mean distance to the ego 36 m (mini).
     "car": ClassSpec(categories=(("vehicle.car", 1.0),), size=(1.95, 4.61, 1.70), size_logsd=(0.09, 0.07, 0.11),
-                     static_per_100m=19.0, moving_per_100m=7.0, motion="vehicle", speed=(10.0, 3.0),
+                     static_per_100m=15.0, moving_per_100m=8.0, motion="vehicle", speed=(10.0, 3.0),
                      kerb_offset=(1.1, 2.0), lot_share=0.3, cluster=6, points_fit=(11.56, -2.84, 0.91),
                      annot_range=75.0, occlusion=0.035),
     # pedestrian: 34.7 % of boxes, 12.4 per keyframe (mini); 72 % of them moving, at 1.26 m/s mean; adult 95 %,
@@ -110,14 +113,14 @@ CLASS_SPECS: dict[str, ClassSpec] = {
     # truck: 4.5 % of boxes, 1.6 per keyframe (mini; ~10 % in trainval), 24.5 % moving at 6.5 m/s;
     # size (2.35, 6.50, 2.62).
     "truck": ClassSpec(categories=(("vehicle.truck", 1.0),), size=(2.35, 6.50, 2.62), size_logsd=(0.12, 0.2, 0.2),
-                       static_per_100m=2.8, moving_per_100m=1.5, motion="vehicle", speed=(7.0, 2.0),
+                       static_per_100m=1.8, moving_per_100m=1.5, motion="vehicle", speed=(7.0, 2.0),
                        kerb_offset=(1.3, 3.0), lot_share=0.3, cluster=2, points_fit=(12.75, -2.70, 0.78),
                        annot_range=80.0, occlusion=0.04),
     # bus: 2.8 % of boxes, 1.0 per keyframe, 53 % moving at 5.6 m/s (mini); rigid 86 %, bendy 14 %
     # (mini 353 / 57 boxes); size (2.94, 11.15, 3.74); seen from further away (mean distance 51 m, mini).
     "bus": ClassSpec(categories=(("vehicle.bus.rigid", 0.86), ("vehicle.bus.bendy", 0.14)),
-                     size=(2.94, 11.15, 3.74), size_logsd=(0.05, 0.12, 0.08), static_per_100m=1.8,
-                     moving_per_100m=2.0, motion="vehicle", speed=(6.5, 2.0), kerb_offset=(1.5, 3.0),
+                     size=(2.94, 11.15, 3.74), size_logsd=(0.05, 0.12, 0.08), static_per_100m=1.2,
+                     moving_per_100m=2.5, motion="vehicle", speed=(6.5, 2.0), kerb_offset=(1.5, 3.0),
                      points_fit=(13.12, -2.48, 0.31), annot_range=90.0, occlusion=0.02),
     # trailer: 0.4 % of boxes, 0.15 per keyframe, parked (0 % moving in mini); size (2.28, 10.14, 3.71).
     "trailer": ClassSpec(categories=(("vehicle.trailer", 1.0),), size=(2.5, 10.1, 3.7), size_logsd=(0.06, 0.2, 0.08),
@@ -130,13 +133,13 @@ CLASS_SPECS: dict[str, ClassSpec] = {
                             points_fit=(8.48, -2.21, 0.82), annot_range=65.0, occlusion=0.025),
     # bicycle: 1.7 % of boxes, 0.6 per keyframe, 28 % moving at 4.3 m/s; size (0.64, 1.82, 1.39) (mini).
     "bicycle": ClassSpec(categories=(("vehicle.bicycle", 1.0),), size=(0.62, 1.80, 1.35), size_logsd=(0.15, 0.08, 0.15),
-                         static_per_100m=0.6, moving_per_100m=0.2, motion="cycle", speed=(4.3, 1.0),
+                         static_per_100m=0.55, moving_per_100m=0.45, motion="cycle", speed=(4.3, 1.0),
                          kerb_offset=(3.0, 6.0), cluster=4, points_fit=(6.97, -1.67, 0.81), annot_range=60.0,
                          occlusion=0.05),
     # detection-only classes, static: barrier 5.75, traffic cone 3.41, construction vehicle 0.49 boxes per
     # keyframe in mini; sizes (2.22, 0.62, 1.08), (0.46, 0.45, 0.80), (2.66, 5.54, 2.43) (mini).
     "barrier": ClassSpec(categories=(("movable_object.barrier", 1.0),), size=(2.22, 0.62, 1.08),
-                         size_logsd=(0.15, 0.15, 0.1), static_per_100m=13.0, moving_per_100m=0.0,
+                         size_logsd=(0.15, 0.15, 0.1), static_per_100m=10.0, moving_per_100m=0.0,
                          kerb_offset=(0.3, 8.0), cluster=8, points_fit=(8.65, -2.03, 0.84), annot_range=60.0,
                          occlusion=0.08),
     "traffic_cone": ClassSpec(categories=(("movable_object.trafficcone", 1.0),), size=(0.46, 0.45, 0.80),
@@ -185,8 +188,8 @@ MOTION_SPECS = {
 # Ego vehicle: mini ego mean speed 5.6 m/s over 10 scenes, 2 of them (almost) stationary; cruise 6-13 m/s.
 EGO_SPEED_CHOICES = ((0.0, 0.15), (4.0, 0.3), (8.0, 0.4), (12.0, 0.15))  # (cruise speed, probability)
 EGO_TURN_PROB = 0.35        # share of scenes with an intersection turn (mini descriptions: 5 of 10 mention turns)
-ANNOT_NOISE_POS = 0.015     # m; per-keyframe annotation jitter (mini parked-car |yaw rate| 0.013 rad/s, ~cm boxes)
-ANNOT_NOISE_YAW = 0.003     # rad
+ANNOT_NOISE_POS = 0.015     # m; nuScenes boxes are drawn per keyframe (centres on a mm grid, ~cm consistency)
+ANNOT_NOISE_YAW = 0.003     # rad; keeps the |yaw rate| of parked cars well below mini's car mean of 0.013 rad/s
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -399,12 +402,13 @@ def _ego(rng: np.random.Generator, frames: int) -> tuple[np.ndarray, str]:
     turn = rng.random() < EGO_TURN_PROB and cruise > 0
     forced = np.array([rng.choice([-1.0, 1.0]) * np.pi / 2 if turn else 0.0])
     n_steps = (frames - 1) * SUBSTEPS
-    v_t, curv, yr = manoeuvre_controls(rng, "vehicle", np.array([cruise]), n_steps, DT / SUBSTEPS, forced)
+    ctl = manoeuvre_controls(rng, "vehicle", np.array([cruise]), n_steps, DT / SUBSTEPS, forced)
     if not turn:
-        curv *= 0.3                                       # the ego mostly follows its lane
+        ctl.curvature *= 0.3                              # the ego mostly keeps to its road
     x0, y0 = rng.uniform(300.0, 2000.0, 2)                # nuScenes map coordinates are positive, 0-3000 m
-    agents = Agents(np.array([x0]), np.array([y0]), np.array([rng.uniform(-np.pi, np.pi)]), v_t[:, 0].copy(),
-                    v_t, curv, yr, np.array([1.5]), np.array([[4.0, 2.5]]))
+    one, zero = np.ones(1), np.zeros(1)
+    agents = Agents(np.array([x0]), np.array([y0]), np.array([rng.uniform(-np.pi, np.pi)]), ctl.v_target[:, 0].copy(),
+                    ctl, 1.5 * one, np.array([[4.0, 2.5]]), 5.0 * one, np.zeros(1, bool), zero, zero, one, zero)
     states = integrate(agents, DT / SUBSTEPS, SUBSTEPS)[0]
     what = ("stationary ego" if cruise == 0 else f"ego at ~{cruise:.0f} m/s") + (
         ", ego turns " + ("left" if forced[0] > 0 else "right") + " at an intersection" if turn else "")
@@ -480,8 +484,8 @@ def _static_objects(rng, name: str, spec: ClassSpec, road: np.ndarray, s_lo: flo
         gap = rng.uniform(0.8, 2.0, n)
     else:                                                 # rows along the kerb, side by side in lots
         gap = np.where(lot, size[:, 0], size[:, 1]) + rng.uniform(0.6, 2.5, n)
-    s = rng.uniform(s_lo, s_hi, n_groups)[group] + np.concatenate(
-        [np.cumsum(gap[group == g]) - gap[group == g][0] for g in range(n_groups)]) if n else np.zeros(0)
+    cum = np.cumsum(gap)
+    s = rng.uniform(s_lo, s_hi, n_groups)[group] + cum - np.repeat(cum[np.cumsum(counts) - counts], counts)
     x, y, h = _on_road(road, s, _kerb(side, offset))
     yaw = h + np.where(rng.random(n_groups)[group] < 0.3, np.pi, 0.0) + np.where(lot, np.pi / 2, 0.0)
     if name in ("pedestrian", "traffic_cone"):
@@ -518,30 +522,39 @@ def _moving_objects(rng, name: str, spec: ClassSpec, road: np.ndarray, s_lo: flo
     elif spec.motion == "cycle":                                               # kerb-side, with the traffic
         lat = _kerb(side, -0.8 + rng.normal(size=n) * 0.2)
         along = np.where(side > 0, 0.0, np.pi)
-    else:
-        offsets, headings, shares = (np.array(v) for v in zip(*LANES))
+    step = np.zeros(n)
+    if spec.motion == "vehicle":
+        offsets, headings, shares, steps = (np.array(v) for v in zip(*LANES))
         lane = rng.choice(len(offsets), size=n, p=shares / shares.sum())
-        lat, along = offsets[lane] + rng.normal(size=n) * 0.2, headings[lane]
+        lat, along, step = offsets[lane] + rng.normal(size=n) * 0.2, headings[lane], steps[lane]
+    follow = np.full(n, spec.motion != "pedestrian")
     if crossing_s is not None and spec.motion != "pedestrian":
         cross = rng.random(n) < 0.25                                           # cross traffic at the junction
         s = np.where(cross, crossing_s + rng.choice([-1.75, 1.75], n) + rng.normal(size=n) * 0.3, s)
         lat = np.where(cross, side * rng.uniform(30.0, 90.0, n), lat)
         along = np.where(cross, np.where(side > 0, -np.pi / 2, np.pi / 2), along)
+        follow &= ~cross
     x, y, h = _on_road(road, s, lat)
     yaw = h + along + rng.normal(size=n) * 0.03
     cruise = np.maximum(rng.normal(spec.speed[0], spec.speed[1], n), 0.3 * spec.speed[0])
-    n_steps = (frames - 1) * SUBSTEPS
-    v_t, curv, yr = manoeuvre_controls(rng, spec.motion, cruise, n_steps, DT / SUBSTEPS)
+    ctl = manoeuvre_controls(rng, spec.motion, cruise, (frames - 1) * SUBSTEPS, DT / SUBSTEPS)
     ms = MOTION_SPECS[spec.motion]
-    agents = Agents(x, y, yaw, v_t[:, 0].copy(), v_t, curv, yr, np.full(n, ms.tau),
-                    np.tile(np.asarray(ms.accel_limits, float), (n, 1)))
+    agents = Agents(x, y, yaw, ctl.v_target[:, 0].copy(), ctl, np.full(n, ms.tau),
+                    np.tile(np.asarray(ms.accel_limits, float), (n, 1)), np.full(n, ms.min_radius), follow,
+                    lat, step, np.where(np.cos(along) >= 0, 1.0, -1.0), s)
     return [np.full(n, name, dtype=object), cats, size, agents]
 
 
 def _concat_agents(parts: list[Agents]) -> Agents:
     """One Agents batch from several (integrated together: one loop per scene)."""
-    return Agents(*(np.concatenate([getattr(a, f) for a in parts]) for f in
-                    ("x", "y", "yaw", "v", "v_target", "curvature", "yaw_rate", "tau", "accel_limits")))
+    def cat(objs, name):
+        return np.concatenate([getattr(o, name) for o in objs])
+
+    ctl = Controls(*(cat([p.controls for p in parts], f) for f in
+                     ("v_target", "curvature", "wiggle", "yaw_rate", "lane_phase", "free")))
+    return Agents(*(cat(parts, f) for f in ("x", "y", "yaw", "v")), ctl,
+                  *(cat(parts, f) for f in ("tau", "accel_limits", "min_radius", "follow", "lane", "lane_step",
+                                            "direction", "s")))
 
 
 def _remove_overlaps(size: np.ndarray, states: np.ndarray, ego: np.ndarray) -> np.ndarray:
@@ -581,7 +594,7 @@ def simulate_scene(index: int, frames: int, seed: int) -> SimScene:
     rng = np.random.default_rng(np.random.SeedSequence([int(seed) & 0xFFFFFFFF, int(index)]))
     ego, what = _ego(rng, frames)
     margin = 90.0
-    road, s0, s1 = _road(ego, margin + 150.0)
+    road, s0, s1 = _road(ego, 500.0)                    # long enough for agents that follow it for 20 s
     crossing_s = 0.5 * (s0 + s1) + rng.uniform(-20, 20) if rng.random() < 0.5 else None
     movers = []
     for name, spec in CLASS_SPECS.items():
@@ -591,7 +604,7 @@ def simulate_scene(index: int, frames: int, seed: int) -> SimScene:
                 movers.append(got)
     parts = []
     if movers:
-        states = integrate(_concat_agents([g[3] for g in movers]), DT / SUBSTEPS, SUBSTEPS)
+        states = integrate(_concat_agents([g[3] for g in movers]), DT / SUBSTEPS, SUBSTEPS, road)
         n = len(states)
         parts.append([np.concatenate([g[i] for g in movers]) for i in range(3)] +
                      [states, np.ones(n, bool), np.zeros(n, bool)])

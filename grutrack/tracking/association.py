@@ -14,8 +14,6 @@ from scipy.optimize import linear_sum_assignment
 
 from grutrack import geometry
 
-_PAIRED = {"giou_3d": geometry.paired_giou_3d, "giou_bev": geometry.paired_bev_giou,
-           "iou_3d": geometry.paired_iou_3d, "iou_bev": geometry.paired_bev_iou}
 _INVALID = 1e6  # cost of a forbidden pair; far above any threshold (costs live in [0, 2])
 
 
@@ -27,21 +25,6 @@ class Matches:
     tracks: np.ndarray      # (K,) int64 track indices, aligned with ``dets``
     unmatched_dets: np.ndarray
     unmatched_tracks: np.ndarray
-
-
-def pair_costs(det_boxes: np.ndarray, trk_boxes: np.ndarray, di: np.ndarray, ti: np.ndarray,
-               metric_of_pair: np.ndarray, metrics: tuple[str, ...]) -> np.ndarray:
-    """Cost ``1 - similarity`` of the listed pairs, each scored with its own metric.
-
-    det_boxes (D, 9), trk_boxes (T, 9); di, ti (K,) pair indices; metric_of_pair (K,) int index into
-    ``metrics`` -> (K,) float64.
-    """
-    cost = np.empty(len(di))
-    for m, name in enumerate(metrics):
-        sel = metric_of_pair == m
-        if sel.any():
-            cost[sel] = 1.0 - _PAIRED[name](det_boxes[di[sel]], trk_boxes[ti[sel]])
-    return cost
 
 
 def similarity_upper_bound(a: np.ndarray, b: np.ndarray, metric: str) -> np.ndarray:
@@ -83,29 +66,41 @@ def hungarian(cost: np.ndarray, threshold: np.ndarray) -> tuple[np.ndarray, np.n
     return rows[ok].astype(np.int64), cols[ok].astype(np.int64)
 
 
-def _stage(det_boxes, det_labels, trk_boxes, trk_labels, dets, trks, metric_names, metric_of_class,
-           threshold_of_class) -> tuple[np.ndarray, np.ndarray]:
-    """One Hungarian stage over the candidate subsets ``dets`` / ``trks``; returns matched global indices."""
-    if len(dets) == 0 or len(trks) == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    same = det_labels[dets][:, None] == trk_labels[trks][None, :]
-    li, lj = np.nonzero(same)
-    cost = np.full(same.shape, _INVALID)
-    thr = threshold_of_class[det_labels[dets]][:, None]
-    if len(li):
-        di, ti = dets[li], trks[lj]
-        metric = metric_of_class[det_labels[di]]
-        # skip pairs whose similarity bound cannot reach the threshold (cost < t  <=>  similarity > 1 - t)
-        need = np.zeros(len(li), dtype=bool)
-        for m, name in enumerate(metric_names):
-            sel = metric == m
-            if sel.any():
-                ub = similarity_upper_bound(det_boxes[di[sel]], trk_boxes[ti[sel]], name)
-                need[sel] = ub > 1.0 - thr[li[sel], 0]
-        li, lj, di, ti, metric = li[need], lj[need], di[need], ti[need], metric[need]
-        cost[li, lj] = pair_costs(det_boxes, trk_boxes, di, ti, metric, metric_names)
-    r, c = hungarian(cost, thr)
-    return dets[r], trks[c]
+def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray,
+                     trk_labels: np.ndarray, stages: list[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
+    """(D, T) cost matrices, one per stage, from ONE geometry pass over the candidate pairs.
+
+    stages: per stage, (metric name per class (7,) object array, cost threshold per class (7,)).
+    A pair is a candidate of a stage when its classes agree and the similarity bound can beat that stage's
+    threshold; everything else costs ``_INVALID``.
+    """
+    D, T = len(det_boxes), len(trk_boxes)
+    costs = [np.full((D, T), _INVALID) for _ in stages]
+    di, ti = np.nonzero(det_labels[:, None] == trk_labels[None, :])
+    if len(di) == 0:
+        return costs
+    a, b, lab = det_boxes[di], trk_boxes[ti], det_labels[di]
+    need = np.zeros((len(stages), len(di)), dtype=bool)
+    for k, (metric, thr) in enumerate(stages):
+        pm = metric[lab]
+        for name in set(pm):
+            sel = pm == name
+            need[k, sel] = similarity_upper_bound(a[sel], b[sel], name) > 1.0 - thr[lab[sel]]
+    any_need = need.any(0)
+    if not any_need.any():
+        return costs
+    names = {m for k, (metric, _) in enumerate(stages) for m in set(metric[lab[need[k]]])}
+    sims = geometry.paired_similarities(a[any_need], b[any_need], names)
+    idx = np.flatnonzero(any_need)
+    for k, (metric, _) in enumerate(stages):
+        pm = metric[lab[idx]]
+        val = np.full(len(idx), -np.inf)
+        for name in names:
+            sel = pm == name
+            val[sel] = sims[name][sel]
+        keep = need[k, idx]
+        costs[k][di[idx[keep]], ti[idx[keep]]] = 1.0 - val[keep]
+    return costs
 
 
 def associate(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray, trk_labels: np.ndarray,
@@ -114,17 +109,18 @@ def associate(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarr
     """Two-stage association of D detections with T (predicted) tracks.
 
     det_boxes (D, 9), trk_boxes (T, 9): canonical boxes; labels (D,), (T,) class indices;
-    first_metric: similarity name per class (7,); thresholds (7,) cost thresholds per class.
+    first_metric: similarity name per class; thresholds: cost thresholds per class.
     """
     d_all = np.arange(len(det_boxes), dtype=np.int64)
     t_all = np.arange(len(trk_boxes), dtype=np.int64)
-    names = tuple(sorted(set(first_metric)))
-    metric_of_class = np.array([names.index(m) for m in first_metric])
-    md, mt = _stage(det_boxes, det_labels, trk_boxes, trk_labels, d_all, t_all, names, metric_of_class,
-                    first_threshold)
+    stages = [(np.asarray(first_metric, dtype=object), first_threshold)]
+    if two_stage:
+        stages.append((np.full(len(first_metric), second_metric, dtype=object), second_threshold))
+    costs = _candidate_costs(det_boxes, det_labels, trk_boxes, trk_labels, stages)
+    md, mt = hungarian(costs[0], first_threshold[det_labels][:, None])
     if two_stage:
         ud, ut = np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt)
-        md2, mt2 = _stage(det_boxes, det_labels, trk_boxes, trk_labels, ud, ut, (second_metric,),
-                          np.zeros(len(first_metric), dtype=np.int64), second_threshold)
-        md, mt = np.concatenate([md, md2]), np.concatenate([mt, mt2])
+        if len(ud) and len(ut):
+            r, c = hungarian(costs[1][np.ix_(ud, ut)], second_threshold[det_labels[ud]][:, None])
+            md, mt = np.concatenate([md, ud[r]]), np.concatenate([mt, ut[c]])
     return Matches(md, mt, np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt))

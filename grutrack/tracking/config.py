@@ -19,13 +19,16 @@ from grutrack.errors import ConfigError
 PRESET_DIR = Path(__file__).resolve().parents[1] / "configs" / "trackers"
 METRICS = ("giou_3d", "giou_bev", "iou_3d", "iou_bev")
 MOTION_MODELS = ("CTRA", "BICYCLE", "CA", "CV")
+ALGORITHMS = ("hungarian", "greedy")
 
 # schema: section -> key -> kind; "per_class_float" etc. are maps over the 7 tracking classes
 SCHEMA: dict[str, dict[str, str]] = {
     "preprocessing": {"score_threshold": "per_class_unit", "nms_threshold": "unit", "nms_class_aware": "bool"},
-    "association": {"first_metric": "per_class_metric", "first_threshold": "per_class_cost",
-                    "two_stage": "bool", "second_metric": "metric", "second_threshold": "per_class_cost"},
-    "lifecycle": {"max_age": "per_class_posint", "decay_rate": "per_class_unit", "punish_num": "nonnegint"},
+    "association": {"algorithm": "algorithm", "first_metric": "per_class_metric", "first_threshold": "per_class_cost",
+                    "two_stage": "bool", "second_metric": "metric", "second_threshold": "per_class_cost",
+                    "max_distance": "per_class_metres"},
+    "lifecycle": {"max_age": "per_class_posint", "min_hits": "per_class_posint", "decay_rate": "per_class_unit",
+                  "punish_num": "nonnegint"},
     "motion": {"config": "str", "model_override": "class_model_map", "yaw_flip": "bool"},
     "output": {"matched_box": "matched_box", "max_boxes_per_sample": "posint"},
 }
@@ -39,12 +42,15 @@ class TrackerConfig:
     score_threshold: np.ndarray
     nms_threshold: float
     nms_class_aware: bool
+    algorithm: str
     first_metric: tuple[str, ...]
     first_threshold: np.ndarray
     two_stage: bool
     second_metric: str
     second_threshold: np.ndarray
+    max_distance: np.ndarray
     max_age: np.ndarray
+    min_hits: np.ndarray
     decay_rate: np.ndarray
     punish_num: int
     motion_config: str
@@ -87,14 +93,17 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
     _check_keys(source, "", raw, SCHEMA)
     v = {f"{sec}.{key}": _value(source, f"{sec}.{key}", raw[sec][key], kind)
          for sec, keys in SCHEMA.items() for key, kind in keys.items()}
+    if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
+        raise ConfigError(f"{source}: 'association.two_stage' must be false with 'association.algorithm' greedy "
+                          f"(greedy matching is one stage)")
     return TrackerConfig(
         source=source,
         score_threshold=v["preprocessing.score_threshold"], nms_threshold=v["preprocessing.nms_threshold"],
-        nms_class_aware=v["preprocessing.nms_class_aware"],
+        nms_class_aware=v["preprocessing.nms_class_aware"], algorithm=v["association.algorithm"],
         first_metric=v["association.first_metric"], first_threshold=v["association.first_threshold"],
         two_stage=v["association.two_stage"], second_metric=v["association.second_metric"],
-        second_threshold=v["association.second_threshold"],
-        max_age=v["lifecycle.max_age"], decay_rate=v["lifecycle.decay_rate"],
+        second_threshold=v["association.second_threshold"], max_distance=v["association.max_distance"],
+        max_age=v["lifecycle.max_age"], min_hits=v["lifecycle.min_hits"], decay_rate=v["lifecycle.decay_rate"],
         punish_num=v["lifecycle.punish_num"],
         motion_config=v["motion.config"], model_override=v["motion.model_override"],
         yaw_flip=v["motion.yaw_flip"], matched_box=v["output.matched_box"],
@@ -145,10 +154,14 @@ def _value(source: str, key: str, val: Any, kind: str) -> Any:
         return val if val in ("filter", "detection") else fail("'filter' or 'detection'")
     if kind == "metric":
         return val if val in METRICS else fail(f"one of {', '.join(METRICS)}")
+    if kind == "algorithm":
+        return val if val in ALGORITHMS else fail(f"one of {', '.join(ALGORITHMS)}")
     if isinstance(val, bool) or not isinstance(val, (int, float)) or not np.isfinite(val):
         fail("a number")
     if kind == "unit":
         return float(val) if 0 <= val <= 1 else fail("a number in [0, 1]")
+    if kind == "metres":
+        return float(val) if val > 0 else fail("a positive distance in metres")
     if kind == "cost":
         return float(val) if 0 <= val <= 2 else fail("a cost threshold in [0, 2] (cost = 1 - similarity)")
     if kind in ("posint", "nonnegint"):

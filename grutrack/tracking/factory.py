@@ -12,11 +12,12 @@ from grutrack.errors import ConfigError
 from grutrack.tracking.config import TrackerConfig, load_tracker_config
 from grutrack.tracking.tracker import Tracker, TrackGroup
 
-#: trackers selectable with ``--tracker``
-TRACKERS: tuple[str, ...] = ("ekf", "grukf")
+#: trackers selectable with ``--tracker``; greedy and ab3dmot are the Table I baselines
+#: (grutrack/tracking/baselines.py)
+TRACKERS: tuple[str, ...] = ("ekf", "grukf", "greedy", "ab3dmot")
 #: tracker name -> preset used when --config is not given (the GRU-KF shares the EKF tracker's preset:
 #: pre-processing, association, lifecycle and output are the same, only the motion backend differs)
-DEFAULT_PRESET = {"ekf": "ekf", "grukf": "ekf"}
+DEFAULT_PRESET = {"ekf": "ekf", "grukf": "ekf", "greedy": "greedy", "ab3dmot": "ab3dmot"}
 
 
 def build_tracker(name: str = "ekf", config: str | Path | None = None,
@@ -39,8 +40,26 @@ def build_tracker(name: str = "ekf", config: str | Path | None = None,
             raise ConfigError("--tracker grukf needs --checkpoint CKPT (a model written by `grutrack train`)")
         from grutrack.training.checkpoint import load_network
 
-        return Tracker(cfg, [grukf_group(load_network(checkpoint), len(index), device)])
-    return Tracker(cfg, ekf_groups(cfg, index))
+        return Tracker(cfg, [grukf_group(load_network(checkpoint), len(index), device)], _association(cfg))
+    return Tracker(cfg, _baseline_groups(name, cfg, index), _association(cfg))
+
+
+def _baseline_groups(name: str, cfg: TrackerConfig, index: np.ndarray) -> list[TrackGroup]:
+    """Track groups of ekf / ab3dmot (one per motion model) or greedy (one group for every label)."""
+    from grutrack.tracking.baselines import DetectionBackend, NoVelocityKalmanBackend
+
+    if name == "greedy":
+        return [TrackGroup(DetectionBackend(), np.ones(len(index), dtype=bool))]
+    return ekf_groups(cfg, index, NoVelocityKalmanBackend if name == "ab3dmot" else None)
+
+
+def _association(cfg: TrackerConfig):
+    """The association the preset asks for: None (the tracker's two-stage Hungarian) or greedy."""
+    if cfg.algorithm == "greedy":
+        from grutrack.tracking.baselines import greedy_association
+
+        return greedy_association(cfg.max_distance)
+    return None
 
 
 def grukf_group(net, n_labels: int, device: str = "auto", train: bool = False) -> TrackGroup:
@@ -65,14 +84,16 @@ def remap_config(cfg: TrackerConfig, index: np.ndarray) -> TrackerConfig:
     return replace(cfg, score_threshold=cfg.score_threshold[index],
                    first_metric=tuple(cfg.first_metric[i] for i in index),
                    first_threshold=cfg.first_threshold[index], second_threshold=cfg.second_threshold[index],
-                   max_age=cfg.max_age[index], decay_rate=cfg.decay_rate[index])
+                   max_distance=cfg.max_distance[index], max_age=cfg.max_age[index], min_hits=cfg.min_hits[index],
+                   decay_rate=cfg.decay_rate[index])
 
 
-def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None) -> list[TrackGroup]:
+def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None, backend_cls=None) -> list[TrackGroup]:
     """One track group per state-space model in use, each with per-label (n_labels, d, d) Q, R, P0 tables.
 
     ``index`` (n_labels,) maps dataset labels to tracking classes (identity for nuScenes). Labels of other
-    groups keep zero rows in a group's tables; they are never indexed there.
+    groups keep zero rows in a group's tables; they are never indexed there. ``backend_cls``: a
+    ``KalmanBackend`` subclass to use instead (AB3DMOT's velocity-free start), default ``KalmanBackend``.
     """
     index = np.arange(len(TRACKING_CLASSES)) if index is None else index
     from grutrack.motion.defaults import load_motion_config
@@ -92,6 +113,6 @@ def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None) -> list[Trac
             d = first[key].shape[0]
             tables[key] = np.stack([motion[TRACKING_CLASSES[c]][key] if members[i] else np.zeros((d, d))
                                     for i, c in enumerate(index)])
-        backend = KalmanBackend(model, tables["Q"], tables["R"], tables["P0"], yaw_flip=cfg.yaw_flip)
+        backend = (backend_cls or KalmanBackend)(model, tables["Q"], tables["R"], tables["P0"], yaw_flip=cfg.yaw_flip)
         groups.append(TrackGroup(backend, members))
     return groups

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Protocol
+from typing import Any, Callable, Iterable, Protocol
 
 import numpy as np
 
 from grutrack.boxes import empty_boxes
 from grutrack.data.scene import BoxSet, Scene
-from grutrack.tracking.association import associate
+from grutrack.tracking.association import Matches, associate
 from grutrack.tracking.config import TrackerConfig
 from grutrack.tracking.preprocess import preprocess
 
@@ -77,13 +77,27 @@ class TrackGroup:
         self.hits = np.concatenate([self.hits, np.ones(len(ids), dtype=np.int64)])
 
 
+#: association of one frame: (detections after pre-processing, predicted track boxes (T, 9), track labels (T,),
+#: dt seconds since the previous frame) -> :class:`Matches`
+AssociateFn = Callable[[BoxSet, np.ndarray, np.ndarray, float], Matches]
+
+
+def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
+    """The default association: per-class similarity, Hungarian, optional second stage (DESIGN section 1)."""
+    def run(dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
+        return associate(dets.boxes, dets.labels, trk_boxes, trk_labels, cfg.first_metric, cfg.first_threshold,
+                         cfg.two_stage, cfg.second_metric, cfg.second_threshold)
+    return run
+
+
 class Tracker:
     """Online multi-object tracker over the frames of one scene at a time.
 
     ``groups``: the track groups; each tracking class must belong to exactly one group.
+    ``associate``: the association function (default :func:`two_stage_association` of ``cfg``).
     """
 
-    def __init__(self, cfg: TrackerConfig, groups: list[TrackGroup]):
+    def __init__(self, cfg: TrackerConfig, groups: list[TrackGroup], associate: AssociateFn | None = None):
         owners = np.sum([g.classes for g in groups], axis=0)
         if not np.all(owners == 1):
             raise ValueError("each tracking class must belong to exactly one track group")
@@ -92,6 +106,8 @@ class Tracker:
         self.group_of_class = np.argmax(np.stack([g.classes for g in groups]), axis=0)
         self.next_id = 0
         self.last_timestamp: int | None = None
+        self.frame_count = 0  # frames of the current scene, this one included
+        self.associate = associate if associate is not None else two_stage_association(cfg)
         #: optional callable(group, rows, det_rows) run right after a group's matched tracks are corrected
         #: (training reads the corrected states there, before expired tracks are dropped)
         self.update_hook = None
@@ -102,6 +118,7 @@ class Tracker:
             g.keep(np.zeros(len(g), dtype=bool))
             g.state = None
         self.last_timestamp = None
+        self.frame_count = 0
 
     def step(self, dets: BoxSet, timestamp: int) -> BoxSet:
         """Process one frame: detections (canonical, global frame) at ``timestamp`` (µs).
@@ -110,13 +127,13 @@ class Tracker:
         """
         dt = 0.0 if self.last_timestamp is None else (timestamp - self.last_timestamp) * 1e-6
         self.last_timestamp = timestamp
+        self.frame_count += 1
         self._predict(dt)
         cfg = self.cfg
         dets = preprocess(dets, cfg.score_threshold, cfg.nms_threshold, cfg.nms_class_aware)
         trk_boxes = np.concatenate([g.backend.boxes(g.state) if len(g) else empty_boxes() for g in self.groups])
         trk_labels = np.concatenate([g.labels for g in self.groups])
-        m = associate(dets.boxes, dets.labels, trk_boxes, trk_labels, cfg.first_metric, cfg.first_threshold,
-                      cfg.two_stage, cfg.second_metric, cfg.second_threshold)
+        m = self.associate(dets, trk_boxes, trk_labels, dt)
         out = self._update_groups(dets, m.dets, m.tracks)
         out.append(self._births(dets, m.unmatched_dets))
         return _concat_boxsets(out)
@@ -148,13 +165,18 @@ class Tracker:
             g.hits[rows] += 1
             g.scores[~matched] *= self.cfg.decay_rate[g.labels[~matched]]
             alive = g.misses < self.cfg.max_age[g.labels]
-            emit = alive & (matched | (g.misses <= self.cfg.punish_num))
+            emit = alive & (matched | (g.misses <= self.cfg.punish_num)) & self._confirmed(g.hits, g.labels)
             boxes = g.backend.boxes(g.state)
             if self.cfg.matched_box == "detection" and len(rows):
                 boxes[rows, :6] = dets.boxes[drows, :6]  # detection centre and size; filter yaw, velocity
             out.append(BoxSet(boxes[emit], g.scores[emit], g.labels[emit], g.ids[emit]))
             g.keep(alive)
         return out
+
+    def _confirmed(self, hits: np.ndarray, labels: np.ndarray) -> np.ndarray:
+        """(N,) bool: tracks with at least min_hits matched frames, or all while the scene is that young."""
+        need = self.cfg.min_hits[labels]
+        return (hits >= need) | (self.frame_count <= need)
 
     def _births(self, dets: BoxSet, new: np.ndarray) -> BoxSet:
         """Start a track for every unmatched detection; returns their boxes as this frame's output."""
@@ -167,7 +189,9 @@ class Tracker:
             if sel.any():
                 d = new[sel]
                 g.add(dets.boxes[d], dets.labels[d], dets.scores[d], ids[sel])
-                out.append(BoxSet(g.backend.boxes(g.state)[-len(d):], dets.scores[d], dets.labels[d], ids[sel]))
+                show = self._confirmed(np.ones(len(d), dtype=np.int64), dets.labels[d])
+                out.append(BoxSet(g.backend.boxes(g.state)[-len(d):][show], dets.scores[d][show],
+                                  dets.labels[d][show], ids[sel][show]))
         return _concat_boxsets(out)
 
 

@@ -1,0 +1,170 @@
+"""Time the official nuScenes tracking evaluation against the fast exact one, on the same input.
+
+    python benchmarks/bench_eval.py                       # default: ../shared/data nuScenes v1.0-mini, mini_val,
+                                                          # ground truth corrupted into a realistic tracker output
+    python benchmarks/bench_eval.py --dataroot /data/nuscenes --version v1.0-trainval --split val \
+        --submission tracks_val.json
+
+Reported (medians over the repeats, seconds):
+  * accumulation + metrics: the devkit's ``TrackingEval.evaluate()`` vs our ``evaluate_tracks`` on the same
+    loaded tracks (what the devkit reports as eval_time);
+  * loading + filtering (devkit loaders, shared by both): ``load_tracks``;
+  * whole pipeline: ``TrackingEval(...).main(render_curves=False)`` (it loads NuScenes itself; that load is also
+    timed on its own) vs ``fast_tracking_eval(nusc, ...)`` with a loaded NuScenes.
+The two results are compared number by number (max |difference|, NaN == NaN).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import math
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+
+def _median_time(fn, repeat: int):
+    times, result = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), times, result
+
+
+def _flatten(d, prefix=""):
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flatten(v, prefix + str(k) + "."))
+        else:
+            out[prefix + str(k)] = v
+    return out
+
+
+def _max_diff(a: dict, b: dict) -> float:
+    fa, fb = _flatten(a), _flatten(b)
+    if set(fa) != set(fb):
+        return math.inf
+    worst = 0.0
+    for k in fa:
+        if k == "eval_time":
+            continue
+        x, y = fa[k], fb[k]
+        if isinstance(x, (int, float)) and isinstance(y, (int, float)):
+            if math.isnan(x) or math.isnan(y):
+                worst = max(worst, 0.0 if math.isnan(x) and math.isnan(y) else math.inf)
+            else:
+                worst = max(worst, abs(x - y))
+        elif x != y:
+            worst = math.inf
+    return worst
+
+
+def main(argv=None) -> int:
+    default_root = Path(os.environ.get("GRUTRACK_TEST_DATA", REPO.parent / "shared" / "data")) / "nuscenes"
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--dataroot", default=str(default_root))
+    ap.add_argument("--version", default="v1.0-mini")
+    ap.add_argument("--split", default="mini_val")
+    ap.add_argument("--submission", default=None,
+                    help="tracking-submission JSON; default: the split's ground truth, corrupted (seed 0)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--repeat", type=int, default=5, help="repeats of the fast evaluator")
+    ap.add_argument("--repeat-devkit", type=int, default=3, help="repeats of the devkit")
+    ap.add_argument("--skip-devkit-whole", action="store_true",
+                    help="time only the devkit's evaluate() (not TrackingEval(...).main)")
+    args = ap.parse_args(argv)
+
+    from nuscenes import NuScenes
+    from nuscenes.eval.common.config import config_factory
+    from nuscenes.eval.tracking.evaluate import TrackingEval
+
+    from grutrack.evaluation.fast_amota import evaluate_tracks, fast_tracking_eval, load_tracks
+
+    t0 = time.perf_counter()
+    nusc = NuScenes(version=args.version, dataroot=args.dataroot, verbose=False)
+    t_nusc = time.perf_counter() - t0
+    cfg = config_factory("tracking_nips_2019")
+
+    with tempfile.TemporaryDirectory() as tmp:
+        if args.submission:
+            sub_path = args.submission
+            what = sub_path
+        else:
+            from grutrack.evaluation.fast_synth import corrupt_submission
+
+            sub_path = os.path.join(tmp, "submission.json")
+            with open(sub_path, "w") as f:
+                json.dump(corrupt_submission(nusc, args.split, seed=args.seed), f)
+            what = "ground truth of %s corrupted (seed %d: noise, id switches, fragments, drops, " \
+                   "false positives, class changes, shadow tracks)" % (args.split, args.seed)
+        with open(sub_path) as f:
+            n_boxes = sum(len(v) for v in json.load(f)["results"].values())
+        print("input: %s; %d boxes; %s %s (NuScenes load %.2fs)" % (what, n_boxes, args.version, args.split, t_nusc))
+
+        # Loading + filtering (devkit loaders; the same for both).
+        t_load, _, (tracks_gt, tracks_pred, meta) = _median_time(
+            lambda: load_tracks(nusc, sub_path, args.split, cfg), max(1, min(args.repeat, 3)))
+
+        # Accumulation + metrics.
+        def devkit_evaluate():
+            ev = object.__new__(TrackingEval)
+            ev.cfg, ev.eval_set, ev.output_dir, ev.verbose, ev.render_classes = cfg, args.split, tmp, False, None
+            ev.tracks_gt, ev.tracks_pred, ev.meta = tracks_gt, tracks_pred, meta
+            metrics, _ = ev.evaluate()
+            return dict(metrics.serialize(), meta=meta)
+
+        t_dev_acc, dev_acc_times, dev_summary = _median_time(devkit_evaluate, args.repeat_devkit)
+        t_fast_acc, fast_acc_times, (fast_metrics, _) = _median_time(
+            lambda: evaluate_tracks(tracks_gt, tracks_pred, cfg), args.repeat)
+        diff_acc = _max_diff(dev_summary, dict(fast_metrics.serialize(), meta=meta))
+
+        # Whole pipeline.
+        t_fast_whole, _, fast_summary = _median_time(
+            lambda: fast_tracking_eval(nusc, sub_path, args.split, cfg), args.repeat)
+        t_dev_whole = None
+        if not args.skip_devkit_whole:
+            def devkit_whole():
+                with contextlib.redirect_stderr(io.StringIO()):
+                    ev = TrackingEval(cfg, sub_path, args.split, os.path.join(tmp, "devkit"), args.version,
+                                      args.dataroot, verbose=False)
+                    return ev.main(render_curves=False)
+
+            t_dev_whole, _, dev_whole_summary = _median_time(devkit_whole, args.repeat_devkit)
+            diff_whole = _max_diff(dev_whole_summary, fast_summary)
+
+    print()
+    print("accumulation + metrics (median of %d devkit / %d fast runs)" % (args.repeat_devkit, args.repeat))
+    print("  devkit TrackingEval.evaluate()   %9.3f s   runs: %s" % (t_dev_acc, ", ".join("%.2f" % t for t in dev_acc_times)))
+    print("  fast evaluate_tracks()           %9.3f s   runs: %s" % (t_fast_acc, ", ".join("%.3f" % t for t in fast_acc_times)))
+    print("  ratio                            %9.1f x" % (t_dev_acc / t_fast_acc))
+    print("  max |difference| of the results  %9.3g" % diff_acc)
+    print("loading + filtering (devkit loaders, both)")
+    print("  load_tracks()                    %9.3f s" % t_load)
+    print("whole pipeline")
+    print("  fast_tracking_eval() (loaded nusc) %7.3f s  = loading %.3f + accumulation %.3f (approx.)"
+          % (t_fast_whole, t_load, t_fast_acc))
+    if t_dev_whole is not None:
+        print("  devkit TrackingEval(...).main()  %9.3f s   (includes its own NuScenes load, %.2f s here)"
+              % (t_dev_whole, t_nusc))
+        print("  ratio                            %9.1f x   (%.1f x without the devkit's NuScenes load)"
+              % (t_dev_whole / t_fast_whole, (t_dev_whole - t_nusc) / t_fast_whole))
+        print("  max |difference| of the results  %9.3g" % diff_whole)
+    else:
+        print("  devkit (loading + evaluate)      %9.3f s   ratio %.1f x"
+              % (t_load + t_dev_acc, (t_load + t_dev_acc) / t_fast_whole))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,183 @@
+"""LT3D detections (Argoverse 2) into canonical city-frame detections.
+
+Input: LT3D's detection table (``AV2Dataset.format_results`` of github.com/neeharperi/LT3D, the AV2 detection
+format), one row per box in the EGO frame of its sweep: ``tx_m, ty_m, tz_m`` (box centre, metres),
+``length_m, width_m, height_m``, ``qw, qx, qy, qz`` (box -> ego rotation), ``score``, ``log_id``,
+``timestamp_ns``, ``category`` (AV2 name) and optionally ``vx, vy`` (object velocity in ego axes, m/s; 0 when
+absent). Accepted files: feather (``.feather`` / ``.arrow``), CSV (LT3D writes ``val_detections.csv``) and a
+pickled pandas DataFrame of the same columns (``.pkl`` / ``.pickle``, what ``format_results`` returns).
+
+Validation (an :class:`InputFormatError` names the file, the field and what was expected): required columns
+present; numbers finite; sizes positive; unit quaternions; scores in [0, 1]; category an AV2 category;
+``log_id`` one of the split's logs; ``timestamp_ns`` one of that log's ego-pose timestamps.
+
+Policy for detections at valid sweep times that are not tracked frames (the tracker runs at the evaluated
+rate, 2 Hz by default, on the label timestamps): they are DROPPED and counted in
+:class:`DetectionStats.off_frame`. Boxes of categories outside the tracking vocabulary (e.g. BOLLARD with the 7
+Table I classes) are dropped likewise (``other_category``). A frame without detections gets an empty box set.
+"""
+
+from __future__ import annotations
+
+import pickle
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from grutrack.data.av2 import (COMPETITION_CATEGORIES, OTHER_ANNOTATION_CATEGORIES, Vocabulary, ego_to_city,
+                               read_poses, split_dir, token_timestamp_ns)
+from grutrack.data.scene import BoxSet, Scene
+from grutrack.errors import InputFormatError
+
+REQUIRED_COLUMNS = ("tx_m", "ty_m", "tz_m", "length_m", "width_m", "height_m", "qw", "qx", "qy", "qz", "score",
+                    "log_id", "timestamp_ns", "category")
+NUMERIC_COLUMNS = ("tx_m", "ty_m", "tz_m", "length_m", "width_m", "height_m", "qw", "qx", "qy", "qz", "score")
+VELOCITY_COLUMNS = ("vx", "vy")
+#: LT3D writes OTHER for a label outside its class list; such boxes are dropped like untracked categories
+KNOWN_CATEGORIES = frozenset(COMPETITION_CATEGORIES + OTHER_ANNOTATION_CATEGORIES + ("OTHER",))
+QUATERNION_TOLERANCE = 1e-2
+
+
+@dataclass
+class DetectionStats:
+    """What happened to the rows of a detection file."""
+
+    rows: int = 0
+    kept: int = 0
+    other_category: int = 0   # category valid but not tracked
+    off_frame: int = 0        # valid sweep time, not a tracked frame (dropped, see module docstring)
+
+
+def read_detection_table(path: str | Path) -> pd.DataFrame:
+    """The detection table of a feather, CSV or pickled-DataFrame file, with the required columns."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputFormatError(f"{path}: detection file does not exist")
+    suffix = path.suffix.lower()
+    try:
+        if suffix in (".feather", ".arrow"):
+            df = pd.read_feather(path)
+        elif suffix == ".csv":
+            df = pd.read_csv(path)
+        elif suffix in (".pkl", ".pickle"):
+            with open(path, "rb") as fh:
+                df = pickle.load(fh)
+        else:
+            raise InputFormatError(f"{path}: unknown detection file type '{suffix}' (expected .feather, .csv or "
+                                   f".pkl holding a pandas DataFrame)")
+    except (OSError, ValueError, pickle.UnpicklingError, EOFError) as exc:
+        raise InputFormatError(f"{path}: cannot read the detection table ({exc})") from exc
+    if not isinstance(df, pd.DataFrame):
+        raise InputFormatError(f"{path}: expected a pandas DataFrame of LT3D detections, got {type(df).__name__}")
+    missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
+    if missing:
+        raise InputFormatError(f"{path}: missing column(s) {missing}; LT3D detections need {list(REQUIRED_COLUMNS)}"
+                               f" (+ optional vx, vy)")
+    return df.reset_index(drop=True)
+
+
+def _numbers(path: Path, df: pd.DataFrame, columns: tuple[str, ...]) -> np.ndarray:
+    """(N, len(columns)) float64 of the given columns; error naming the first non-numeric / non-finite field."""
+    try:
+        arr = df[list(columns)].to_numpy(dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputFormatError(f"{path}: columns {list(columns)} must be numeric ({exc})") from exc
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise InputFormatError(f"{path}: row {i} (log {df['log_id'].iat[i]}, timestamp_ns {df['timestamp_ns'].iat[i]}):"
+                               f" field '{columns[j]}' is {arr[i, j]}; a finite number is required")
+    return arr
+
+
+def _check_values(path: Path, df: pd.DataFrame, num: np.ndarray) -> None:
+    """Sizes positive, quaternions unit, scores in [0, 1], categories known."""
+    def fail(mask: np.ndarray, field: str, expect: str, value) -> None:
+        i = int(np.argmax(mask))
+        raise InputFormatError(f"{path}: row {i} (log {df['log_id'].iat[i]}, timestamp_ns {df['timestamp_ns'].iat[i]})"
+                               f": field '{field}' {expect}, got {value(i)}")
+
+    size = num[:, 3:6]
+    if (size <= 0).any():
+        fail((size <= 0).any(axis=1), "length_m/width_m/height_m", "must be positive metres", lambda i: size[i].tolist())
+    norm = np.linalg.norm(num[:, 6:10], axis=1)
+    if (np.abs(norm - 1.0) > QUATERNION_TOLERANCE).any():
+        fail(np.abs(norm - 1.0) > QUATERNION_TOLERANCE, "qw/qx/qy/qz", "must be a unit quaternion",
+             lambda i: f"norm {norm[i]:.4f}")
+    score = num[:, 10]
+    if ((score < 0) | (score > 1)).any():
+        fail((score < 0) | (score > 1), "score", "must be in [0, 1]", lambda i: score[i])
+    cats = df["category"].astype(str).to_numpy()
+    unknown = ~np.isin(cats, list(KNOWN_CATEGORIES))
+    if unknown.any():
+        fail(unknown, "category", "must be an AV2 category (e.g. REGULAR_VEHICLE)", lambda i: repr(cats[i]))
+
+
+def _timestamps(path: Path, df: pd.DataFrame) -> np.ndarray:
+    """(N,) int64 ``timestamp_ns``; error when a value is not an integer."""
+    ts = pd.to_numeric(df["timestamp_ns"], errors="coerce").to_numpy()
+    bad = ~np.isfinite(ts.astype(np.float64)) | (ts.astype(np.float64) != np.round(ts.astype(np.float64)))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise InputFormatError(f"{path}: row {i}: field 'timestamp_ns' must be an integer (nanoseconds), got "
+                               f"{df['timestamp_ns'].iat[i]!r}")
+    return df["timestamp_ns"].to_numpy().astype(np.int64)
+
+
+def load_detections(path: str | Path, root: str | Path, split: str, scenes: list[Scene],
+                    vocab: Vocabulary) -> tuple[dict[str, BoxSet], DetectionStats]:
+    """Detections of every frame of ``scenes`` as canonical city-frame box sets, and what was dropped.
+
+    ``root``/``split``: the AV2 dataset the scenes come from (ego poses are read per log). Labels index
+    ``vocab``; the boxes are ``(N, 9) [x, y, z, w, l, h, yaw, vx, vy]`` in the city frame (metres, radians, m/s).
+    """
+    path = Path(path)
+    df = read_detection_table(path)
+    num = _numbers(path, df, NUMERIC_COLUMNS)
+    has_vel = all(c in df.columns for c in VELOCITY_COLUMNS)
+    vel = _numbers(path, df, VELOCITY_COLUMNS) if has_vel else np.zeros((len(df), 2))
+    _check_values(path, df, num)
+    ts = _timestamps(path, df)
+    logs = df["log_id"].astype(str).to_numpy()
+    known = {s.name for s in scenes}
+    unknown = sorted(set(logs) - known)
+    if unknown:
+        raise InputFormatError(f"{path}: field 'log_id' has {len(unknown)} log(s) that are not logs of split "
+                               f"'{split}' under {root} (first: {unknown[0]}); expected one of the {len(known)} "
+                               f"logs being tracked")
+    stats = DetectionStats(rows=len(df))
+    labels = vocab.labels(df["category"].astype(str).to_numpy())
+    stats.other_category = int((labels < 0).sum())
+    out: dict[str, BoxSet] = {}
+    ddir = split_dir(root, split)
+    for scene in scenes:
+        rows = np.flatnonzero(logs == scene.name)
+        out.update(_log_boxes(path, ddir / scene.name, scene, rows, ts, num, vel, labels, stats))
+    return out, stats
+
+
+def _log_boxes(path: Path, log_dir: Path, scene: Scene, rows: np.ndarray, ts: np.ndarray, num: np.ndarray,
+               vel: np.ndarray, labels: np.ndarray, stats: DetectionStats) -> dict[str, BoxSet]:
+    """The frames of one log: pose check, ego -> city, binning to the tracked frames."""
+    poses = read_poses(log_dir)
+    prow = poses.index(ts[rows])
+    if (prow < 0).any():
+        i = int(rows[np.argmax(prow < 0)])
+        raise InputFormatError(f"{path}: row {i} (log {scene.name}): field 'timestamp_ns' {ts[i]} is not a sweep "
+                               f"time of this log (no ego pose at it in {log_dir}/city_SE3_egovehicle.feather)")
+    frame_ts = np.array([token_timestamp_ns(f.token) for f in scene.frames], dtype=np.int64)
+    fidx = np.searchsorted(frame_ts, ts[rows]).clip(0, max(len(frame_ts) - 1, 0))
+    on_frame = (frame_ts[fidx] == ts[rows]) if len(frame_ts) else np.zeros(len(rows), dtype=bool)
+    stats.off_frame += int((~on_frame).sum())
+    keep = on_frame & (labels[rows] >= 0)
+    r, f, p = rows[keep], fidx[keep], prow[keep]
+    stats.kept += len(r)
+    centre, yaw, v = ego_to_city(poses, p, num[r, 0:3], num[r, 6:10], vel[r])
+    boxes = np.column_stack([centre, num[r][:, [4, 3, 5]], yaw, v])
+    order = np.argsort(f, kind="stable")
+    starts = np.searchsorted(f[order], np.arange(len(frame_ts)), side="left")
+    stops = np.searchsorted(f[order], np.arange(len(frame_ts)), side="right")
+    return {fr.token: BoxSet(boxes[order[a:b]], num[r[order[a:b]], 10], labels[r[order[a:b]]])
+            for fr, a, b in zip(scene.frames, starts, stops)}

@@ -1,0 +1,397 @@
+"""Argoverse 2 end to end on the two real val logs of ../shared/data/av2: adapter, LT3D detection converter,
+tracking-challenge pickle + feather, the official AV2 tracking evaluation (HOTA), the Table I baselines.
+
+There are no real AV2 detections in the fixture. Detections here are made from the annotations: the oracle
+(annotations as detections, score 1) and SIMULATED detections sampled by grutrack.data.detection_sim (the
+"centerpoint" detector profile: noise, misses, duplicates, false positives) at 2 Hz. The simulated numbers
+compare trackers on the same input; they are not LT3D results and not comparable to the paper's Table I.
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.spatial.transform import Rotation
+
+from grutrack.cli import main
+from grutrack.data import av2
+from grutrack.data.lt3d_detections import load_detections
+from grutrack.data.scene import BoxSet, Frame, Scene
+from grutrack.errors import DatasetError, InputFormatError
+from grutrack.evaluation.av2_eval import default_workers, evaluate_sequences, metrics_from_result
+from grutrack.export.av2_tracks import (build_sequences, expected_frames, gt_sequences, read_tracks_pickle,
+                                        sequences_to_table, table_to_sequences, validate_sequences)
+from grutrack.tracking.baselines import greedy_association
+from grutrack.tracking.factory import build_tracker
+from grutrack.tracking.tracker import track_scenes
+
+LOG_A = "7fab2350-7eaf-3b7e-a39d-6937a4c1bede"
+LOG_B = "adcf7d18-0510-35b0-a2fa-b4cea13a6d76"
+#: detection-simulator class standing in for each Table I class (one-to-one, so the class comes back exactly)
+SIM_CLASS = {"REGULAR_VEHICLE": "car", "PEDESTRIAN": "pedestrian", "BICYCLE": "bicycle",
+             "LARGE_VEHICLE": "construction_vehicle", "BUS": "bus", "BOX_TRUCK": "truck", "TRUCK": "trailer"}
+
+
+# ------------------------------------------------------------------------------------------------------------
+# helpers
+# ------------------------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def scenes(av2_root):
+    """The two val logs at 2 Hz with Table I ground truth."""
+    return av2.load_scenes(av2_root, "val", with_gt=True)
+
+
+def lt3d_table(scenes: list[Scene], boxsets: dict[str, BoxSet], vocab: av2.Vocabulary) -> pd.DataFrame:
+    """City-frame canonical boxes written back as an LT3D detection table (ego frame of each sweep)."""
+    parts = []
+    for s in scenes:
+        for f in s.frames:
+            b = boxsets.get(f.token)
+            if b is None or len(b) == 0:
+                continue
+            R = av2.quat_to_matrix(f.ego_rotation)[0]
+            centre = (b.boxes[:, 0:3] - f.ego_translation) @ R
+            rz = Rotation.from_euler("z", b.boxes[:, 6, None]).as_matrix()
+            q = Rotation.from_matrix(R.T[None] @ rz).as_quat()  # x, y, z, w
+            v = np.column_stack([b.boxes[:, 7:9], np.zeros(len(b))]) @ R
+            parts.append(pd.DataFrame({
+                "tx_m": centre[:, 0], "ty_m": centre[:, 1], "tz_m": centre[:, 2],
+                "length_m": b.boxes[:, 4], "width_m": b.boxes[:, 3], "height_m": b.boxes[:, 5],
+                "qw": q[:, 3], "qx": q[:, 0], "qy": q[:, 1], "qz": q[:, 2], "vx": v[:, 0], "vy": v[:, 1],
+                "score": b.scores, "log_id": s.name, "timestamp_ns": av2.token_timestamp_ns(f.token),
+                "category": np.asarray(vocab.names, dtype=object)[b.labels]}))
+    return pd.concat(parts, ignore_index=True)
+
+
+def simulated_boxsets(scenes: list[Scene], vocab: av2.Vocabulary, seed: int = 0) -> dict[str, BoxSet]:
+    """SIMULATED detections of every frame from its ground truth (grutrack.data.detection_sim, centerpoint)."""
+    from grutrack.data.detection_sim import GTFrame, load_profile, simulate
+
+    to_sim = np.array([SIM_CLASS[n] for n in vocab.names], dtype=object)
+    back = {v: vocab.names.index(k) for k, v in SIM_CLASS.items()}
+    frames = [GTFrame(token=f.token, scene=s.name, timestamp=f.timestamp, ego_translation=f.ego_translation,
+                      boxes=f.gt.boxes, names=to_sim[f.gt.labels], num_lidar_pts=f.gt.extra["num_pts"],
+                      num_radar_pts=np.zeros(len(f.gt), np.int64), instance_ids=f.gt.ids)
+              for s in scenes for f in s.frames]
+    out = {}
+    for det in simulate(frames, load_profile("centerpoint"), seed):
+        lab = np.array([back.get(n, -1) for n in det.names], dtype=np.int64)
+        keep = lab >= 0
+        out[det.token] = BoxSet(det.boxes[keep], det.scores[keep], lab[keep])
+    return out
+
+
+def _track(root, dets, out, tracker="ekf", *extra) -> None:
+    assert main(["track", "--dataset", "av2", "--dataroot", str(root), "--split", "val", "--detections", str(dets),
+                 "--tracker", tracker, "--out", str(out), "--no-progress", *extra]) == 0
+
+
+def _evaluate(root, sub, out) -> dict:
+    assert main(["evaluate", "--dataset", "av2", "--dataroot", str(root), "--split", "val", "--submission",
+                 str(sub), "--out", str(out)]) == 0
+    return json.loads(out.read_text())
+
+
+# ------------------------------------------------------------------------------------------------------------
+# adapter
+# ------------------------------------------------------------------------------------------------------------
+
+def test_category_lists_match_av2():
+    from av2.datasets.sensor.constants import AnnotationCategories
+    from av2.evaluation import SensorCompetitionCategories
+
+    assert av2.COMPETITION_CATEGORIES == tuple(c.value for c in SensorCompetitionCategories)
+    assert set(av2.COMPETITION_CATEGORIES + av2.OTHER_ANNOTATION_CATEGORIES) == {c.value for c in AnnotationCategories}
+    assert set(av2.PARAM_CLASS) == set(av2.COMPETITION_CATEGORIES)
+    v = av2.vocabulary()
+    assert v.names == av2.TABLE_I_CLASSES
+    assert v.param_classes == ("car", "pedestrian", "bicycle", "truck", "bus", "truck", "truck")
+
+
+def test_scenes_city_frame_and_rate(av2_root, scenes):
+    assert [s.name for s in scenes] == [LOG_A, LOG_B] and [len(s) for s in scenes] == [32, 32]
+    full = av2.load_scenes(av2_root, "val", rate_hz=None, log_ids=[LOG_A])[0]
+    assert len(full) == 156
+    ts = np.array([av2.token_timestamp_ns(f.token) for f in scenes[0].frames])
+    assert np.allclose(np.diff(ts) * 1e-9, 0.5, atol=0.01)  # 2 Hz
+    assert [f.token for f in scenes[0].frames] == [f.token for f in full.frames[::5]]
+    assert scenes[0].frames[3].timestamp == ts[3] // 1000  # canonical frames are in microseconds
+    # one box against an independent transform of the raw tables (scipy rotations)
+    ann = pd.read_feather(av2_root / "val" / LOG_A / "annotations.feather")
+    poses = pd.read_feather(av2_root / "val" / LOG_A / "city_SE3_egovehicle.feather").set_index("timestamp_ns")
+    f = scenes[0].frames[7]
+    row = ann[(ann.timestamp_ns == ts[7]) & (ann.track_uuid == f.gt.ids[0])].iloc[0]
+    pose = poses.loc[ts[7]]
+    r_ego = Rotation.from_quat([pose.qx, pose.qy, pose.qz, pose.qw])
+    centre = r_ego.apply([row.tx_m, row.ty_m, row.tz_m]) + [pose.tx_m, pose.ty_m, pose.tz_m]
+    heading = (r_ego * Rotation.from_quat([row.qx, row.qy, row.qz, row.qw])).apply([1.0, 0, 0])
+    assert np.allclose(f.gt.boxes[0, 0:3], centre, atol=1e-6)
+    assert np.allclose(f.gt.boxes[0, 3:6], [row.width_m, row.length_m, row.height_m])
+    assert np.isclose(f.gt.boxes[0, 6], np.arctan2(heading[1], heading[0]), atol=1e-9)
+    # velocities are plausible and the parked / moving split is there
+    speeds = np.concatenate([np.hypot(*fr.gt.boxes[:, 7:9].T) for s in scenes for fr in s.frames])
+    assert speeds.max() < 30 and (speeds < 0.2).mean() > 0.2 and (speeds > 2).mean() > 0.05
+    assert set(np.concatenate([fr.gt.labels for s in scenes for fr in s.frames])) == set(range(7))
+
+
+def test_empty_and_missing_logs(av2_root, tmp_path):
+    root = tmp_path / "sensor"
+    log = root / "val" / "0000-empty"
+    log.mkdir(parents=True)
+    (root / "val" / LOG_A).symlink_to(av2_root / "val" / LOG_A)
+    pd.read_feather(av2_root / "val" / LOG_A / "city_SE3_egovehicle.feather").to_feather(log / "city_SE3_egovehicle.feather")
+    pd.read_feather(av2_root / "val" / LOG_A / "annotations.feather").iloc[:0].to_feather(log / "annotations.feather")
+    with pytest.raises(DatasetError, match="0000-empty: cannot determine its frames: its annotations.feather has no rows"):
+        av2.load_scenes(root, "val")
+    assert main(["track", "--dataset", "av2", "--dataroot", str(root), "--split", "val", "--detections",
+                 str(tmp_path / "none.feather"), "--out", str(tmp_path / "o.pkl"), "--no-progress"]) == 2
+    with pytest.raises(DatasetError, match="no split folder 'test'"):
+        av2.load_scenes(av2_root, "test")
+    with pytest.raises(DatasetError, match="not in"):
+        av2.load_scenes(av2_root, "val", log_ids=["nope"])
+
+
+# ------------------------------------------------------------------------------------------------------------
+# detections
+# ------------------------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def oracle_table(scenes):
+    return lt3d_table(scenes, {f.token: f.gt for s in scenes for f in s.frames}, av2.vocabulary())
+
+
+def test_lt3d_roundtrip_and_drop_policy(av2_root, scenes, oracle_table, tmp_path):
+    # an extra detection at a 10 Hz sweep that is not a tracked frame, and one of an untracked category
+    full = av2.load_scenes(av2_root, "val", rate_hz=None, log_ids=[LOG_A])[0]
+    extra = oracle_table.iloc[[0, 1]].copy()
+    extra["timestamp_ns"] = [av2.token_timestamp_ns(full.frames[1].token), extra["timestamp_ns"].iat[1]]
+    extra["category"] = ["REGULAR_VEHICLE", "BOLLARD"]
+    path = tmp_path / "d.csv"
+    pd.concat([oracle_table, extra], ignore_index=True).to_csv(path, index=False)
+    dets, stats = load_detections(path, av2_root, "val", scenes, av2.vocabulary())
+    assert (stats.rows, stats.kept, stats.off_frame, stats.other_category) == (len(oracle_table) + 2,
+                                                                                len(oracle_table), 1, 1)
+    for s in scenes:
+        for f in s.frames[::7]:
+            d = dets[f.token]
+            assert np.allclose(d.boxes[:, :7], f.gt.boxes[:, :7], atol=1e-6) and (d.labels == f.gt.labels).all()
+            # velocity travels as (vx, vy) in ego axes: the ego's small pitch / roll loses its vertical part
+            assert np.allclose(d.boxes[:, 7:9], f.gt.boxes[:, 7:9], rtol=1e-2, atol=1e-3)
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda d: d.__setitem__("log_id", d["log_id"].where(d.index != 5, "00000000-not-a-log")),
+     "field 'log_id' has 1 log.*00000000-not-a-log"),
+    (lambda d: d.__setitem__("timestamp_ns", d["timestamp_ns"].where(d.index != 5, 123)),
+     "row 5 .*field 'timestamp_ns' 123 is not a sweep time"),
+    (lambda d: d.__setitem__("tx_m", d["tx_m"].where(d.index != 5, np.nan)), "row 5 .*field 'tx_m' is nan"),
+    (lambda d: d.__setitem__("qw", d["qw"].where(d.index != 5, 3.0)), "row 5 .*'qw/qx/qy/qz' must be a unit quaternion"),
+    (lambda d: d.__setitem__("score", d["score"].where(d.index != 5, 1.5)), "row 5 .*'score' must be in \\[0, 1\\]"),
+    (lambda d: d.__setitem__("category", d["category"].where(d.index != 5, "CAR")), "row 5 .*'category' must be an AV2"),
+    (lambda d: d.drop(columns=["height_m"], inplace=True), "missing column\\(s\\) \\['height_m'\\]"),
+])
+def test_lt3d_bad_input(av2_root, scenes, oracle_table, tmp_path, mutate, message):
+    d = oracle_table.copy()
+    mutate(d)
+    path = tmp_path / "bad.feather"
+    d.to_feather(path)
+    with pytest.raises(InputFormatError, match=message) as err:
+        load_detections(path, av2_root, "val", scenes, av2.vocabulary())
+    assert str(path) in str(err.value)
+
+
+def test_lt3d_pickle_and_empty_file(av2_root, scenes, oracle_table, tmp_path):
+    oracle_table.to_pickle(tmp_path / "d.pkl")
+    dets, _ = load_detections(tmp_path / "d.pkl", av2_root, "val", scenes, av2.vocabulary())
+    assert sum(len(b) for b in dets.values()) == len(oracle_table)
+    oracle_table.iloc[:0].to_feather(tmp_path / "e.feather")
+    dets, stats = load_detections(tmp_path / "e.feather", av2_root, "val", scenes, av2.vocabulary())
+    assert stats.rows == 0 and len(dets) == 64 and all(len(b) == 0 for b in dets.values())
+
+
+# ------------------------------------------------------------------------------------------------------------
+# export
+# ------------------------------------------------------------------------------------------------------------
+
+def test_pickle_layout_and_validation(scenes):
+    vocab = av2.vocabulary()
+    res = {f.token: BoxSet(f.gt.boxes, np.full(len(f.gt), 0.5), f.gt.labels, np.arange(len(f.gt)))
+           for s in scenes for f in s.frames}
+    seqs = build_sequences(scenes, res, vocab)
+    exp = expected_frames(scenes)
+    validate_sequences(seqs, exp)
+    fr = seqs[LOG_B][4]
+    n = len(fr["track_id"])
+    assert fr["seq_id"] == LOG_B and fr["timestamp_ns"] == exp[LOG_B][4]
+    assert fr["translation_m"].shape == (n, 3) and fr["size"].shape == (n, 3) and fr["velocity_m_per_s"].shape == (n, 3)
+    assert isinstance(fr["ego_translation_m"], list) and fr["track_id"].dtype == np.int64
+    assert set(fr["name"]) <= set(av2.TABLE_I_CLASSES)
+    assert [av2.COMPETITION_CATEGORIES[i] for i in fr["label"]] == list(fr["name"])
+    bad = {k: v for k, v in seqs.items()}
+    bad[LOG_A] = seqs[LOG_A][:-1]
+    with pytest.raises(InputFormatError, match=f"log {LOG_A}: frames must be exactly the 32 label frames"):
+        validate_sequences(bad, exp, "sub.pkl")
+    with pytest.raises(InputFormatError, match="logs must be exactly"):
+        validate_sequences({LOG_A: seqs[LOG_A]}, exp)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# tracking baselines
+# ------------------------------------------------------------------------------------------------------------
+
+def test_greedy_association_score_order_gate_and_labels():
+    def dets(xy, scores, labels):
+        b = np.zeros((len(xy), 9))
+        b[:, 0:2], b[:, 3:6] = xy, 1.0
+        return BoxSet(b, np.array(scores, float), np.array(labels))
+
+    assoc = greedy_association(np.array([2.0, 5.0]))
+    trk = np.zeros((2, 9))
+    trk[:, 0] = [0.0, 3.0]
+    # both detections are nearest to track 0; the higher score takes it, the other takes track 1 (within 5 m)
+    m = assoc(dets([[0.5, 0], [0.2, 0]], [0.3, 0.9], [1, 1]), trk, np.array([1, 1]), 0.5)
+    assert sorted(zip(m.dets.tolist(), m.tracks.tolist())) == [(0, 1), (1, 0)]
+    m = assoc(dets([[0.5, 0], [0.2, 0]], [0.3, 0.9], [0, 0]), trk, np.array([0, 0]), 0.5)
+    assert m.dets.tolist() == [1] and m.unmatched_dets.tolist() == [0]  # 2 m gate for label 0
+    m = assoc(dets([[0.0, 0]], [0.9], [0]), trk, np.array([1, 1]), 0.5)
+    assert len(m.dets) == 0  # different labels never match
+    # velocity compensation: a detection 5 m ahead moving at 10 m/s was at the track 0.5 s ago
+    d = dets([[5.0, 0]], [0.9], [0])
+    d.boxes[0, 7] = 10.0
+    assert assoc(d, trk[:1], np.array([0]), 0.5).dets.tolist() == [0]
+
+
+def test_ab3dmot_min_hits_and_zero_velocity_start():
+    t = build_tracker("ab3dmot")
+    frames = [Frame(f"f{i}", 1_000_000 + 500_000 * i, np.zeros(3), np.array([1.0, 0, 0, 0])) for i in range(6)]
+    box = lambda x: np.array([[x, 0, 0.8, 1.8, 4.5, 1.6, 0, 9.0, 0]])  # noqa: E731  (detector says 9 m/s)
+    dets = {f"f{i}": BoxSet(box(2.0 * i), [0.9], [2]) for i in range(6)}
+    dets["f4"] = BoxSet(np.zeros((0, 9)), [], [])
+    scene = Scene("s", "s", frames)
+    run = track_scenes(t, [scene], dets)
+    # written in the first 3 frames of a scene (AB3DMOT frame_count <= min_hits), then from the 3rd hit on
+    assert [len(run.results[f"f{i}"]) for i in range(6)] == [1, 1, 1, 1, 1, 1]
+    assert abs(t.groups[0].backend.boxes(t.groups[0].state)[0, 7] - 4.0) < 1.0  # velocity from positions (4 m/s)
+    # a new track born late is hidden until its third hit
+    t.reset()
+    late = {f"f{i}": BoxSet(box(2.0 * i) if i >= 3 else np.zeros((0, 9)), [0.9] * (i >= 3), [2] * (i >= 3))
+            for i in range(6)}
+    run = track_scenes(t, [scene], late)
+    assert [len(run.results[f"f{i}"]) for i in range(6)] == [0, 0, 0, 0, 0, 1]
+
+
+# ------------------------------------------------------------------------------------------------------------
+# official evaluation end to end
+# ------------------------------------------------------------------------------------------------------------
+
+def _preset_without_nms(tmp_path):
+    from grutrack.tracking.config import PRESET_DIR
+
+    text = (PRESET_DIR / "ekf.yaml").read_text()
+    assert "nms_threshold: 0.08" in text
+    path = tmp_path / "ekf_no_nms.yaml"
+    path.write_text(text.replace("nms_threshold: 0.08", "nms_threshold: 1.0"))
+    return path
+
+
+def test_oracle_hota_pickle_feather_and_metrics(av2_root, scenes, oracle_table, tmp_path):
+    # the ekf tracker with its NMS off: annotations may overlap (33 of them by more than Poly-MOT's BEV IoU 0.08
+    # NMS threshold, which would drop them); everything else is the default preset
+    oracle_table.to_feather(tmp_path / "gt_dets.feather")
+    sub = tmp_path / "sub.pkl"
+    _track(av2_root, tmp_path / "gt_dets.feather", sub, "ekf", "--config", str(_preset_without_nms(tmp_path)))
+    seqs = read_tracks_pickle(sub)
+    labels = gt_sequences(av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True),
+                          av2.vocabulary(all_categories=True))
+    assert list(seqs) == list(labels)
+    assert [[f["timestamp_ns"] for f in fs] for fs in seqs.values()] == \
+           [[f["timestamp_ns"] for f in fs] for fs in labels.values()]
+    # the feather table holds the same tracks
+    table = pd.read_feather(sub.with_suffix(".feather"))
+    assert len(table) == sum(len(f["track_id"]) for fs in seqs.values() for f in fs)
+    back = table_to_sequences(table, expected_frames(scenes))
+    for log in seqs:
+        for a, b in zip(seqs[log], back[log]):
+            for key in ("track_id", "translation_m", "size", "velocity_m_per_s", "label", "name", "score"):
+                np.testing.assert_allclose(a[key], b[key]) if a[key].dtype.kind == "f" else \
+                    np.testing.assert_array_equal(a[key], b[key])
+            np.testing.assert_allclose(np.cos(a["yaw"] - b["yaw"]), 1.0, atol=1e-12)
+    pd.testing.assert_frame_equal(sequences_to_table(back), table)
+    # the official evaluator's own loader reads the leaderboard file
+    from av2.evaluation.tracking import utils as official_utils
+
+    assert official_utils.load(str(sub)).keys() == seqs.keys()
+    m = _evaluate(av2_root, sub, tmp_path / "metrics.json")
+    assert m["dataset"] == "av2" and m["split"] == "val" and set(m) >= {"evaluator", "overall", "per_class"}
+    assert set(m["per_class"]) == set(av2.COMPETITION_CATEGORIES)
+    present = m["overall"]["present_classes"]
+    assert len(present) >= 5
+    for c in present:
+        assert m["per_class"][c]["hota"] >= 0.99, (c, m["per_class"][c])
+    absent = [c for c in av2.TABLE_I_CLASSES if c not in present]
+    assert all(m["per_class"][c]["hota"] == 0.0 for c in absent)
+    assert np.isclose(m["overall"]["hota"], np.mean([m["per_class"][c]["hota"] for c in av2.TABLE_I_CLASSES]))
+    assert m["settings"]["drivable_area_roi"] and m["settings"]["max_range_m"] == 50
+    assert m["settings"]["workers"] == default_workers()
+
+
+def test_simulated_detections_table(av2_root, scenes, tmp_path, capsys):
+    vocab = av2.vocabulary()
+    table = lt3d_table(scenes, simulated_boxsets(scenes, vocab, seed=0), vocab)
+    table.to_feather(tmp_path / "sim.feather")
+    results = {}
+    for tracker in ("greedy", "ab3dmot", "ekf"):
+        sub = tmp_path / f"{tracker}.pkl"
+        _track(av2_root, tmp_path / "sim.feather", sub, tracker)
+        results[tracker] = _evaluate(av2_root, sub, tmp_path / f"{tracker}.json")
+    lines = ["SIMULATED detections (grutrack.data.detection_sim, centerpoint profile, seed 0) on the 2 AV2 val "
+             "logs at 2 Hz; official AV2 HOTA",
+             f"{'tracker':<9}" + "".join(f"{c[:10]:>11}" for c in av2.TABLE_I_CLASSES) + f"{'AVG(7)':>9}"]
+    for tracker, m in results.items():
+        lines.append(f"{tracker:<9}" + "".join(f"{m['per_class'][c]['hota']:>11.3f}" for c in av2.TABLE_I_CLASSES)
+                     + f"{m['overall']['hota']:>9.3f}")
+    with capsys.disabled():
+        print("\n" + "\n".join(lines))
+    (tmp_path / "table.txt").write_text("\n".join(lines))
+    assert results["ekf"]["overall"]["hota"] >= results["ab3dmot"]["overall"]["hota"]
+    for m in results.values():
+        assert 0.2 < m["overall"]["hota_present"] < 1.0
+
+
+def test_frames_without_detections_never_trip_the_evaluator(av2_root, scenes, oracle_table, tmp_path):
+    # log B has no detection at all; log A has none in frames 5-12
+    ts_a = [av2.token_timestamp_ns(f.token) for f in scenes[0].frames]
+    keep = (oracle_table["log_id"] == LOG_A) & ~oracle_table["timestamp_ns"].isin(ts_a[5:13])
+    oracle_table[keep].reset_index(drop=True).to_feather(tmp_path / "holes.feather")
+    sub = tmp_path / "holes.pkl"
+    _track(av2_root, tmp_path / "holes.feather", sub, "greedy")
+    seqs = read_tracks_pickle(sub)
+    assert [len(f["track_id"]) for f in seqs[LOG_B]] == [0] * 32
+    assert all(len(f["track_id"]) == 0 for f in seqs[LOG_A][5:13])  # greedy writes matched tracks only
+    assert all(f["translation_m"].shape == (0, 3) for f in seqs[LOG_B])
+    labels = gt_sequences(av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True),
+                          av2.vocabulary(all_categories=True))
+    out = evaluate_sequences(seqs, labels, None, workers=1)  # in-process, no ROI
+    _, per_class = metrics_from_result(out)
+    assert 0.2 < per_class["REGULAR_VEHICLE"]["hota"] < 0.9
+    # a submission that lacks a frame is refused before the official evaluator's assertion
+    seqs[LOG_A] = seqs[LOG_A][1:]
+    with open(tmp_path / "short.pkl", "wb") as fh:
+        pickle.dump(seqs, fh)
+    assert main(["evaluate", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--submission",
+                 str(tmp_path / "short.pkl"), "--out", str(tmp_path / "m.json")]) == 2
+    assert not (tmp_path / "m.json").exists()
+
+
+def test_cli_dataset_options(av2_root, tmp_path, capsys):
+    assert main(["track", "--dataroot", str(av2_root), "--split", "val", "--detections", "x.json",
+                 "--out", str(tmp_path / "o.json")]) == 2
+    assert "--version is required with --dataset nuscenes" in capsys.readouterr().err
+    assert main(["evaluate", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--submission",
+                 "x.pkl", "--out", str(tmp_path / "m.json"), "--evaluator", "fast"]) == 2
+    assert "AV2 has the official evaluator only" in capsys.readouterr().err
