@@ -289,22 +289,28 @@ def test_ab3dmot_min_hits_and_zero_velocity_start():
 # official evaluation end to end
 # ------------------------------------------------------------------------------------------------------------
 
-def _preset_without_nms(tmp_path):
-    from grutrack.tracking.config import PRESET_DIR
-
-    text = (PRESET_DIR / "ekf.yaml").read_text()
-    assert "nms_threshold: 0.08" in text
-    path = tmp_path / "ekf_no_nms.yaml"
-    path.write_text(text.replace("nms_threshold: 0.08", "nms_threshold: 1.0"))
-    return path
+def duplicated_tracks(scenes: list[Scene], radius_m: float = 0.2) -> set[str]:
+    """Track uuids annotated twice: the second uuid of every same-class pair whose centres are within
+    ``radius_m`` in every frame where both exist (one such pair in log 7fab2350: a REGULAR_VEHICLE with two
+    track_uuids through all 32 frames). No tracker can keep such twins apart, so the oracle loses AssA there."""
+    close, seen = {}, {}
+    for s in scenes:
+        for f in s.frames:
+            b = f.gt.boxes
+            d = np.hypot(b[:, None, 0] - b[None, :, 0], b[:, None, 1] - b[None, :, 1])
+            i, j = np.nonzero(np.triu((d < radius_m) & (f.gt.labels[:, None] == f.gt.labels[None, :]), 1))
+            for u, v in zip(f.gt.ids[i], f.gt.ids[j]):
+                close[(u, v)] = close.get((u, v), 0) + 1
+            for u in f.gt.ids:
+                seen[u] = seen.get(u, 0) + 1
+    return {v for (u, v), n in close.items() if n == min(seen[u], seen[v])}
 
 
 def test_oracle_hota_pickle_feather_and_metrics(av2_root, scenes, oracle_table, tmp_path):
-    # the ekf tracker with its NMS off: annotations may overlap (33 of them by more than Poly-MOT's BEV IoU 0.08
-    # NMS threshold, which would drop them); everything else is the default preset
+    # the default ekf tracker on the annotations (score 1), through the CLI, official evaluator
     oracle_table.to_feather(tmp_path / "gt_dets.feather")
     sub = tmp_path / "sub.pkl"
-    _track(av2_root, tmp_path / "gt_dets.feather", sub, "ekf", "--config", str(_preset_without_nms(tmp_path)))
+    _track(av2_root, tmp_path / "gt_dets.feather", sub, "ekf")
     seqs = read_tracks_pickle(sub)
     labels = gt_sequences(av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True),
                           av2.vocabulary(all_categories=True))
@@ -331,13 +337,32 @@ def test_oracle_hota_pickle_feather_and_metrics(av2_root, scenes, oracle_table, 
     assert set(m["per_class"]) == set(av2.COMPETITION_CATEGORIES)
     present = m["overall"]["present_classes"]
     assert len(present) >= 5
-    for c in present:
-        assert m["per_class"][c]["hota"] >= 0.99, (c, m["per_class"][c])
+    for c in present:  # REGULAR_VEHICLE: the doubly annotated car, see duplicated_tracks and the next test
+        assert m["per_class"][c]["hota"] >= (0.98 if c == "REGULAR_VEHICLE" else 0.99), (c, m["per_class"][c])
     absent = [c for c in av2.TABLE_I_CLASSES if c not in present]
     assert all(m["per_class"][c]["hota"] == 0.0 for c in absent)
     assert np.isclose(m["overall"]["hota"], np.mean([m["per_class"][c]["hota"] for c in av2.TABLE_I_CLASSES]))
     assert m["settings"]["drivable_area_roi"] and m["settings"]["max_range_m"] == 50
     assert m["settings"]["workers"] == default_workers()
+
+
+def test_oracle_without_the_doubly_annotated_car(av2_root, scenes):
+    twins = duplicated_tracks(scenes)
+    assert len(twins) == 1
+    vocab, all_vocab = av2.vocabulary(), av2.vocabulary(all_categories=True)
+    gt = {f.token: f.gt.subset(~np.isin(f.gt.ids, list(twins))) for s in scenes for f in s.frames}
+    tracker = build_tracker("ekf", param_classes=vocab.param_classes)
+    run = track_scenes(tracker, scenes, gt)
+    all_scenes = av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True)
+    for s in all_scenes:
+        for f in s.frames:
+            f.gt = f.gt.subset(~np.isin(f.gt.ids, list(twins)))
+    out = evaluate_sequences(build_sequences(scenes, run.results, vocab), gt_sequences(all_scenes, all_vocab),
+                             av2_root / "val")
+    overall, per_class = metrics_from_result(out)
+    assert len(overall["present_classes"]) >= 5
+    for c in overall["present_classes"]:
+        assert per_class[c]["hota"] >= 0.99, (c, per_class[c])
 
 
 def test_simulated_detections_table(av2_root, scenes, tmp_path, capsys):

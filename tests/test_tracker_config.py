@@ -20,10 +20,24 @@ def test_ekf_preset_values():
     assert cfg.nms_threshold == 0.08 and cfg.two_stage and cfg.second_metric == "giou_bev"
     assert cfg.first_metric[1] == "giou_bev" and cfg.first_metric[2] == "giou_3d"  # bus, car
     assert cfg.max_age.tolist() == [10, 10, 15, 20, 10, 10, 20] and cfg.punish_num == 1
+    assert cfg.algorithm == "hungarian" and cfg.min_hits.tolist() == [1] * 7  # Poly-MOT's min_hit 1
+    assert cfg.max_distance.tolist() == [3.0, 5.5, 4.0, 13.0, 1.0, 3.0, 4.0]  # CenterPoint, greedy only
 
 
-def test_every_preset_key_has_a_comment():
-    text = (PRESET_DIR / "ekf.yaml").read_text().splitlines()
+def test_baseline_presets():
+    greedy, ab3dmot = load_tracker_config("greedy"), load_tracker_config("ab3dmot")
+    assert greedy.algorithm == "greedy" and not greedy.two_stage and greedy.punish_num == 0
+    assert greedy.max_distance.tolist() == [8.75, 14.0, 16.0, 13.0, 2.0, 16.0, 15.0]  # AV2 baseline gates
+    assert greedy.max_age.tolist() == [3] * 7 and greedy.nms_threshold == 1.0
+    assert ab3dmot.algorithm == "hungarian" and ab3dmot.first_metric == ("iou_3d",) * 7
+    assert ab3dmot.first_threshold.tolist() == [0.99] * 7  # IoU_min 0.01
+    assert ab3dmot.max_age.tolist() == [2] * 7 and ab3dmot.min_hits.tolist() == [3] * 7
+    assert ab3dmot.motion_config == "ab3dmot" and not ab3dmot.two_stage
+
+
+@pytest.mark.parametrize("preset", ["ekf", "polymot", "greedy", "ab3dmot"])
+def test_every_preset_key_has_a_comment(preset):
+    text = (PRESET_DIR / f"{preset}.yaml").read_text().splitlines()
     for i, line in enumerate(text):
         s = line.strip()
         if s and not s.startswith("#") and s.endswith(":") is False and ":" in s and line.startswith("  "):
@@ -39,6 +53,12 @@ def test_every_preset_key_has_a_comment():
     (lambda r: r["association"].__setitem__("second_metric", "giou"), "must be one of giou_3d"),
     (lambda r: r["motion"].__setitem__("model_override", {"car": "CTRV"}), "'motion.model_override.car' must be one of"),
     (lambda r: r["lifecycle"]["max_age"].__setitem__("bus", 2.5), "must be an integer"),
+    (lambda r: r["association"].__setitem__("algorithm", "greedyy"), "'association.algorithm' must be one of"),
+    (lambda r: r["association"].__setitem__("algorithm", "greedy"), "'association.two_stage' must be false"),
+    (lambda r: r["association"]["max_distance"].__setitem__("car", -1), "'association.max_distance.car' must be a "
+                                                                       "positive distance"),
+    (lambda r: r["lifecycle"]["min_hits"].__setitem__("car", 0), "'lifecycle.min_hits.car' must be an integer >= 1"),
+    (lambda r: r["lifecycle"].pop("min_hits"), "missing key 'lifecycle.min_hits'"),
 ])
 def test_bad_preset_keys(mutate, message):
     raw = copy.deepcopy(_raw())

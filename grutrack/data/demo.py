@@ -869,6 +869,7 @@ def generate_demo(out: str | os.PathLike, scenes: int = DEFAULT_SCENES, frames: 
     tables, splits = build_tables(scenes, frames, seed, version)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
+    os.chmod(tmp, 0o755)                                  # mkdtemp makes it private; a dataset is for reading
     try:
         (tmp / version).mkdir()
         (tmp / "maps").mkdir()

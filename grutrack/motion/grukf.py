@@ -32,6 +32,7 @@ from torch import nn
 from grutrack.motion.torch_models import make_torch_model, wrap_angle_t
 
 MEAS_DIM = 9
+MIN_SIZE = 0.05  # metres: lower bound of the posterior w, l, h
 _YAW_Z = 6
 
 
@@ -171,7 +172,9 @@ class GRUKalmanNet(nn.Module):
         delta = torch.einsum("kmn,kn->km", K.to(innov_h.dtype), innov_h)
         delta = from_heading_frame(delta, yaw, STATE_PLANAR)
         x = x_prior + delta
-        x = torch.cat([x[:, :yi], wrap_angle_t(x[:, yi:yi + 1]), x[:, yi + 1:]], 1)
+        # sizes stay physical (a learned gain can overshoot); the yaw is wrapped
+        x = torch.cat([x[:, :3], x[:, 3:6].clamp_min(MIN_SIZE), x[:, 6:yi], wrap_angle_t(x[:, yi:yi + 1]),
+                       x[:, yi + 1:]], 1)
         return x, new_hidden
 
     def config_dict(self) -> dict:

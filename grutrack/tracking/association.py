@@ -27,8 +27,8 @@ class Matches:
     unmatched_tracks: np.ndarray
 
 
-def similarity_upper_bound(a: np.ndarray, b: np.ndarray, metric: str) -> np.ndarray:
-    """A cheap upper bound of ``metric`` between aligned pairs of boxes a, b (K, 9) -> (K,).
+def similarity_upper_bounds(a: np.ndarray, b: np.ndarray, names) -> dict[str, np.ndarray]:
+    """Cheap upper bounds of the named similarities between aligned pairs of boxes a, b (K, 9) -> {name: (K,)}.
 
     When the BEV centre distance d exceeds the sum of circumradii the footprints are disjoint (IoU = 0) and
     the convex hull contains the trapezoid spanned by the inscribed discs, of area >= d (rho_a + rho_b), so
@@ -37,19 +37,24 @@ def similarity_upper_bound(a: np.ndarray, b: np.ndarray, metric: str) -> np.ndar
     skipped without computing the polygon geometry; the result is identical.
     """
     d = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1])
-    circum = 0.5 * (np.hypot(a[:, 3], a[:, 4]) + np.hypot(b[:, 3], b[:, 4]))
-    rho = 0.5 * (np.minimum(a[:, 3], a[:, 4]) + np.minimum(b[:, 3], b[:, 4]))
-    disjoint = d > circum
-    if metric.startswith("iou"):
-        return np.where(disjoint, 0.0, 1.0)
-    area = a[:, 3] * a[:, 4] + b[:, 3] * b[:, 4]
-    hull = np.maximum(d * rho, 1e-12)
-    if metric == "giou_3d":
-        vol = a[:, 3] * a[:, 4] * a[:, 5] + b[:, 3] * b[:, 4] * b[:, 5]
-        bound = vol / (hull * np.maximum(a[:, 5], b[:, 5])) - 1.0
-    else:
-        bound = area / hull - 1.0
-    return np.where(disjoint, np.minimum(bound, 1.0), 1.0)
+    disjoint = d > 0.5 * (np.hypot(a[:, 3], a[:, 4]) + np.hypot(b[:, 3], b[:, 4]))
+    hull = np.maximum(d * 0.5 * (np.minimum(a[:, 3], a[:, 4]) + np.minimum(b[:, 3], b[:, 4])), 1e-12)
+    out = {}
+    for name in names:
+        if name.startswith("iou"):
+            out[name] = np.where(disjoint, 0.0, 1.0)
+        elif name == "giou_3d":
+            vol = a[:, 3] * a[:, 4] * a[:, 5] + b[:, 3] * b[:, 4] * b[:, 5]
+            out[name] = np.where(disjoint, np.minimum(vol / (hull * np.maximum(a[:, 5], b[:, 5])) - 1.0, 1.0), 1.0)
+        else:
+            area = a[:, 3] * a[:, 4] + b[:, 3] * b[:, 4]
+            out[name] = np.where(disjoint, np.minimum(area / hull - 1.0, 1.0), 1.0)
+    return out
+
+
+def similarity_upper_bound(a: np.ndarray, b: np.ndarray, metric: str) -> np.ndarray:
+    """:func:`similarity_upper_bounds` for one metric -> (K,)."""
+    return similarity_upper_bounds(a, b, [metric])[metric]
 
 
 def hungarian(cost: np.ndarray, threshold: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -67,12 +72,12 @@ def hungarian(cost: np.ndarray, threshold: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray,
-                     trk_labels: np.ndarray, stages: list[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
+                     trk_labels: np.ndarray, stages: list[tuple[tuple[str, ...], np.ndarray]]) -> list[np.ndarray]:
     """(D, T) cost matrices, one per stage, from ONE geometry pass over the candidate pairs.
 
-    stages: per stage, (metric name per class (7,) object array, cost threshold per class (7,)).
-    A pair is a candidate of a stage when its classes agree and the similarity bound can beat that stage's
-    threshold; everything else costs ``_INVALID``.
+    stages: per stage, (metric name per class, cost threshold per class (C,)). A pair is a candidate of a
+    stage when its classes agree and the similarity bound can beat that stage's threshold; everything else
+    costs ``_INVALID``.
     """
     D, T = len(det_boxes), len(trk_boxes)
     costs = [np.full((D, T), _INVALID) for _ in stages]
@@ -80,26 +85,23 @@ def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: n
     if len(di) == 0:
         return costs
     a, b, lab = det_boxes[di], trk_boxes[ti], det_labels[di]
-    need = np.zeros((len(stages), len(di)), dtype=bool)
-    for k, (metric, thr) in enumerate(stages):
-        pm = metric[lab]
-        for name in set(pm):
-            sel = pm == name
-            need[k, sel] = similarity_upper_bound(a[sel], b[sel], name) > 1.0 - thr[lab[sel]]
-    any_need = need.any(0)
-    if not any_need.any():
+    present = np.unique(lab)
+    names = sorted({stage[0][c] for stage in stages for c in present})
+    code = {n: i for i, n in enumerate(names)}
+    codes = [np.array([code.get(m, -1) for m in metric])[lab] for metric, _ in stages]   # (K,) per stage
+    bounds = similarity_upper_bounds(a, b, names)
+    bound_of = np.stack([bounds[n] for n in names])                                     # (M, K)
+    k_idx = np.arange(len(di))
+    need = [bound_of[c, k_idx] > 1.0 - thr[lab] for c, (_, thr) in zip(codes, stages)]
+    idx = np.flatnonzero(np.any(need, axis=0))
+    if len(idx) == 0:
         return costs
-    names = {m for k, (metric, _) in enumerate(stages) for m in set(metric[lab[need[k]]])}
-    sims = geometry.paired_similarities(a[any_need], b[any_need], names)
-    idx = np.flatnonzero(any_need)
-    for k, (metric, _) in enumerate(stages):
-        pm = metric[lab[idx]]
-        val = np.full(len(idx), -np.inf)
-        for name in names:
-            sel = pm == name
-            val[sel] = sims[name][sel]
-        keep = need[k, idx]
-        costs[k][di[idx[keep]], ti[idx[keep]]] = 1.0 - val[keep]
+    sims = geometry.paired_similarities(a[idx], b[idx], names)
+    sim_of = np.stack([sims[n] for n in names])                                          # (M, len(idx))
+    cols = np.arange(len(idx))
+    for cost, c, nd in zip(costs, codes, need):
+        keep = nd[idx]
+        cost[di[idx[keep]], ti[idx[keep]]] = 1.0 - sim_of[c[idx], cols][keep]
     return costs
 
 
@@ -113,9 +115,9 @@ def associate(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarr
     """
     d_all = np.arange(len(det_boxes), dtype=np.int64)
     t_all = np.arange(len(trk_boxes), dtype=np.int64)
-    stages = [(np.asarray(first_metric, dtype=object), first_threshold)]
+    stages = [(tuple(first_metric), first_threshold)]
     if two_stage:
-        stages.append((np.full(len(first_metric), second_metric, dtype=object), second_threshold))
+        stages.append(((second_metric,) * len(first_metric), second_threshold))
     costs = _candidate_costs(det_boxes, det_labels, trk_boxes, trk_labels, stages)
     md, mt = hungarian(costs[0], first_threshold[det_labels][:, None])
     if two_stage:
