@@ -8,7 +8,7 @@
 Reported (medians over the repeats, seconds):
   * accumulation + metrics: the devkit's ``TrackingEval.evaluate()`` vs our ``evaluate_tracks`` on the same
     loaded tracks (what the devkit reports as eval_time);
-  * loading + filtering (devkit loaders, shared by both): ``load_tracks``;
+  * loading + filtering: the devkit's loaders vs the fast exact re-implementation (``load_tracks``);
   * whole pipeline: ``TrackingEval(...).main(render_curves=False)`` (it loads NuScenes itself; that load is also
     timed on its own) vs ``fast_tracking_eval(nusc, ...)`` with a loaded NuScenes.
 The two results are compared number by number (max |difference|, NaN == NaN).
@@ -112,11 +112,14 @@ def main(argv=None) -> int:
             n_boxes = sum(len(v) for v in json.load(f)["results"].values())
         print("input: %s; %d boxes; %s %s (NuScenes load %.2fs)" % (what, n_boxes, args.version, args.split, t_nusc))
 
-        # Loading + filtering (devkit loaders; the same for both).
-        t_load, _, (tracks_gt, tracks_pred, meta) = _median_time(
-            lambda: load_tracks(nusc, sub_path, args.split, cfg), max(1, min(args.repeat, 3)))
+        # Loading + filtering: the devkit's loaders vs the fast exact re-implementation.
+        n_load = max(1, min(args.repeat, 3))
+        t_load_dev, _, (tracks_gt, tracks_pred, meta) = _median_time(
+            lambda: load_tracks(nusc, sub_path, args.split, cfg, loader="devkit"), n_load)
+        t_load_fast, _, _ = _median_time(lambda: load_tracks(nusc, sub_path, args.split, cfg, loader="fast"),
+                                         n_load)
 
-        # Accumulation + metrics.
+        # Accumulation + metrics, on the devkit-loaded tracks.
         def devkit_evaluate():
             ev = object.__new__(TrackingEval)
             ev.cfg, ev.eval_set, ev.output_dir, ev.verbose, ev.render_classes = cfg, args.split, tmp, False, None
@@ -130,7 +133,7 @@ def main(argv=None) -> int:
         diff_acc = _max_diff(dev_summary, dict(fast_metrics.serialize(), meta=meta))
 
         # Whole pipeline.
-        t_fast_whole, _, fast_summary = _median_time(
+        t_fast_whole, fast_whole_times, fast_summary = _median_time(
             lambda: fast_tracking_eval(nusc, sub_path, args.split, cfg), args.repeat)
         t_dev_whole = None
         if not args.skip_devkit_whole:
@@ -140,29 +143,34 @@ def main(argv=None) -> int:
                                       args.dataroot, verbose=False)
                     return ev.main(render_curves=False)
 
-            t_dev_whole, _, dev_whole_summary = _median_time(devkit_whole, args.repeat_devkit)
+            t_dev_whole, dev_whole_times, dev_whole_summary = _median_time(devkit_whole, args.repeat_devkit)
             diff_whole = _max_diff(dev_whole_summary, fast_summary)
 
+    def runs(times, fmt="%.2f"):
+        return ", ".join(fmt % t for t in times)
+
     print()
-    print("accumulation + metrics (median of %d devkit / %d fast runs)" % (args.repeat_devkit, args.repeat))
-    print("  devkit TrackingEval.evaluate()   %9.3f s   runs: %s" % (t_dev_acc, ", ".join("%.2f" % t for t in dev_acc_times)))
-    print("  fast evaluate_tracks()           %9.3f s   runs: %s" % (t_fast_acc, ", ".join("%.3f" % t for t in fast_acc_times)))
-    print("  ratio                            %9.1f x" % (t_dev_acc / t_fast_acc))
-    print("  max |difference| of the results  %9.3g" % diff_acc)
-    print("loading + filtering (devkit loaders, both)")
-    print("  load_tracks()                    %9.3f s" % t_load)
+    print("accumulation + metrics (same loaded tracks; median of %d devkit / %d fast runs)"
+          % (args.repeat_devkit, args.repeat))
+    print("  devkit TrackingEval.evaluate()     %9.3f s   runs: %s" % (t_dev_acc, runs(dev_acc_times)))
+    print("  fast evaluate_tracks()             %9.3f s   runs: %s" % (t_fast_acc, runs(fast_acc_times, "%.3f")))
+    print("  ratio                              %9.1f x" % (t_dev_acc / t_fast_acc))
+    print("  max |difference| of the results    %9.3g" % diff_acc)
+    print("loading + filtering (median of %d)" % n_load)
+    print("  devkit loaders (TrackingBox)       %9.3f s" % t_load_dev)
+    print("  fast exact loader                  %9.3f s   ratio %.1f x" % (t_load_fast, t_load_dev / t_load_fast))
     print("whole pipeline")
-    print("  fast_tracking_eval() (loaded nusc) %7.3f s  = loading %.3f + accumulation %.3f (approx.)"
-          % (t_fast_whole, t_load, t_fast_acc))
+    print("  fast_tracking_eval() (loaded nusc) %9.3f s   runs: %s" % (t_fast_whole, runs(fast_whole_times, "%.3f")))
+    print("    ~ loading %.3f + accumulation %.3f" % (t_load_fast, t_fast_acc))
     if t_dev_whole is not None:
-        print("  devkit TrackingEval(...).main()  %9.3f s   (includes its own NuScenes load, %.2f s here)"
-              % (t_dev_whole, t_nusc))
-        print("  ratio                            %9.1f x   (%.1f x without the devkit's NuScenes load)"
+        print("  devkit TrackingEval(...).main()    %9.3f s   runs: %s" % (t_dev_whole, runs(dev_whole_times)))
+        print("    ~ NuScenes load %.3f + loading %.3f + accumulation %.3f" % (t_nusc, t_load_dev, t_dev_acc))
+        print("  ratio                              %9.1f x   (%.1f x without the devkit's own NuScenes load)"
               % (t_dev_whole / t_fast_whole, (t_dev_whole - t_nusc) / t_fast_whole))
-        print("  max |difference| of the results  %9.3g" % diff_whole)
+        print("  max |difference| of the results    %9.3g" % diff_whole)
     else:
-        print("  devkit (loading + evaluate)      %9.3f s   ratio %.1f x"
-              % (t_load + t_dev_acc, (t_load + t_dev_acc) / t_fast_whole))
+        print("  devkit loading + evaluate()        %9.3f s   ratio %.1f x"
+              % (t_load_dev + t_dev_acc, (t_load_dev + t_dev_acc) / t_fast_whole))
     return 0
 
 

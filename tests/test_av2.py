@@ -144,9 +144,10 @@ def test_empty_and_missing_logs(av2_root, tmp_path):
     log = root / "val" / "0000-empty"
     log.mkdir(parents=True)
     (root / "val" / LOG_A).symlink_to(av2_root / "val" / LOG_A)
-    pd.read_feather(av2_root / "val" / LOG_A / "city_SE3_egovehicle.feather").to_feather(log / "city_SE3_egovehicle.feather")
-    pd.read_feather(av2_root / "val" / LOG_A / "annotations.feather").iloc[:0].to_feather(log / "annotations.feather")
-    with pytest.raises(DatasetError, match="0000-empty: cannot determine its frames: its annotations.feather has no rows"):
+    src = av2_root / "val" / LOG_A
+    pd.read_feather(src / "city_SE3_egovehicle.feather").to_feather(log / "city_SE3_egovehicle.feather")
+    pd.read_feather(src / "annotations.feather").iloc[:0].to_feather(log / "annotations.feather")
+    with pytest.raises(DatasetError, match="0000-empty: cannot determine its frames: its annotations.feather has no"):
         av2.load_scenes(root, "val")
     assert main(["track", "--dataset", "av2", "--dataroot", str(root), "--split", "val", "--detections",
                  str(tmp_path / "none.feather"), "--out", str(tmp_path / "o.pkl"), "--no-progress"]) == 2
@@ -190,9 +191,12 @@ def test_lt3d_roundtrip_and_drop_policy(av2_root, scenes, oracle_table, tmp_path
     (lambda d: d.__setitem__("timestamp_ns", d["timestamp_ns"].where(d.index != 5, 123)),
      "row 5 .*field 'timestamp_ns' 123 is not a sweep time"),
     (lambda d: d.__setitem__("tx_m", d["tx_m"].where(d.index != 5, np.nan)), "row 5 .*field 'tx_m' is nan"),
-    (lambda d: d.__setitem__("qw", d["qw"].where(d.index != 5, 3.0)), "row 5 .*'qw/qx/qy/qz' must be a unit quaternion"),
-    (lambda d: d.__setitem__("score", d["score"].where(d.index != 5, 1.5)), "row 5 .*'score' must be in \\[0, 1\\]"),
-    (lambda d: d.__setitem__("category", d["category"].where(d.index != 5, "CAR")), "row 5 .*'category' must be an AV2"),
+    (lambda d: d.__setitem__("qw", d["qw"].where(d.index != 5, 3.0)),
+     "row 5 .*'qw/qx/qy/qz' must be a unit quaternion"),
+    (lambda d: d.__setitem__("score", d["score"].where(d.index != 5, 1.5)),
+     "row 5 .*'score' must be in \\[0, 1\\]"),
+    (lambda d: d.__setitem__("category", d["category"].where(d.index != 5, "CAR")),
+     "row 5 .*'category' must be an AV2"),
     (lambda d: d.drop(columns=["height_m"], inplace=True), "missing column\\(s\\) \\['height_m'\\]"),
 ])
 def test_lt3d_bad_input(av2_root, scenes, oracle_table, tmp_path, mutate, message):
@@ -238,6 +242,20 @@ def test_pickle_layout_and_validation(scenes):
         validate_sequences(bad, exp, "sub.pkl")
     with pytest.raises(InputFormatError, match="logs must be exactly"):
         validate_sequences({LOG_A: seqs[LOG_A]}, exp)
+
+
+def test_all_categories_track_and_export(av2_root, tmp_path):
+    vocab = av2.vocabulary(all_categories=True)
+    scenes = av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True)
+    lt3d_table(scenes, {f.token: f.gt for s in scenes for f in s.frames}, vocab).to_feather(tmp_path / "d.feather")
+    dets, stats = load_detections(tmp_path / "d.feather", av2_root, "val", scenes, vocab)
+    assert stats.kept == stats.rows == sum(len(f.gt) for s in scenes for f in s.frames)
+    for name in ("ekf", "greedy", "ab3dmot"):
+        run = track_scenes(build_tracker(name, param_classes=vocab.param_classes), scenes, dets)
+        seqs = build_sequences(scenes, run.results, vocab)
+        validate_sequences(seqs, expected_frames(scenes))
+        names = {n for fs in seqs.values() for f in fs for n in f["name"]}
+        assert {"BOLLARD", "CONSTRUCTION_CONE", "REGULAR_VEHICLE"} <= names
 
 
 # ------------------------------------------------------------------------------------------------------------

@@ -71,7 +71,8 @@ def devkit_evaluate(nusc, submission, split: str, config=None, workdir: Optional
                 pred_boxes, ev.meta = load_prediction_of_sample_tokens(path, cfg.max_boxes_per_sample,
                                                                        TrackingBox, sample_tokens=tokens)
                 gt_boxes = load_gt_of_sample_tokens(nusc, tokens, TrackingBox)
-        assert set(pred_boxes.sample_tokens) == set(gt_boxes.sample_tokens)
+        if set(pred_boxes.sample_tokens) != set(gt_boxes.sample_tokens):   # TrackingEval.__init__'s assert
+            raise AssertionError("Samples in split don't match samples in predicted tracks.")
         pred_boxes = filter_eval_boxes(nusc, add_center_dist(nusc, pred_boxes), cfg.class_range)
         gt_boxes = filter_eval_boxes(nusc, add_center_dist(nusc, gt_boxes), cfg.class_range)
         ev.sample_tokens = gt_boxes.sample_tokens
@@ -387,16 +388,68 @@ def test_exact_center_distances_bitwise():
         assert np.array_equal(exact_center_distances(x, y), euclidean_distances(x, y))
 
 
-def test_load_tracks_matches_devkit(nusc_mini, mini_val_gt, devkit_reference):
-    """Our loading is the devkit's: same frames, same boxes in the same order, same scores."""
-    sub = corrupt_submission(nusc_mini, "mini_val", seed=0, base=mini_val_gt)
-    _, _, ref_gt, ref_pred = devkit_reference("corrupted_mini_val", nusc_mini, sub, "mini_val")
-    tracks_gt, tracks_pred, _ = load_tracks(nusc_mini, sub, "mini_val")
-    for ref, ours in ((ref_gt, tracks_gt), (ref_pred, tracks_pred)):
-        assert list(ref) == list(ours)
-        for scene in ref:
-            assert list(ref[scene]) == list(ours[scene])
-            for ts in ref[scene]:
-                a = [(b.tracking_id, b.tracking_name, b.translation, b.tracking_score) for b in ref[scene][ts]]
-                b = [(b.tracking_id, b.tracking_name, b.translation, b.tracking_score) for b in ours[scene][ts]]
-                assert a == b
+def _same_tracks(ref, ours) -> int:
+    """Same scenes, frames, boxes in the same order, same id/class/translation/score; returns the box count."""
+    n = 0
+    assert list(ref) == list(ours)
+    for scene in ref:
+        assert list(ref[scene]) == list(ours[scene])
+        for ts in ref[scene]:
+            a = [(b.tracking_id, b.tracking_name, tuple(map(float, b.translation)), float(b.tracking_score))
+                 for b in ref[scene][ts]]
+            b = [(b.tracking_id, b.tracking_name, tuple(map(float, b.translation)), float(b.tracking_score))
+                 for b in ours[scene][ts]]
+            assert a == b, (scene, ts)
+            n += len(a)
+    return n
+
+
+@pytest.mark.parametrize("loader", ["fast", "devkit"])
+def test_load_tracks_matches_devkit(nusc_mini, mini_val_gt, devkit_reference, loader):
+    """Both loaders give the devkit's tracks: same frames, same boxes in the same order (interpolated boxes
+    included), same track-averaged scores."""
+    for name, sub in (("corrupted_mini_val", corrupt_submission(nusc_mini, "mini_val", seed=0, base=mini_val_gt)),
+                      ("contested_mini_val", corrupt_submission(
+                          nusc_mini, "mini_val", seed=2, base=mini_val_gt, duplicate=0.3, exact_duplicate=0.15,
+                          repeated_id=0.01, noise=0.4))):
+        _, _, ref_gt, ref_pred = devkit_reference(name, nusc_mini, sub, "mini_val")
+        tracks_gt, tracks_pred, meta = load_tracks(nusc_mini, sub, "mini_val", loader=loader)
+        assert meta == sub["meta"]
+        assert _same_tracks(ref_gt, tracks_gt) == 3669
+        assert _same_tracks(ref_pred, tracks_pred) > 4000
+
+
+def _devkit_error(nusc, submission, split):
+    try:
+        devkit_evaluate(nusc, submission, split)
+    except Exception as exc:   # noqa: BLE001 - whatever the devkit raises
+        return exc
+    return None
+
+
+@pytest.mark.parametrize("defect", ["nan_translation", "unknown_class", "string_translation", "missing_sample",
+                                    "no_boxes", "too_many_boxes", "missing_key"])
+def test_invalid_submissions_fail_like_the_devkit(nusc_mini, mini_val_gt, defect):
+    """Input the devkit rejects: the fast loader hands over to the devkit's loaders, which raise their error."""
+    sub = copy.deepcopy(mini_val_gt)
+    tokens = list(sub["results"])
+    box = next(b for t in tokens for b in sub["results"][t])
+    if defect == "nan_translation":
+        box["translation"][0] = float("nan")
+    elif defect == "unknown_class":
+        box["tracking_name"] = "barrier"
+    elif defect == "string_translation":
+        box["translation"] = [str(v) for v in box["translation"]]
+    elif defect == "missing_sample":
+        del sub["results"][tokens[0]]
+    elif defect == "no_boxes":
+        sub["results"] = {t: [] for t in tokens}
+    elif defect == "too_many_boxes":
+        sub["results"][tokens[0]] = [box] * 501
+    elif defect == "missing_key":
+        del box["velocity"]
+    expected = _devkit_error(nusc_mini, sub, "mini_val")
+    assert expected is not None
+    with pytest.raises(type(expected)) as raised:
+        fast_tracking_eval(nusc_mini, sub, "mini_val")
+    assert str(raised.value) == str(expected)

@@ -101,7 +101,8 @@ def _check_values(path: Path, df: pd.DataFrame, num: np.ndarray) -> None:
 
     size = num[:, 3:6]
     if (size <= 0).any():
-        fail((size <= 0).any(axis=1), "length_m/width_m/height_m", "must be positive metres", lambda i: size[i].tolist())
+        fail((size <= 0).any(axis=1), "length_m/width_m/height_m", "must be positive metres",
+             lambda i: size[i].tolist())
     norm = np.linalg.norm(num[:, 6:10], axis=1)
     if (np.abs(norm - 1.0) > QUATERNION_TOLERANCE).any():
         fail(np.abs(norm - 1.0) > QUATERNION_TOLERANCE, "qw/qx/qy/qz", "must be a unit quaternion",

@@ -38,7 +38,7 @@ from unittest import mock
 import numpy as np
 
 from grutrack.data.av2 import COMPETITION_CATEGORIES, TABLE_I_CLASSES, load_scenes, split_dir, vocabulary
-from grutrack.errors import InputFormatError
+from grutrack.errors import DatasetError
 from grutrack.export.av2_tracks import expected_frames, gt_sequences, read_tracks_pickle, validate_sequences
 from grutrack.io import write_json_atomic
 
@@ -154,13 +154,16 @@ def evaluate_sequences(predictions: dict, labels: dict, dataset_dir: str | Path 
     folder (enables the ROI filter) or None. Returns ``{"result": TrackEval's result tree, "tuned": {class: HOTA},
     "mean": {class: HOTA}, "idf1": {class: IDF1}}``.
     """
-    order = list(labels)  # the official function regroups labels by first timestamp; predictions must follow
-    labels = copy.deepcopy(labels)
+    # the official function regroups the labels by first timestamp (a stable sort) and then pairs prediction and
+    # label frames by position: give both in that order
+    order = sorted(labels, key=lambda lg: labels[lg][0]["timestamp_ns"] if labels[lg] else 0)
+    labels = copy.deepcopy({lg: labels[lg] for lg in order})
     predictions = copy.deepcopy({lg: predictions[lg] for lg in order})
     workers = max(1, int(workers or default_workers()))
     idf1: dict = {}
     with tempfile.TemporaryDirectory(prefix="grutrack-av2-eval-") as tmp:
         out_root = Path(trackeval_dir).resolve() if trackeval_dir else Path(tmp)
+        out_root.mkdir(parents=True, exist_ok=True)
         sink = contextlib.nullcontext() if verbose else contextlib.redirect_stdout(io.StringIO())
         errsink = contextlib.nullcontext() if verbose else contextlib.redirect_stderr(io.StringIO())
         with _official_settings(workers, quiet=trackeval_dir is None, idf1_out=idf1) as official, \
@@ -219,7 +222,7 @@ def evaluate_submission(root: str | Path, split: str, submission: str | Path, *,
     ddir = split_dir(root, split)
     use_roi = has_maps(ddir, list(labels)) if roi is None else bool(roi)
     if use_roi and not has_maps(ddir, list(labels)):
-        raise InputFormatError(f"{ddir}: the drivable-area ROI needs every log's map/ folder")
+        raise DatasetError(f"{ddir}: the drivable-area ROI needs every log's map/ folder")
     workers = max(1, int(workers or default_workers()))
     out = evaluate_sequences(preds, labels, ddir if use_roi else None, max_range_m=max_range_m, workers=workers,
                              trackeval_dir=trackeval_dir, verbose=verbose)

@@ -61,11 +61,29 @@ def _quiet(verbose: bool):
 
 
 def load_tracks(nusc, submission: Union[dict, str, os.PathLike], eval_split: str, config=None,
-                verbose: bool = False):
+                verbose: bool = False, loader: str = "fast"):
     """Load, filter and convert ground truth and predictions to tracks exactly as ``TrackingEval.__init__``.
 
+    :param loader: ``"fast"`` (default): :mod:`grutrack.evaluation.fast_loading`, the same tracks with light box
+        records, falling back to the devkit's loaders for any input it does not reproduce (the devkit then gives
+        its own result or error); ``"devkit"``: the devkit's loaders (``TrackingBox`` objects).
     :return: ``(tracks_gt, tracks_pred, meta)`` as the devkit's ``create_tracks`` gives them.
     """
+    cfg = config if config is not None else _default_config()
+    if loader == "fast":
+        from grutrack.evaluation.fast_loading import NeedsDevkitLoader, fast_load_tracks
+
+        try:
+            return fast_load_tracks(nusc, submission, eval_split, cfg)
+        except NeedsDevkitLoader as exc:
+            if verbose:
+                print("fast loader: %s; using the devkit's loaders" % exc)
+    elif loader != "devkit":
+        raise ValueError("loader must be 'fast' or 'devkit', not %r" % (loader,))
+    return _devkit_load_tracks(nusc, submission, eval_split, cfg, verbose)
+
+
+def _devkit_load_tracks(nusc, submission, eval_split: str, cfg, verbose: bool):
     from nuscenes.eval.common.data_classes import EvalBoxes
     from nuscenes.eval.common.loaders import (add_center_dist, filter_eval_boxes, get_samples_of_custom_split,
                                               load_gt, load_gt_of_sample_tokens, load_prediction,
@@ -74,7 +92,6 @@ def load_tracks(nusc, submission: Union[dict, str, os.PathLike], eval_split: str
     from nuscenes.eval.tracking.loaders import create_tracks
     from nuscenes.utils.splits import is_predefined_split
 
-    cfg = config if config is not None else _default_config()
     predefined = is_predefined_split(split_name=eval_split)
     custom_tokens = None if predefined else get_samples_of_custom_split(split_name=eval_split, nusc=nusc)
 
@@ -799,7 +816,7 @@ def evaluate_tracks(tracks_gt, tracks_pred, config=None):
 
 
 def fast_tracking_eval(nusc, submission: Union[dict, str, os.PathLike], eval_split: str, config=None,
-                       verbose: bool = False) -> dict:
+                       verbose: bool = False, *, loader: str = "fast") -> dict:
     """Evaluate a nuScenes tracking submission; returns what ``TrackingEval.main`` writes as
     ``metrics_summary.json`` (``TrackingMetrics.serialize()`` plus ``meta``), with the same numbers.
 
@@ -809,11 +826,13 @@ def fast_tracking_eval(nusc, submission: Union[dict, str, os.PathLike], eval_spl
     :param eval_split: a predefined split name (``mini_val``, ``val``, ...) or a custom split of
         ``<dataroot>/<version>/splits.json``.
     :param config: a devkit ``TrackingConfig``; default ``config_factory('tracking_nips_2019')``.
-    :param verbose: print the devkit's loading messages and the final metrics table.
+    :param verbose: print the loading messages and the final metrics table.
+    :param loader: ``"fast"`` (exact re-implementation of the devkit's loading, devkit fallback) or
+        ``"devkit"`` (the devkit's loaders); see :func:`load_tracks`.
     ``eval_time`` is this implementation's accumulation + metrics time (what the devkit times there too).
     """
     cfg = config if config is not None else _default_config()
-    tracks_gt, tracks_pred, meta = load_tracks(nusc, submission, eval_split, cfg, verbose=verbose)
+    tracks_gt, tracks_pred, meta = load_tracks(nusc, submission, eval_split, cfg, verbose=verbose, loader=loader)
     metrics, _ = evaluate_tracks(tracks_gt, tracks_pred, cfg)
     summary = metrics.serialize()
     summary["meta"] = meta.copy()

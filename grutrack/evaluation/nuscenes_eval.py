@@ -33,8 +33,11 @@ def devkit_tracking_eval(dataroot: str | Path, version: str, split: str, submiss
     if not submission.is_file():
         raise InputFormatError(f"{submission}: submission file does not exist")
     with tempfile.TemporaryDirectory(prefix="grutrack-eval-") as out_dir:
-        sink = contextlib.nullcontext() if verbose else contextlib.redirect_stdout(io.StringIO())
-        with sink:
+        quiet = contextlib.ExitStack()
+        if not verbose:  # the devkit prints and draws progress bars (stderr) even with verbose=False
+            quiet.enter_context(contextlib.redirect_stdout(io.StringIO()))
+            quiet.enter_context(contextlib.redirect_stderr(io.StringIO()))
+        with quiet:
             ev = TrackingEval(config=config_factory("tracking_nips_2019"), result_path=str(submission),
                               eval_set=split, output_dir=out_dir, nusc_version=version,
                               nusc_dataroot=str(dataroot), verbose=verbose)
@@ -82,7 +85,11 @@ def write_metrics(path: str | Path, doc: dict) -> None:
 def format_summary(doc: dict) -> str:
     """A human-readable table: overall AMOTA/AMOTP/MOTA/IDS/recall and the same per class."""
     def fmt(v, digits=3):
-        return "  nan" if v is None else (f"{v:.{digits}f}" if isinstance(v, float) else str(v))
+        if v is None:
+            return "nan"
+        if isinstance(v, float) and v.is_integer() and abs(v) >= 1:
+            return str(int(v))  # counts (tp, fp, ids, ...) come as floats from the devkit
+        return f"{v:.{digits}f}" if isinstance(v, float) else str(v)
 
     cols = ("amota", "amotp", "mota", "recall", "ids", "frag", "tp", "fp", "fn")
     lines = [f"{'class':<12}" + "".join(f"{c:>9}" for c in cols)]

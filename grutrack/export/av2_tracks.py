@@ -54,10 +54,15 @@ def frame_dict(log_id: str, timestamp_ns: int, ego_translation: np.ndarray, boxe
 
     ``boxes.ids`` become ``track_id`` (int64 when integer, else object); None or empty gives (0, ...) arrays.
     """
-    b = boxes if boxes is not None else BoxSet.empty(with_ids=True)
-    names = np.asarray(vocab.names, dtype=object)[b.labels] if len(b) else np.zeros(0, dtype=object)
-    ids = b.ids if b.ids is not None else np.zeros(0, dtype=np.int64)
-    ids = ids.astype(np.int64) if np.issubdtype(np.asarray(ids).dtype, np.integer) else np.asarray(ids, dtype=object)
+    b = boxes if boxes is not None and len(boxes) else BoxSet.empty()
+    names = np.asarray(vocab.names, dtype=object)[b.labels]
+    label = np.array([_CATEGORY_INDEX[n] for n in vocab.names], dtype=np.int64)[b.labels]
+    if len(b) == 0 or b.ids is None:
+        ids = np.zeros(len(b), dtype=np.int64 if with_score else object)
+    elif np.issubdtype(np.asarray(b.ids).dtype, np.integer):
+        ids = np.asarray(b.ids, dtype=np.int64)
+    else:
+        ids = np.asarray(b.ids, dtype=object)
     out = {
         "seq_id": log_id, "timestamp_ns": int(timestamp_ns),
         "track_id": ids,
@@ -65,7 +70,7 @@ def frame_dict(log_id: str, timestamp_ns: int, ego_translation: np.ndarray, boxe
         "size": b.boxes[:, [4, 3, 5]].copy(),
         "yaw": b.boxes[:, 6].copy(),
         "velocity_m_per_s": np.column_stack([b.boxes[:, 7:9], np.zeros(len(b))]),
-        "label": np.array([_CATEGORY_INDEX[n] for n in names], dtype=np.int64),
+        "label": label,
         "name": names,
         "ego_translation_m": [float(v) for v in np.asarray(ego_translation, dtype=np.float64)[:3]],
     }
@@ -190,7 +195,7 @@ def sequences_to_table(seqs: dict[str, list[dict]]) -> pd.DataFrame:
     table = {
         "log_id": np.repeat([f["seq_id"] for f in frames], n).astype(object),
         "timestamp_ns": np.repeat([f["timestamp_ns"] for f in frames], n).astype(np.int64),
-        "track_uuid": np.array([str(t) for t in cat("track_id")], dtype=object),
+        "track_uuid": cat("track_id").astype(str).astype(object),
         "category": cat("name").astype(object),
         "tx_m": trans[:, 0], "ty_m": trans[:, 1], "tz_m": trans[:, 2],
         "length_m": size[:, 0], "width_m": size[:, 1], "height_m": size[:, 2],
@@ -233,7 +238,7 @@ def _table_frame(rows: pd.DataFrame, ids, yaw, names, log_id: str, ts: int) -> d
             "size": rows[["length_m", "width_m", "height_m"]].to_numpy(np.float64).reshape(n, 3),
             "yaw": yaw, "velocity_m_per_s": np.column_stack([rows[["vx_m_per_s", "vy_m_per_s"]].to_numpy(np.float64)
                                                              .reshape(n, 2), np.zeros(n)]),
-            "label": np.array([_CATEGORY_INDEX[c] for c in names], dtype=np.int64), "name": names,
+            "label": pd.Series(names, dtype=object).map(_CATEGORY_INDEX).to_numpy(np.int64), "name": names,
             "score": rows["score"].to_numpy(np.float64)}
 
 

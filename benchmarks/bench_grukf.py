@@ -1,0 +1,78 @@
+"""GRU-Kalman filter throughput: training (frames/s and scenes/s, one optimizer step per scene) and tracking.
+
+Input: real nuScenes mini_train ground truth (../shared/data) with simulated CenterPoint-like detections
+(labelled simulated), mini_val for tracking. Prints medians over --repeat runs of --steps training steps, and
+the tracking loop's frames/s with the trained network.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_grukf.py [--steps 8 --repeat 3 --device auto]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import torch  # noqa: E402
+
+from grutrack.data.detection_sim import simulate_nuscenes  # noqa: E402
+from grutrack.data.nusc_detections import load_detections  # noqa: E402
+from grutrack.data.nuscenes import load_scenes, open_nuscenes  # noqa: E402
+from grutrack.tracking.factory import build_tracker  # noqa: E402
+from grutrack.tracking.tracker import track_scenes  # noqa: E402
+from grutrack.training.config import load_train_config  # noqa: E402
+from grutrack.training.trainer import Trainer  # noqa: E402
+
+DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "nuscenes"
+
+
+def _dets(nusc, split, seed, scenes, tmp):
+    path = Path(tmp) / f"{split}.json"
+    path.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", split, "centerpoint", seed, nusc=nusc)))
+    return load_detections(path, [f.token for s in scenes for f in s.frames])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--dataroot", default=str(DEFAULT_DATA))
+    ap.add_argument("--steps", type=int, default=8)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--device", default="auto")
+    args = ap.parse_args()
+    torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
+    nusc = open_nuscenes(args.dataroot, "v1.0-mini")
+    train = load_scenes(nusc, "mini_train", with_gt=True)
+    val = load_scenes(nusc, "mini_val")
+    with tempfile.TemporaryDirectory() as tmp:
+        dtrain, dval = _dets(nusc, "mini_train", 1, train, tmp), _dets(nusc, "mini_val", 2, val, tmp)
+        cfg = load_train_config("grukf", {"device": args.device, "checkpoint_every": 0, "epochs": 100})
+        fps, sps = [], []
+        for r in range(args.repeat):
+            t = Trainer(cfg, train, dtrain, Path(tmp) / f"run{r}", progress=False)
+            t0 = time.perf_counter()
+            t.run(max_steps=args.steps)
+            dt = time.perf_counter() - t0
+            frames = sum(len(train[i]) for i in t.state.order[:args.steps]) if t.state.order else 0
+            frames = frames or sum(len(s) for s in train) * args.steps // len(train)
+            fps.append(frames / dt)
+            sps.append(args.steps / dt)
+        ckpt = t.save("bench.pt")
+        track_fps = []
+        for _ in range(args.repeat):
+            run = track_scenes(build_tracker("grukf", checkpoint=ckpt, device=args.device), val, dval)
+            track_fps.append(run.fps)
+    print(f"device {t.device}, torch threads {torch.get_num_threads()}, {args.steps} training steps per run")
+    print(f"training: median {statistics.median(fps):.1f} frames/s, {statistics.median(sps):.2f} scenes/s "
+          f"(runs: {', '.join(f'{v:.1f}' for v in fps)} frames/s)")
+    print(f"tracking with the GRU-KF: median {statistics.median(track_fps):.1f} frames/s "
+          f"(runs: {', '.join(f'{v:.1f}' for v in track_fps)})")
+
+
+if __name__ == "__main__":
+    main()
