@@ -84,15 +84,15 @@ def write_metrics(path: str | Path, doc: dict) -> None:
 
 def format_summary(doc: dict) -> str:
     """A human-readable table: overall AMOTA/AMOTP/MOTA/IDS/recall and the same per class."""
-    def fmt(v, digits=3):
+    counts = {"ids", "frag", "tp", "fp", "fn", "gt", "mt", "ml"}
+
+    def fmt(v, col):
         if v is None:
             return "nan"
-        if isinstance(v, float) and v.is_integer() and abs(v) >= 1:
-            return str(int(v))  # counts (tp, fp, ids, ...) come as floats from the devkit
-        return f"{v:.{digits}f}" if isinstance(v, float) else str(v)
+        return str(int(round(v))) if col in counts else f"{v:.3f}"  # the devkit gives counts as floats
 
     cols = ("amota", "amotp", "mota", "recall", "ids", "frag", "tp", "fp", "fn")
     lines = [f"{'class':<12}" + "".join(f"{c:>9}" for c in cols)]
     for name, m in [*doc["per_class"].items(), ("OVERALL", doc["overall"])]:
-        lines.append(f"{name:<12}" + "".join(f"{fmt(m.get(c)):>9}" for c in cols))
+        lines.append(f"{name:<12}" + "".join(f"{fmt(m.get(c), c):>9}" for c in cols))
     return "\n".join(lines)
