@@ -5,7 +5,7 @@
     python benchmarks/bench_eval.py --dataroot /data/nuscenes --version v1.0-trainval --split val \
         --submission tracks_val.json
 
-Reported (medians over the repeats, seconds):
+Reported (medians over the repeats, seconds of wall-clock and of CPU time of this process):
   * accumulation + metrics: the devkit's ``TrackingEval.evaluate()`` vs our ``evaluate_tracks`` on the same
     loaded tracks (what the devkit reports as eval_time);
   * loading + filtering: the devkit's loaders vs the fast exact re-implementation (``load_tracks``);
@@ -32,13 +32,26 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 
+class _Timing:
+    """Wall-clock and CPU (process) time of repeated runs; medians. The CPU time is the robust figure on a
+    shared machine (other processes steal wall-clock time, not this process's CPU time)."""
+
+    def __init__(self, wall, cpu):
+        self.wall, self.cpu = wall, cpu
+        self.wall_med, self.cpu_med = statistics.median(wall), statistics.median(cpu)
+
+    def runs(self, fmt="%.2f"):
+        return ", ".join(fmt % t for t in self.wall)
+
+
 def _median_time(fn, repeat: int):
-    times, result = [], None
+    wall, cpu, result = [], [], None
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         result = fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), times, result
+        cpu.append(time.process_time() - c0)
+        wall.append(time.perf_counter() - t0)
+    return _Timing(wall, cpu), result
 
 
 def _flatten(d, prefix=""):
@@ -114,9 +127,9 @@ def main(argv=None) -> int:
 
         # Loading + filtering: the devkit's loaders vs the fast exact re-implementation.
         n_load = max(1, min(args.repeat, 3))
-        t_load_dev, _, (tracks_gt, tracks_pred, meta) = _median_time(
+        t_load_dev, (tracks_gt, tracks_pred, meta) = _median_time(
             lambda: load_tracks(nusc, sub_path, args.split, cfg, loader="devkit"), n_load)
-        t_load_fast, _, _ = _median_time(lambda: load_tracks(nusc, sub_path, args.split, cfg, loader="fast"),
+        t_load_fast, _ = _median_time(lambda: load_tracks(nusc, sub_path, args.split, cfg, loader="fast"),
                                          n_load)
 
         # Accumulation + metrics, on the devkit-loaded tracks.
@@ -127,13 +140,13 @@ def main(argv=None) -> int:
             metrics, _ = ev.evaluate()
             return dict(metrics.serialize(), meta=meta)
 
-        t_dev_acc, dev_acc_times, dev_summary = _median_time(devkit_evaluate, args.repeat_devkit)
-        t_fast_acc, fast_acc_times, (fast_metrics, _) = _median_time(
+        t_dev_acc, dev_summary = _median_time(devkit_evaluate, args.repeat_devkit)
+        t_fast_acc, (fast_metrics, _) = _median_time(
             lambda: evaluate_tracks(tracks_gt, tracks_pred, cfg), args.repeat)
         diff_acc = _max_diff(dev_summary, dict(fast_metrics.serialize(), meta=meta))
 
         # Whole pipeline.
-        t_fast_whole, fast_whole_times, fast_summary = _median_time(
+        t_fast_whole, fast_summary = _median_time(
             lambda: fast_tracking_eval(nusc, sub_path, args.split, cfg), args.repeat)
         t_dev_whole = None
         if not args.skip_devkit_whole:
@@ -143,34 +156,39 @@ def main(argv=None) -> int:
                                       args.dataroot, verbose=False)
                     return ev.main(render_curves=False)
 
-            t_dev_whole, dev_whole_times, dev_whole_summary = _median_time(devkit_whole, args.repeat_devkit)
+            t_dev_whole, dev_whole_summary = _median_time(devkit_whole, args.repeat_devkit)
             diff_whole = _max_diff(dev_whole_summary, fast_summary)
 
-    def runs(times, fmt="%.2f"):
-        return ", ".join(fmt % t for t in times)
+    def line(label, t, fmt="%.2f"):
+        print("  %-34s %9.3f s wall  %9.3f s CPU   (wall runs: %s)" % (label, t.wall_med, t.cpu_med, t.runs(fmt)))
+
+    def ratio(label, slow, fast):
+        print("  %-34s %9.1f x wall  %9.1f x CPU" % (label, slow.wall_med / fast.wall_med, slow.cpu_med / fast.cpu_med))
 
     print()
-    print("accumulation + metrics (same loaded tracks; median of %d devkit / %d fast runs)"
+    print("accumulation + metrics (same loaded tracks; medians of %d devkit / %d fast runs)"
           % (args.repeat_devkit, args.repeat))
-    print("  devkit TrackingEval.evaluate()     %9.3f s   runs: %s" % (t_dev_acc, runs(dev_acc_times)))
-    print("  fast evaluate_tracks()             %9.3f s   runs: %s" % (t_fast_acc, runs(fast_acc_times, "%.3f")))
-    print("  ratio                              %9.1f x" % (t_dev_acc / t_fast_acc))
+    line("devkit TrackingEval.evaluate()", t_dev_acc)
+    line("fast evaluate_tracks()", t_fast_acc, "%.3f")
+    ratio("ratio", t_dev_acc, t_fast_acc)
     print("  max |difference| of the results    %9.3g" % diff_acc)
-    print("loading + filtering (median of %d)" % n_load)
-    print("  devkit loaders (TrackingBox)       %9.3f s" % t_load_dev)
-    print("  fast exact loader                  %9.3f s   ratio %.1f x" % (t_load_fast, t_load_dev / t_load_fast))
+    print("loading + filtering (medians of %d)" % n_load)
+    line("devkit loaders (TrackingBox)", t_load_dev)
+    line("fast exact loader", t_load_fast, "%.3f")
+    ratio("ratio", t_load_dev, t_load_fast)
     print("whole pipeline")
-    print("  fast_tracking_eval() (loaded nusc) %9.3f s   runs: %s" % (t_fast_whole, runs(fast_whole_times, "%.3f")))
-    print("    ~ loading %.3f + accumulation %.3f" % (t_load_fast, t_fast_acc))
+    line("fast_tracking_eval() (loaded nusc)", t_fast_whole, "%.3f")
+    print("    ~ loading %.3f + accumulation %.3f s CPU" % (t_load_fast.cpu_med, t_fast_acc.cpu_med))
     if t_dev_whole is not None:
-        print("  devkit TrackingEval(...).main()    %9.3f s   runs: %s" % (t_dev_whole, runs(dev_whole_times)))
-        print("    ~ NuScenes load %.3f + loading %.3f + accumulation %.3f" % (t_nusc, t_load_dev, t_dev_acc))
-        print("  ratio                              %9.1f x   (%.1f x without the devkit's own NuScenes load)"
-              % (t_dev_whole / t_fast_whole, (t_dev_whole - t_nusc) / t_fast_whole))
+        line("devkit TrackingEval(...).main()", t_dev_whole)
+        print("    ~ its NuScenes load %.3f + loading %.3f + accumulation %.3f s CPU"
+              % (t_nusc, t_load_dev.cpu_med, t_dev_acc.cpu_med))
+        ratio("ratio", t_dev_whole, t_fast_whole)
         print("  max |difference| of the results    %9.3g" % diff_whole)
     else:
-        print("  devkit loading + evaluate()        %9.3f s   ratio %.1f x"
-              % (t_load_dev + t_dev_acc, (t_load_dev + t_dev_acc) / t_fast_whole))
+        print("  devkit loading + evaluate()        %9.3f s CPU   ratio %.1f x"
+              % (t_load_dev.cpu_med + t_dev_acc.cpu_med,
+                 (t_load_dev.cpu_med + t_dev_acc.cpu_med) / t_fast_whole.cpu_med))
     return 0
 
 

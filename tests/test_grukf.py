@@ -187,3 +187,37 @@ def test_checkpoint_loads_without_reinitialising(small_training_set, tmp_path):
     assert sum(len(r) for r in run.results.values()) > 0
     with pytest.raises(Exception, match="needs --checkpoint"):
         build_tracker("grukf")
+
+
+def test_nan_loss_stops_training_and_keeps_last_good_checkpoint(small_training_set, tmp_path, monkeypatch):
+    from grutrack.training import trainer as tr
+    from grutrack.training.checkpoint import read_checkpoint
+
+    scenes, dets = small_training_set
+    t = _trainer(scenes, dets, tmp_path, epochs=2)
+    t.run(max_steps=1)
+    good = {k: v.clone() for k, v in t.net.state_dict().items()}
+    real = tr.run_scene
+
+    def poisoned(*a, **k):
+        loss = real(*a, **k)
+        loss.total = loss.total * float("nan")
+        return loss
+
+    monkeypatch.setattr(tr, "run_scene", poisoned)
+    with pytest.raises(tr.TrainingDiverged, match="the loss is nan.*last good checkpoint is .*last.pt"):
+        t.run()
+    ck = read_checkpoint(tmp_path / "last.pt")
+    assert all(torch.equal(ck["model"][k], good[k]) for k in good)
+    assert ck["train_state"]["step"] == 1
+
+
+def test_diverging_gain_stops_training(small_training_set, tmp_path):
+    from grutrack.training.trainer import TrainingDiverged
+
+    scenes, dets = small_training_set
+    t = _trainer(scenes, dets, tmp_path, epochs=1)
+    with torch.no_grad():
+        t.net.fc_gain[2].bias.fill_(5e3)
+    with pytest.raises(TrainingDiverged, match="gain diverged"):
+        t.run()

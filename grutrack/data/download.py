@@ -9,7 +9,6 @@ error says where to put the file by hand.
 
 from __future__ import annotations
 
-import hashlib
 import http.client
 import os
 import re
@@ -26,6 +25,7 @@ from tqdm import tqdm
 from grutrack import __version__
 from grutrack.data.registry import DetectionSource
 from grutrack.errors import GrutrackError
+from grutrack.provenance import sha256_file
 
 #: hosts whose links open a web page (sign-in, virus-scan interstitial, folder view) rather than the file
 BROWSER_HOSTS = ("drive.google.com", "docs.google.com", "drive.usercontent.google.com", "onedrive.live.com",
@@ -45,15 +45,6 @@ def needs_browser(url: str) -> bool:
     """True when ``url`` points at a host that only serves the file through a browser."""
     host = (urlparse(url).hostname or "").lower()
     return any(host == h or host.endswith("." + h) for h in BROWSER_HOSTS)
-
-
-def sha256_file(path: str | Path) -> str:
-    """Hex SHA-256 of a file, read in chunks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def manual_instructions(src: DetectionSource, dest: Path, reason: str) -> str:

@@ -107,6 +107,8 @@ class GRUKalmanNet(nn.Module):
         self.fc_back2 = _fc(self.h_sigma + m * m, self.h_sigma)
         nn.init.zeros_(self.fc_gain[2].weight)
         nn.init.zeros_(self.fc_gain[2].bias)
+        #: largest |K| entry produced since the last reset (the trainer watches it for divergence)
+        self.max_abs_gain = 0.0
 
     def set_gain_prior(self, K0: torch.Tensor) -> None:
         """Start from the constant gain K0 (m, n) in the heading frame: output bias = K0, small weights."""
@@ -169,6 +171,8 @@ class GRUKalmanNet(nn.Module):
                  "fwd_evol": _normalise(to_heading_frame(fwd_evol, yaw, STATE_PLANAR)),
                  "fwd_update": _normalise(to_heading_frame(fwd_upd, yaw, STATE_PLANAR))}
         K, new_hidden = self.gain(feats, hidden)
+        if len(K):
+            self.max_abs_gain = max(self.max_abs_gain, float(K.detach().abs().max()))
         delta = torch.einsum("kmn,kn->km", K.to(innov_h.dtype), innov_h)
         delta = from_heading_frame(delta, yaw, STATE_PLANAR)
         x = x_prior + delta

@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from grutrack.data.scene import BoxSet, Scene
+from grutrack.errors import GrutrackError
 from grutrack.io import atomic_path
 from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig, MEAS_PLANAR, STATE_PLANAR
 from grutrack.motion.torch_models import wrap_angle_t
@@ -33,6 +34,9 @@ from grutrack.tracking.tracker import Tracker, TrackGroup, track_scenes
 from grutrack.training.checkpoint import read_checkpoint, save_checkpoint
 from grutrack.training.config import TrainConfig
 from grutrack.training.gt_association import StickyGTAssociation
+
+#: a gain entry beyond this (a correction of 1000x the innovation) means the learned filter has diverged
+MAX_ABS_GAIN = 1e3
 
 LOG_FIELDS = ("step", "epoch", "scene", "loss", "gt_terms", "pseudo_terms", "lr", "val_amota", "seconds")
 
@@ -47,6 +51,10 @@ def ekf_backend(cfg: TrainConfig) -> KalmanBackend:
     first = motion[TRACKING_CLASSES[0]]
     tables = {k: np.stack([motion[c][k] for c in TRACKING_CLASSES]) for k in ("Q", "R", "P0")}
     return KalmanBackend(make_model(first["model"], **first["params"]), tables["Q"], tables["R"], tables["P0"])
+
+
+class TrainingDiverged(GrutrackError):
+    """The loss, a gradient or the learned gain became non-finite or exploded."""
 
 
 class PairedBackend:
@@ -280,14 +288,29 @@ class Trainer:
         final = self.save("model.pt") if self.state.epoch >= self.cfg.epochs else self.out / "last.pt"
         return final
 
+    def _diverged(self, scene: Scene, what: str) -> None:
+        """Keep the last good state (the step was not applied) as last.pt and stop with a clear message."""
+        path = self.save()
+        raise TrainingDiverged(f"training stopped at step {self.state.step + 1} (scene {scene.name}): {what}; "
+                               f"the last good checkpoint is {path} (lower lr in the training config, then "
+                               f"--resume)")
+
     def _step(self, scene: Scene) -> None:
         t0 = time.perf_counter()
         self.net.train()
+        self.net.max_abs_gain = 0.0
         loss = run_scene(self.net, scene, self.dets, self.tracker_cfg, self.cfg, self.device)
         value = loss.value()
+        if not torch.isfinite(value):
+            self._diverged(scene, f"the loss is {float(value)}")
+        if self.net.max_abs_gain > MAX_ABS_GAIN:
+            self._diverged(scene, f"the gain diverged (max |K| = {self.net.max_abs_gain:.3g} > {MAX_ABS_GAIN:g})")
         self.opt.zero_grad()
         if value.requires_grad:
             value.backward()
+            if not all(torch.isfinite(p.grad).all() for p in self.net.parameters() if p.grad is not None):
+                self.opt.zero_grad()
+                self._diverged(scene, "a gradient is NaN or infinite")
             self.opt.step()
         lr = self.opt.param_groups[0]["lr"]
         self.sched.step()

@@ -1,0 +1,71 @@
+"""Code versions per workflow stage: the package version plus a hash of the package files that stage runs.
+
+Every workflow rule carries its stage's code version as a Snakemake ``param``; Snakemake re-runs a job whose
+params changed, so editing, say, ``grutrack/tracking/`` re-runs tracking and everything downstream of it, but
+not the demo data or the detections. The file lists are deliberately generous (a stage lists every module it
+imports from the package, and the shipped configs it reads).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+from grutrack import __version__
+
+PACKAGE = Path(__file__).resolve().parents[1]
+_COMMON = ("__init__.py", "errors.py", "io.py", "provenance.py", "boxes.py", "classes.py", "geometry.py",
+           "cli/__init__.py", "data/scene.py")
+_TRACKING = ("tracking", "motion", "configs/trackers", "configs/motion", "training/checkpoint.py",
+             "pipeline/presets.py")
+
+#: stage -> package paths (files or folders) whose content defines the stage's code version
+STAGE_SOURCES: dict[str, tuple[str, ...]] = {
+    "data": ("data/demo.py", "cli/demo.py"),
+    "simulate": ("data/detection_sim.py", "data/nuscenes.py", "configs/detector_profiles", "cli/demo.py"),
+    "fetch": ("data/registry.py", "data/download.py", "configs/detections.yaml", "cli/detections.py"),
+    "convert": ("data/registry.py", "data/nusc_convert.py", "data/lt3d_convert.py", "data/nusc_detections.py",
+                "data/lt3d_detections.py", "data/nuscenes.py", "data/av2.py", "configs/detections.yaml",
+                "cli/detections.py"),
+    "train": ("training", "data/nuscenes.py", "data/nusc_detections.py", "evaluation/fast_amota.py",
+              "export/nuscenes_json.py", "configs/training", "cli/train.py", *_TRACKING),
+    "track": ("data/nuscenes.py", "data/nusc_detections.py", "export/nuscenes_json.py", "cli/track.py",
+              *_TRACKING),
+    "track_av2": ("data/av2.py", "data/lt3d_detections.py", "export/av2_tracks.py", "cli/track.py", *_TRACKING),
+    "submit": ("export/nuscenes_json.py", "export/leaderboard.py", "data/nuscenes.py", "cli/submit.py"),
+    "evaluate": ("evaluation/nuscenes_eval.py", "evaluation/fast_amota.py", "data/nuscenes.py",
+                 "cli/evaluate.py"),
+    "evaluate_av2": ("evaluation/av2_eval.py", "data/av2.py", "export/av2_tracks.py", "cli/evaluate.py"),
+    "report": ("report", "cli/report.py"),
+}
+
+
+def _files(rel: str, root: Path) -> list[Path]:
+    """The .py / .yaml files under one listed path (none when it does not exist)."""
+    p = root / rel
+    if p.is_file():
+        return [p]
+    if p.is_dir():
+        return sorted(q for q in p.rglob("*") if q.suffix in (".py", ".yaml") and "__pycache__" not in q.parts)
+    return []
+
+
+def source_hash(paths: tuple[str, ...], root: Path = PACKAGE) -> str:
+    """Short SHA-256 over the (relative path, content) of every file under ``paths``."""
+    h = hashlib.sha256()
+    files = sorted({f for rel in (*_COMMON, *paths) for f in _files(rel, root)})
+    for f in files:
+        h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()[:12]
+
+
+def code_version(stage: str, root: Path = PACKAGE) -> str:
+    """``<version>+<hash>`` of a stage; ``GRUTRACK_CODE_VERSION`` in the environment pins every stage to
+    that string instead (for a release build, or tests that must not see concurrent source edits)."""
+    if stage not in STAGE_SOURCES:
+        raise KeyError(f"unknown workflow stage '{stage}' (known: {', '.join(STAGE_SOURCES)})")
+    pinned = os.environ.get("GRUTRACK_CODE_VERSION")
+    if pinned:
+        return pinned
+    return f"{__version__}+{source_hash(STAGE_SOURCES[stage], root)}"

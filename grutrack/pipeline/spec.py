@@ -1,0 +1,256 @@
+"""The workflow config (``workflow/config/config.yaml``, already checked against its JSON schema): the
+cross-references a schema cannot express, the dataroot checks for requested targets, and where each stage
+writes its files. Every error is a :class:`ConfigError` that names the config key and what to put there.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from grutrack.errors import ConfigError
+
+#: report kind -> the dataset kinds its experiment may use
+REPORT_DATASETS = {"demo": ("demo",), "nusc_val": ("nuscenes", "demo"), "nusc_test": ("nuscenes", "demo"),
+                   "av2_val": ("av2",), "semi_supervised": ()}
+#: what a dataroot must hold, by dataset kind (for the error message)
+DATAROOT_HINT = {
+    "nuscenes": "the nuScenes dataroot, i.e. the folder that holds {version}/ (the JSON tables; v1.0-test/ too "
+                "for the test split)",
+    "av2": "the Argoverse 2 sensor-dataset root, i.e. the folder that holds {split}/<log_id>/ with "
+           "annotations.feather, city_SE3_egovehicle.feather and map/",
+}
+
+
+# ------------------------------------------------------------------------------------------------------------
+# cross-references
+# ------------------------------------------------------------------------------------------------------------
+
+def check_config(cfg: dict, paper: dict, registry: dict) -> None:
+    """Check every name the config refers to; resolve tracker presets and training configs with overrides."""
+    from grutrack.pipeline.presets import resolve_tracker, resolve_training
+
+    for name, preset in cfg["tracker_presets"].items():
+        _resolved(f"tracker_presets.{name}", lambda: resolve_tracker(preset["base"], preset["overrides"]))
+    for name, tr in cfg["trainings"].items():
+        key = f"trainings.{name}"
+        _need(cfg["datasets"], tr["dataset"], f"{key}.dataset", "datasets")
+        _need(cfg["detectors"], tr["detector"], f"{key}.detector", "detectors")
+        if cfg["datasets"][tr["dataset"]]["kind"] == "av2":
+            raise ConfigError(f"config key {key}.dataset: training reads nuScenes-format data (demo or nuscenes), "
+                              f"not '{tr['dataset']}' (av2)")
+        splits = [tr["split"]] + ([tr["validation"]["split"]] if tr["validation"] else [])
+        for split in splits:
+            _detector_covers(cfg, registry, tr["detector"], split, f"{key}.detector")
+        _resolved(key, lambda: resolve_training(tr["config"], tr["overrides"]))
+    for name, exp in cfg["experiments"].items():
+        _check_experiment(cfg, registry, name, exp)
+    for name, rep in cfg["reports"].items():
+        _check_report(cfg, paper, name, rep)
+
+
+def _resolved(key: str, fn) -> None:
+    """Run a resolver; its error is prefixed with the config key."""
+    try:
+        fn()
+    except ConfigError as exc:
+        raise ConfigError(f"config key {key}: {exc}") from exc
+
+
+def _need(section: dict, name, key: str, section_name: str) -> None:
+    if name not in section:
+        raise ConfigError(f"config key {key}: '{name}' is not defined under {section_name} "
+                          f"(defined: {', '.join(section) or 'none'})")
+
+
+def _detector_covers(cfg: dict, registry: dict, det: str, split: str, key: str) -> None:
+    """A simulated detector needs a seed for the split, a registry detector a source."""
+    d = cfg["detectors"][det]
+    if d["kind"] == "simulated" and split not in d["seeds"]:
+        raise ConfigError(f"config key detectors.{det}.seeds has no seed for split '{split}' (used by {key}); "
+                          f"add e.g. {split}: 1")
+    if d["kind"] == "registry":
+        if split not in d["sources"]:
+            raise ConfigError(f"config key detectors.{det}.sources has no source for split '{split}' (used by "
+                              f"{key}); add {split}: <name in grutrack/configs/detections.yaml>")
+        _need(registry, d["sources"][split], f"detectors.{det}.sources.{split}", "grutrack/configs/detections.yaml")
+
+
+def _check_experiment(cfg: dict, registry: dict, name: str, exp: dict) -> None:
+    key = f"experiments.{name}"
+    _need(cfg["datasets"], exp["dataset"], f"{key}.dataset", "datasets")
+    kind = cfg["datasets"][exp["dataset"]]["kind"]
+    for det in exp["detectors"]:
+        _need(cfg["detectors"], det, f"{key}.detectors", "detectors")
+        if kind == "av2" and cfg["detectors"][det]["kind"] == "simulated":
+            raise ConfigError(f"config key {key}.detectors: simulated detections need nuScenes-format ground "
+                              f"truth; '{det}' cannot be used on av2")
+        _detector_covers(cfg, registry, det, exp["split"], f"{key}.detectors")
+    for run_name, run in exp["runs"].items():
+        rkey = f"{key}.runs.{run_name}"
+        _need(cfg["tracker_presets"], run["preset"], f"{rkey}.preset", "tracker_presets")
+        if (run["tracker"] == "grukf") != (run["training"] is not None):
+            raise ConfigError(f"config key {rkey}.training: a grukf run needs a training, other trackers none")
+        if run["training"] is not None:
+            _need(cfg["trainings"], run["training"], f"{rkey}.training", "trainings")
+    evaluators = {"demo": ("devkit", "fast"), "nuscenes": ("devkit", "fast", "none"), "av2": ("official", "none")}
+    if exp["evaluator"] not in evaluators[kind]:
+        raise ConfigError(f"config key {key}.evaluator: '{exp['evaluator']}' is not available for a {kind} "
+                          f"dataset (choose {', '.join(evaluators[kind])})")
+    lb = exp["leaderboard_run"]
+    if lb is not None:
+        _need(exp["runs"], lb, f"{key}.leaderboard_run", f"{key}.runs")
+        if kind == "av2":
+            raise ConfigError(f"config key {key}.leaderboard_run: leaderboard zips are built for nuScenes only")
+
+
+def _check_report(cfg: dict, paper: dict, name: str, rep: dict) -> None:
+    key = f"reports.{name}"
+    if rep["kind"] == "semi_supervised":
+        for role in ("semi_supervised", "supervised"):
+            if role not in rep["trainings"]:
+                raise ConfigError(f"config key {key}.trainings needs '{role}': <training name>")
+            tr = rep["trainings"][role]
+            _need(cfg["trainings"], tr, f"{key}.trainings.{role}", "trainings")
+            if cfg["trainings"][tr]["validation"] is None:
+                raise ConfigError(f"config key trainings.{tr}.validation must be set (the figure plots validation "
+                                  f"AMOTA against step)")
+        return
+    if rep["experiment"] is None:
+        raise ConfigError(f"config key {key}.experiment: a {rep['kind']} report needs an experiment")
+    _need(cfg["experiments"], rep["experiment"], f"{key}.experiment", "experiments")
+    exp = cfg["experiments"][rep["experiment"]]
+    kind = cfg["datasets"][exp["dataset"]]["kind"]
+    if kind not in REPORT_DATASETS[rep["kind"]]:
+        raise ConfigError(f"config key {key}.experiment: a {rep['kind']} report needs a "
+                          f"{' or '.join(REPORT_DATASETS[rep['kind']])} experiment, '{rep['experiment']}' is {kind}")
+    for table, rows in rep["tables"].items():
+        _need(paper["tables"], table, f"{key}.tables", "the paper tables (paper.yaml)")
+        for row, run in rows.items():
+            _need(paper["tables"][table]["rows"], row, f"{key}.tables.{table}", f"paper.yaml tables.{table}.rows")
+            _need(exp["runs"], run, f"{key}.tables.{table}.{row}", f"experiments.{rep['experiment']}.runs")
+
+
+# ------------------------------------------------------------------------------------------------------------
+# datasets and dataroots
+# ------------------------------------------------------------------------------------------------------------
+
+def version_for(cfg: dict, dataset: str, split: str) -> str | None:
+    """The dataset version a split lives in (nuScenes test lives in test_version)."""
+    ds = cfg["datasets"][dataset]
+    if ds["kind"] == "nuscenes" and split == "test" and ds.get("test_version"):
+        return ds["test_version"]
+    return ds.get("version")
+
+
+def require_dataroot(cfg: dict, dataset: str, split: str | None = None) -> str:
+    """The dataroot of a real dataset, checked to exist; the error names the config key and what to put."""
+    ds = cfg["datasets"][dataset]
+    key = f"datasets.{dataset}.dataroot"
+    if ds["kind"] == "demo":
+        return ds["dataroot"]
+    version = version_for(cfg, dataset, split or "val") or ""
+    hint = DATAROOT_HINT[ds["kind"]].format(version=version, split=split or "<split>")
+    root = ds["dataroot"]
+    if not root:
+        raise ConfigError(f"config key {key} is not set: put there {hint} (edit workflow/config/config.yaml or "
+                          f"pass --config 'datasets={{{dataset}: {{dataroot: /path/to/it}}}}')")
+    need = Path(root) / (version if ds["kind"] == "nuscenes" else (split or ""))
+    if not need.is_dir():
+        raise ConfigError(f"config key {key} = {root}: {need} does not exist; it must be {hint}")
+    return root
+
+
+def datasets_of_target(cfg: dict, target: str) -> list[tuple[str, str]]:
+    """(dataset, split) pairs a target reads; unknown targets read nothing that can be checked here."""
+    m = re.fullmatch(r"reports/([^/]+)\.md", target)
+    if m and m.group(1) in cfg["reports"]:
+        return _report_datasets(cfg, cfg["reports"][m.group(1)])
+    m = re.fullmatch(r"submissions/(.+)_([^_/]+)\.zip", target)
+    if m and m.group(1) in cfg["experiments"]:
+        return _experiment_datasets(cfg, m.group(1))
+    m = re.fullmatch(r"(?:results|submissions|reports/metrics)/([^/]+)/.*", target)
+    if m and m.group(1) in cfg["experiments"]:
+        return _experiment_datasets(cfg, m.group(1))
+    m = re.fullmatch(r"checkpoints/([^/]+)/.*", target)
+    if m and m.group(1) in cfg["trainings"]:
+        return _training_datasets(cfg, m.group(1))
+    return []
+
+
+def _training_datasets(cfg: dict, name: str) -> list[tuple[str, str]]:
+    tr = cfg["trainings"][name]
+    out = [(tr["dataset"], tr["split"])]
+    return out + ([(tr["dataset"], tr["validation"]["split"])] if tr["validation"] else [])
+
+
+def _experiment_datasets(cfg: dict, name: str) -> list[tuple[str, str]]:
+    exp = cfg["experiments"][name]
+    out = [(exp["dataset"], exp["split"])]
+    for run in exp["runs"].values():
+        if run["training"]:
+            out += _training_datasets(cfg, run["training"])
+    return out
+
+
+def _report_datasets(cfg: dict, rep: dict) -> list[tuple[str, str]]:
+    if rep["kind"] == "semi_supervised":
+        return [p for tr in rep["trainings"].values() for p in _training_datasets(cfg, tr)]
+    return _experiment_datasets(cfg, rep["experiment"])
+
+
+def check_targets(cfg: dict, targets) -> None:
+    """Check the dataroots of every real dataset the requested targets read (before any rule runs)."""
+    for target in targets:
+        for dataset, split in datasets_of_target(cfg, str(target)):
+            require_dataroot(cfg, dataset, split)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# file layout
+# ------------------------------------------------------------------------------------------------------------
+
+def dataset_kind(cfg: dict, dataset: str) -> str:
+    """demo, nuscenes or av2."""
+    return cfg["datasets"][dataset]["kind"]
+
+
+def demo_sentinel(cfg: dict, dataset: str) -> str:
+    """The file the demo-data rule writes last-but-one and later rules depend on."""
+    ds = cfg["datasets"][dataset]
+    return f"{ds['dataroot']}/{ds['version']}/scene.json"
+
+
+def detections_file(cfg: dict, dataset: str, split: str, detector: str) -> str:
+    """Detections of one split, simulated or converted from a registry source."""
+    if cfg["detectors"][detector]["kind"] == "simulated":
+        return f"detections/simulated/{dataset}/{split}/{detector}.json"
+    ext = "feather" if dataset_kind(cfg, dataset) == "av2" else "json"
+    return f"detections/converted/{dataset}/{split}/{detector}.{ext}"
+
+
+def raw_source_file(registry: dict, source: str) -> str:
+    """Where a registry source is downloaded to (or put by hand)."""
+    return f"detections/raw/{source}/{registry[source].filename}"
+
+
+def tracks_file(cfg: dict, experiment: str, detector: str, run: str) -> str:
+    """The tracker's output of one run."""
+    ext = "pkl" if dataset_kind(cfg, cfg["experiments"][experiment]["dataset"]) == "av2" else "json"
+    return f"results/{experiment}/{detector}/{run}/tracks.{ext}"
+
+
+def submission_file(cfg: dict, experiment: str, detector: str, run: str) -> str:
+    """The validated submission of one run (its manifest sits beside it)."""
+    ext = "pkl" if dataset_kind(cfg, cfg["experiments"][experiment]["dataset"]) == "av2" else "json"
+    return f"submissions/{experiment}/{detector}/{run}.{ext}"
+
+
+def metrics_file(experiment: str, detector: str, run: str) -> str:
+    """The metrics JSON of one run."""
+    return f"reports/metrics/{experiment}/{detector}/{run}.json"
+
+
+def checkpoint_file(training: str) -> str:
+    """The model a training writes."""
+    return f"checkpoints/{training}/model.pt"

@@ -1,0 +1,78 @@
+# Shared definitions: the interpreter every rule runs grutrack with, the cross-checked config, the paper's
+# numbers, the detection registry, and input functions. Logic lives in grutrack.pipeline (tested there).
+
+import json
+import re
+
+import yaml
+from snakemake.exceptions import WorkflowError
+
+from grutrack.data.registry import load_registry
+from grutrack.errors import ConfigError
+from grutrack.pipeline import spec as S
+from grutrack.pipeline.codever import code_version
+
+PY = sys.executable                      # the environment's interpreter (the one running snakemake)
+GRUTRACK = f"{PY} -m grutrack"
+# on failure, show the end of the rule's log on the terminal
+ON_FAIL = "|| {{ tail -n 25 {log} >&2; exit 1; }}"
+
+PAPER_PATH = str(Path(workflow.basedir) / config["paper"]) if not os.path.isabs(config["paper"]) else config["paper"]
+with open(PAPER_PATH) as _f:
+    PAPER = yaml.safe_load(_f)
+validate(PAPER, "../schemas/paper.schema.yaml", set_default=False)
+REGISTRY = load_registry()
+S.check_config(config, PAPER, REGISTRY)
+# dataroots of real datasets are checked now, for the requested targets only (demo targets need none)
+S.check_targets(config, workflow.dag_settings.targets if workflow.dag_settings else ())
+
+
+def _alternation(names):
+    """A wildcard regex matching exactly these names (none: matches nothing)."""
+    names = sorted(names)
+    return "|".join(re.escape(n) for n in names) if names else "(?!x)x"
+
+
+def _experiments_of(kinds):
+    return [n for n, e in config["experiments"].items() if S.dataset_kind(config, e["dataset"]) in kinds]
+
+
+NUSC_EXPERIMENTS = _alternation(_experiments_of(("demo", "nuscenes")))
+AV2_EXPERIMENTS = _alternation(_experiments_of(("av2",)))
+
+wildcard_constraints:
+    dataset=_alternation(config["datasets"]),
+    detector=_alternation(config["detectors"]),
+    training=_alternation(config["trainings"]),
+    run="[^/]+",
+    split="[^/]+",
+    source="[^/]+",
+
+
+def dataset_input(dataset, split=None):
+    """Input of a rule that reads a dataset: the demo's sentinel file (built by demo_data), nothing for a real
+    dataset, whose dataroot is checked here (the error names the config key)."""
+    try:
+        S.require_dataroot(config, dataset, split)
+    except ConfigError as exc:
+        raise WorkflowError(str(exc))
+    if S.dataset_kind(config, dataset) == "demo":
+        return [S.demo_sentinel(config, dataset)]
+    return []
+
+
+def dataroot(dataset):
+    return config["datasets"][dataset]["dataroot"]
+
+
+def experiment(w):
+    return config["experiments"][w.experiment]
+
+
+def run_of(w):
+    return config["experiments"][w.experiment]["runs"][w.run]
+
+
+def jq(obj):
+    """Compact, key-sorted JSON of a config value (a params value and a CLI argument)."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"))
