@@ -16,6 +16,11 @@ COMMANDS: tuple[str, ...] = (
     "grutrack.cli.evaluate",
     "grutrack.cli.train",
     "grutrack.cli.demo",
+    "grutrack.cli.detections",
+    "grutrack.cli.resolve",
+    "grutrack.cli.submit",
+    "grutrack.cli.report",
+    "grutrack.cli.check",
 )
 
 

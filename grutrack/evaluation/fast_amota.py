@@ -243,7 +243,6 @@ def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
 # One class
 # ----------------------------------------------------------------------------------------------------------------
 
-@dataclass
 class _Subset:
     """Candidate pairs of one frame for one set of kept predictions (cached across thresholds).
 
@@ -251,20 +250,51 @@ class _Subset:
     such a pair whatever its state (every optimal assignment contains it), so only the other ("contested")
     rows need the state machine.
     """
-    g0: int                 # class-level index of the frame's first GT
-    g: np.ndarray           # class-level GT index of each candidate pair
-    p: np.ndarray           # class-level prediction index of each candidate pair
-    d: np.ndarray           # exact distance of each pair
-    iso: np.ndarray         # pair is isolated
-    simple: bool            # every pair isolated
-    # Only for frames with contested rows:
-    dist: Optional[np.ndarray] = None       # n x k distances, NaN where >= threshold (motmetrics' matrix)
-    kept: Optional[np.ndarray] = None       # class-level indices of the kept predictions (matrix columns)
-    hids: Optional[List[int]] = None        # hypothesis id of each column
-    col_of: Optional[Dict[int, int]] = None  # hypothesis id -> column, when the ids are unique in the frame
-    rows: Optional[List[int]] = None        # contested rows (local), ascending
-    iso_rows: Optional[np.ndarray] = None   # isolated rows (local) and their columns
-    iso_cols: Optional[np.ndarray] = None
+    __slots__ = ("g0", "g", "p", "d", "iso", "simple", "n", "kept", "ph", "unique_ids", "col_hid", "rows",
+                 "row_cols", "pair_d", "iso_rows", "iso_cols", "_dist")
+
+    def __init__(self, g0: int, g: np.ndarray, p: np.ndarray, d: np.ndarray, iso: np.ndarray, simple: bool):
+        self.g0 = g0            # class-level index of the frame's first GT
+        self.g = g              # class-level GT index of each candidate pair
+        self.p = p              # class-level prediction index of each candidate pair
+        self.d = d              # exact distance of each pair
+        self.iso = iso          # pair is isolated
+        self.simple = simple    # every pair isolated
+
+    def contest(self, n: int, kept: np.ndarray, ph: np.ndarray, rows: List[int], cols: List[int],
+                unique_ids: bool) -> None:
+        """Python-side structures for the state machine of a frame with contested rows (``rows``, ``cols``: the
+        local matrix position of each candidate pair; ``unique_ids``: no hypothesis id repeats in the frame)."""
+        self.n = n                                  # rows of motmetrics' matrix (GT of the frame)
+        self.kept = kept                            # class-level prediction index of each matrix column
+        self.ph = ph
+        self.unique_ids = unique_ids
+        iso = self.iso.tolist()
+        self.pair_d = dict(zip(zip(rows, cols), self.d.tolist()))
+        self.col_hid = dict(zip(cols, ph[self.p].tolist()))   # hypothesis id of the candidate columns
+        self.row_cols: Dict[int, List[int]] = {}
+        for r, j, i in zip(rows, cols, iso):
+            if not i:
+                self.row_cols.setdefault(r, []).append(j)
+        self.rows = sorted(self.row_cols)           # contested rows, ascending
+        self.iso_rows = [r for r, i in zip(rows, iso) if i]
+        self.iso_cols = [j for j, i in zip(cols, iso) if i]
+        self._dist = None
+
+    @property
+    def hids(self) -> List[int]:
+        """Hypothesis id of every column."""
+        return self.ph[self.kept].tolist()
+
+    @property
+    def dist(self) -> np.ndarray:
+        """motmetrics' distance matrix of the frame: exact distances, NaN where >= the threshold."""
+        if self._dist is None:
+            m = np.full((self.n, len(self.kept)), np.nan)
+            for (r, j), v in self.pair_d.items():
+                m[r, j] = v
+            self._dist = m
+        return self._dist
 
 
 @dataclass
@@ -301,6 +331,12 @@ class _ClassEval:
         self.g_ptr = np.searchsorted(self.gf, frames)
         self.p_ptr = np.searchsorted(self.pf, frames)
         self.n_f = np.diff(self.g_ptr)
+        # Frames where a hypothesis id occurs twice (the devkit's "first unmasked column with that id" matters).
+        self.frame_dup_hyp = np.zeros(flat.n_frames, dtype=bool)
+        if len(self.ph) > 1:
+            order = np.lexsort((self.ph, self.pf))
+            dup = (self.pf[order][1:] == self.pf[order][:-1]) & (self.ph[order][1:] == self.ph[order][:-1])
+            self.frame_dup_hyp[self.pf[order][1:][dup]] = True
         self._cache: Dict[Tuple[int, int], _Subset] = {}
         self._pass_cache: Dict[int, _PassResult] = {}
         self._objects()
@@ -322,58 +358,88 @@ class _ClassEval:
         self.has_duplicate_gt = bool(dup.any())
 
     def _near(self) -> None:
-        """Predictions that could be within the distance threshold of some GT of their frame (conservative)."""
+        """(GT, prediction) pairs of a frame that could be within the distance threshold (conservative margin
+        over the rounding of the devkit's formula), row-major per frame; and the predictions in such a pair."""
         self.p_near = np.zeros(len(self.ps), dtype=bool)
         both = np.flatnonzero((self.n_f > 0) & (np.diff(self.p_ptr) > 0))
         th = self.dist_th
-        for f in both:
+        near_g: List[np.ndarray] = []
+        near_p: List[np.ndarray] = []
+        for f in both.tolist():
             g0, g1 = self.g_ptr[f], self.g_ptr[f + 1]
             p0, p1 = self.p_ptr[f], self.p_ptr[f + 1]
             gxy = self.gxy[g0:g1]
             pxy = self.pxy[p0:p1]
-            dx = gxy[:, 0, None] - pxy[None, :, 0]
-            dy = gxy[:, 1, None] - pxy[None, :, 1]
-            approx = np.hypot(dx, dy)
-            # Rounding of the devkit's |x|^2 - 2xy + |y|^2 formula is far below this margin near the threshold.
+            approx = np.hypot(gxy[:, 0, None] - pxy[None, :, 0], gxy[:, 1, None] - pxy[None, :, 1])
+            # |x|^2 - 2xy + |y|^2 loses ~1e-16 |x|^2 to rounding: far below this margin near the threshold.
             scale = max(float(np.abs(gxy).max()), float(np.abs(pxy).max()), 1.0)
-            margin = 1e-3 + 1e-12 * scale * scale
-            self.p_near[p0:p1] = (approx < th + margin).any(axis=0)
+            ii, jj = np.nonzero(approx < th + 1e-3 + 1e-12 * scale * scale)
+            near_g.append(g0 + ii)
+            near_p.append(p0 + jj)
+        self.near_g = np.concatenate(near_g) if near_g else np.zeros(0, np.int64)
+        self.near_p = np.concatenate(near_p) if near_p else np.zeros(0, np.int64)
+        self.p_near[self.near_p] = True
+        self.near_ptr = np.searchsorted(self.gf[self.near_g], np.arange(self.n_frames + 1))
 
     # -- candidate pairs ---------------------------------------------------------------------------------------
 
-    def _subset(self, f: int, kept: np.ndarray, n_kept: int) -> _Subset:
-        """Exact distances and candidate pairs of frame ``f`` with its kept predictions (cached by count: the
-        kept sets of one frame are nested, so the count identifies the set)."""
-        g0, g1 = int(self.g_ptr[f]), int(self.g_ptr[f + 1])
-        p0, p1 = int(self.p_ptr[f]), int(self.p_ptr[f + 1])
-        idx = p0 + np.flatnonzero(kept[p0:p1])
-        assert len(idx) == n_kept
-        # Same formula and operation order as exact_center_distances; the BLAS product on fresh C-contiguous
-        # arrays of the devkit's shapes (n_gt x 2, n_kept x 2), the norms precomputed.
-        dist = -2 * (self.gxy[g0:g1].copy() @ self.pxy[idx].T)
-        dist += self.gxx[g0:g1, None]
-        dist += self.pyy[None, idx]
-        np.maximum(dist, 0, out=dist)
-        np.sqrt(dist, out=dist)
-        cand = dist < self.dist_th          # the devkit sets distances >= dist_th_tp to NaN
-        ii, jj = np.nonzero(cand)
-        row_deg = np.bincount(ii, minlength=g1 - g0)
-        col_deg = np.bincount(jj, minlength=n_kept)
-        iso = (row_deg[ii] == 1) & (col_deg[jj] == 1)
-        simple = bool(iso.all())
-        sub = _Subset(g0=g0, g=g0 + ii, p=idx[jj], d=dist[ii, jj], iso=iso, simple=simple)
-        if not simple:
-            dist[~cand] = np.nan
-            sub.dist = dist
-            sub.kept = idx
-            sub.hids = self.ph[idx].tolist()
-            if len(set(sub.hids)) == len(sub.hids):
-                sub.col_of = {h: j for j, h in enumerate(sub.hids)}
-            sub.rows = np.unique(ii[~iso]).tolist()
-            sub.iso_rows = ii[iso]
-            sub.iso_cols = jj[iso]
-        self._cache[(f, n_kept)] = sub
-        return sub
+    def _compute_subsets(self, missing: List[Tuple[int, int]], kept: np.ndarray, ck: np.ndarray) -> None:
+        """Exact distances and candidate pairs of frames with their kept predictions; cached by (frame, number
+        kept): the kept sets of a frame are nested, so the count identifies the set.
+
+        The devkit calls ``euclidean_distances(gt_xy, kept_pred_xy)`` per frame: ``-2 X.Y^T + |X|^2 + |Y|^2``,
+        clipped at 0, square-rooted. The BLAS product's last bit depends on the matrix shape, so it is made
+        per frame on fresh arrays of the devkit's shapes; the rest is elementwise and done for all frames at
+        once, on the pairs that can be candidates.
+        """
+        kept_idx = np.flatnonzero(kept)
+        g_ptr, p_ptr = self.g_ptr, self.p_ptr
+        gxy, pxy = self.gxy, self.pxy
+        dots = []
+        for f, _ in missing:
+            g0, g1 = g_ptr[f], g_ptr[f + 1]
+            idx = kept_idx[ck[p_ptr[f]]:ck[p_ptr[f + 1]]]
+            dots.append((gxy[g0:g1].copy() @ pxy[idx].T).ravel())
+        fs = np.asarray([f for f, _ in missing], dtype=np.int64)
+        ks = np.asarray([k for _, k in missing], dtype=np.int64)
+        ns = self.n_f[fs]
+        offsets = np.r_[0, np.cumsum(ns * ks)]
+        dot_all = np.concatenate(dots)
+        # Near pairs of these frames whose prediction is kept.
+        starts = self.near_ptr[fs]
+        counts = self.near_ptr[fs + 1] - starts
+        sid = np.repeat(np.arange(len(missing)), counts)
+        pos = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts) + np.repeat(starts, counts)
+        ng, npp = self.near_g[pos], self.near_p[pos]
+        sel = kept[npp]
+        sid, ng, npp = sid[sel], ng[sel], npp[sel]
+        row = ng - g_ptr[fs[sid]]
+        col = ck[npp] - ck[p_ptr[fs[sid]]]          # rank of the prediction among the frame's kept ones
+        d = -2 * dot_all[offsets[sid] + row * ks[sid] + col]
+        d += self.gxx[ng]
+        d += self.pyy[npp]
+        np.maximum(d, 0, out=d)
+        np.sqrt(d, out=d)
+        cand = d < self.dist_th                     # the devkit sets distances >= dist_th_tp to NaN
+        sid, ng, npp, d, row, col = sid[cand], ng[cand], npp[cand], d[cand], row[cand], col[cand]
+        row_off = np.r_[0, np.cumsum(ns)]
+        col_off = np.r_[0, np.cumsum(ks)]
+        rkey = row_off[sid] + row
+        ckey = col_off[sid] + col
+        iso = (np.bincount(rkey, minlength=int(row_off[-1]))[rkey] == 1) & \
+              (np.bincount(ckey, minlength=int(col_off[-1]))[ckey] == 1)
+        n_contested = np.bincount(sid[~iso], minlength=len(missing))
+        bounds = np.searchsorted(sid, np.arange(1, len(missing))).tolist()
+        parts = zip(np.split(ng, bounds), np.split(npp, bounds), np.split(d, bounds), np.split(iso, bounds))
+        cache = self._cache
+        for s_, ((f, k), (g_, p_, d_, iso_), nc) in enumerate(zip(missing, parts, n_contested.tolist())):
+            g0 = int(g_ptr[f])
+            sub = _Subset(g0, g_, p_, d_, iso_, nc == 0)
+            if nc:
+                lo, hi = (bounds[s_ - 1] if s_ else 0), (bounds[s_] if s_ < len(bounds) else len(sid))
+                sub.contest(int(self.n_f[f]), kept_idx[ck[p_ptr[f]]:ck[p_ptr[f + 1]]].copy(), self.ph,
+                            row[lo:hi].tolist(), col[lo:hi].tolist(), not self.frame_dup_hyp[f])
+            cache[(f, k)] = sub
 
     # -- one threshold -----------------------------------------------------------------------------------------
 
@@ -393,15 +459,12 @@ class _ClassEval:
         # Frames with at least one candidate pair; the others only produce misses and false positives.
         active = np.flatnonzero((self.n_f > 0) & (near_f > 0))
         cache = self._cache
-        subs: List[_Subset] = []
-        hard: List[Tuple[int, _Subset]] = []
-        for f, k in zip(active.tolist(), k_f[active].tolist()):
-            sub = cache.get((f, k))
-            if sub is None:
-                sub = self._subset(f, kept, k)
-            subs.append(sub)
-            if not sub.simple:
-                hard.append((f, sub))
+        keys = list(zip(active.tolist(), k_f[active].tolist()))
+        missing = [key for key in keys if key not in cache]
+        if missing:
+            self._compute_subsets(missing, kept, ck)
+        subs = [cache[key] for key in keys]
+        hard = [(f, sub) for (f, _), sub in zip(keys, subs) if not sub.simple]
 
         # Isolated pairs: matched whatever the state.
         if subs:
@@ -447,41 +510,41 @@ class _ClassEval:
         order = np.argsort(key_iso, kind="stable")
         key_sorted = key_iso[order]
         h_sorted = ph[p_iso][order]
-
-        def prev_of(objs: np.ndarray, f: int) -> Tuple[np.ndarray, np.ndarray]:
-            """(frame, hypothesis) of each object's last isolated match before frame f; (-1, -1) if none."""
-            q = np.searchsorted(key_sorted, objs * nf + f) - 1
-            if len(key_sorted) == 0:
-                return np.full(len(objs), -1), np.full(len(objs), -1)
-            qc = np.maximum(q, 0)
-            ok = (q >= 0) & (key_sorted[qc] // nf == objs)
-            return np.where(ok, key_sorted[qc] % nf, -1), np.where(ok, h_sorted[qc], -1)
-
         last: Dict[int, Tuple[int, int]] = {}   # object -> (frame, hypothesis) of its last contested match
 
-        def iso_prev(sub: _Subset, f: int) -> List[int]:
-            """Previous partner of each isolated row of a contested frame (rarely needed)."""
-            objs = go[sub.g0 + sub.iso_rows]
-            pf_i, ph_i = prev_of(objs, f)
-            out = []
-            for o, hf, hh in zip(objs.tolist(), pf_i.tolist(), ph_i.tolist()):
-                lc = last.get(o)
-                out.append(lc[1] if lc is not None and lc[0] > hf else hh)
-            return out
+        def isolated_prev(rows: List[int], g0: int, f: int) -> Tuple[List[int], List[int], List[int]]:
+            """Objects of the rows, and (frame, hypothesis) of their last isolated match before f (-1: none)."""
+            objs = go[g0 + np.asarray(rows, dtype=np.int64)]
+            if len(key_sorted) == 0:
+                return objs.tolist(), [-1] * len(rows), [-1] * len(rows)
+            q = np.searchsorted(key_sorted, objs * nf + f) - 1
+            qc = np.maximum(q, 0)
+            ok = (q >= 0) & (key_sorted[qc] // nf == objs)
+            return (objs.tolist(), np.where(ok, key_sorted[qc] % nf, -1).tolist(),
+                    np.where(ok, h_sorted[qc], -1).tolist())
 
-        # Isolated-match state of all contested rows, in one search.
-        all_rows = [sub.g0 + np.asarray(sub.rows, dtype=np.int64) for _, sub in hard]
-        all_f = np.concatenate([np.full(len(r), f) for r, (f, _) in zip(all_rows, hard)])
-        all_objs = go[np.concatenate(all_rows)]
-        q = np.searchsorted(key_sorted, all_objs * nf + all_f) - 1
+        def state(rows: List[int], g0: int, f: int) -> Tuple[List[int], List[int]]:
+            """Objects of the rows and their previous partner (-1: none) before frame f."""
+            objs, pf, hp = isolated_prev(rows, g0, f)
+            for t, o in enumerate(objs):
+                lc = last.get(o)
+                if lc is not None and lc[0] > pf[t]:
+                    hp[t] = lc[1]
+            return objs, hp
+
+        # Isolated-match state of every contested row of every frame, in one search.
+        all_rows = np.concatenate([sub.g0 + np.asarray(sub.rows, dtype=np.int64) for _, sub in hard])
+        all_f = np.repeat(np.asarray([f for f, _ in hard], dtype=np.int64), [len(sub.rows) for _, sub in hard])
+        all_objs = go[all_rows]
         if len(key_sorted):
+            q = np.searchsorted(key_sorted, all_objs * nf + all_f) - 1
             qc = np.maximum(q, 0)
             ok = (q >= 0) & (key_sorted[qc] // nf == all_objs)
             pf_all = np.where(ok, key_sorted[qc] % nf, -1).tolist()
-            ph_all = np.where(ok, h_sorted[qc], -1).tolist()
+            hp_all = np.where(ok, h_sorted[qc], -1).tolist()
         else:
             pf_all = [-1] * len(all_objs)
-            ph_all = [-1] * len(all_objs)
+            hp_all = [-1] * len(all_objs)
         objs_all = all_objs.tolist()
 
         out_g: List[int] = []
@@ -489,64 +552,62 @@ class _ClassEval:
         out_d: List[float] = []
         at = 0
         for f, sub in hard:
-            dist = sub.dist
-            hids = sub.hids
-            n_rows = len(sub.rows)
-            prev: List[int] = []
-            for t in range(at, at + n_rows):
-                o = objs_all[t]
-                hp = ph_all[t]
+            rows = sub.rows
+            nr = len(rows)
+            objs = objs_all[at:at + nr]
+            prev = hp_all[at:at + nr]
+            for t, o in enumerate(objs):
                 lc = last.get(o)
-                if lc is not None and lc[0] > pf_all[t]:
-                    hp = lc[1]
-                prev.append(hp)
-            rows_objs = objs_all[at:at + n_rows]
-            at += n_rows
-
-            col_of = sub.col_of
-            if col_of is None:
-                prev_all = dict(zip(sub.rows, prev))
-                prev_all.update(zip(sub.iso_rows.tolist(), iso_prev(sub, f)))
+                if lc is not None and lc[0] > pf_all[at + t]:
+                    prev[t] = lc[1]
+            at += nr
+            if not sub.unique_ids:
+                prev_all = dict(zip(rows, prev))
+                prev_all.update(zip(sub.iso_rows, state(sub.iso_rows, sub.g0, f)[1]))
                 matched = self._update_generic(sub, prev_all)
             else:
+                row_cols, col_hid = sub.row_cols, sub.col_hid
                 hmask = set()
                 omask = set()
                 matched = []
-                for r, hp in zip(sub.rows, prev):
+                for r, hp in zip(rows, prev):
                     if hp < 0:
                         continue
-                    j = col_of.get(hp)
-                    if j is None or j in hmask or dist[r, j] != dist[r, j]:
-                        continue
-                    hmask.add(j)
-                    omask.add(r)
-                    matched.append((r, j))
+                    # Ids are unique: the partner's column, if within distance, is one of the row's candidates.
+                    for j in row_cols[r]:
+                        if col_hid[j] == hp:
+                            if j not in hmask:
+                                hmask.add(j)
+                                omask.add(r)
+                                matched.append((r, j))
+                            break
                 # What the contested rows have left; isolated pairs never share a row or column with them.
-                rest = [(r, j) for r in sub.rows if r not in omask
-                        for j in np.flatnonzero(~np.isnan(dist[r])).tolist() if j not in hmask]
-                rr = [r for r, _ in rest]
-                cc = [j for _, j in rest]
-                if len(set(rr)) == len(rr) and len(set(cc)) == len(cc):
+                rest = [(r, j) for r in rows if r not in omask for j in row_cols[r] if j not in hmask]
+                rr = {r for r, _ in rest}
+                cc = {j for _, j in rest}
+                if len(rr) == len(rest) and len(cc) == len(rest):
                     matched.extend(rest)
                 else:
                     # Solver needed, on motmetrics' matrix: the isolated rows that kept their previous
                     # partner in step 1 are masked there too.
-                    for r, j, hh in zip(sub.iso_rows.tolist(), sub.iso_cols.tolist(), iso_prev(sub, f)):
-                        if hh == hids[j]:
+                    iso_prev = state(sub.iso_rows, sub.g0, f)[1]
+                    for r, j, hh in zip(sub.iso_rows, sub.iso_cols, iso_prev):
+                        if hh == sub.col_hid[j]:
                             omask.add(r)
                             hmask.add(j)
-                    dm = dist.copy()
+                    dm = sub.dist.copy()
                     dm[sorted(omask), :] = np.nan
                     dm[:, sorted(hmask)] = np.nan
-                    contested = set(sub.rows)
+                    contested = set(rows)
                     r2, c2 = _assign(dm)
                     matched.extend((r, j) for r, j in zip(r2.tolist(), c2.tolist()) if r in contested)
-            row_obj = dict(zip(sub.rows, rows_objs))
+            row_obj = dict(zip(rows, objs))
+            kept, col_hid, pair_d, g0 = sub.kept, sub.col_hid, sub.pair_d, sub.g0
             for r, j in matched:
-                out_g.append(sub.g0 + r)
-                out_p.append(int(sub.kept[j]))
-                out_d.append(float(dist[r, j]))
-                last[row_obj[r]] = (f, hids[j])
+                out_g.append(g0 + r)
+                out_p.append(int(kept[j]))
+                out_d.append(pair_d[(r, j)])
+                last[row_obj[r]] = (f, col_hid[j])
         return (np.asarray(out_g, dtype=np.int64), np.asarray(out_p, dtype=np.int64),
                 np.asarray(out_d, dtype=np.float64))
 

@@ -23,9 +23,11 @@ def read_submission(path: str | Path) -> dict:
 
 def devkit_check(path: str | Path) -> None:
     """Load the file with nuscenes-devkit's ``load_prediction`` (the loader the official evaluation uses)."""
+    from nuscenes.eval.common.config import config_factory
     from nuscenes.eval.common.loaders import load_prediction
     from nuscenes.eval.tracking.data_classes import TrackingBox
 
+    config_factory("tracking_nips_2019")  # registers the tracking class names TrackingBox checks against
     try:
         load_prediction(str(path), MAX_BOXES_PER_SAMPLE, TrackingBox, verbose=False)
     except (AssertionError, KeyError, TypeError, ValueError) as exc:

@@ -1,11 +1,14 @@
 """The workflow config (``workflow/config/config.yaml``, already checked against its JSON schema): the
-cross-references a schema cannot express, the dataroot checks for requested targets, and where each stage
-writes its files. Every error is a :class:`ConfigError` that names the config key and what to put there.
+cross-references a schema cannot express, the dataroot check of a real dataset, and where each stage writes
+its files. Every error is a :class:`ConfigError` that names the config key and what to put there.
+
+Snakemake parses the Snakefile before it knows the requested targets, so dataroots are checked by the input
+functions of the rules that read a dataset: while the DAG is built, before any rule runs, and only for the
+datasets the requested targets need (the demo target needs none).
 """
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 from grutrack.errors import ConfigError
@@ -74,6 +77,9 @@ def _detector_covers(cfg: dict, registry: dict, det: str, split: str, key: str) 
             raise ConfigError(f"config key detectors.{det}.sources has no source for split '{split}' (used by "
                               f"{key}); add {split}: <name in grutrack/configs/detections.yaml>")
         _need(registry, d["sources"][split], f"detectors.{det}.sources.{split}", "grutrack/configs/detections.yaml")
+    if d["kind"] == "local" and split not in d["files"]:
+        raise ConfigError(f"config key detectors.{det}.files has no file for split '{split}' (used by {key}); add "
+                          f"{split}: <path to the detection file>")
 
 
 def _check_experiment(cfg: dict, registry: dict, name: str, exp: dict) -> None:
@@ -161,51 +167,6 @@ def require_dataroot(cfg: dict, dataset: str, split: str | None = None) -> str:
     return root
 
 
-def datasets_of_target(cfg: dict, target: str) -> list[tuple[str, str]]:
-    """(dataset, split) pairs a target reads; unknown targets read nothing that can be checked here."""
-    m = re.fullmatch(r"reports/([^/]+)\.md", target)
-    if m and m.group(1) in cfg["reports"]:
-        return _report_datasets(cfg, cfg["reports"][m.group(1)])
-    m = re.fullmatch(r"submissions/(.+)_([^_/]+)\.zip", target)
-    if m and m.group(1) in cfg["experiments"]:
-        return _experiment_datasets(cfg, m.group(1))
-    m = re.fullmatch(r"(?:results|submissions|reports/metrics)/([^/]+)/.*", target)
-    if m and m.group(1) in cfg["experiments"]:
-        return _experiment_datasets(cfg, m.group(1))
-    m = re.fullmatch(r"checkpoints/([^/]+)/.*", target)
-    if m and m.group(1) in cfg["trainings"]:
-        return _training_datasets(cfg, m.group(1))
-    return []
-
-
-def _training_datasets(cfg: dict, name: str) -> list[tuple[str, str]]:
-    tr = cfg["trainings"][name]
-    out = [(tr["dataset"], tr["split"])]
-    return out + ([(tr["dataset"], tr["validation"]["split"])] if tr["validation"] else [])
-
-
-def _experiment_datasets(cfg: dict, name: str) -> list[tuple[str, str]]:
-    exp = cfg["experiments"][name]
-    out = [(exp["dataset"], exp["split"])]
-    for run in exp["runs"].values():
-        if run["training"]:
-            out += _training_datasets(cfg, run["training"])
-    return out
-
-
-def _report_datasets(cfg: dict, rep: dict) -> list[tuple[str, str]]:
-    if rep["kind"] == "semi_supervised":
-        return [p for tr in rep["trainings"].values() for p in _training_datasets(cfg, tr)]
-    return _experiment_datasets(cfg, rep["experiment"])
-
-
-def check_targets(cfg: dict, targets) -> None:
-    """Check the dataroots of every real dataset the requested targets read (before any rule runs)."""
-    for target in targets:
-        for dataset, split in datasets_of_target(cfg, str(target)):
-            require_dataroot(cfg, dataset, split)
-
-
 # ------------------------------------------------------------------------------------------------------------
 # file layout
 # ------------------------------------------------------------------------------------------------------------
@@ -216,9 +177,8 @@ def dataset_kind(cfg: dict, dataset: str) -> str:
 
 
 def demo_sentinel(cfg: dict, dataset: str) -> str:
-    """The file the demo-data rule writes last-but-one and later rules depend on."""
-    ds = cfg["datasets"][dataset]
-    return f"{ds['dataroot']}/{ds['version']}/scene.json"
+    """The demo dataset's folder, which the demo-data rule writes and later rules depend on."""
+    return cfg["datasets"][dataset]["dataroot"]
 
 
 def detections_file(cfg: dict, dataset: str, split: str, detector: str) -> str:

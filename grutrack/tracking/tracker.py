@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Protocol
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from grutrack.boxes import empty_boxes
 from grutrack.data.scene import BoxSet, Scene
@@ -223,6 +224,14 @@ def track_scenes(tracker: Tracker, scenes: Iterable[Scene], detections: dict[str
 
     ``progress``: optional callable(n_frames) called after each scene (e.g. a tqdm ``update``).
     """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _track_scenes(tracker, scenes, detections, progress)
+
+
+def _track_scenes(tracker: Tracker, scenes: Iterable[Scene], detections: dict[str, BoxSet],
+                  progress=None) -> TrackingRun:
+    # the filter's linear algebra is many tiny batched solves: multi-threaded BLAS only adds thread
+    # hand-offs (and stalls badly when other processes share the cores), so the loop runs single-threaded
     results, frames, seconds = {}, 0, 0.0
     for scene in scenes:
         tracker.reset()

@@ -264,6 +264,12 @@ class Trainer:
     # -- the loop --------------------------------------------------------------------------------------
     def run(self, max_steps: int | None = None) -> Path:
         """Train until all epochs are done (or ``max_steps`` more steps); returns the final checkpoint."""
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1, user_api="blas"):  # tiny batched solves: threads only add stalls
+            return self._run(max_steps)
+
+    def _run(self, max_steps: int | None) -> Path:
         from tqdm import tqdm
 
         self.out.mkdir(parents=True, exist_ok=True)

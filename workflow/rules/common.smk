@@ -3,6 +3,7 @@
 
 import json
 import re
+import shlex
 
 import yaml
 from snakemake.exceptions import WorkflowError
@@ -23,8 +24,6 @@ with open(PAPER_PATH) as _f:
 validate(PAPER, "../schemas/paper.schema.yaml", set_default=False)
 REGISTRY = load_registry()
 S.check_config(config, PAPER, REGISTRY)
-# dataroots of real datasets are checked now, for the requested targets only (demo targets need none)
-S.check_targets(config, workflow.dag_settings.targets if workflow.dag_settings else ())
 
 
 def _alternation(names):
@@ -50,8 +49,9 @@ wildcard_constraints:
 
 
 def dataset_input(dataset, split=None):
-    """Input of a rule that reads a dataset: the demo's sentinel file (built by demo_data), nothing for a real
-    dataset, whose dataroot is checked here (the error names the config key)."""
+    """Input of a rule that reads a dataset: the demo's folder (built by demo_data), nothing for a real dataset,
+    whose dataroot is checked here, while the DAG is built and before any rule runs (the error names the
+    config key and what to put there)."""
     try:
         S.require_dataroot(config, dataset, split)
     except ConfigError as exc:

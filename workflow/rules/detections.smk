@@ -1,11 +1,23 @@
-# Stage "detections": simulated detections (demo or any nuScenes-format split with ground truth), and published
-# detections from the registry (grutrack/configs/detections.yaml): downloaded, or put in place by hand where
-# the host needs a browser, then converted to one split's detections.
+# Stage "detections": simulated detections (demo or any nuScenes-format split with ground truth); published
+# detections from the registry (grutrack/configs/detections.yaml), downloaded or put in place by hand where
+# the host needs a browser; and the user's own detection files (detector kind local). Published and local
+# files are converted to one split's detections (validated against the split).
 
 
-def _registry_source(w):
-    """Registry name of the detector's source for this split."""
-    return config["detectors"][w.detector]["sources"][w.split]
+def _raw_input(w):
+    """The file convert_detections reads: a registry download or the user's local file."""
+    det = config["detectors"][w.detector]
+    if det["kind"] == "local":
+        return det["files"][w.split]
+    return S.raw_source_file(REGISTRY, det["sources"][w.split])
+
+
+def _format_args(w):
+    """How convert_detections learns the format: the registry source's name, or the local detector's format."""
+    det = config["detectors"][w.detector]
+    if det["kind"] == "local":
+        return f"--format {det['format']}" + (f" --member {shlex.quote(det['member'])}" if det["member"] else "")
+    return det["sources"][w.split]
 
 
 rule simulate_detections:
@@ -41,13 +53,13 @@ rule fetch_detections:
 
 rule convert_detections:
     input:
-        raw=lambda w: S.raw_source_file(REGISTRY, _registry_source(w)),
+        raw=_raw_input,
         data=lambda w: dataset_input(w.dataset, w.split),
     output: "detections/converted/{dataset}/{split}/{detector}.{ext}"
     wildcard_constraints:
         ext="json|feather",
     params:
-        source=_registry_source,
+        source=_format_args,
         dataroot=lambda w: dataroot(w.dataset),
         version=lambda w: S.version_for(config, w.dataset, w.split) or "none",
         code=code_version("convert"),

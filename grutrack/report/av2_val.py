@@ -1,0 +1,42 @@
+"""Report of Argoverse 2 val (``reports/av2_val.md``): Table I, HOTA per class for Greedy, AB3DMOT and the
+GRU-KF (trained on nuScenes) on LT3D detections, paper numbers beside the reproduced ones."""
+
+from __future__ import annotations
+
+from grutrack.report import figures
+from grutrack.report.inputs import ReportInputs
+from grutrack.report.markdown import (AV2_OVERALL, check_section, header, image, mirror_tables, provenance,
+                                      runs_table)
+from grutrack.report.paper import get_table, reproduced
+
+AVERAGE_NOTE = ("Note: the paper's average for Ours (47.3) is not the mean of its seven per-class values (54.1) "
+                "and the paper does not say what it averages over; the reproduced `average` is the mean over the "
+                "7 Table I classes (absent classes count as 0, as the official evaluator scores them).")
+
+
+def build(inp: ReportInputs) -> str:
+    """The markdown text (figures are written into ``inp.figures``)."""
+    docs = inp.docs()
+    exp = inp.experiment or {}
+    tbl = get_table(inp.paper, "I")
+    parts = [header(f"Argoverse 2 {exp.get('split', 'val')}: Table I",
+                    [f"Detections: {exp.get('detector', '?')}. Official AV2 tracking evaluation (HOTA). Paper "
+                     "numbers are labelled **Paper numbers**."])]
+    parts += ["", f"## {tbl['title']}", "", mirror_tables(tbl, inp.row_docs("I")), "", AVERAGE_NOTE, "",
+              _figure(inp, tbl)]
+    parts += ["", "## Every run (Table I average over 7 classes, ×100)", "", runs_table(docs, AV2_OVERALL)]
+    parts += ["", "## Check against the tolerances of paper.yaml", "", check_section("I", tbl, inp.row_docs("I"))]
+    parts += ["", "## Provenance", "", provenance(inp.runs, docs)]
+    return "\n".join(parts) + "\n"
+
+
+def _figure(inp: ReportInputs, tbl: dict) -> str:
+    """HOTA per class: the paper's Ours and every reproduced row."""
+    cols = list(tbl["columns"])
+    row_docs = inp.row_docs("I")
+    series = {"paper Ours": [tbl["rows"].get("Ours", {}).get(c) for c in cols]}
+    for row, doc in row_docs.items():
+        series[f"reproduced {row}"] = [reproduced(tbl, doc)[c] for c in cols]
+    path = figures.grouped_bars(inp.figures / "table_I_hota.png", cols, series, "Table I: HOTA per class",
+                                "HOTA ×100")
+    return image(path, inp.out.parent, "Table I: paper vs reproduced HOTA per class")

@@ -1,0 +1,42 @@
+"""Report of nuScenes val (``reports/nusc_val.md``): Table III (overall AMOTA / AMOTP / IDS) and Table IV (the
+motion-module ablation, bicycle and car), paper numbers beside the reproduced ones."""
+
+from __future__ import annotations
+
+from grutrack.report import figures
+from grutrack.report.inputs import ReportInputs
+from grutrack.report.markdown import (check_section, header, image, mirror_tables, provenance, runs_table)
+from grutrack.report.paper import get_table, reproduced
+
+
+def build(inp: ReportInputs) -> str:
+    """The markdown text (figures are written into ``inp.figures``)."""
+    docs = inp.docs()
+    exp = inp.experiment or {}
+    parts = [header(f"nuScenes {exp.get('split', 'val')}: Tables III and IV",
+                    [f"Detections: {exp.get('detector', '?')}. Paper numbers are labelled **Paper numbers**; "
+                     "reproduced numbers come from the metrics JSONs under Provenance."])]
+    for tid in ("III", "IV"):
+        if tid in inp.rows:
+            tbl = get_table(inp.paper, tid)
+            parts += ["", f"## {tbl['title']}", "", mirror_tables(tbl, inp.row_docs(tid)), "",
+                      _figure(inp, tid, tbl)]
+    parts += ["", "## Every run", "", runs_table(docs)]
+    parts += ["", "## Check against the tolerances of paper.yaml", ""]
+    parts += ["\n\n".join(check_section(tid, get_table(inp.paper, tid), inp.row_docs(tid)) for tid in inp.rows)]
+    parts += ["", "## Provenance", "", provenance(inp.runs, docs)]
+    return "\n".join(parts) + "\n"
+
+
+def _figure(inp: ReportInputs, tid: str, tbl: dict) -> str:
+    """Paper vs reproduced bars of the table's AMOTA columns."""
+    row_docs = inp.row_docs(tid)
+    rows = list(row_docs)
+    cols = [c for c in tbl["columns"] if c.endswith("amota")]
+    series = {}
+    for col in cols:
+        series[f"paper {col}"] = [tbl["rows"][r].get(col) for r in rows]
+        series[f"reproduced {col}"] = [reproduced(tbl, row_docs[r])[col] for r in rows]
+    path = figures.grouped_bars(inp.figures / f"table_{tid}_amota.png", rows, series,
+                                f"Table {tid}: paper vs reproduced", "AMOTA ×100")
+    return image(path, inp.out.parent, f"Table {tid}: paper vs reproduced AMOTA")

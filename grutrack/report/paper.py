@@ -1,0 +1,100 @@
+"""The paper's numbers (``workflow/config/paper.yaml``) and reading the matching numbers from a metrics JSON.
+
+A table has ``columns`` (name -> metric path in a metrics JSON, scale to the paper's unit, tolerance) and
+``rows`` (method -> column -> number). See the header of paper.yaml.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import yaml
+
+from grutrack.errors import ConfigError, InputFormatError
+
+PACKAGE_ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_PAPER = Path("workflow/config/paper.yaml")
+ROW_INFO_KEYS = ("detector",)  # non-numeric keys a paper row may carry
+
+
+def default_paper_path() -> Path:
+    """workflow/config/paper.yaml of the working directory, else of the repository the package lives in."""
+    for cand in (DEFAULT_PAPER, PACKAGE_ROOT / DEFAULT_PAPER):
+        if cand.is_file():
+            return cand
+    raise ConfigError(f"no paper numbers found at {DEFAULT_PAPER} (run from the repository root or give --paper)")
+
+
+def load_paper(path: str | Path | None = None) -> dict:
+    """Read and structurally check paper.yaml (the workflow also validates it against its JSON schema)."""
+    path = Path(path) if path else default_paper_path()
+    try:
+        paper = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"{path}: cannot read the paper numbers ({exc})") from exc
+    if not isinstance(paper, dict) or not isinstance(paper.get("tables"), dict):
+        raise ConfigError(f"{path}: expected a 'tables' mapping")
+    for tid, table in paper["tables"].items():
+        _check_table(path, tid, table)
+    return paper
+
+
+def _check_table(path: Path, tid: str, table: dict) -> None:
+    for key in ("title", "columns", "rows", "default_row"):
+        if key not in table:
+            raise ConfigError(f"{path}: tables.{tid} has no '{key}'")
+    for row, values in table["rows"].items():
+        for col in values:
+            if col not in table["columns"] and col not in ROW_INFO_KEYS:
+                raise ConfigError(f"{path}: tables.{tid}.rows.{row} has column '{col}', not one of "
+                                  f"{', '.join(table['columns'])}")
+
+
+def get_table(paper: dict, tid: str) -> dict:
+    """A paper table by its id (I, II, III, IV)."""
+    if tid not in paper["tables"]:
+        raise ConfigError(f"unknown paper table '{tid}' (known: {', '.join(paper['tables'])})")
+    return paper["tables"][tid]
+
+
+def get_row(table: dict, row: str | None) -> tuple[str, dict]:
+    """(name, numbers) of a row; the table's default row when ``row`` is None."""
+    name = row or table["default_row"]
+    if name not in table["rows"]:
+        raise ConfigError(f"{table['title']}: no row '{name}' (rows: {', '.join(table['rows'])})")
+    return name, {k: v for k, v in table["rows"][name].items() if k not in ROW_INFO_KEYS}
+
+
+def load_metrics(path: str | Path) -> dict:
+    """A metrics JSON written by ``grutrack evaluate``."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise InputFormatError(f"{path}: cannot read a metrics JSON ({exc})") from exc
+    if not isinstance(doc, dict) or not isinstance(doc.get("overall"), dict):
+        raise InputFormatError(f"{path}: not a metrics JSON of grutrack evaluate (no 'overall' object)")
+    return doc
+
+
+def metric(doc: dict, dotted: str) -> float | None:
+    """The value at a dotted path (``overall.amota``, ``per_class.car.amotp``); None when absent or NaN."""
+    node = doc
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return None
+        node = node[part]
+    if isinstance(node, bool) or not isinstance(node, (int, float)) or not math.isfinite(node):
+        return None
+    return float(node)
+
+
+def reproduced(table: dict, doc: dict | None) -> dict[str, float | None]:
+    """Every column of a table read from a metrics JSON, in the paper's unit (None: not available)."""
+    out = {}
+    for col, spec in table["columns"].items():
+        v = metric(doc, spec["metric"]) if doc is not None else None
+        out[col] = None if v is None else v * spec["scale"]
+    return out

@@ -1,0 +1,85 @@
+# Stage "report": reports/<name>.md and its figures (PNG) from metrics JSONs, manifests and training logs;
+# the paper's numbers (paper.yaml) beside the reproduced ones. Reports never recompute a metric.
+
+
+def _report(w):
+    return config["reports"][w.report]
+
+
+def _report_runs(rep):
+    """(run, metrics JSON, manifest) of the report's experiment, first detector (evaluated experiments)."""
+    if rep["kind"] in ("semi_supervised", "nusc_test"):
+        return []
+    exp_name = rep["experiment"]
+    det = config["experiments"][exp_name]["detectors"][0]
+    sub = lambda run: S.submission_file(config, exp_name, det, run)
+    return [(run, S.metrics_file(exp_name, det, run), re.sub(r"\.(json|pkl)$", ".manifest.json", sub(run)))
+            for run in config["experiments"][exp_name]["runs"]]
+
+
+def _report_trainings(rep):
+    """(name, train_log.csv, training.yaml) of the trainings the report shows."""
+    if rep["kind"] == "semi_supervised":
+        names = rep["trainings"]
+    else:
+        runs = config["experiments"][rep["experiment"]]["runs"]
+        names = {r["training"]: r["training"] for r in runs.values() if r["training"]}
+    return [(label, f"checkpoints/{t}/train_log.csv", f"checkpoints/{t}/training.yaml") for label, t in names.items()
+            if rep["kind"] in ("semi_supervised", "demo")]
+
+
+def _report_zips(rep):
+    """(detector, zip, manifest) of a leaderboard report."""
+    if rep["kind"] != "nusc_test":
+        return []
+    name = rep["experiment"]
+    exp = config["experiments"][name]
+    return [(det, f"submissions/{name}_{det}.zip",
+             re.sub(r"\.json$", ".manifest.json", S.submission_file(config, name, det, exp["leaderboard_run"])))
+            for det in exp["detectors"]]
+
+
+def _report_inputs(w):
+    rep = _report(w)
+    files = [PAPER_PATH]
+    for _, metrics, manifest in _report_runs(rep):
+        files += [metrics, manifest]
+    for _, log_csv, cfg in _report_trainings(rep):
+        files += [log_csv, cfg]
+    for _, zp, manifest in _report_zips(rep):
+        files += [zp, manifest]
+    return files
+
+
+def _report_args(w):
+    """The report's command-line arguments: every file it reads, and which run reproduces which paper row."""
+    rep = _report(w)
+    args = [f"--paper {PAPER_PATH}", f"--name {w.report}"]
+    if rep["experiment"]:
+        exp = config["experiments"][rep["experiment"]]
+        args.append(f"--experiment {rep['experiment']}:{exp['dataset']}:{exp['split']}:{exp['detectors'][0]}")
+    args += [f"--run {run}={metrics}" for run, metrics, _ in _report_runs(rep)]
+    args += [f"--train-log {label}={log_csv}" for label, log_csv, _ in _report_trainings(rep)]
+    args += [f"--zip {det}={zp}" for det, zp, _ in _report_zips(rep)]
+    args += [f"--row {shlex.quote(f'{table}:{row}={run}')}" for table, rows in rep["tables"].items()
+             for row, run in rows.items()]
+    return " ".join(args)
+
+
+rule report:
+    input: _report_inputs
+    output:
+        md="reports/{report}.md",
+        figures=directory("reports/figures/{report}"),
+    wildcard_constraints:
+        report=_alternation(config["reports"]),
+    params:
+        kind=lambda w: _report(w)["kind"],
+        spec=lambda w: jq(_report(w)),
+        args=_report_args,
+        code=code_version("report"),
+    log: "logs/report/{report}.log"
+    benchmark: "logs/benchmarks/report/{report}.tsv"
+    shell:
+        "{GRUTRACK} report {params.kind} {params.args} --out {output.md} --figures {output.figures} "
+        "> {log} 2>&1 " + ON_FAIL

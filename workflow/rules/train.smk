@@ -1,0 +1,49 @@
+# Stage "train": the GRU-Kalman filter, semi-supervised (or supervised) on a training split. The training config
+# is the shipped one with the workflow's overrides, resolved and validated into checkpoints/<name>/training.yaml.
+
+
+def _training(w):
+    return config["trainings"][w.training]
+
+
+def _train_inputs(w):
+    tr = _training(w)
+    out = {"data": dataset_input(tr["dataset"], tr["split"]),
+           "detections": S.detections_file(config, tr["dataset"], tr["split"], tr["detector"])}
+    if tr["validation"]:
+        out["val_detections"] = S.detections_file(config, tr["dataset"], tr["validation"]["split"], tr["detector"])
+    return out
+
+
+def _val_args(w, input):
+    tr = _training(w)
+    if not tr["validation"]:
+        return ""
+    return (f"--val-split {tr['validation']['split']} --val-detections {input.val_detections} "
+            f"--val-every {tr['validation']['every']}")
+
+
+rule train:
+    input: unpack(_train_inputs)
+    output:
+        model="checkpoints/{training}/model.pt",
+        log_csv="checkpoints/{training}/train_log.csv",
+        config="checkpoints/{training}/training.yaml",
+    params:
+        training=lambda w: jq(_training(w)),
+        base=lambda w: _training(w)["config"],
+        overrides=lambda w: jq(_training(w)["overrides"]),
+        dataroot=lambda w: dataroot(_training(w)["dataset"]),
+        version=lambda w: S.version_for(config, _training(w)["dataset"], _training(w)["split"]),
+        split=lambda w: _training(w)["split"],
+        val=_val_args,
+        code=code_version("train"),
+    threads: 2
+    log: "logs/train/{training}.log"
+    benchmark: "logs/benchmarks/train/{training}.tsv"
+    shell:
+        "( {GRUTRACK} resolve-config training --base {params.base} --overrides {params.overrides:q} "
+        "--out {output.config} && "
+        "{GRUTRACK} train --dataroot {params.dataroot} --version {params.version} --split {params.split} "
+        "--detections {input.detections} --config {output.config} --out checkpoints/{wildcards.training} "
+        "{params.val} --no-progress ) > {log} 2>&1 " + ON_FAIL
