@@ -3,28 +3,34 @@
 The official evaluation (``nuscenes.eval.tracking.evaluate.TrackingEval`` in nuscenes-devkit 1.2.0) runs a
 motmetrics 1.4.0 ``MOTAccumulator`` frame by frame for every class and every one of its 40 recall thresholds,
 builds pandas event tables and computes per-object metrics (FRAG, TID, LGD) with one pandas filter per object.
-This module gives the same numbers, to the last digit, much faster:
+This module gives the same numbers (every entry of ``metrics_summary.json`` and of ``metrics_details.json``),
+much faster:
 
-* loading and filtering reuse the devkit itself (``load_prediction`` / ``load_gt`` or their custom-split
-  variants, ``add_center_dist``, ``filter_eval_boxes``, ``create_tracks``), so the ground-truth filtering,
-  the track-score averaging and the interpolation of gaps are the devkit's by construction;
-* the accumulation is re-implemented: the centre distances are computed exactly as the devkit's
-  ``sklearn.metrics.pairwise.euclidean_distances`` call does (same formula, same BLAS call on the same matrix
-  shape, so bit-identical), once per frame and per distinct set of kept predictions, and cached across
-  thresholds; a frame whose candidate pairs (distance < ``dist_th_tp``) form a one-to-one matching is resolved
-  without any solver (motmetrics would take all of them whatever its state), so whole scenes are matched with
-  array operations and MATCH / SWITCH follow from the previous partner of each object; a frame with competing
-  candidates replays motmetrics' ``MOTAccumulator.update`` (keep previous pairings that are still within
-  distance, then ``motmetrics.lap.linear_sum_assignment`` on the very matrix motmetrics would build, so the
-  tie-breaking is the solver's own);
+* loading and filtering: by default :mod:`grutrack.evaluation.fast_loading`, an exact re-implementation of the
+  devkit's ``load_prediction`` / ``load_gt`` (or their custom-split variants), ``add_center_dist``,
+  ``filter_eval_boxes`` and ``create_tracks`` (track score = mean of the box scores of an id, gaps
+  interpolated) that hands over to the devkit's own loaders for any input it does not reproduce;
+  ``loader="devkit"`` uses the devkit's loaders directly;
+* the accumulation (``TrackingEvaluation.accumulate``) is re-implemented. The centre distances are computed as
+  the devkit's ``sklearn.metrics.pairwise.euclidean_distances`` call does (same formula; the BLAS product on
+  a matrix of the devkit's shape, whose last bit depends on that shape), once per frame and distinct set of
+  kept predictions, cached across thresholds. A candidate pair (distance < ``dist_th_tp``) whose GT and
+  prediction have no other candidate is matched whatever motmetrics' state (every optimal assignment contains
+  it), so most pairs of all frames are matched at once with array operations, MATCH or SWITCH following from
+  the object's previous partner. The rows with competing candidates replay ``MOTAccumulator.update`` in time
+  order: keep the previous pairing if still within distance, then ``motmetrics.lap.linear_sum_assignment`` on
+  the very matrix motmetrics builds (so ties are broken by motmetrics' own solver), unless what is left is
+  one-to-one;
 * the per-threshold metrics (MOTAR, MOTA, MOTP, FAF, MT, ML, FP, FN, IDS, FRAG, TID, LGD, recall) are array
-  reductions over the ground-truth boxes sorted by object, following ``nuscenes.eval.tracking.metrics`` and
-  ``motmetrics.metrics``; thresholds, their de-duplication, the unachieved-recall padding, the best-MOTA pick and
-  the AMOTA/AMOTP averaging follow ``TrackingEvaluation.accumulate`` and ``TrackingEval.evaluate``; the result
-  is a devkit ``TrackingMetrics`` / ``TrackingMetricDataList``, serialised by the devkit.
+  reductions over the GT boxes sorted by object, following ``nuscenes.eval.tracking.metrics`` and
+  ``motmetrics.metrics`` on the devkit's frame numbering (only frames with a box of the class count); the
+  thresholds (from the scores of the MATCH events without threshold), their de-duplication, the padding of
+  unachieved recalls, the worst values when none is achieved, the best-MOTA pick and the AMOTA/AMOTP averaging
+  follow ``TrackingEvaluation`` and ``TrackingEval.evaluate``; the result is a devkit ``TrackingMetrics`` /
+  ``TrackingMetricDataList``, serialised by the devkit.
 
 Public entry points: :func:`fast_tracking_eval` (the ``metrics_summary.json`` dict), :func:`load_tracks`
-(the devkit's loading and filtering) and :func:`evaluate_tracks` (the fast accumulation on loaded tracks).
+(loading and filtering) and :func:`evaluate_tracks` (accumulation and metrics on loaded tracks).
 """
 
 from __future__ import annotations
@@ -175,6 +181,7 @@ class _Flat:
     p_hyp: np.ndarray
     p_xy: np.ndarray
     p_score: np.ndarray
+    obj_raw_id: List[Any]       # tracking_id of each object (objects are per scene)
 
 
 def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
@@ -188,7 +195,7 @@ def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
     p_hyp: List[int] = []
     p_xy: List[Tuple[float, float]] = []
     p_score: List[float] = []
-    n_obj = 0
+    obj_raw_id: List[Any] = []
     n_hyp = 0
     f = 0
     # The devkit iterates the GT scenes and, within each, the GT timestamps; prediction ids are per scene
@@ -205,8 +212,8 @@ def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
                     continue
                 o = obj_ids.get(box.tracking_id)
                 if o is None:
-                    o = obj_ids[box.tracking_id] = n_obj
-                    n_obj += 1
+                    o = obj_ids[box.tracking_id] = len(obj_raw_id)
+                    obj_raw_id.append(box.tracking_id)
                 g_frame.append(f)
                 g_cls.append(c)
                 g_obj.append(o)
@@ -236,6 +243,7 @@ def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
         p_hyp=np.asarray(p_hyp, dtype=np.int64),
         p_xy=np.asarray(p_xy, dtype=np.float64).reshape(-1, 2),
         p_score=np.asarray(p_score, dtype=np.float64),
+        obj_raw_id=obj_raw_id,
     )
 
 
@@ -324,6 +332,8 @@ class _ClassEval:
         self.pxy = np.ascontiguousarray(flat.p_xy[pi])
         self.ps = flat.p_score[pi]
         self.n_gt = len(gi)
+        # Distinct GT tracking ids of the class (the devkit's ML when no threshold is achieved).
+        self.n_gt_ids = len({flat.obj_raw_id[o] for o in set(self.go.tolist())})
         # Squared norms as scikit-learn computes them (row-wise einsum: independent of the other rows).
         self.gxx = np.einsum("ij,ij->i", self.gxy, self.gxy)
         self.pyy = np.einsum("ij,ij->i", self.pxy, self.pxy)
@@ -794,13 +804,12 @@ def _accumulate_class(ce: _ClassEval, cfg, nelem: int):
     assert num_unachieved + len(valid) - len(np.unique(valid)) + len(thresh_metrics) == nelem
     rep_counts = [int(np.sum(np.asarray(thresholds) == t)) for t in np.unique(valid)]
 
-    n_objects = len(ce.obj_starts)
     for name in _MOT_METRICS:
         if not thresh_metrics:
             worst = cfg.metric_worst[name]
             if worst == -1:
                 if name == "ml":
-                    worst = n_objects
+                    worst = ce.n_gt_ids
                 elif name in ("gt", "fn"):
                     worst = ce.n_gt
                 elif name in ("fp", "ids", "frag"):

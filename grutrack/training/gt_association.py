@@ -32,17 +32,16 @@ class StickyGTAssociation:
         gt_labels (G,).
         """
         out = np.full(len(track_ids), -1, dtype=np.int64)
-        row_of = {g: i for i, g in enumerate(gt_ids)}
-        taken = set(self.held.values())
-        free_tracks = []
-        for k, tid in enumerate(track_ids):
-            g = self.held.get(int(tid))
-            if g is None:
-                free_tracks.append(k)
-            elif g in row_of:
-                out[k] = row_of[g]
-        free_gt = np.array([i for i, g in enumerate(gt_ids) if g not in taken], dtype=np.int64)
-        ft = np.asarray(free_tracks, dtype=np.int64)
+        held = np.array([self.held.get(int(t), "") for t in track_ids], dtype=object)
+        gt_ids = np.asarray(gt_ids, dtype=object)
+        # rows of the current GT list holding each track's instance (sticky tracks whose instance is present)
+        present = np.isin(held, gt_ids) & (held != "")
+        if present.any():
+            order = np.argsort(gt_ids)
+            out[present] = order[np.searchsorted(gt_ids[order], held[present])]
+        taken = np.isin(gt_ids, np.array(list(self.held.values()), dtype=object))
+        ft = np.flatnonzero(held == "")
+        free_gt = np.flatnonzero(~taken)
         if len(ft) == 0 or len(free_gt) == 0:
             return out
         d = np.linalg.norm(track_xy[ft][:, None, :] - gt_xy[free_gt][None, :, :], axis=2)

@@ -1,0 +1,114 @@
+"""Workflow support: resolved presets and training configs, per-stage code versions, the workflow config's
+cross-references and dataroot messages."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import pytest
+import yaml
+
+from grutrack.cli import main
+from grutrack.data.registry import load_registry
+from grutrack.errors import ConfigError
+from grutrack.pipeline import codever, spec
+from grutrack.pipeline.presets import deep_merge, resolve_tracker, resolve_training
+from grutrack.provenance import config_hash
+from grutrack.tracking.config import load_tracker_config
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return yaml.safe_load((REPO / "workflow/config/config.yaml").read_text())
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return yaml.safe_load((REPO / "workflow/config/paper.yaml").read_text())
+
+
+def test_deep_merge_keeps_the_rest():
+    base = {"a": {"x": 1, "y": 2}, "b": 3}
+    assert deep_merge(base, {"a": {"y": 5}}) == {"a": {"x": 1, "y": 5}, "b": 3}
+    assert base == {"a": {"x": 1, "y": 2}, "b": 3}
+
+
+def test_resolved_tracker_preset_and_its_errors(tmp_path):
+    raw = resolve_tracker("ekf", {"association": {"first_threshold": {"car": 1.2}}})
+    assert raw["association"]["first_threshold"]["car"] == 1.2
+    assert raw["association"]["first_threshold"]["bus"] == 1.335
+    with pytest.raises(ConfigError, match="association.first_treshold"):
+        resolve_tracker("ekf", {"association": {"first_treshold": {"car": 1.2}}})
+    with pytest.raises(ConfigError, match="first_threshold.cra"):
+        resolve_tracker("ekf", {"association": {"first_threshold": {"cra": 1.2}}})
+    out = tmp_path / "t.yaml"
+    assert main(["resolve-config", "tracker", "--base", "ekf", "--overrides",
+                 '{"motion": {"model_override": {"car": "CA"}}}', "--out", str(out)]) == 0
+    cfg = load_tracker_config(out)
+    assert cfg.model_override == {"car": "CA"}
+    assert f"config hash {config_hash(yaml.safe_load(out.read_text()))}" in out.read_text()
+
+
+def test_resolved_training_config():
+    assert resolve_training("grukf", {"ss_model": "BICYCLE", "epochs": 3})["ss_model"] == "BICYCLE"
+    with pytest.raises(ConfigError, match="unknown key 'epoch'"):
+        resolve_training("grukf", {"epoch": 3})
+
+
+def _tree(root: Path, files: dict[str, str]) -> None:
+    for rel, text in files.items():
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_text(text)
+
+
+def test_code_version_changes_only_for_the_stages_that_run_the_file(tmp_path, monkeypatch):
+    monkeypatch.delenv("GRUTRACK_CODE_VERSION", raising=False)
+    _tree(tmp_path, {"tracking/tracker.py": "a", "report/demo.py": "b", "data/demo.py": "c", "evaluation/x.py": "d"})
+    before = {s: codever.code_version(s, tmp_path) for s in codever.STAGE_SOURCES}
+    (tmp_path / "report/demo.py").write_text("b2")
+    after = {s: codever.code_version(s, tmp_path) for s in codever.STAGE_SOURCES}
+    assert [s for s in before if before[s] != after[s]] == ["report"]
+    (tmp_path / "tracking/tracker.py").write_text("a2")
+    again = {s: codever.code_version(s, tmp_path) for s in codever.STAGE_SOURCES}
+    assert {s for s in after if after[s] != again[s]} == {"train", "track", "track_av2"}
+    monkeypatch.setenv("GRUTRACK_CODE_VERSION", "pinned")
+    assert codever.code_version("track", tmp_path) == "pinned"
+    assert codever.code_version("report").startswith("0.") or codever.code_version("report") == "pinned"
+
+
+def test_default_config_cross_references(cfg, paper):
+    spec.check_config(cfg, paper, load_registry())
+
+
+@pytest.mark.parametrize("path, value, message", [
+    (("experiments", "demo_val", "runs", "ekf", "preset"), "ekff", "experiments.demo_val.runs.ekf.preset"),
+    (("experiments", "demo_val", "runs", "grukf", "training"), "nope", "experiments.demo_val.runs.grukf.training"),
+    (("reports", "nusc_val", "tables", "IV", "CTRA+Ours"), "missing_run", "reports.nusc_val.tables.IV.CTRA+Ours"),
+    (("detectors", "centerpoint", "sources", "val"), "no_such_source", "detectors.centerpoint.sources.val"),
+    (("trainings", "demo_grukf", "split"), "demo_test", "detectors.centerpoint_sim.seeds"),
+])
+def test_bad_references_name_the_key(cfg, paper, path, value, message):
+    bad = copy.deepcopy(cfg)
+    node = bad
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    with pytest.raises(ConfigError, match=message.replace("+", r"\+")):
+        spec.check_config(bad, paper, load_registry())
+
+
+def test_dataroot_messages(cfg, tmp_path):
+    with pytest.raises(ConfigError, match=r"datasets\.nuscenes\.dataroot is not set: put there the nuScenes dataroot"):
+        spec.require_dataroot(cfg, "nuscenes", "val")
+    c = copy.deepcopy(cfg)
+    c["datasets"]["nuscenes"]["dataroot"] = str(tmp_path)
+    with pytest.raises(ConfigError, match="v1.0-test does not exist"):
+        spec.require_dataroot(c, "nuscenes", "test")
+    (tmp_path / "v1.0-trainval").mkdir()
+    assert spec.require_dataroot(c, "nuscenes", "val") == str(tmp_path)
+    with pytest.raises(ConfigError, match=r"datasets\.av2\.dataroot is not set: put there the Argoverse 2"):
+        spec.require_dataroot(cfg, "av2", "val")
+    assert spec.require_dataroot(cfg, "demo") == "data/demo"

@@ -1,0 +1,149 @@
+"""The Snakemake workflow on a tiny demo (3 scenes x 12 frames, one training epoch), run for real once in a
+temporary working directory: the report's tables match the metrics JSONs and its figures exist; a dry run
+after one changed value plans only the stages that depend on it; a misspelt config key fails before any
+rule runs, naming the key; a missing dataroot fails naming its config key; the leaderboard zip is validated.
+
+The code-version param is pinned (GRUTRACK_CODE_VERSION) so that source edits made while the tests run cannot
+re-plan stages; tests/test_pipeline.py checks the per-stage code versions themselves.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+TINY = """
+datasets:
+  demo: {scenes: 3, frames_per_scene: 12}
+trainings:
+  demo_grukf: {overrides: {epochs: 1}}
+"""
+
+
+def snakemake(workdir: Path, *args: str, configs: tuple[str, ...] = (), timeout: int = 600):
+    """Run snakemake on the repository's Snakefile in ``workdir``; returns the completed process."""
+    cmd = [sys.executable, "-m", "snakemake", *args, "--snakefile", str(REPO / "Snakefile"), "--cores", "2"]
+    if configs:
+        cmd += ["--configfile", *configs]
+    env = {**os.environ, "GRUTRACK_CODE_VERSION": "test-pinned"}
+    return subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def planned(proc) -> dict[str, int]:
+    """Rule -> job count from the 'Job stats' table of a dry run ({} when nothing is to be done)."""
+    text = proc.stdout + proc.stderr
+    if "Nothing to be done" in text:
+        return {}
+    block = text.split("Job stats:", 1)[1]
+    out = {}
+    for line in block.splitlines()[3:]:
+        m = re.match(r"^(\w+)\s+(\d+)$", line.strip())
+        if not m or m.group(1) == "total":
+            break
+        out[m.group(1)] = int(m.group(2))
+    return out
+
+
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory):
+    """A real run of reports/demo_val.md on the tiny demo config."""
+    work = tmp_path_factory.mktemp("wf")
+    (work / "tiny.yaml").write_text(TINY)
+    proc = snakemake(work, "reports/demo_val.md", configs=("tiny.yaml",))
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return work
+
+
+def test_demo_report_tables_match_metrics_json(demo_run):
+    text = (demo_run / "reports/demo_val.md").read_text()
+    assert "SYNTHETIC" in text and "No comparison between the two is implied" in text
+    for run in ("ekf", "grukf"):
+        doc = json.loads((demo_run / f"reports/metrics/demo_val/centerpoint_sim/{run}.json").read_text())
+        o = doc["overall"]
+        row = re.search(rf"^\| {run} \| (.+) \|$", text, re.M).group(1).split(" | ")
+        assert row[:5] == [f"{100 * o['amota']:.1f}", f"{100 * o['amotp']:.1f}", f"{100 * o['mota']:.1f}",
+                           f"{100 * o['recall']:.1f}", str(o["ids"])]
+    assert re.search(r"^\| Ours \| 73\.2 \| 51\.1 \| 267 \|$", text, re.M)          # paper numbers, labelled
+    assert "config hash" in text and "grutrack 0.1.0" in text and "centerpoint_sim.json" in text
+    links = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", text)
+    assert links
+    for link in links:
+        assert (demo_run / "reports" / link).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_nothing_to_do_after_the_run(demo_run):
+    assert planned(snakemake(demo_run, "-n", "reports/demo_val.md", configs=("tiny.yaml",))) == {}
+
+
+def test_tracker_threshold_change_reruns_track_submit_evaluate_report(demo_run):
+    (demo_run / "thr.yaml").write_text(
+        "tracker_presets:\n  ekf: {overrides: {preprocessing: {score_threshold: {car: 0.25}}}}\n")
+    proc = snakemake(demo_run, "-n", "--quiet", "rules", "--", "reports/demo_val.md",
+                     configs=("tiny.yaml", "thr.yaml"))
+    assert planned(proc) == {"track": 2, "submit": 2, "evaluate": 2, "report": 1}, proc.stdout[-2000:]
+
+
+def test_training_change_reruns_train_and_its_dependents_only(demo_run):
+    (demo_run / "lr.yaml").write_text("trainings:\n  demo_grukf: {overrides: {epochs: 1, lr: 2.0e-5}}\n")
+    proc = snakemake(demo_run, "-n", "--quiet", "rules", "--", "reports/demo_val.md",
+                     configs=("tiny.yaml", "lr.yaml"))
+    # only the GRU-KF run depends on the training; the EKF run is untouched
+    assert planned(proc) == {"train": 1, "track": 1, "submit": 1, "evaluate": 1, "report": 1}
+
+
+def test_paper_numbers_change_reruns_only_the_report(demo_run):
+    (demo_run / "paper.yaml").write_text((REPO / "workflow/config/paper.yaml").read_text())
+    os.utime(demo_run / "paper.yaml")
+    (demo_run / "paper_cfg.yaml").write_text(f"paper: {demo_run / 'paper.yaml'}\n")
+    proc = snakemake(demo_run, "-n", "--", "reports/demo_val.md", configs=("tiny.yaml", "paper_cfg.yaml"))
+    assert planned(proc) == {"report": 1}
+
+
+def test_leaderboard_zip_validates_before_zipping(demo_run, tmp_path):
+    from grutrack.data.nuscenes import load_scenes, open_nuscenes
+    from grutrack.errors import InputFormatError
+    from grutrack.export.leaderboard import build_zip
+
+    sub = demo_run / "submissions/demo_val/centerpoint_sim/grukf.json"
+    tokens = [f.token for s in load_scenes(open_nuscenes(demo_run / "data/demo", "v1.0-demo"), "demo_val")
+              for f in s.frames]
+    info = build_zip(sub, tokens, tmp_path / "lb.zip")
+    with zipfile.ZipFile(tmp_path / "lb.zip") as zf:
+        assert zf.namelist() == ["grukf.json"] and json.loads(zf.read("grukf.json"))["meta"]["use_lidar"]
+    assert info["samples"] == len(tokens)
+    broken = json.loads(sub.read_text())
+    broken["results"].pop(tokens[0])
+    (tmp_path / "broken.json").write_text(json.dumps(broken))
+    with pytest.raises(InputFormatError, match="1 missing"):
+        build_zip(tmp_path / "broken.json", tokens, tmp_path / "bad.zip")
+    assert not (tmp_path / "bad.zip").exists()
+
+
+@pytest.mark.parametrize("overlay, key", [
+    ("datasets:\n  demo: {scenez: 3}\n", "scenez"),
+    ("trakers: {}\n", "trakers"),
+    ("datasets:\n  demo: {scenes: three}\n", "datasets']['demo']['scenes"),
+    ("tracker_presets:\n  ekf: {overrides: {lifecycle: {punish_nun: 2}}}\n", "lifecycle.punish_nun"),
+])
+def test_misspelt_config_key_fails_before_any_rule_runs(tmp_path, overlay, key):
+    (tmp_path / "bad.yaml").write_text(overlay)
+    proc = snakemake(tmp_path, "reports/demo_val.md", configs=("bad.yaml",))
+    assert proc.returncode != 0
+    assert key in proc.stderr + proc.stdout
+    assert not (tmp_path / "data").exists() and not (tmp_path / "logs").exists()   # nothing ran
+
+
+def test_missing_dataroot_names_the_config_key(tmp_path):
+    proc = snakemake(tmp_path, "-n", "reports/nusc_val.md")
+    assert proc.returncode != 0
+    assert "config key datasets.nuscenes.dataroot is not set" in proc.stderr + proc.stdout
+    proc = snakemake(tmp_path, "-n", "reports/av2_val.md", "--config", f"datasets={{nuscenes: {{dataroot: {tmp_path}}}}}")
+    assert "datasets.av2.dataroot is not set" in proc.stderr + proc.stdout
