@@ -460,3 +460,34 @@ def test_invalid_submissions_fail_like_the_devkit(nusc_mini, mini_val_gt, defect
     with pytest.raises(type(expected)) as raised:
         fast_tracking_eval(nusc_mini, sub, "mini_val")
     assert str(raised.value) == str(expected)
+
+
+# ----- the real tracker's output: EKF on the real PointPillars detections, and the synthetic demo ------------
+def _tracked_submission(nusc, split: str, detections) -> Dict[str, Any]:
+    from grutrack.data.nusc_detections import load_detections
+    from grutrack.data.nuscenes import load_scenes
+    from grutrack.export.nuscenes_json import build_submission
+    from grutrack.tracking.factory import build_tracker
+    from grutrack.tracking.tracker import track_scenes
+
+    scenes = load_scenes(nusc, split)
+    tokens = [f.token for s in scenes for f in s.frames]
+    run = track_scenes(build_tracker("ekf"), scenes, load_detections(detections, tokens))
+    return build_submission(run.results, tokens)
+
+
+def test_ekf_on_pointpillars_mini_val(nusc_mini, pointpillars_mini_val):
+    sub = _tracked_submission(nusc_mini, "mini_val", pointpillars_mini_val)
+    assert_parity(nusc_mini, sub, "mini_val")
+
+
+def test_ekf_on_simulated_demo_val(tmp_path):
+    from grutrack.cli import main
+    from grutrack.data.nuscenes import open_nuscenes
+
+    data, dets = tmp_path / "demo", tmp_path / "dets.json"
+    assert main(["demo-data", "--out", str(data), "--scenes", "5", "--frames-per-scene", "20", "--seed", "4"]) == 0
+    assert main(["simulate-detections", "--dataroot", str(data), "--version", "v1.0-demo", "--split", "demo_val",
+                 "--profile", "centerpoint", "--seed", "9", "--out", str(dets)]) == 0
+    nusc = open_nuscenes(data, "v1.0-demo")
+    assert_parity(nusc, _tracked_submission(nusc, "demo_val", dets), "demo_val")

@@ -37,11 +37,10 @@ from __future__ import annotations
 
 import contextlib
 import io
-import json
 import os
 import time
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Tuple, Union
+from typing import Any, Dict, List, Tuple, Union
 
 import numpy as np
 
