@@ -25,14 +25,27 @@ datasets:
   demo: {scenes: 3, frames_per_scene: 12}
 trainings:
   demo_grukf: {overrides: {epochs: 1}}
+# a leaderboard-style experiment on the demo (no evaluation; a validated zip and the Table II report)
+experiments:
+  demo_lb:
+    dataset: demo
+    split: demo_val
+    detectors: [centerpoint_sim]
+    evaluator: none
+    leaderboard_run: grukf
+    runs: {grukf: {tracker: grukf, preset: ekf, training: demo_grukf}}
+reports:
+  demo_lb: {kind: nusc_test, experiment: demo_lb, tables: {II: {"Ours (CenterPoint)": grukf}}, trainings: {}}
 """
 
 
-def snakemake(workdir: Path, *args: str, configs: tuple[str, ...] = (), timeout: int = 600):
+def snakemake(workdir: Path, *targets: str, options: tuple[str, ...] = (), configs: tuple[str, ...] = (),
+              timeout: int = 600):
     """Run snakemake on the repository's Snakefile in ``workdir``; returns the completed process."""
-    cmd = [sys.executable, "-m", "snakemake", *args, "--snakefile", str(REPO / "Snakefile"), "--cores", "2"]
+    cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(REPO / "Snakefile"), "--cores", "2", *options]
     if configs:
         cmd += ["--configfile", *configs]
+    cmd += ["--", *targets]
     env = {**os.environ, "GRUTRACK_CODE_VERSION": "test-pinned"}
     return subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, timeout=timeout)
 
@@ -54,10 +67,10 @@ def planned(proc) -> dict[str, int]:
 
 @pytest.fixture(scope="module")
 def demo_run(tmp_path_factory):
-    """A real run of reports/demo_val.md on the tiny demo config."""
+    """A real run of reports/demo_val.md (and the leaderboard-style demo_lb report) on the tiny demo config."""
     work = tmp_path_factory.mktemp("wf")
     (work / "tiny.yaml").write_text(TINY)
-    proc = snakemake(work, "reports/demo_val.md", configs=("tiny.yaml",))
+    proc = snakemake(work, "reports/demo_val.md", "reports/demo_lb.md", configs=("tiny.yaml",))
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     return work
 
@@ -70,7 +83,7 @@ def test_demo_report_tables_match_metrics_json(demo_run):
         o = doc["overall"]
         row = re.search(rf"^\| {run} \| (.+) \|$", text, re.M).group(1).split(" | ")
         assert row[:5] == [f"{100 * o['amota']:.1f}", f"{100 * o['amotp']:.1f}", f"{100 * o['mota']:.1f}",
-                           f"{100 * o['recall']:.1f}", str(o["ids"])]
+                           f"{100 * o['recall']:.1f}", f"{o['ids']:.0f}"]
     assert re.search(r"^\| Ours \| 73\.2 \| 51\.1 \| 267 \|$", text, re.M)          # paper numbers, labelled
     assert "config hash" in text and "grutrack 0.1.0" in text and "centerpoint_sim.json" in text
     links = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", text)
@@ -80,20 +93,20 @@ def test_demo_report_tables_match_metrics_json(demo_run):
 
 
 def test_nothing_to_do_after_the_run(demo_run):
-    assert planned(snakemake(demo_run, "-n", "reports/demo_val.md", configs=("tiny.yaml",))) == {}
+    assert planned(snakemake(demo_run, "reports/demo_val.md", options=("-n",), configs=("tiny.yaml",))) == {}
 
 
 def test_tracker_threshold_change_reruns_track_submit_evaluate_report(demo_run):
     (demo_run / "thr.yaml").write_text(
         "tracker_presets:\n  ekf: {overrides: {preprocessing: {score_threshold: {car: 0.25}}}}\n")
-    proc = snakemake(demo_run, "-n", "--quiet", "rules", "--", "reports/demo_val.md",
+    proc = snakemake(demo_run, "reports/demo_val.md", options=("-n", "--quiet", "rules"),
                      configs=("tiny.yaml", "thr.yaml"))
     assert planned(proc) == {"track": 2, "submit": 2, "evaluate": 2, "report": 1}, proc.stdout[-2000:]
 
 
 def test_training_change_reruns_train_and_its_dependents_only(demo_run):
     (demo_run / "lr.yaml").write_text("trainings:\n  demo_grukf: {overrides: {epochs: 1, lr: 2.0e-5}}\n")
-    proc = snakemake(demo_run, "-n", "--quiet", "rules", "--", "reports/demo_val.md",
+    proc = snakemake(demo_run, "reports/demo_val.md", options=("-n", "--quiet", "rules"),
                      configs=("tiny.yaml", "lr.yaml"))
     # only the GRU-KF run depends on the training; the EKF run is untouched
     assert planned(proc) == {"train": 1, "track": 1, "submit": 1, "evaluate": 1, "report": 1}
@@ -103,8 +116,18 @@ def test_paper_numbers_change_reruns_only_the_report(demo_run):
     (demo_run / "paper.yaml").write_text((REPO / "workflow/config/paper.yaml").read_text())
     os.utime(demo_run / "paper.yaml")
     (demo_run / "paper_cfg.yaml").write_text(f"paper: {demo_run / 'paper.yaml'}\n")
-    proc = snakemake(demo_run, "-n", "--", "reports/demo_val.md", configs=("tiny.yaml", "paper_cfg.yaml"))
+    proc = snakemake(demo_run, "reports/demo_val.md", options=("-n",), configs=("tiny.yaml", "paper_cfg.yaml"))
     assert planned(proc) == {"report": 1}
+
+
+def test_leaderboard_zip_rule_and_report(demo_run):
+    zp = demo_run / "submissions/demo_lb_centerpoint_sim.zip"
+    with zipfile.ZipFile(zp) as zf:
+        assert zf.namelist() == ["grukf.json"]
+    text = (demo_run / "reports/demo_lb.md").read_text()
+    assert "submissions/demo_lb_centerpoint_sim.zip" in text and "Ours (LargeKernel3D)" in text
+    assert re.search(r"^\| Ours \(CenterPoint\) \| 70\.0 \| 50\.4 \| 353 \|$", text, re.M)
+    assert not (demo_run / "reports/metrics/demo_lb").exists()       # no ground truth, no evaluation
 
 
 def test_leaderboard_zip_validates_before_zipping(demo_run, tmp_path):
@@ -142,8 +165,9 @@ def test_misspelt_config_key_fails_before_any_rule_runs(tmp_path, overlay, key):
 
 
 def test_missing_dataroot_names_the_config_key(tmp_path):
-    proc = snakemake(tmp_path, "-n", "reports/nusc_val.md")
+    proc = snakemake(tmp_path, "reports/nusc_val.md", options=("-n",))
     assert proc.returncode != 0
     assert "config key datasets.nuscenes.dataroot is not set" in proc.stderr + proc.stdout
-    proc = snakemake(tmp_path, "-n", "reports/av2_val.md", "--config", f"datasets={{nuscenes: {{dataroot: {tmp_path}}}}}")
+    proc = snakemake(tmp_path, "reports/av2_val.md",
+                     options=("-n", "--config", f"datasets={{nuscenes: {{dataroot: {tmp_path}}}}}"))
     assert "datasets.av2.dataroot is not set" in proc.stderr + proc.stdout

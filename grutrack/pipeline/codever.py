@@ -15,8 +15,8 @@ from pathlib import Path
 from grutrack import __version__
 
 PACKAGE = Path(__file__).resolve().parents[1]
-_COMMON = ("__init__.py", "errors.py", "io.py", "provenance.py", "boxes.py", "classes.py", "geometry.py",
-           "cli/__init__.py", "data/scene.py")
+#: files every stage runs (the package version itself is part of every code version)
+_COMMON = ("errors.py", "io.py", "provenance.py", "boxes.py", "classes.py", "geometry.py", "data/scene.py")
 _TRACKING = ("tracking", "motion", "configs/trackers", "configs/motion", "training/checkpoint.py",
              "pipeline/presets.py")
 

@@ -99,7 +99,8 @@ def _check_experiment(cfg: dict, registry: dict, name: str, exp: dict) -> None:
             raise ConfigError(f"config key {rkey}.training: a grukf run needs a training, other trackers none")
         if run["training"] is not None:
             _need(cfg["trainings"], run["training"], f"{rkey}.training", "trainings")
-    evaluators = {"demo": ("devkit", "fast"), "nuscenes": ("devkit", "fast", "none"), "av2": ("official", "none")}
+    evaluators = {"demo": ("devkit", "fast", "none"), "nuscenes": ("devkit", "fast", "none"),
+                  "av2": ("official", "none")}
     if exp["evaluator"] not in evaluators[kind]:
         raise ConfigError(f"config key {key}.evaluator: '{exp['evaluator']}' is not available for a {kind} "
                           f"dataset (choose {', '.join(evaluators[kind])})")
@@ -130,6 +131,12 @@ def _check_report(cfg: dict, paper: dict, name: str, rep: dict) -> None:
     if kind not in REPORT_DATASETS[rep["kind"]]:
         raise ConfigError(f"config key {key}.experiment: a {rep['kind']} report needs a "
                           f"{' or '.join(REPORT_DATASETS[rep['kind']])} experiment, '{rep['experiment']}' is {kind}")
+    if rep["kind"] == "nusc_test" and exp["leaderboard_run"] is None:
+        raise ConfigError(f"config key experiments.{rep['experiment']}.leaderboard_run must name the run whose zips "
+                          f"the {name} report shows")
+    if rep["kind"] != "nusc_test" and exp["evaluator"] == "none":
+        raise ConfigError(f"config key {key}.experiment: a {rep['kind']} report needs metrics, but experiment "
+                          f"'{rep['experiment']}' has evaluator none")
     for table, rows in rep["tables"].items():
         _need(paper["tables"], table, f"{key}.tables", "the paper tables (paper.yaml)")
         for row, run in rows.items():

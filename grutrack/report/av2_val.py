@@ -6,7 +6,7 @@ from __future__ import annotations
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import (AV2_OVERALL, check_section, header, image, mirror_tables, provenance,
-                                      runs_table)
+                                      runs_table, setting_note)
 from grutrack.report.paper import get_table, reproduced
 
 AVERAGE_NOTE = ("Note: the paper's average for Ours (47.3) is not the mean of its seven per-class values (54.1) "
@@ -22,7 +22,9 @@ def build(inp: ReportInputs) -> str:
     parts = [header(f"Argoverse 2 {exp.get('split', 'val')}: Table I",
                     [f"Detections: {exp.get('detector', '?')}. Official AV2 tracking evaluation (HOTA). Paper "
                      "numbers are labelled **Paper numbers**."])]
-    parts += ["", f"## {tbl['title']}", "", mirror_tables(tbl, inp.row_docs("I")), "", AVERAGE_NOTE, "",
+    note = setting_note(tbl, exp, exp.get("detector"))
+    parts += ["", f"## {tbl['title']}", "", *([note, ""] if note else []), mirror_tables(tbl, inp.row_docs("I")),
+              "", AVERAGE_NOTE, "",
               _figure(inp, tbl)]
     parts += ["", "## Every run (Table I average over 7 classes, ×100)", "", runs_table(docs, AV2_OVERALL)]
     parts += ["", "## Check against the tolerances of paper.yaml", "", check_section("I", tbl, inp.row_docs("I"))]

@@ -56,7 +56,7 @@ def _training_sections(inp: ReportInputs) -> list[str]:
         last = rows[-1]
         val = [r for r in rows if r["val_amota"] is not None]
         out += ["", f"## Training '{label}'", "",
-                f"{last['step']} steps over {last['epoch'] + 1} epoch(s); last scene loss {num(last['loss'])}"
+                f"{last['step']} steps over {last['epoch'] + 1} epoch(s); last scene loss {last['loss']:.4g}"
                 + (f"; last validation AMOTA {val[-1]['val_amota']:.3f}" if val else "") + ".", "",
                 image(path, inp.out.parent, f"training loss of {label}")]
     return out

@@ -50,9 +50,23 @@ def mirror_tables(tbl: dict, docs: dict[str, dict | None]) -> str:
     out = [f"**Paper numbers** ({tbl['title']}; as printed in the paper):", "", table(["method"] + cols, paper_rows)]
     if repro_rows:
         out += ["", "**Reproduced** (same layout; read from the metrics JSONs listed under Provenance):", "",
-                table(["method"] + cols, repro_rows),
-                "", "**Difference** (reproduced − paper, in the paper's unit):", "", table(["method"] + cols, diff_rows)]
+                table(["method"] + cols, repro_rows), "", "**Difference** (reproduced − paper, in the paper's unit):",
+                "", table(["method"] + cols, diff_rows)]
     return "\n".join(out)
+
+
+def setting_note(tbl: dict, experiment: dict | None, detections: str | None = None) -> str:
+    """A warning when the reproduced setting (dataset, split, detector) is not the paper table's."""
+    if not experiment:
+        return ""
+    paper = (tbl.get("dataset"), tbl.get("split"))
+    ours = (experiment.get("dataset"), experiment.get("split"))
+    same_det = detections is None or detections.lower().replace("_", "") in tbl.get("detections", "").lower()
+    if paper == ours and same_det:
+        return ""
+    return (f"> **Different setting.** The paper's numbers are on {paper[0]} {paper[1]} with {tbl.get('detections')} "
+            f"detections; the reproduced ones on {ours[0]} {ours[1]} with {detections or '?'} detections, so the "
+            f"differences below mostly measure that, not the method.")
 
 
 def short(h: str | None) -> str:
@@ -71,8 +85,9 @@ def provenance(runs: dict[str, str], docs: dict[str, dict]) -> str:
     for run, path in runs.items():
         m = read_manifest(manifest_path(docs[run]["submission"])) or {}
         cfg = m.get("tracker_config") or {}
+        config = f"`{cfg.get('path', DASH)}` (config hash {cfg.get('config_hash', DASH)})"
         rows.append([run, f"`{path}`", m.get("tracker", DASH), file_cell(m.get("detections")),
-                     file_cell(m.get("checkpoint")), f"`{cfg.get('path', DASH)}` (config hash {cfg.get('config_hash', DASH)})",
+                     file_cell(m.get("checkpoint")), config,
                      f"{m.get('grutrack_version', DASH)} (code {m.get('code_version') or DASH})"])
     return table(["run", "metrics JSON", "tracker", "detections", "checkpoint", "tracker config", "grutrack"],
                  rows, "l" * 7)

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
-from grutrack.report.markdown import (check_section, header, image, mirror_tables, provenance, runs_table)
+from grutrack.report.markdown import (check_section, header, image, mirror_tables, provenance, runs_table,
+                                      setting_note)
 from grutrack.report.paper import get_table, reproduced
 
 
@@ -19,7 +20,9 @@ def build(inp: ReportInputs) -> str:
     for tid in ("III", "IV"):
         if tid in inp.rows:
             tbl = get_table(inp.paper, tid)
-            parts += ["", f"## {tbl['title']}", "", mirror_tables(tbl, inp.row_docs(tid)), "",
+            note = setting_note(tbl, exp, exp.get("detector"))
+            parts += ["", f"## {tbl['title']}", "", *([note, ""] if note else []),
+                      mirror_tables(tbl, inp.row_docs(tid)), "",
                       _figure(inp, tid, tbl)]
     parts += ["", "## Every run", "", runs_table(docs)]
     parts += ["", "## Check against the tolerances of paper.yaml", ""]

@@ -33,7 +33,7 @@ rule simulate_detections:
     log: "logs/detections/simulate/{dataset}/{split}/{detector}.log"
     benchmark: "logs/benchmarks/detections/simulate/{dataset}/{split}/{detector}.tsv"
     shell:
-        "{GRUTRACK} simulate-detections --dataroot {params.dataroot} --version {params.version} "
+        "{GRUTRACK} simulate-detections --dataroot {params.dataroot:q} --version {params.version} "
         "--split {wildcards.split} --profile {params.profile} --seed {params.seed} --out {output} > {log} 2>&1 "
         + ON_FAIL
 
@@ -66,5 +66,5 @@ rule convert_detections:
     log: "logs/detections/convert/{dataset}/{split}/{detector}.{ext}.log"
     benchmark: "logs/benchmarks/detections/convert/{dataset}/{split}/{detector}.{ext}.tsv"
     shell:
-        "{GRUTRACK} convert-detections {params.source} --raw {input.raw} --dataroot {params.dataroot} "
+        "{GRUTRACK} convert-detections {params.source} --raw {input.raw:q} --dataroot {params.dataroot:q} "
         "--version {params.version} --split {wildcards.split} --out {output} > {log} 2>&1 " + ON_FAIL

@@ -22,7 +22,7 @@ rule evaluate:
     log: "logs/evaluate/{experiment}/{detector}/{run}.log"
     benchmark: "logs/benchmarks/evaluate/{experiment}/{detector}/{run}.tsv"
     shell:
-        "{GRUTRACK} evaluate --dataroot {params.dataroot} --version {params.version} --split {params.split} "
+        "{GRUTRACK} evaluate --dataroot {params.dataroot:q} --version {params.version} --split {params.split} "
         "--submission {input.submission} --evaluator {params.evaluator} --out {output} > {log} 2>&1 " + ON_FAIL
 
 
@@ -40,6 +40,6 @@ rule evaluate_av2:
     log: "logs/evaluate/{experiment}/{detector}/{run}.log"
     benchmark: "logs/benchmarks/evaluate/{experiment}/{detector}/{run}.tsv"
     shell:
-        "{GRUTRACK} evaluate --dataset av2 --dataroot {params.dataroot} --split {params.split} "
+        "{GRUTRACK} evaluate --dataset av2 --dataroot {params.dataroot:q} --split {params.split} "
         "--rate {params.rate} --workers {threads} --submission {input.submission} --out {output} > {log} 2>&1 "
         + ON_FAIL

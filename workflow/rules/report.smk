@@ -57,7 +57,8 @@ def _report_args(w):
     args = [f"--paper {PAPER_PATH}", f"--name {w.report}"]
     if rep["experiment"]:
         exp = config["experiments"][rep["experiment"]]
-        args.append(f"--experiment {rep['experiment']}:{exp['dataset']}:{exp['split']}:{exp['detectors'][0]}")
+        args.append(f"--experiment {rep['experiment']}:{S.dataset_kind(config, exp['dataset'])}:{exp['split']}:"
+                    f"{exp['detectors'][0]}")
     args += [f"--run {run}={metrics}" for run, metrics, _ in _report_runs(rep)]
     args += [f"--train-log {label}={log_csv}" for label, log_csv, _ in _report_trainings(rep)]
     args += [f"--zip {det}={zp}" for det, zp, _ in _report_zips(rep)]

@@ -40,7 +40,7 @@ rule submit:
     log: "logs/submit/{experiment}/{detector}/{run}.log"
     benchmark: "logs/benchmarks/submit/{experiment}/{detector}/{run}.tsv"
     shell:
-        "{GRUTRACK} submit --tracks {input.tracks} --dataroot {params.dataroot} --version {params.version} "
+        "{GRUTRACK} submit --tracks {input.tracks} --dataroot {params.dataroot:q} --version {params.version} "
         "--split {params.split} --out {output.submission} --manifest {output.manifest} {params.provenance} "
         "--code-version {params.track_code} > {log} 2>&1 " + ON_FAIL
 
@@ -61,7 +61,7 @@ rule submit_av2:
     log: "logs/submit/{experiment}/{detector}/{run}.log"
     benchmark: "logs/benchmarks/submit/{experiment}/{detector}/{run}.tsv"
     shell:
-        "{GRUTRACK} submit --dataset av2 --tracks {input.tracks} --dataroot {params.dataroot} "
+        "{GRUTRACK} submit --dataset av2 --tracks {input.tracks} --dataroot {params.dataroot:q} "
         "--split {params.split} --out {output.submission} --manifest {output.manifest} {params.provenance} "
         "--code-version {params.track_code} > {log} 2>&1 " + ON_FAIL
 
@@ -81,5 +81,5 @@ rule leaderboard_zip:
     log: "logs/submit/{experiment}_{detector}.zip.log"
     benchmark: "logs/benchmarks/submit/{experiment}_{detector}.zip.tsv"
     shell:
-        "{GRUTRACK} leaderboard-zip --submission {input.submission} --dataroot {params.dataroot} "
+        "{GRUTRACK} leaderboard-zip --submission {input.submission} --dataroot {params.dataroot:q} "
         "--version {params.version} --split {params.split} --out {output} > {log} 2>&1 " + ON_FAIL

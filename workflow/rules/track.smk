@@ -49,7 +49,7 @@ rule track:
     shell:
         "( {GRUTRACK} resolve-config tracker --base {params.base} --overrides {params.overrides:q} "
         "--out {output.preset} && "
-        "{GRUTRACK} track --dataroot {params.dataroot} --version {params.version} --split {params.split} "
+        "{GRUTRACK} track --dataroot {params.dataroot:q} --version {params.version} --split {params.split} "
         "--detections {input.detections} --tracker {params.tracker} --config {output.preset} "
         "{params.checkpoint} --device {params.device} --out {output.tracks} --no-progress ) > {log} 2>&1 "
         + ON_FAIL
@@ -79,7 +79,7 @@ rule track_av2:
     shell:
         "( {GRUTRACK} resolve-config tracker --base {params.base} --overrides {params.overrides:q} "
         "--out {output.preset} && "
-        "{GRUTRACK} track --dataset av2 --dataroot {params.dataroot} --split {params.split} --rate {params.rate} "
+        "{GRUTRACK} track --dataset av2 --dataroot {params.dataroot:q} --split {params.split} --rate {params.rate} "
         "--detections {input.detections} --tracker {params.tracker} --config {output.preset} "
         "{params.checkpoint} --device {params.device} --out {output.tracks} --feather {output.feather} "
         "--no-progress ) > {log} 2>&1 " + ON_FAIL

@@ -44,6 +44,6 @@ rule train:
     shell:
         "( {GRUTRACK} resolve-config training --base {params.base} --overrides {params.overrides:q} "
         "--out {output.config} && "
-        "{GRUTRACK} train --dataroot {params.dataroot} --version {params.version} --split {params.split} "
+        "{GRUTRACK} train --dataroot {params.dataroot:q} --version {params.version} --split {params.split} "
         "--detections {input.detections} --config {output.config} --out checkpoints/{wildcards.training} "
         "{params.val} --no-progress ) > {log} 2>&1 " + ON_FAIL
