@@ -27,6 +27,19 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
             tmp_path.unlink()
 
 
+def read_json(path: str | os.PathLike, what: str = "JSON file"):
+    """Parse a JSON file; a missing file or invalid JSON raises InputFormatError naming the file."""
+    from grutrack.errors import InputFormatError
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputFormatError(f"{path}: {what} does not exist")
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputFormatError(f"{path}: not valid JSON ({exc})") from exc
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)

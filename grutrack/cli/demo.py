@@ -8,6 +8,7 @@ import argparse
 import json
 from pathlib import Path
 
+from grutrack.io import read_json
 from grutrack.errors import InputFormatError
 
 
@@ -94,12 +95,7 @@ def run_stats(args: argparse.Namespace) -> int:
 
 def _read_stats(path: Path) -> dict:
     """A statistics JSON written by ``dataset-stats --json`` (NaN stored as null)."""
-    if not path.is_file():
-        raise InputFormatError(f"{path}: statistics file does not exist (write one with dataset-stats --json)")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputFormatError(f"{path}: not valid JSON ({exc})") from exc
+    data = read_json(path, "statistics file (write one with dataset-stats --json)")
     if not isinstance(data, dict) or not isinstance(data.get("classes"), dict):
         raise InputFormatError(f"{path}: expected an object with 'classes' (written by dataset-stats --json)")
     return {"classes": {c: {k: (float("nan") if v is None else v) for k, v in row.items()}

@@ -7,7 +7,6 @@ known class names, finite numbers, positive sizes, unit quaternions. The 10 dete
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +15,7 @@ from grutrack.boxes import yaw_from_quaternion
 from grutrack.classes import CLASS_INDEX, DETECTION_CLASSES, DETECTION_TO_TRACKING
 from grutrack.data.scene import BoxSet
 from grutrack.errors import InputFormatError
+from grutrack.io import read_json
 
 QUATERNION_TOLERANCE = 1e-2  # |‖q‖ - 1| allowed; JSON writers round quaternions to a few digits
 
@@ -23,12 +23,7 @@ QUATERNION_TOLERANCE = 1e-2  # |‖q‖ - 1| allowed; JSON writers round quatern
 def read_detection_json(path: str | Path) -> dict:
     """Parse a detection JSON and check its top level (``meta``, ``results``)."""
     path = Path(path)
-    if not path.is_file():
-        raise InputFormatError(f"{path}: detection file does not exist")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputFormatError(f"{path}: not valid JSON ({exc})") from exc
+    data = read_json(path, "detection file")
     if not isinstance(data, dict) or not isinstance(data.get("results"), dict):
         raise InputFormatError(f"{path}: expected a JSON object with a 'results' object "
                                f"{{sample_token: [box, ...]}} (official nuScenes detection format)")
