@@ -308,7 +308,7 @@ class Trainer:
         loss = run_scene(self.net, scene, self.dets, self.tracker_cfg, self.cfg, self.device)
         value = loss.value()
         if not torch.isfinite(value):
-            self._diverged(scene, f"the loss is {float(value)}")
+            self._diverged(scene, f"the loss is {value.item()}")
         if self.net.max_abs_gain > MAX_ABS_GAIN:
             self._diverged(scene, f"the gain diverged (max |K| = {self.net.max_abs_gain:.3g} > {MAX_ABS_GAIN:g})")
         self.opt.zero_grad()
