@@ -112,3 +112,13 @@ def test_dataroot_messages(cfg, tmp_path):
     with pytest.raises(ConfigError, match=r"datasets\.av2\.dataroot is not set: put there the Argoverse 2"):
         spec.require_dataroot(cfg, "av2", "val")
     assert spec.require_dataroot(cfg, "demo") == "data/demo"
+
+
+def test_core_geometry_and_box_code_re_run_tracking():
+    """Geometry, the box layout and the canonical scene form feed every tracker: they version the track stages."""
+    from grutrack.pipeline.codever import STAGE_SOURCES
+
+    for stage in ("track", "track_av2", "train"):
+        for path in ("geometry.py", "boxes.py", "data/scene.py", "tracking", "motion"):
+            assert path in STAGE_SOURCES[stage], (stage, path)
+    assert "evaluation/fast_loading.py" in STAGE_SOURCES["evaluate"]

@@ -8,13 +8,13 @@ import argparse
 import json
 import time
 
+from grutrack.cli.common import add_dataset_args
 from grutrack.data.nuscenes import open_nuscenes, split_scene_names
 from grutrack.errors import ConfigError, InputFormatError
 from grutrack.evaluation.nuscenes_eval import (devkit_tracking_eval, format_summary, metrics_document,
                                                write_metrics)
 
 EVALUATORS = ("devkit", "fast", "official")
-DATASETS = ("nuscenes", "av2")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -24,11 +24,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                    "(tracking_nips_2019) or, with --dataset av2, the official AV2 tracking "
                                    "evaluation (HOTA, 50 m, drivable-area ROI), and write a metrics JSON "
                                    "(overall and per class).")
-    p.add_argument("--dataset", default="nuscenes", choices=DATASETS, help="dataset (default: nuscenes)")
-    p.add_argument("--dataroot", required=True,
-                   help="nuScenes dataroot (holds <version>/) or AV2 sensor root (holds <split>/<log_id>/)")
-    p.add_argument("--version", default=None, help="nuScenes version, e.g. v1.0-trainval, v1.0-mini (nuScenes only)")
-    p.add_argument("--split", required=True, help="split with ground truth: val, mini_val, ... or custom")
+    add_dataset_args(p, "split with ground truth: val, mini_val, ... or custom")
     p.add_argument("--submission", required=True, help="tracking submission: JSON (nuscenes) or pickle (av2)")
     p.add_argument("--out", required=True, help="metrics JSON to write")
     p.add_argument("--evaluator", default=None, choices=EVALUATORS,

@@ -9,13 +9,13 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from grutrack.cli.common import add_dataset_args
 from grutrack.data.nusc_detections import load_detections
 from grutrack.data.nuscenes import load_scenes, open_nuscenes
 from grutrack.errors import ConfigError
 from grutrack.export.nuscenes_json import build_submission, write_submission
 from grutrack.tracking.factory import TRACKERS, build_tracker
 
-DATASETS = ("nuscenes", "av2")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -25,11 +25,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                    "tracking submission (validated, written atomically): the nuScenes tracking "
                                    "JSON, or for --dataset av2 the AV2 tracking-challenge pickle and a feather "
                                    "table of the same tracks.")
-    p.add_argument("--dataset", default="nuscenes", choices=DATASETS, help="dataset (default: nuscenes)")
-    p.add_argument("--dataroot", required=True,
-                   help="nuScenes dataroot (holds <version>/) or AV2 sensor root (holds <split>/<log_id>/)")
-    p.add_argument("--version", default=None, help="nuScenes version, e.g. v1.0-trainval, v1.0-mini (nuScenes only)")
-    p.add_argument("--split", required=True, help="split name: val, test, mini_val, ... or a custom split")
+    add_dataset_args(p, "split name: val, test, mini_val, ... or a custom split")
     p.add_argument("--detections", required=True,
                    help="nuScenes: official detection-submission JSON; av2: LT3D detections (.feather, .csv or a "
                         "pickled DataFrame), ego frame")

@@ -17,8 +17,8 @@ from grutrack import __version__
 PACKAGE = Path(__file__).resolve().parents[1]
 #: files every stage runs (the package version itself is part of every code version)
 _COMMON = ("errors.py", "io.py", "provenance.py", "boxes.py", "classes.py", "geometry.py", "data/scene.py")
-_TRACKING = ("tracking", "motion", "configs/trackers", "configs/motion", "training/checkpoint.py",
-             "pipeline/presets.py")
+_TRACKING = ("tracking", "motion", "geometry.py", "boxes.py", "classes.py", "data/scene.py", "configs/trackers",
+             "configs/motion", "training/checkpoint.py", "pipeline/presets.py", "cli/common.py")
 
 #: stage -> package paths (files or folders) whose content defines the stage's code version
 STAGE_SOURCES: dict[str, tuple[str, ...]] = {
@@ -29,14 +29,16 @@ STAGE_SOURCES: dict[str, tuple[str, ...]] = {
                 "data/lt3d_detections.py", "data/nuscenes.py", "data/av2.py", "configs/detections.yaml",
                 "cli/detections.py"),
     "train": ("training", "data/nuscenes.py", "data/nusc_detections.py", "evaluation/fast_amota.py",
+              "evaluation/fast_loading.py",
               "export/nuscenes_json.py", "configs/training", "cli/train.py", *_TRACKING),
     "track": ("data/nuscenes.py", "data/nusc_detections.py", "export/nuscenes_json.py", "cli/track.py",
               *_TRACKING),
     "track_av2": ("data/av2.py", "data/lt3d_detections.py", "export/av2_tracks.py", "cli/track.py", *_TRACKING),
     "submit": ("export/nuscenes_json.py", "export/leaderboard.py", "data/nuscenes.py", "cli/submit.py"),
-    "evaluate": ("evaluation/nuscenes_eval.py", "evaluation/fast_amota.py", "data/nuscenes.py",
-                 "cli/evaluate.py"),
-    "evaluate_av2": ("evaluation/av2_eval.py", "data/av2.py", "export/av2_tracks.py", "cli/evaluate.py"),
+    "evaluate": ("evaluation/nuscenes_eval.py", "evaluation/fast_amota.py", "evaluation/fast_loading.py",
+                 "data/nuscenes.py", "cli/evaluate.py", "cli/common.py"),
+    "evaluate_av2": ("evaluation/av2_eval.py", "data/av2.py", "export/av2_tracks.py", "cli/evaluate.py",
+                     "cli/common.py"),
     "report": ("report", "cli/report.py"),
 }
 
