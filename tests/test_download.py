@@ -146,3 +146,19 @@ def test_download_fails_clearly_on_http_error(server, tmp_path, monkeypatch):
     monkeypatch.setattr(_Handler, "do_GET", refuse)
     with pytest.raises(DownloadError, match="HTTP 404"):
         download(f"{server}/missing", Path(tmp_path) / "m.json", progress=False, timeout=5)
+
+
+def test_extract_member_writes_whole_file_or_clear_error(tmp_path):
+    import zipfile
+
+    from grutrack.data.nusc_convert import extract_member
+    from grutrack.errors import InputFormatError
+
+    z = tmp_path / "a.zip"
+    with zipfile.ZipFile(z, "w") as zf:
+        zf.writestr("x/det.json", '{"results": {}}')
+    out = extract_member(z, "x/det.json", tmp_path)
+    assert out.read_text() == '{"results": {}}'
+    with pytest.raises(InputFormatError, match="no member 'nope'"):
+        extract_member(z, "nope", tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.zip", "det.json"]  # no temp file left

@@ -12,7 +12,7 @@ from pathlib import Path
 from grutrack.data.nusc_detections import load_detections, read_detection_json
 from grutrack.data.nuscenes import load_scenes, open_nuscenes
 from grutrack.errors import InputFormatError
-from grutrack.io import write_json_atomic
+from grutrack.io import atomic_path, write_json_atomic
 
 
 def extract_member(archive: str | Path, member: str, out_dir: str | Path) -> Path:
@@ -24,7 +24,7 @@ def extract_member(archive: str | Path, member: str, out_dir: str | Path) -> Pat
                 raise InputFormatError(f"{archive}: archive has no member '{member}' "
                                        f"(members: {', '.join(zf.namelist()[:10])})")
             target = Path(out_dir) / Path(member).name
-            with zf.open(member) as src, open(target, "wb") as dst:
+            with atomic_path(target) as tmp, zf.open(member) as src, open(tmp, "wb") as dst:
                 shutil.copyfileobj(src, dst)
     except zipfile.BadZipFile as exc:
         raise InputFormatError(f"{archive}: not a zip archive ({exc})") from exc
