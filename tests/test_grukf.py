@@ -221,3 +221,96 @@ def test_diverging_gain_stops_training(small_training_set, tmp_path):
         t.net.fc_gain[2].bias.fill_(5e3)
     with pytest.raises(TrainingDiverged, match="gain diverged"):
         t.run()
+
+
+# ----- gain table (class / update count / frames since the last update) --------------------------------------
+def _table_net(**kw):
+    """A network whose learned part is silent: K = shared prior + table cell."""
+    net = _net(**kw)
+    with torch.no_grad():
+        net.fc_gain[2].weight.zero_()
+    return net
+
+
+def test_gain_table_cells_start_at_given_gains_and_are_looked_up_per_track():
+    net = _table_net(class_gain=True, age_bins=2, gap_bins=3)
+    assert tuple(net.gain_table.shape) == (7, 2, 3, 90)
+    table = torch.full((7, 2, 3, 10, 9), float("nan"), dtype=torch.float64)
+    for g in range(3):
+        table[2, 1, g] = 0.0
+        table[2, 1, g, 0, 0] = table[2, 1, g, 1, 1] = 0.2 * (g + 1)   # position gain grows with the gap
+    net.set_gain_prior(torch.zeros(10, 9, dtype=torch.float64), table)
+    with torch.no_grad():
+        net.fc_gain[2].weight.zero_()
+    net.double()
+    prior = torch.tensor(_states(4))
+    prior[:, 8] = 0.0                                                     # heading along global x
+    y = TorchCTRA().h(prior)
+    y[:, 0] += 1.0
+    labels = torch.tensor([2, 2, 2, 4])
+    n_upd = torch.tensor([5, 5, 5, 5])
+    gaps = torch.tensor([1, 2, 9, 1])                                     # 9 -> the last gap bin
+    with torch.no_grad():
+        x, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(4),
+                           net.table_index(labels, n_upd, gaps))
+    step = (x[:, 0] - prior[:, 0]).numpy()
+    # class 4 had no update in the table (NaN cells): it starts at the shared prior (zero gain here)
+    assert np.allclose(step, [0.2, 0.4, 0.6, 0.0], atol=1e-9)
+    with pytest.raises(ValueError, match="gain table needs"):
+        net.correct(prior, y, y, prior, prior, prior, net.init_hidden(4))
+
+
+def test_backend_counts_updates_and_frames_since_the_last_update():
+    from grutrack.tracking.grukf_backend import GRUKFBackend
+
+    net = _table_net(age_bins=4, gap_bins=4)
+    be = GRUKFBackend(net, "cpu")
+    z = TorchCTRA().h(torch.tensor(_states(3))).numpy()
+    s = be.initiate(z, np.array([0, 1, 2]))
+    seen = []
+    real = net.table_index
+    net.table_index = lambda c, a, g: (seen.append((c.tolist(), a.tolist(), g.tolist())), real(c, a, g))[1]
+    s = be.predict(s, 0.5)
+    s = be.update(s, np.array([0, 2]), z[[0, 2]])          # first update, after one frame
+    s = be.predict(be.predict(be.predict(s, 0.5), 0.5), 0.5)
+    s = be.update(s, np.array([1, 2]), z[[1, 2]])          # track 1: first update after 4 frames; 2: second
+    assert seen == [([0, 2], [1, 1], [1, 1]), ([1, 2], [1, 2], [4, 3])]
+    assert s.n_updates.tolist() == [1, 1, 2] and s.since.tolist() == [3, 0, 0]
+    both = be.concat(be.select(s, np.array([2])), be.select(s, np.array([0])))
+    assert both.n_updates.tolist() == [2, 1] and both.since.tolist() == [0, 3]
+
+
+def test_backend_maps_dataset_labels_to_tracking_classes():
+    from grutrack.tracking.grukf_backend import GRUKFBackend
+
+    net = _table_net(class_gain=True)
+    be = GRUKFBackend(net, "cpu", class_index=np.array([2, 2, 4]))   # e.g. three AV2 categories
+    s = be.initiate(TorchCTRA().h(torch.tensor(_states(3))).numpy(), np.array([0, 1, 2]))
+    cells = be._cells(be.predict(s, 0.5), np.array([0, 1, 2]))
+    assert cells[0].tolist() == [2, 2, 4]
+
+
+def test_ekf_gain_table_grows_after_missed_frames(small_training_set):
+    from grutrack.tracking.config import load_tracker_config
+    from grutrack.training.config import load_train_config
+    from grutrack.training.trainer import mean_ekf_gain
+
+    scenes, dets = small_training_set
+    cfg = load_train_config("grukf", {"gap_bins": 3, "age_bins": 0, "class_gain": False})
+    shared, table = mean_ekf_gain(scenes, dets, load_tracker_config(cfg.tracker_preset), cfg)
+    assert table.shape == (1, 1, 3, 10, 9) and np.isfinite(table[0, 0, :2]).all()
+    # the covariance grows while a track coasts, so the next detection is trusted more
+    assert table[0, 0, 1, 0, 0] > table[0, 0, 0, 0, 0]
+    # the shared gain is the count-weighted mean of the cells: it lies between them
+    assert table[0, 0, 0, 0, 0] <= shared[0, 0] <= table[0, 0, 1, 0, 0]
+
+
+def test_prediction_terms_are_added_when_weighted(small_training_set, tmp_path):
+    scenes, dets = small_training_set
+    plain = _trainer(scenes, dets, tmp_path / "a", epochs=1)
+    plain.run()
+    pred = _trainer(scenes, dets, tmp_path / "b", epochs=1, prediction_weight=1.0)
+    pred.run()
+    assert all(r["prediction_terms"] == 0 for r in plain.log_rows)
+    assert all(r["prediction_terms"] > 0 for r in pred.log_rows)
+    assert [r["loss"] for r in plain.log_rows] != [r["loss"] for r in pred.log_rows]

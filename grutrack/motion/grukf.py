@@ -41,13 +41,30 @@ class GRUKFConfig:
     """Architecture of the GRU-Kalman filter (stored in checkpoints).
 
     ss_model: CTRA or Bicycle; in_mult / out_mult: widths of the input / output FC layers as multiples of
-    the feature size (KalmanNet's defaults 5 and 40); four_gru: the authors' four-GRU variant.
+    the feature size (KalmanNet's defaults 5 and 40); four_gru: the authors' four-GRU variant;
+    class_gain: a learned per-class offset (n_classes, m * n) added to the output layer's gain, started at
+    the EKF's per-class mean gain minus the shared one (a grutrack choice; the network and SS model stay
+    shared by all classes).
     """
 
     ss_model: str = "CTRA"
     in_mult: int = 5
     out_mult: int = 40
     four_gru: bool = False
+    class_gain: bool = False
+    age_bins: int = 0
+    gap_bins: int = 0
+    n_classes: int = 7
+
+    @property
+    def table_shape(self) -> tuple[int, int, int]:
+        """(class, age, gap) sizes of the gain offset table ((1, 1, 1): no table)."""
+        return (self.n_classes if self.class_gain else 1, max(self.age_bins, 1), max(self.gap_bins, 1))
+
+    @property
+    def has_table(self) -> bool:
+        """Whether the network carries a gain offset table."""
+        return self.class_gain or self.age_bins > 0 or self.gap_bins > 0
 
 
 def _fc(i: int, o: int) -> nn.Sequential:
@@ -107,14 +124,34 @@ class GRUKalmanNet(nn.Module):
         self.fc_back2 = _fc(self.h_sigma + m * m, self.h_sigma)
         nn.init.zeros_(self.fc_gain[2].weight)
         nn.init.zeros_(self.fc_gain[2].bias)
+        if cfg.has_table:
+            self.gain_table = nn.Parameter(torch.zeros(*cfg.table_shape, m * n))
         #: largest |K| entry produced since the last reset (the trainer watches it for divergence)
         self.max_abs_gain = 0.0
 
-    def set_gain_prior(self, K0: torch.Tensor) -> None:
-        """Start from the constant gain K0 (m, n) in the heading frame: output bias = K0, small weights."""
+    def set_gain_prior(self, K0: torch.Tensor, K_table: torch.Tensor | None = None) -> None:
+        """Start from the constant gain K0 (m, n) in the heading frame: output bias = K0, small weights.
+
+        With a gain table, ``K_table`` (*table_shape, m, n) gives the starting gain of each (class, age) cell
+        (a NaN cell had no update in the training data: it starts at K0).
+        """
         with torch.no_grad():
             self.fc_gain[2].bias.copy_(K0.reshape(-1).to(self.fc_gain[2].bias))
             self.fc_gain[2].weight.mul_(0.0).add_(torch.randn_like(self.fc_gain[2].weight) * 1e-3)
+            if self.cfg.has_table and K_table is not None:
+                off = K_table.reshape(*self.cfg.table_shape, -1).to(self.gain_table) - self.fc_gain[2].bias
+                self.gain_table.copy_(torch.nan_to_num(off, nan=0.0))
+
+    def table_index(self, labels: torch.Tensor, n_updates: torch.Tensor, gaps: torch.Tensor
+                    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Cells of the gain table (three (K,) int64 index tensors) for tracks of classes ``labels`` (K,) at
+        their ``n_updates``-th update (K,) (1 = the first after birth), ``gaps`` (K,) frames after their last
+        update (1 = the previous frame)."""
+        zero = torch.zeros_like(labels)
+        c = labels if self.cfg.class_gain else zero
+        a = n_updates.clamp(1, self.cfg.age_bins) - 1 if self.cfg.age_bins > 0 else zero
+        g = gaps.clamp(1, self.cfg.gap_bins) - 1 if self.cfg.gap_bins > 0 else zero
+        return c, a, g
 
     def init_hidden(self, n_tracks: int, device=None) -> dict[str, torch.Tensor]:
         """Zero hidden states for new tracks (N, hidden) each."""
@@ -126,9 +163,11 @@ class GRUKalmanNet(nn.Module):
             h["r"] = torch.zeros(n_tracks, self.n * self.n, device=device, dtype=dt)
         return h
 
-    def gain(self, feats: dict[str, torch.Tensor], hidden: dict[str, torch.Tensor]
+    def gain(self, feats: dict[str, torch.Tensor], hidden: dict[str, torch.Tensor],
+             cells: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None
              ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        """Gain K (N, m, n) from the four normalised features and the hidden states; returns new hidden states."""
+        """Gain K (N, m, n) from the four normalised features and the hidden states (and, with a gain table,
+        the tracks' cells of it, see :meth:`table_index`); returns new hidden states."""
         dt = self.fc_gain[2].weight.dtype
         f_upd, f_evol = feats["fwd_update"].to(dt), feats["fwd_evol"].to(dt)
         f_obs = torch.cat([feats["obs_diff"], feats["innovation"]], dim=1).to(dt)
@@ -142,16 +181,22 @@ class GRUKalmanNet(nn.Module):
             new["r"] = h_r
         h_s = self.gru_s(torch.cat(s_in, dim=1), hidden["s"])
         K = self.fc_gain(torch.cat([h_sigma, h_s], dim=1))
+        if self.cfg.has_table:
+            if cells is None:
+                raise ValueError("this GRU-KF's gain table needs the class, update count and gap of every track")
+            K = K + self.gain_table[cells]
         back = self.fc_back1(torch.cat([h_s, K], dim=1))
         new["sigma"] = self.fc_back2(torch.cat([h_sigma, back], dim=1))
         new["s"] = h_s
         return K.reshape(-1, self.m, self.n), new
 
     def correct(self, x_prior: torch.Tensor, y: torch.Tensor, y_prev: torch.Tensor, x_post_prev: torch.Tensor,
-                x_prior_prev: torch.Tensor, x_post_prev2: torch.Tensor, hidden: dict[str, torch.Tensor]
+                x_prior_prev: torch.Tensor, x_post_prev2: torch.Tensor, hidden: dict[str, torch.Tensor],
+                cells: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None
                 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """One update of K tracks (all (K, ·) float64): prior x^-_n, measurement y_n, previous measurement,
-        previous posterior x_{n-1|n-1}, previous prior x_{n-1|n-2}, posterior before that x_{n-2|n-2}.
+        previous posterior x_{n-1|n-1}, previous prior x_{n-1|n-2}, posterior before that x_{n-2|n-2};
+        ``cells``: the tracks' cells of the gain table (:meth:`table_index`; only with a table).
         Returns the posterior (K, m) and the new hidden states.
         """
         yaw = x_prior[:, self.ss.yaw_index]
@@ -170,7 +215,7 @@ class GRUKalmanNet(nn.Module):
                  "obs_diff": _normalise(to_heading_frame(obs_diff, yaw, MEAS_PLANAR)),
                  "fwd_evol": _normalise(to_heading_frame(fwd_evol, yaw, STATE_PLANAR)),
                  "fwd_update": _normalise(to_heading_frame(fwd_upd, yaw, STATE_PLANAR))}
-        K, new_hidden = self.gain(feats, hidden)
+        K, new_hidden = self.gain(feats, hidden, cells)
         if len(K):
             self.max_abs_gain = max(self.max_abs_gain, float(K.detach().abs().max()))
         delta = torch.einsum("kmn,kn->km", K.to(innov_h.dtype), innov_h)

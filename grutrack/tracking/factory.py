@@ -40,7 +40,8 @@ def build_tracker(name: str = "ekf", config: str | Path | None = None,
             raise ConfigError("--tracker grukf needs --checkpoint CKPT (a model written by `grutrack train`)")
         from grutrack.training.checkpoint import load_network
 
-        return Tracker(cfg, [grukf_group(load_network(checkpoint), len(index), device)], _association(cfg))
+        return Tracker(cfg, [grukf_group(load_network(checkpoint), len(index), device, class_index=index)],
+                       _association(cfg))
     return Tracker(cfg, _baseline_groups(name, cfg, index), _association(cfg))
 
 
@@ -62,11 +63,14 @@ def _association(cfg: TrackerConfig):
     return None
 
 
-def grukf_group(net, n_labels: int, device: str = "auto", train: bool = False) -> TrackGroup:
-    """One track group for every label, run by the GRU-Kalman filter ``net``."""
+def grukf_group(net, n_labels: int, device: str = "auto", train: bool = False,
+                class_index: np.ndarray | None = None) -> TrackGroup:
+    """One track group for every label, run by the GRU-Kalman filter ``net``; ``class_index`` (n_labels,) int
+    maps a dataset label to the tracking class the network's per-class gain uses (default: identity)."""
     from grutrack.tracking.grukf_backend import GRUKFBackend
 
-    return TrackGroup(GRUKFBackend(net, device, train=train), np.ones(n_labels, dtype=bool))
+    return TrackGroup(GRUKFBackend(net, device, train=train, class_index=class_index),
+                      np.ones(n_labels, dtype=bool))
 
 
 def _param_index(param_classes: tuple[str, ...] | None) -> np.ndarray:

@@ -26,7 +26,8 @@ def resolve_device(device: str = "auto") -> torch.device:
 class GRUState:
     """N tracks: x current state (posterior after an update, prior after a predict) (N, m) float64; y_prev
     last measurement (N, 9); post1 / post2 the last two posteriors, prior1 the prior of the last update
-    (N, m); hidden GRU states {name: (N, hidden)}; labels (N,) int64 (numpy)."""
+    (N, m); hidden GRU states {name: (N, hidden)}; labels (N,) int64, n_updates (N,) int64 the updates each
+    track has had and since (N,) int64 the frames predicted since its last update or birth (numpy)."""
 
     x: torch.Tensor
     y_prev: torch.Tensor
@@ -35,6 +36,8 @@ class GRUState:
     prior1: torch.Tensor
     hidden: dict
     labels: np.ndarray
+    n_updates: np.ndarray
+    since: np.ndarray
 
     def map(self, fn_t, fn_np) -> "GRUState":
         """Apply fn_t to every tensor, fn_np to the labels."""
@@ -47,10 +50,16 @@ class GRUState:
 
 
 class GRUKFBackend:
-    """Batched GRU-KF over the tracks of one group (every class shares the network and SS model)."""
+    """Batched GRU-KF over the tracks of one group (every class shares the network and SS model).
 
-    def __init__(self, net: GRUKalmanNet, device: torch.device | str = "auto", train: bool = False):
+    ``class_index`` (n_labels,) int: the tracking class (row of the network's per-class gain) of each dataset
+    label; None = the labels are the tracking classes.
+    """
+
+    def __init__(self, net: GRUKalmanNet, device: torch.device | str = "auto", train: bool = False,
+                 class_index: np.ndarray | None = None):
         self.net = net
+        self.class_index = None if class_index is None else np.asarray(class_index, dtype=np.int64)
         self.device = resolve_device(device) if isinstance(device, str) else device
         self.net.to(self.device)
         self.train = train
@@ -67,12 +76,23 @@ class GRUKFBackend:
         with self._ctx():
             zt = self._t(z)
             x = self.ss.init_state(zt)
-            return GRUState(x, zt, x, x, x, self.net.init_hidden(len(z), self.device), labels.copy())
+            zero = np.zeros(len(z), dtype=np.int64)
+            return GRUState(x, zt, x, x, x, self.net.init_hidden(len(z), self.device), labels.copy(), zero, zero)
+
+    def _cells(self, s: GRUState, rows: np.ndarray):
+        """The gain-table cells of tracks ``rows`` at this update (None when the network has no table)."""
+        if not self.net.cfg.has_table:
+            return None
+        cls = s.labels[rows] if self.class_index is None else self.class_index[s.labels[rows]]
+        t = [torch.as_tensor(a, device=self.device, dtype=torch.long)
+             for a in (cls, s.n_updates[rows] + 1, np.maximum(s.since[rows], 1))]
+        return self.net.table_index(*t)
 
     def predict(self, s: GRUState, dt: float) -> GRUState:
         """x <- f(x, dt) for every track."""
         with self._ctx():
-            return GRUState(self.ss.f(s.x, dt), s.y_prev, s.post1, s.post2, s.prior1, s.hidden, s.labels)
+            return GRUState(self.ss.f(s.x, dt), s.y_prev, s.post1, s.post2, s.prior1, s.hidden, s.labels,
+                            s.n_updates, s.since + 1)
 
     def update(self, s: GRUState, rows: np.ndarray, z: np.ndarray) -> GRUState:
         """Correct tracks ``rows`` (K,) with measurements z (K, 9) through the learned gain."""
@@ -81,7 +101,8 @@ class GRUKFBackend:
             y = self._t(z)
             prior = s.x[r]
             post, hid = self.net.correct(prior, y, s.y_prev[r], s.post1[r], s.prior1[r], s.post2[r],
-                                         {k: v[r] for k, v in s.hidden.items()})
+                                         {k: v[r] for k, v in s.hidden.items()},
+                                         self._cells(s, rows))
 
             def put(t: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
                 out = t.clone()
@@ -89,7 +110,8 @@ class GRUKFBackend:
                 return out
 
             return GRUState(put(s.x, post), put(s.y_prev, y), put(s.post1, post), put(s.post2, s.post1[r]),
-                            put(s.prior1, prior), {k: put(s.hidden[k], hid[k]) for k in s.hidden}, s.labels)
+                            put(s.prior1, prior), {k: put(s.hidden[k], hid[k]) for k in s.hidden}, s.labels,
+                            _incremented(s.n_updates, rows), _zeroed(s.since, rows))
 
     def measure(self, s: GRUState) -> torch.Tensor:
         """h(x) (N, 9) as a tensor (keeps the graph in training)."""
@@ -113,4 +135,18 @@ class GRUKFBackend:
         return GRUState(*(torch.cat([getattr(a, n), getattr(b, n)]) for n in ("x", "y_prev", "post1", "post2",
                                                                              "prior1")),
                         {k: torch.cat([a.hidden[k], b.hidden[k]]) for k in a.hidden},
-                        np.concatenate([a.labels, b.labels]))
+                        *(np.concatenate([getattr(a, n), getattr(b, n)]) for n in ("labels", "n_updates", "since")))
+
+
+def _zeroed(counts: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """A copy of ``counts`` (N,) with ``rows`` set to zero."""
+    out = counts.copy()
+    out[rows] = 0
+    return out
+
+
+def _incremented(counts: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """A copy of ``counts`` (N,) with ``rows`` incremented by one."""
+    out = counts.copy()
+    out[rows] += 1
+    return out

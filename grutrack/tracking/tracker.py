@@ -109,8 +109,9 @@ class Tracker:
         self.last_timestamp: int | None = None
         self.frame_count = 0  # frames of the current scene, this one included
         self.associate = associate if associate is not None else two_stage_association(cfg)
-        #: optional callable(group, rows, det_rows) run right after a group's matched tracks are corrected
-        #: (training reads the corrected states there, before expired tracks are dropped)
+        #: optional callable(group, rows, det_rows) run every frame for every non-empty group, right after its
+        #: matched tracks ``rows`` (possibly none) are corrected (training reads the states there, before
+        #: expired tracks are dropped)
         self.update_hook = None
 
     def reset(self) -> None:
@@ -157,8 +158,8 @@ class Tracker:
                 continue
             if len(rows):
                 g.state = g.backend.update(g.state, rows, dets.boxes[drows])
-                if self.update_hook is not None:
-                    self.update_hook(g, rows, drows)
+            if self.update_hook is not None:
+                self.update_hook(g, rows, drows)
             matched = np.zeros(n, dtype=bool)
             matched[rows] = True
             g.scores[rows] = dets.scores[drows]

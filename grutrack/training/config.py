@@ -24,10 +24,14 @@ class TrainConfig:
     device: str
     ss_model: str
     four_gru: bool
+    class_gain: bool
+    age_bins: int
+    gap_bins: int
     tracker_preset: str
     motion_config: str
     gt_match_distance: float
     loss_weights: tuple
+    prediction_weight: float
     val_every: int
     checkpoint_every: int
 
@@ -41,11 +45,18 @@ _CHECKS = {
     "device": (lambda v: isinstance(v, str) and v != "", "a device name such as auto, cpu or cuda"),
     "ss_model": (lambda v: str(v).upper() in ("CTRA", "BICYCLE"), "CTRA or Bicycle"),
     "four_gru": (lambda v: isinstance(v, bool), "true or false"),
+    "class_gain": (lambda v: isinstance(v, bool), "true or false"),
+    "age_bins": (lambda v: isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 100,
+                 "an integer from 0 to 100"),
+    "gap_bins": (lambda v: isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 100,
+                 "an integer from 0 to 100"),
     "tracker_preset": (lambda v: isinstance(v, str) and v != "", "a tracker preset name or path"),
     "motion_config": (lambda v: isinstance(v, str) and v != "", "a motion config name or path"),
     "gt_match_distance": (lambda v: isinstance(v, (int, float)) and v > 0, "a positive distance in metres"),
     "loss_weights": (lambda v: isinstance(v, list) and len(v) == 9 and all(isinstance(x, (int, float)) and x >= 0
                                                                             for x in v), "9 non-negative numbers"),
+    "prediction_weight": (lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and v >= 0,
+                          "a number >= 0"),
     "val_every": (lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
     "checkpoint_every": (lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
 }
@@ -82,4 +93,5 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrainConfig:
     vals["loss_weights"] = tuple(float(x) for x in raw["loss_weights"])
     vals["lr"], vals["weight_decay"] = float(raw["lr"]), float(raw["weight_decay"])
     vals["gt_match_distance"] = float(raw["gt_match_distance"])
+    vals["prediction_weight"] = float(raw["prediction_weight"])
     return TrainConfig(**{k: vals[k] for k in names})

@@ -24,6 +24,18 @@ class StickyGTAssociation:
         """Start of a scene."""
         self.held.clear()
 
+    def held_rows(self, track_ids: np.ndarray, gt_ids: np.ndarray) -> np.ndarray:
+        """GT row per track (K,) int64 of the instance each track already holds, -1 where it holds none or
+        its instance is absent from this frame (no new matching)."""
+        out = np.full(len(track_ids), -1, dtype=np.int64)
+        held = np.array([self.held.get(int(t), "") for t in track_ids], dtype=object)
+        gt_ids = np.asarray(gt_ids, dtype=object)
+        present = np.isin(held, gt_ids) & (held != "")
+        if present.any():
+            order = np.argsort(gt_ids)
+            out[present] = order[np.searchsorted(gt_ids[order], held[present])]
+        return out
+
     def match(self, track_ids: np.ndarray, track_xy: np.ndarray, track_labels: np.ndarray,
               gt_ids: np.ndarray, gt_xy: np.ndarray, gt_labels: np.ndarray) -> np.ndarray:
         """GT row per track (K,) int64, -1 where the track has no GT this frame.
@@ -31,14 +43,10 @@ class StickyGTAssociation:
         track_ids (K,), track_xy (K, 2) metres, track_labels (K,); gt_ids (G,) instance ids, gt_xy (G, 2),
         gt_labels (G,).
         """
-        out = np.full(len(track_ids), -1, dtype=np.int64)
+        # rows of the current GT list holding each track's instance (sticky tracks whose instance is present)
+        out = self.held_rows(track_ids, gt_ids)
         held = np.array([self.held.get(int(t), "") for t in track_ids], dtype=object)
         gt_ids = np.asarray(gt_ids, dtype=object)
-        # rows of the current GT list holding each track's instance (sticky tracks whose instance is present)
-        present = np.isin(held, gt_ids) & (held != "")
-        if present.any():
-            order = np.argsort(gt_ids)
-            out[present] = order[np.searchsorted(gt_ids[order], held[present])]
         taken = np.isin(gt_ids, np.array(list(self.held.values()), dtype=object))
         ft = np.flatnonzero(held == "")
         free_gt = np.flatnonzero(~taken)

@@ -38,7 +38,8 @@ from grutrack.training.gt_association import StickyGTAssociation
 #: a gain entry beyond this (a correction of 1000x the innovation) means the learned filter has diverged
 MAX_ABS_GAIN = 1e3
 
-LOG_FIELDS = ("step", "epoch", "scene", "loss", "gt_terms", "pseudo_terms", "lr", "val_amota", "seconds")
+LOG_FIELDS = ("step", "epoch", "scene", "loss", "gt_terms", "pseudo_terms", "prediction_terms", "lr", "val_amota",
+              "seconds")
 
 
 def ekf_backend(cfg: TrainConfig) -> KalmanBackend:
@@ -60,19 +61,22 @@ class TrainingDiverged(GrutrackError):
 class PairedBackend:
     """GRU-KF and EKF on the same tracks; boxes (for association and output) come from the GRU-KF.
 
-    After each update, ``last`` holds the corrected rows' GRU-KF measurement-space posterior (K, 9) tensor
-    and the EKF posterior (K, 9) numpy array.
+    After each predict, ``prior`` holds every track's GRU-KF measurement-space prior (N, 9) tensor (the box
+    association used); after each update, ``last`` holds the corrected rows' GRU-KF measurement-space
+    posterior (K, 9) tensor and the EKF posterior (K, 9) numpy array.
     """
 
     def __init__(self, gru: GRUKFBackend, ekf: KalmanBackend):
         self.gru, self.ekf = gru, ekf
-        self.last = None
+        self.last = self.prior = None
 
     def initiate(self, z, labels):
         return (self.gru.initiate(z, labels), self.ekf.initiate(z, labels))
 
     def predict(self, s, dt):
-        return (self.gru.predict(s[0], dt), self.ekf.predict(s[1], dt))
+        g = self.gru.predict(s[0], dt)
+        self.prior = self.gru.measure(g)
+        return (g, self.ekf.predict(s[1], dt))
 
     def update(self, s, rows, z):
         g, e = self.gru.update(s[0], rows, z), self.ekf.update(s[1], rows, z)
@@ -104,13 +108,33 @@ class SceneLoss:
         self.w = torch.tensor(cfg.loss_weights, dtype=torch.float64, device=device)
         self.assoc = StickyGTAssociation(cfg.gt_match_distance)
         self.total = torch.zeros((), dtype=torch.float64, device=device)
-        self.gt_terms = self.pseudo_terms = 0
+        self.gt_terms = self.pseudo_terms = self.prediction_terms = 0
         self.frame_gt: BoxSet | None = None
 
     def hook(self, group: TrackGroup, rows: np.ndarray, det_rows: np.ndarray) -> None:
-        """Add the terms of the tracks just corrected (called by the tracker)."""
-        pred, ekf = group.backend.last
+        """Add the terms of this frame (called by the tracker for every group, every frame): posterior terms
+        of the tracks just corrected, and prediction terms of every track holding a GT instance."""
         gt = self.frame_gt
+        if len(rows):
+            self._posterior_terms(group, rows, gt)
+        if self.cfg.prediction_weight > 0 and self.prior_ok(group) and len(gt):
+            held = self.assoc.held_rows(group.ids, gt.ids)
+            has = np.flatnonzero(held >= 0)
+            if len(has):
+                prior = group.backend.prior
+                target = torch.as_tensor(gt.boxes[held[has]], dtype=torch.float64, device=prior.device)
+                res = _residual(prior[torch.as_tensor(has, device=prior.device)], target)
+                self.total = self.total + self.cfg.prediction_weight * (res ** 2 * self.w).sum()
+                self.prediction_terms += len(has)
+
+    @staticmethod
+    def prior_ok(group: TrackGroup) -> bool:
+        """The group's recorded prior covers its current tracks (not so in a scene's first frame)."""
+        prior = group.backend.prior
+        return prior is not None and len(prior) == len(group)
+
+    def _posterior_terms(self, group: TrackGroup, rows: np.ndarray, gt: BoxSet) -> None:
+        pred, ekf = group.backend.last
         ids, labels = group.ids[rows], group.labels[rows]
         xy = pred.detach().cpu().numpy()[:, :2]
         match = self.assoc.match(ids, xy, labels, gt.ids, gt.boxes[:, :2], gt.labels) if len(gt) else \
@@ -129,7 +153,7 @@ class SceneLoss:
 
     def value(self) -> torch.Tensor:
         """Mean over terms (0 when the scene produced none)."""
-        return self.total / max(self.gt_terms + self.pseudo_terms, 1)
+        return self.total / max(self.gt_terms + self.pseudo_terms + self.prediction_terms, 1)
 
 
 def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
@@ -147,22 +171,13 @@ def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_
 
 
 class GainRecorder(KalmanBackend):
-    """An EKF backend that accumulates the heading-frame Kalman gain of every update of established tracks."""
-
-    def __init__(self, *a, min_hits: int = 3, **kw):
-        super().__init__(*a, **kw)
-        self.sum, self.count, self.min_hits = None, 0, min_hits
-        self.hits = None
+    """An EKF backend that keeps the heading-frame Kalman gains (K, m, 9) of its last update in ``last``."""
 
     def update(self, s: KFState, rows, z):
         x, P = s.x[rows], s.P[rows]
-        R = self.R[s.labels[rows]]
-        _, H, S = self.kf.project(x, P, R)
+        _, H, S = self.kf.project(x, P, self.R[s.labels[rows]])
         K = np.swapaxes(np.linalg.solve(S, H @ P), -1, -2)  # (K, m, 9) global frame
-        yaw = x[:, self.model.yaw_index]
-        Kh = _rotate_gain(K, yaw)
-        self.sum = Kh.sum(0) if self.sum is None else self.sum + Kh.sum(0)
-        self.count += len(rows)
+        self.last = _rotate_gain(K, x[:, self.model.yaw_index])
         return super().update(s, rows, z)
 
 
@@ -178,14 +193,38 @@ def _rotate_gain(K: np.ndarray, yaw: np.ndarray) -> np.ndarray:
 
 
 def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
-                  cfg: TrainConfig) -> np.ndarray:
-    """The EKF's mean heading-frame gain (m, 9) over all updates on the training scenes."""
+                  cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The EKF's mean heading-frame gain over all updates on the training scenes, (m, 9), and per cell of the
+    gain table (*table_shape, m, 9): by class (``class_gain``), by update count 1..age_bins and by frames
+    since the last update 1..gap_bins (the last bin takes the larger values too); NaN in cells without an
+    update, zeros overall when there was none."""
     base = ekf_backend(cfg)
     rec = GainRecorder(base.model, base.Q, base.R, base.P0)
-    track_scenes(Tracker(tracker_cfg, [TrackGroup(rec, np.ones(7, dtype=bool))]), scenes, dets)
-    if rec.count == 0:
-        return np.zeros((base.model.dim_x, 9))
-    return rec.sum / rec.count
+    shape = _arch(cfg).table_shape
+    total = np.zeros((*shape, base.model.dim_x, 9))
+    count = np.zeros(shape, dtype=np.int64)
+
+    def hook(group: TrackGroup, rows: np.ndarray, det_rows: np.ndarray) -> None:
+        if len(rows):
+            c = group.labels[rows] if cfg.class_gain else np.zeros(len(rows), dtype=np.int64)
+            a = np.minimum(group.hits[rows], shape[1]) - 1   # hits = 1 + the updates before this one
+            g = np.minimum(group.misses[rows], shape[2]) - 1  # misses = frames since the last update
+            np.add.at(total, (c, a, g), rec.last)
+            np.add.at(count, (c, a, g), 1)
+
+    tracker = Tracker(tracker_cfg, [TrackGroup(rec, np.ones(7, dtype=bool))])
+    tracker.update_hook = hook
+    track_scenes(tracker, scenes, dets)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        table = total / count[..., None, None]
+    shared = total.sum((0, 1, 2)) / max(int(count.sum()), 1)
+    return shared, table
+
+
+def _arch(cfg: TrainConfig) -> GRUKFConfig:
+    """The network architecture a training config asks for."""
+    return GRUKFConfig(ss_model=cfg.ss_model, four_gru=cfg.four_gru, class_gain=cfg.class_gain,
+                       age_bins=cfg.age_bins, gap_bins=cfg.gap_bins)
 
 
 @dataclass
@@ -223,8 +262,9 @@ class Trainer:
         torch.manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
         random.seed(cfg.seed)
-        self.net = GRUKalmanNet(GRUKFConfig(ss_model=cfg.ss_model, four_gru=cfg.four_gru))
-        self.net.set_gain_prior(torch.as_tensor(mean_ekf_gain(scenes, dets, self.tracker_cfg, cfg)))
+        self.net = GRUKalmanNet(_arch(cfg))
+        shared, table = mean_ekf_gain(scenes, dets, self.tracker_cfg, cfg)
+        self.net.set_gain_prior(torch.as_tensor(shared), torch.as_tensor(table))
         self.net.to(self.device)
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
         self.total_steps = cfg.epochs * len(scenes)
@@ -323,7 +363,7 @@ class Trainer:
         self.state.step += 1
         row = {"step": self.state.step, "epoch": self.state.epoch, "scene": scene.name,
                "loss": round(float(value.detach()), 8), "gt_terms": loss.gt_terms,
-               "pseudo_terms": loss.pseudo_terms, "lr": lr, "val_amota": "",
+               "pseudo_terms": loss.pseudo_terms, "prediction_terms": loss.prediction_terms, "lr": lr, "val_amota": "",
                "seconds": round(time.perf_counter() - t0, 4)}
         if self.validate is not None and self.cfg.val_every and self.state.step % self.cfg.val_every == 0:
             self.net.eval()
