@@ -54,33 +54,14 @@ def _median_time(fn, repeat: int):
     return _Timing(wall, cpu), result
 
 
-def _flatten(d, prefix=""):
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(_flatten(v, prefix + str(k) + "."))
-        else:
-            out[prefix + str(k)] = v
-    return out
-
-
 def _max_diff(a: dict, b: dict) -> float:
-    fa, fb = _flatten(a), _flatten(b)
-    if set(fa) != set(fb):
+    """Largest entry difference of two summaries (inf when their entries differ)."""
+    from grutrack.evaluation.compare import entry_differences
+
+    try:
+        return max(entry_differences(a, b).values(), default=0.0)
+    except ValueError:
         return math.inf
-    worst = 0.0
-    for k in fa:
-        if k == "eval_time":
-            continue
-        x, y = fa[k], fb[k]
-        if isinstance(x, (int, float)) and isinstance(y, (int, float)):
-            if math.isnan(x) or math.isnan(y):
-                worst = max(worst, 0.0 if math.isnan(x) and math.isnan(y) else math.inf)
-            else:
-                worst = max(worst, abs(x - y))
-        elif x != y:
-            worst = math.inf
-    return worst
 
 
 def main(argv=None) -> int:

@@ -20,6 +20,7 @@ from typing import Any, Dict, Optional, Tuple
 import numpy as np
 import pytest
 
+from grutrack.evaluation.compare import entry_differences, flatten
 from grutrack.evaluation.fast_amota import (evaluate_tracks, exact_center_distances, fast_tracking_eval,
                                             load_tracks)
 from grutrack.evaluation.fast_synth import corrupt_submission, gt_submission
@@ -84,36 +85,15 @@ def devkit_evaluate(nusc, submission, split: str, config=None, workdir: Optional
     return summary, md_list, ev.tracks_gt, ev.tracks_pred
 
 
-def _flatten(d: Dict[str, Any], prefix: str = "") -> Dict[str, Any]:
-    out: Dict[str, Any] = {}
-    for key, value in d.items():
-        if isinstance(value, dict):
-            out.update(_flatten(value, prefix + str(key) + "."))
-        else:
-            out[prefix + str(key)] = value
-    return out
-
-
-def _diff(a: Any, b: Any) -> float:
-    """Absolute difference of two numbers (0 for NaN/NaN, inf for NaN/number); ``==`` for anything else."""
-    if isinstance(a, (int, float, np.number)) and isinstance(b, (int, float, np.number)) \
-            and not isinstance(a, bool) and not isinstance(b, bool):
-        a, b = float(a), float(b)
-        if math.isnan(a) or math.isnan(b):
-            return 0.0 if math.isnan(a) and math.isnan(b) else math.inf
-        return abs(a - b)
-    return 0.0 if a == b else math.inf
-
-
 def compare_summaries(ref: Dict[str, Any], ours: Dict[str, Any]) -> Tuple[float, list]:
     """(max abs difference, [mismatches]) over every entry but eval_time; keys must be identical."""
-    fr, fo = _flatten(ref), _flatten(ours)
-    assert set(fr) == set(fo), "different keys: %s" % sorted(set(fr) ^ set(fo))
+    try:
+        diffs = entry_differences(ref, ours)
+    except ValueError as exc:
+        raise AssertionError(str(exc)) from exc
+    fr, fo = flatten(ref), flatten(ours)
     worst, bad = 0.0, []
-    for key in sorted(fr):
-        if key == "eval_time":
-            continue
-        d = _diff(fr[key], fo[key])
+    for key, d in diffs.items():
         if d > TOL:
             bad.append((key, fr[key], fo[key]))
         elif d > worst:

@@ -41,10 +41,13 @@ class GRUKFConfig:
     """Architecture of the GRU-Kalman filter (stored in checkpoints).
 
     ss_model: CTRA or Bicycle; in_mult / out_mult: widths of the input / output FC layers as multiples of
-    the feature size (KalmanNet's defaults 5 and 40); four_gru: the authors' four-GRU variant;
-    class_gain: a learned per-class offset (n_classes, m * n) added to the output layer's gain, started at
-    the EKF's per-class mean gain minus the shared one (a grutrack choice; the network and SS model stay
-    shared by all classes).
+    the feature size (KalmanNet's defaults 5 and 40); four_gru: the authors' four-GRU variant.
+    class_gain / age_bins / gap_bins: a learned gain table (n_classes or 1, age_bins or 1, gap_bins or 1,
+    m * n) added to the output layer's gain, looked up per track by its class (with ``class_gain``), by its
+    update count (1, 2, ..., age_bins and more) and by the frames since its last update (1 = the previous
+    frame, ..., gap_bins and more). Each cell starts at the EKF's mean gain in that cell minus the shared one,
+    so an untrained network follows the EKF's gain schedule, which grows after missed detections as the EKF's
+    covariance does (a grutrack choice; the network and SS model stay shared by all classes).
     """
 
     ss_model: str = "CTRA"
@@ -132,8 +135,8 @@ class GRUKalmanNet(nn.Module):
     def set_gain_prior(self, K0: torch.Tensor, K_table: torch.Tensor | None = None) -> None:
         """Start from the constant gain K0 (m, n) in the heading frame: output bias = K0, small weights.
 
-        With a gain table, ``K_table`` (*table_shape, m, n) gives the starting gain of each (class, age) cell
-        (a NaN cell had no update in the training data: it starts at K0).
+        With a gain table, ``K_table`` (*table_shape, m, n) gives the starting gain of each (class, age, gap)
+        cell (a NaN cell had no update in the training data: it starts at K0).
         """
         with torch.no_grad():
             self.fc_gain[2].bias.copy_(K0.reshape(-1).to(self.fc_gain[2].bias))

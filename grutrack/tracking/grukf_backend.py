@@ -40,7 +40,7 @@ class GRUState:
     since: np.ndarray
 
     def map(self, fn_t, fn_np) -> "GRUState":
-        """Apply fn_t to every tensor, fn_np to the labels."""
+        """Apply fn_t to every tensor, fn_np to the numpy arrays (labels, n_updates, since)."""
         kw = {}
         for f in fields(self):
             v = getattr(self, f.name)

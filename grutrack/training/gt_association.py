@@ -24,12 +24,19 @@ class StickyGTAssociation:
         """Start of a scene."""
         self.held.clear()
 
+    def _held(self, track_ids: np.ndarray) -> np.ndarray:
+        """(K,) object: the instance each track holds, "" where it holds none."""
+        return np.array([self.held.get(int(t), "") for t in track_ids], dtype=object)
+
     def held_rows(self, track_ids: np.ndarray, gt_ids: np.ndarray) -> np.ndarray:
         """GT row per track (K,) int64 of the instance each track already holds, -1 where it holds none or
         its instance is absent from this frame (no new matching)."""
-        out = np.full(len(track_ids), -1, dtype=np.int64)
-        held = np.array([self.held.get(int(t), "") for t in track_ids], dtype=object)
-        gt_ids = np.asarray(gt_ids, dtype=object)
+        return self._held_rows(self._held(track_ids), np.asarray(gt_ids, dtype=object))
+
+    @staticmethod
+    def _held_rows(held: np.ndarray, gt_ids: np.ndarray) -> np.ndarray:
+        """Row of ``gt_ids`` (G,) holding each held instance (K,) object, -1 where absent or none."""
+        out = np.full(len(held), -1, dtype=np.int64)
         present = np.isin(held, gt_ids) & (held != "")
         if present.any():
             order = np.argsort(gt_ids)
@@ -44,9 +51,8 @@ class StickyGTAssociation:
         gt_labels (G,).
         """
         # rows of the current GT list holding each track's instance (sticky tracks whose instance is present)
-        out = self.held_rows(track_ids, gt_ids)
-        held = np.array([self.held.get(int(t), "") for t in track_ids], dtype=object)
-        gt_ids = np.asarray(gt_ids, dtype=object)
+        held, gt_ids = self._held(track_ids), np.asarray(gt_ids, dtype=object)
+        out = self._held_rows(held, gt_ids)
         taken = np.isin(gt_ids, np.array(list(self.held.values()), dtype=object))
         ft = np.flatnonzero(held == "")
         free_gt = np.flatnonzero(~taken)

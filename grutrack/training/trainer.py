@@ -117,7 +117,9 @@ class SceneLoss:
         gt = self.frame_gt
         if len(rows):
             self._posterior_terms(group, rows, gt)
-        if self.cfg.prediction_weight > 0 and self.prior_ok(group) and len(gt):
+        # the tracker calls this only for groups that had tracks at this frame's predict, so ``prior`` (set
+        # there) has a row for every track of the group
+        if self.cfg.prediction_weight > 0 and len(gt):
             held = self.assoc.held_rows(group.ids, gt.ids)
             has = np.flatnonzero(held >= 0)
             if len(has):
@@ -126,12 +128,6 @@ class SceneLoss:
                 res = _residual(prior[torch.as_tensor(has, device=prior.device)], target)
                 self.total = self.total + self.cfg.prediction_weight * (res ** 2 * self.w).sum()
                 self.prediction_terms += len(has)
-
-    @staticmethod
-    def prior_ok(group: TrackGroup) -> bool:
-        """The group's recorded prior covers its current tracks (not so in a scene's first frame)."""
-        prior = group.backend.prior
-        return prior is not None and len(prior) == len(group)
 
     def _posterior_terms(self, group: TrackGroup, rows: np.ndarray, gt: BoxSet) -> None:
         pred, ekf = group.backend.last
