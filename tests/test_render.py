@@ -4,6 +4,7 @@ scenes rendered. The counts drawn must be the official evaluation's, and the mar
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -175,3 +176,41 @@ def test_bad_inputs_exit_2_with_one_line(case, rendered, nusc_root, tmp_path, ca
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("grutrack render: error:") and expect in err[0], err
     assert not (tmp_path / "r" / "counts.json").exists()
+
+
+def test_report_embeds_key_frames_of_the_worst_scene(rendered, tmp_path):
+    """A report given the run's render folder shows a strip of the worst scene's id-switch frames."""
+    from PIL import Image
+
+    from grutrack.render.draw import LAYOUT
+
+    out, metrics, _ = rendered
+    metrics_path = tmp_path / "ekf_metrics.json"
+    metrics_path.write_text(json.dumps(metrics))
+    paper = Path(__file__).resolve().parents[1] / "workflow/config/paper.yaml"
+    md = tmp_path / "rep" / "r.md"
+    assert main(["report", "nusc_val", "--out", str(md), "--paper", str(paper), "--experiment",
+                 "mini_val:nuscenes:mini_val:pointpillars", "--run", f"ekf={metrics_path}",
+                 "--render", f"ekf={out / 'counts.json'}"]) == 0
+    text = md.read_text()
+    # scene-0916 has the most IDS + FP + FN; its three id switches are the first key frames shown
+    assert "**ekf**: scene-0916, frames 8, 19, 23, 24" in text
+    assert "id switches shown: 73\u219282, 64\u219258, 58\u219290" in text
+    link = re.search(r"!\[ekf: key frames of scene-0916\]\(([^)]+)\)", text).group(1)
+    with Image.open(md.parent / link) as im:
+        side = int(LAYOUT.panel * 0.45)
+        assert im.size == (4 * side + 3 * 6, side + 24)
+        strip = np.asarray(im.convert("RGB")).astype(int)
+    assert _near(strip, IDS_RGB, 60).sum() > 100          # the id-switch rings are in the strip
+
+
+def test_report_rejects_a_folder_that_is_not_a_render(tmp_path, capsys):
+    bad = tmp_path / "counts.json"
+    bad.write_text(json.dumps({"scenes": []}))
+    m = tmp_path / "m.json"
+    m.write_text(json.dumps({"dataset": "nuscenes", "overall": {}, "per_class": {}}))
+    paper = Path(__file__).resolve().parents[1] / "workflow/config/paper.yaml"
+    assert main(["report", "demo", "--out", str(tmp_path / "r.md"), "--paper", str(paper),
+                 "--run", f"ekf={m}", "--render", f"ekf={bad}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "counts.json" in err[0]

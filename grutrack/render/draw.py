@@ -311,30 +311,60 @@ def render_scene(views: list[FrameView], out_dir: Path, thresholds: dict, canvas
     return pngs, gif
 
 
-def key_frames(views: list[FrameView], k: int = 4) -> list[FrameView]:
-    """Up to ``k`` frames to show: the id-switch moments first, then the frames with the most FP + FN, in time
-    order."""
-    switch = [v for v in views if v.id_switches]
-    rest = sorted((v for v in views if not v.id_switches),
-                  key=lambda v: (-(v.totals()["fp"] + v.totals()["fn"]), v.index))
-    pick = (switch + rest)[:k]
-    return sorted(pick, key=lambda v: v.index)
+def key_frames(frames: list[dict], k: int = 4) -> list[dict]:
+    """Up to ``k`` frame records of counts.json to show: the id-switch moments first, then the frames with the
+    most FP + FN; returned in time order."""
+    switch = [f for f in frames if f["id_switches"]]
+    rest = sorted((f for f in frames if not f["id_switches"]),
+                  key=lambda f: (-(f["totals"]["fp"] + f["totals"]["fn"]), f["index"]))
+    return sorted((switch + rest)[:k], key=lambda f: f["index"])
 
 
-def write_strip(path: Path, views: list[FrameView], thresholds: dict, k: int = 4, scale: float = 0.5) -> list[int]:
-    """A horizontal strip of ``k`` key frames (BEV panels only, resized by ``scale``) as one PNG; returns the
-    frame indices shown."""
+def strip_from_counts(counts_json: str | Path, out_png: str | Path, k: int = 4, scale: float = 0.45,
+                      layout: Layout = LAYOUT) -> dict:
+    """A strip of ``k`` key frames (BEV panels of the rendered PNGs, resized by ``scale``, side by side) of the
+    rendered scene with the most IDS + FP + FN, from a ``grutrack render`` folder; written as one PNG.
+
+    :return: ``{"scene", "frames": [frame number, 1-based], "totals": {tp, fp, fn, ids} over the shown frames,
+        "id_switches": [(old, new), ...]}``.
+    """
     from PIL import Image
 
-    canvas = BevCanvas(thresholds=thresholds)
-    L = canvas.layout
-    picks = key_frames(views, k)
+    from grutrack.errors import InputFormatError
+    from grutrack.io import read_json
+
+    counts_json = Path(counts_json)
+    doc = read_json(counts_json, "render counts")
+    scenes = doc.get("scenes") if isinstance(doc, dict) else None
+    if not scenes or not all(s.get("frames") for s in scenes):
+        raise InputFormatError(f"{counts_json}: no rendered scene with frames (a grutrack render counts.json)")
+    scene = max(scenes, key=lambda s: s.get("errors", 0))
+    picks = key_frames(scene["frames"], k)
+    side = int(layout.panel * scale)
     panels = []
-    for v in picks:
-        rgb = canvas.draw(v, len(views), views[0].timestamp)
-        crop = rgb[L.margin:L.margin + L.panel, L.margin:L.margin + L.panel]
-        panels.append(np.asarray(Image.fromarray(crop).resize((int(L.panel * scale),) * 2, Image.BILINEAR)))
-    gap = np.full((panels[0].shape[0], 6, 3), 255, dtype=np.uint8)
-    strip = np.concatenate([x for p in panels for x in (p, gap)][:-1], axis=1)
-    write_png(Path(path), strip)
-    return [v.index for v in picks]
+    for f in picks:
+        png = counts_json.parent / f["png"]
+        if not png.is_file():
+            raise InputFormatError(f"{counts_json}: frame image {png} is missing")
+        with Image.open(png) as im:
+            crop = im.convert("RGB").crop((layout.margin, layout.margin, layout.margin + layout.panel,
+                                           layout.margin + layout.panel))
+        panels.append(np.asarray(crop.resize((side, side), Image.LANCZOS)))
+    from matplotlib import font_manager
+    from PIL import ImageDraw, ImageFont
+
+    font = ImageFont.truetype(font_manager.findfont("DejaVu Sans"), 13)
+    gap = np.full((side + 24, 6, 3), 255, dtype=np.uint8)
+    labelled = []
+    for f, p in zip(picks, panels):
+        im = Image.new("RGB", (side, side + 24), "white")
+        im.paste(Image.fromarray(p), (0, 24))
+        t = f["totals"]
+        sw = ", ".join(f"{_short(s['previous_track_id'])}\u2192{_short(s['track_id'])}" for s in f["id_switches"])
+        ImageDraw.Draw(im).text((4, 4), f"frame {f['index'] + 1}: " + (f"IDS {sw}  " if sw else "")
+                                + f"FP {t['fp']}  FN {t['fn']}", fill="black", font=font)
+        labelled.append(np.asarray(im))
+    write_png(Path(out_png), np.concatenate([x for p in labelled for x in (p, gap)][:-1], axis=1))
+    totals = {key: sum(f["totals"][key] for f in picks) for key in ("tp", "fp", "fn", "ids")}
+    return {"scene": scene["name"], "frames": [f["index"] + 1 for f in picks], "totals": totals,
+            "id_switches": [(s["previous_track_id"], s["track_id"]) for f in picks for s in f["id_switches"]]}
