@@ -30,7 +30,9 @@ much faster:
   ``TrackingMetricDataList``, serialised by the devkit.
 
 Public entry points: :func:`fast_tracking_eval` (the ``metrics_summary.json`` dict), :func:`load_tracks`
-(loading and filtering) and :func:`evaluate_tracks` (accumulation and metrics on loaded tracks).
+(loading and filtering), :func:`evaluate_tracks` (accumulation and metrics on loaded tracks) and
+:func:`match_decisions` (the decision behind every counted TP, FP, FN and IDS, box by box, at each class's
+best-MOTA threshold: what ``grutrack render`` draws).
 """
 
 from __future__ import annotations
