@@ -272,21 +272,24 @@ def write_png(path: Path, rgb: np.ndarray) -> None:
         Image.fromarray(rgb).save(tmp, format="PNG", compress_level=1)
 
 
-def write_gif(path: Path, frames: list[np.ndarray], seconds_per_frame: float = 0.5, scale: float = 0.75) -> None:
-    """One animated GIF (looping) of ``(H, W, 3)`` uint8 frames, resized by ``scale``, written atomically."""
+def gif_frame(rgb: np.ndarray, scale: float = 0.75):
+    """One animation frame: ``(H, W, 3)`` uint8 resized by ``scale`` and reduced to a 64-colour palette (a
+    Pillow image of about 0.4 MB, so a scene's animation is held in memory at that size, not at full size)."""
     from PIL import Image
 
+    im = Image.fromarray(rgb)
+    if scale != 1:
+        im = im.resize((int(im.width * scale), int(im.height * scale)), Image.BILINEAR)
+    return im.quantize(colors=64, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE)
+
+
+def write_gif(path: Path, frames: list, seconds_per_frame: float = 0.5) -> None:
+    """One looping animated GIF of :func:`gif_frame` images, written atomically."""
     from grutrack.io import atomic_path
 
-    imgs = []
-    for f in frames:
-        im = Image.fromarray(f)
-        if scale != 1:
-            im = im.resize((int(im.width * scale), int(im.height * scale)), Image.BILINEAR)
-        imgs.append(im.quantize(colors=64, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE))
     with atomic_path(path) as tmp:
-        imgs[0].save(tmp, format="GIF", save_all=True, append_images=imgs[1:], loop=0,
-                     duration=int(seconds_per_frame * 1000))
+        frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], loop=0,
+                       duration=int(seconds_per_frame * 1000))
 
 
 def render_scene(views: list[FrameView], out_dir: Path, thresholds: dict, canvas: BevCanvas | None = None,
@@ -303,7 +306,8 @@ def render_scene(views: list[FrameView], out_dir: Path, thresholds: dict, canvas
         path = folder / f"frame_{v.index:03d}.png"
         write_png(path, rgb)
         pngs.append(path)
-        frames.append(rgb)
+        if animation:
+            frames.append(gif_frame(rgb))
     gif = None
     if animation:
         gif = Path(out_dir) / f"{scene}.gif"
