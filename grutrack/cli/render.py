@@ -17,7 +17,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                    "trail and a heading mark, and the evaluation's own matching (nuScenes: per "
                                    "class at its best-MOTA threshold, 2 m centre distance): false-positive "
                                    "tracks, missed ground truth and id switches, with the frame's counts. Writes "
-                                   "DIR/<scene>/frame_NNN.png, DIR/<scene>.gif and DIR/counts.json.")
+                                   "DIR/<scene>/frame_NNN.png (NNN from 001), DIR/<scene>.gif and "
+                                   "DIR/counts.json. nuScenes only for now.")
     add_dataset_args(p, "split with ground truth: val, mini_val, ... or custom")
     p.add_argument("--submission", required=True, help="tracking submission (nuScenes JSON)")
     p.add_argument("--detections", default=None, help="detection submission whose boxes are drawn faint")

@@ -294,7 +294,8 @@ def write_gif(path: Path, frames: list, seconds_per_frame: float = 0.5) -> None:
 
 def render_scene(views: list[FrameView], out_dir: Path, thresholds: dict, canvas: BevCanvas | None = None,
                  animation: bool = True) -> tuple[list[Path], Path | None]:
-    """PNG per frame (``out_dir/<scene>/frame_NNN.png``) and ``out_dir/<scene>.gif``; returns their paths."""
+    """PNG per frame (``out_dir/<scene>/frame_NNN.png``, NNN from 001 as in the title) and
+    ``out_dir/<scene>.gif``; returns their paths."""
     canvas = canvas or BevCanvas(thresholds=thresholds)
     scene = views[0].scene
     folder = Path(out_dir) / scene
@@ -303,7 +304,7 @@ def render_scene(views: list[FrameView], out_dir: Path, thresholds: dict, canvas
     t0 = views[0].timestamp
     for v in views:
         rgb = canvas.draw(v, len(views), t0)
-        path = folder / f"frame_{v.index:03d}.png"
+        path = folder / f"frame_{v.index + 1:03d}.png"      # the frame number of the title, from 1
         write_png(path, rgb)
         pngs.append(path)
         if animation:

@@ -2,8 +2,8 @@
 draw them and write ``counts.json``.
 
 ``counts.json``: ``{"dataset", "version", "split", "submission", "detections", "thresholds": {class: float|None},
-"scenes": [{"name", "token", "animation", "errors", "frames": [{"index", "sample_token", "timestamp", "png",
-"ego": {"xy", "yaw"}, "totals": {tp, fp, fn, ids}, "per_class": {class: {tp, fp, fn, ids}}, "false_positives": [...],
+"scenes": [{"name", "token", "animation", "errors", "frames": [{"index" (from 0), "frame" (from 1, as drawn),
+"sample_token", "timestamp", "png", "ego": {"xy", "yaw"}, "totals": {tp, fp, fn, ids}, "per_class": {class: {tp, fp, fn, ids}}, "false_positives": [...],
 "missed": [...], "id_switches": [...]}]}], "per_class": {class: {tp, fp, fn, ids}}}``. ``per_class`` sums the
 rendered frames; as in the metrics JSON, FP and IDS are null for a class without an achieved threshold and
 every count is null for a class without ground truth in the split.
@@ -43,7 +43,8 @@ def load_evaluation(dataroot: str, version: str, split: str, submission: str | P
         tracks_gt, tracks_pred, _ = load_tracks(nusc, doc, split)
         decisions, _ = match_decisions(tracks_gt, tracks_pred)
     except (AssertionError, KeyError, TypeError, ValueError) as exc:
-        raise InputFormatError(f"{submission}: the tracking evaluation rejects it ({exc or type(exc).__name__})") from exc
+        why = str(exc) or type(exc).__name__
+        raise InputFormatError(f"{submission}: the tracking evaluation rejects it ({why})") from exc
     return nusc, scenes, results, decisions
 
 
@@ -82,9 +83,10 @@ def sum_counts(views: list[FrameView], thresholds: dict, gt_classes: set) -> dic
 
 def frame_record(v: FrameView, png: Path, out: Path) -> dict:
     """The counts.json entry of one frame."""
-    return {"index": v.index, "sample_token": v.sample_token, "timestamp": v.timestamp,
+    return {"index": v.index, "frame": v.index + 1, "sample_token": v.sample_token, "timestamp": v.timestamp,
             "png": str(png.relative_to(out)),
-            "ego": {"xy": [round(float(x), 4) for x in v.ego_xy], "yaw": round(v.ego_yaw, 6)}, "totals": v.totals(), "per_class": v.counts,
+            "ego": {"xy": [round(float(x), 4) for x in v.ego_xy], "yaw": round(v.ego_yaw, 6)},
+            "totals": v.totals(), "per_class": v.counts,
             "false_positives": v.false_positives, "missed": v.missed, "id_switches": v.id_switches}
 
 

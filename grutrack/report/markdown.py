@@ -189,5 +189,6 @@ def worst_scene_strips(inp) -> str:
         sw = ", ".join(f"{a}\u2192{b}" for a, b in info["id_switches"]) or "none"
         parts += ["", f"**{run}**: {info['scene']}, frames {', '.join(map(str, info['frames']))} "
                       f"(id switches shown: {sw}; FP {t['fp']}, FN {t['fn']} in these frames)", "",
-                  image(inp.figures / f"worst_scene_{run}.png", inp.out.parent, f"{run}: key frames of {info['scene']}")]
+                  image(inp.figures / f"worst_scene_{run}.png", inp.out.parent,
+                        f"{run}: key frames of {info['scene']}")]
     return "\n".join(parts)
