@@ -152,13 +152,15 @@ def test_worst_scenes_rank_by_errors(nusc_root, rendered):
     assert [s.name for s in worst] == [max(errors, key=errors.get)] == ["scene-0916"]
 
 
-@pytest.mark.parametrize("case", ["unknown_scene", "other_split", "missing_file", "worst_zero", "av2"])
+@pytest.mark.parametrize("case", ["unknown_scene", "other_split", "missing_file", "worst_zero", "av2",
+                                  "detections_other_split"])
 def test_bad_inputs_exit_2_with_one_line(case, rendered, nusc_root, tmp_path, capsys):
     out, _, sub = rendered
     args = ["render", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
             "--submission", str(out.parent / "ekf.json"), "--out", str(tmp_path / "r")]
     expect = {"unknown_scene": "--scene scene-9999", "other_split": "from other splits",
-              "missing_file": "does not exist", "worst_zero": "--worst", "av2": "--dataset av2"}[case]
+              "missing_file": "does not exist", "worst_zero": "--worst", "av2": "--dataset av2",
+              "detections_other_split": "sample tokens of the split are missing"}[case]
     if case == "unknown_scene":
         args += ["--scene", "scene-9999"]
     else:
@@ -171,6 +173,9 @@ def test_bad_inputs_exit_2_with_one_line(case, rendered, nusc_root, tmp_path, ca
         args[args.index("--submission") + 1] = str(tmp_path / "none.json")
     if case == "av2":
         args += ["--dataset", "av2"]
+    if case == "detections_other_split":
+        (tmp_path / "dets.json").write_text(json.dumps({"meta": {}, "results": {"0" * 32: []}}))
+        args += ["--detections", str(tmp_path / "dets.json")]
     capsys.readouterr()
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
