@@ -42,7 +42,9 @@ is on the hull iff ``a`` reaches at least as far as ``b`` in some direction of t
 cone), then summed the same way. All work is done in the frame of box ``b`` (centre at the origin),
 so large global coordinates cost no precision. Inside / on-edge tests have a slack of
 :data:`TOL` metres; repeated or collinear boundary points add no area, so identical, nested and
-touching boxes are exact to rounding.
+touching boxes are exact to rounding. The per-pair polygon work (candidate points, angular sort,
+shoelace sums) runs in numba-compiled kernels, one pair at a time with no temporaries; they are compiled
+once and cached on disk beside this module.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 TOL = 1e-10
 """Slack in metres of the inside / on-the-edge tests (points this close to a boundary count as on it).
@@ -63,10 +66,6 @@ collinear point set and count as 0 (so, e.g., two collinear segments have GIoU 0
 
 CHUNK_PAIRS = 1 << 16
 """Pairs handled at once by the ``pairwise_*`` functions (bounds temporary memory)."""
-
-BLOCK = 512
-"""Pairs per block of the polygon work: keeps each temporary array under 128 KiB, which avoids
-fresh memory mappings (and their page faults) for every numpy temporary."""
 
 # Corner order in the box frame (+x along l, +y along w): front-left, rear-left, rear-right,
 # front-right, i.e. counter-clockwise. Edge k runs from corner k to corner k+1.
@@ -194,194 +193,197 @@ def _pairs(a: _Boxes, b: _Boxes, outer: bool) -> _Pairs:
                   overlap=flat(overlap), span=flat(span))
 
 
-# Internally, per-pair quantities are laid out points-first, ``(P, K)`` with the K pairs last, so
-# that every numpy operation runs over long contiguous rows.
+_SU_T = (1.0, -1.0, -1.0, 1.0)
+_SV_T = (1.0, 1.0, -1.0, -1.0)
 
 
-def _corners_a(f: _PairFrame) -> tuple[np.ndarray, np.ndarray]:
-    """Corners of ``a`` in ``b``'s frame: x, y ``(4, K)`` metres, counter-clockwise."""
-    su, sv = _SU[:, None], _SV[:, None]
-    x = f.cx + su * (f.al * f.c) - sv * (f.aw * f.s)
-    y = f.cy + su * (f.al * f.s) + sv * (f.aw * f.c)
-    return x, y
+@njit(cache=True, inline="always")
+def _pseudo_angle(dx: float, dy: float) -> float:
+    """A key in [0, 4) increasing with the angle of ``(dx, dy)`` from +x, counter-clockwise; ``(0, 0)`` -> 1."""
+    p = dx / (abs(dx) + abs(dy) + 1e-300)
+    return 1.0 - p + (2.0 + 2.0 * p if dy < 0.0 else 0.0)
 
 
-def _corners_b(f: _PairFrame) -> tuple[np.ndarray, np.ndarray]:
-    """Corners of ``b`` in its own frame: x, y ``(4, K)`` metres, counter-clockwise."""
-    return _SU[:, None] * f.bl, _SV[:, None] * f.bw
+@njit(cache=True)
+def _ring_area(x: np.ndarray, y: np.ndarray, valid: np.ndarray) -> float:
+    """Area (m²) of the convex polygon through the valid points ``x, y, valid (P,)`` (P <= 16).
 
-
-def _rows(*rows: np.ndarray) -> np.ndarray:
-    """Stack equal-shaped arrays along a new first axis (a cheaper ``np.stack(rows)``)."""
-    out = np.empty((len(rows),) + rows[0].shape)
-    for i, row in enumerate(rows):
-        out[i] = row
-    return out
-
-
-def _pseudo_angle(dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
-    """A key in [0, 4) increasing with the angle of ``(dx, dy)`` (any equal shapes) from +x, CCW.
-
-    ``(0, 0)`` gets key 1.
+    The valid points must lie on the boundary of the polygon and include its vertices; repeats and points
+    along edges add nothing. They are sorted by angle about their mean and summed by the shoelace formula:
+    ``A = 1/2 sum_r (x_r y_{r+1} - y_r x_{r+1})``. No valid point gives area 0.
     """
-    p = dx / (np.abs(dx) + np.abs(dy) + 1e-300)
-    return 1.0 - p + (dy < 0.0) * (2.0 + 2.0 * p)
-
-
-def _batcher_network(n: int) -> list[tuple[int, int]]:
-    """Comparators ``(i, j)``, ``i < j``, of Batcher's odd-even merge sort of ``n`` keys (a power of 2)."""
-    pairs = []
-    p = 1
-    while p < n:
-        k = p
-        while k >= 1:
-            for j in range(k % p, n - k, 2 * k):
-                for i in range(min(k, n - j - k)):
-                    if (i + j) // (2 * p) == (i + j + k) // (2 * p):
-                        pairs.append((i + j, i + j + k))
-            k //= 2
-        p *= 2
-    return pairs
-
-
-_NETWORKS = {8: _batcher_network(8), 16: _batcher_network(16)}
-
-
-def _sort_columns(keys: np.ndarray) -> np.ndarray:
-    """``keys (P, K)`` (P = 8 or 16) sorted ascending within each column, by a sorting network."""
-    rows = list(keys)
-    for i, j in _NETWORKS[len(rows)]:
-        lo = np.minimum(rows[i], rows[j])
-        rows[j] = np.maximum(rows[i], rows[j])
-        rows[i] = lo
-    return np.stack(rows)
-
-
-def _ring_area(x: np.ndarray, y: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Area ``(K,) float64`` m² of the convex polygon through the valid points of each column.
-
-    ``x, y`` (metres, finite) and ``valid`` are ``(P, K)`` with P = 8 or 16. The valid points of a
-    column must lie on the boundary of its convex polygon and include its vertices; repeats and
-    points along edges add nothing. They are sorted by angle about their mean and summed by the
-    shoelace formula. No valid point gives area 0.
-    """
-    p, k = x.shape
-    vf = valid.astype(np.float64)
-    n = vf.sum(axis=0)
-    nn = np.maximum(n, 1.0)
-    dx = (x - (x * vf).sum(axis=0) / nn) * vf  # invalid points sit on the mean: they add no area
-    dy = (y - (y * vf).sum(axis=0) / nn) * vf
-    key = _pseudo_angle(dx, dy) + 8.0 * (1.0 - vf)  # in [0, 12); invalid points sort last
-    # Quantise to integers and put the row index in the low 4 bits: distinct keys that carry
-    # their point along through the sort.
-    ikey = (key * 2.0**44).astype(np.int64) * 16 + np.arange(p)[:, None]
-    idx = (_sort_columns(ikey) & 15) * k + np.arange(k)
-    sx, sy = dx.ravel()[idx], dy.ravel()[idx]  # (P, K) in angular order
-    twice = (sx[:-1] * sy[1:] - sy[:-1] * sx[1:]).sum(axis=0)
-    last = np.maximum(n.astype(np.intp) - 1, 0)  # close the ring: last valid point -> first
-    cols = np.arange(k)
-    twice += sx[last, cols] * sy[0] - sy[last, cols] * sx[0]
+    p = x.shape[0]
+    n = 0
+    mx = 0.0
+    my = 0.0
+    for r in range(p):
+        if valid[r]:
+            n += 1
+            mx += x[r]
+            my += y[r]
+    if n == 0:
+        return 0.0
+    mx /= n
+    my /= n
+    # Integer keys: quantised angle, invalid points last, the point's index in the low 4 bits.
+    keys = np.empty(p, dtype=np.int64)
+    for r in range(p):
+        dx, dy = x[r] - mx, y[r] - my
+        key = _pseudo_angle(dx, dy) if valid[r] else 9.0
+        keys[r] = np.int64(key * 2.0**44) * 16 + r
+    keys.sort()
+    twice = 0.0
+    first = keys[0] & 15
+    x0, y0 = x[first] - mx, y[first] - my
+    xp, yp = x0, y0
+    for r in range(1, n):
+        q = keys[r] & 15
+        xq, yq = x[q] - mx, y[q] - my
+        twice += xp * yq - yp * xq
+        xp, yp = xq, yq
+    twice += xp * y0 - yp * x0
     return 0.5 * twice
 
 
-_NEXT = np.array([1, 2, 3, 0])  # corner k+1 (end of edge k)
-_PREV = np.array([3, 0, 1, 2])  # corner k-1
+@njit(cache=True)
+def _pair_corners(cx, cy, c, s, al, aw, bl, bw, ax, ay, bx, by) -> None:
+    """Fill the corners of ``a`` in ``b``'s frame ``ax, ay (4,)`` and of ``b`` ``bx, by (4,)``, metres, CCW."""
+    for k in range(4):
+        su, sv = _SU_T[k], _SV_T[k]
+        ax[k] = cx + su * (al * c) - sv * (aw * s)
+        ay[k] = cy + su * (al * s) + sv * (aw * c)
+        bx[k] = su * bl
+        by[k] = sv * bw
 
 
-def _intersection_area(f: _PairFrame) -> np.ndarray:
-    """BEV intersection area ``(K,) float64`` m² of each pair (frame from :func:`_pairs`)."""
-    ax, ay = _corners_a(f)  # (4, K) in b's frame, where b is the box |x| <= bl, |y| <= bw
-    bx, by = _corners_b(f)
-    a_in = (np.abs(ax) <= f.bl + TOL) & (np.abs(ay) <= f.bw + TOL)
-    ex, ey = bx - f.cx, by - f.cy  # corners of b along a's axes
-    b_in = ((np.abs(ex * f.c + ey * f.s) <= f.al + TOL)
-            & (np.abs(ey * f.c - ex * f.s) <= f.aw + TOL))
-    # Edges of a against the lines of b's edges y = bw, x = -bl, y = -bw, x = bl:
-    # s0[i, j] / s1[i, j] = signed distance outside line j of the start / end of a's edge i.
-    s0 = np.stack([ay - f.bw, -ax - f.bl, -ay - f.bw, ax - f.bl], axis=1)  # (4, 4, K)
-    s1 = s0[_NEXT]
-    crosses = (((s0 <= 0.0) & (s1 >= 0.0)) | ((s0 >= 0.0) & (s1 <= 0.0))) & (s0 != s1)
-    den = s0 - s1
-    den[~crosses] = 1.0
-    t = s0 / den  # in [0, 1] where the edge crosses the line
-    dxe, dye = ax[_NEXT] - ax, ay[_NEXT] - ay  # (4, K) edge vectors
-    px, py = ax[:, None] + t * dxe[:, None], ay[:, None] + t * dye[:, None]
-    # The crossing must fall within b's edge (|x| <= bl on lines 0 and 2, |y| <= bw on 1 and 3).
-    along = np.stack([np.abs(px[:, 0]) - f.bl, np.abs(py[:, 1]) - f.bw,
-                      np.abs(px[:, 2]) - f.bl, np.abs(py[:, 3]) - f.bw], axis=1)
-    bad = ~(crosses & (along <= TOL))
-    # Each edge of a enters and leaves b at most once: keep its first and last valid crossing.
-    t_in = np.where(bad, 2.0, t).min(axis=1)  # (4, K); > 1 if none
-    t_out = np.where(bad, -1.0, t).max(axis=1)  # < 0 if none
-    x = np.concatenate([ax, bx, ax + t_in * dxe, ax + t_out * dxe])
-    y = np.concatenate([ay, by, ay + t_in * dye, ay + t_out * dye])
-    valid = np.concatenate([a_in, b_in, t_in <= 1.0, t_out >= 0.0])
-    return _ring_area(x, y, valid)
+@njit(cache=True)
+def _intersection_kernel(cx, cy, c, s, al, aw, bl, bw, todo, out) -> None:
+    """BEV intersection area ``out (K,)`` m² of the pairs with ``todo (K,)`` set (frame from ``_pairs``).
 
-
-def _hull_area(f: _PairFrame) -> np.ndarray:
-    """Area ``(K,) float64`` m² of the convex hull of the 8 BEV corners of each pair.
-
-    A corner of ``a`` is on the hull iff, for some direction ``m`` in its normal cone, ``a`` reaches
-    at least as far as ``b`` along ``m``; checking ``a``'s two edge normals at the corner and ``b``'s
-    edge normals inside the cone suffices (the support of ``b`` is linear between those). Likewise
-    for the corners of ``b``.
+    The intersection polygon's vertices are among 16 candidates: corners of either box inside the other, and
+    where each edge of ``a`` enters and leaves ``b`` (the box ``|x| <= bl, |y| <= bw``).
     """
-    c, s, al, aw, bl, bw = f.c, f.s, f.al, f.aw, f.bl, f.bw
-    # Outward normals of a's edges (left, rear, right, front) in b's frame, (4, K) components.
-    nax, nay = _rows(-s, -c, s, c), _rows(c, -s, -c, s)
-    abs_s, abs_c = np.abs(s), np.abs(c)
-    e_s = al * abs_s + aw * abs_c  # reach of a from its centre along b's y axis
-    e_c = al * abs_c + aw * abs_s  # ... along b's x axis
-    f_s = bl * abs_s + bw * abs_c  # reach of b from its centre along a's w axis
-    f_c = bl * abs_c + bw * abs_s  # ... along a's l axis
-    # Support of a and b along a's normals, and along b's normals (+y, -x, -y, +x).
-    ha_na = nax * f.cx + nay * f.cy + _rows(aw, al, aw, al)
-    hb_na = _rows(f_s, f_c, f_s, f_c)
-    ha_nb = _rows(f.cy + e_s, e_c - f.cx, e_s - f.cy, f.cx + e_c)
-    hb_nb = _rows(bw, bl, bw, bl)
-    a_na, a_nb = ha_na >= hb_na - TOL, ha_nb >= hb_nb - TOL  # (4, K): a reaches as far as b
-    b_na, b_nb = hb_na >= ha_na - TOL, hb_nb >= ha_nb - TOL
-    # pos[i, j]: (a's normal i) . (b's normal j) >= 0.
-    pos = _rows(nay, -nax, -nay, nax).transpose(1, 0, 2) >= 0.0  # (4, 4, K)
-    a_cone = pos[_PREV] & pos  # [i, j]: b's normal j lies in the cone of a's corner i
-    b_cone = pos[:, _PREV] & pos  # [i, j]: a's normal i lies in the cone of b's corner j
-    a_on = a_na[_PREV] | a_na | (a_cone & a_nb[None]).any(axis=1)
-    b_on = b_nb[_PREV] | b_nb | (b_cone & b_na[:, None]).any(axis=0)
-    ax, ay = _corners_a(f)
-    bx, by = _corners_b(f)
-    return _ring_area(np.concatenate([ax, bx]), np.concatenate([ay, by]),
-                      np.concatenate([a_on, b_on]))
+    ax = np.empty(4)
+    ay = np.empty(4)
+    bx = np.empty(4)
+    by = np.empty(4)
+    px = np.empty(16)
+    py = np.empty(16)
+    valid = np.empty(16, dtype=np.bool_)
+    s0 = np.empty(4)
+    for k in range(cx.shape[0]):
+        if not todo[k]:
+            out[k] = 0.0
+            continue
+        ck, sk, alk, awk, blk, bwk = c[k], s[k], al[k], aw[k], bl[k], bw[k]
+        _pair_corners(cx[k], cy[k], ck, sk, alk, awk, blk, bwk, ax, ay, bx, by)
+        for i in range(4):
+            px[i], py[i] = ax[i], ay[i]
+            valid[i] = abs(ax[i]) <= blk + TOL and abs(ay[i]) <= bwk + TOL
+            ex, ey = bx[i] - cx[k], by[i] - cy[k]  # corner of b relative to a's centre
+            px[4 + i], py[4 + i] = bx[i], by[i]
+            valid[4 + i] = abs(ex * ck + ey * sk) <= alk + TOL and abs(ey * ck - ex * sk) <= awk + TOL
+        for i in range(4):
+            nx = (i + 1) % 4
+            dxe, dye = ax[nx] - ax[i], ay[nx] - ay[i]
+            # signed distance outside b's edge lines y = bw, x = -bl, y = -bw, x = bl of a's edge start / end
+            s0[0], s0[1], s0[2], s0[3] = ay[i] - bwk, -ax[i] - blk, -ay[i] - bwk, ax[i] - blk
+            t_in, t_out = 2.0, -1.0
+            for j in range(4):
+                if j == 0:
+                    e1 = ay[nx] - bwk
+                elif j == 1:
+                    e1 = -ax[nx] - blk
+                elif j == 2:
+                    e1 = -ay[nx] - bwk
+                else:
+                    e1 = ax[nx] - blk
+                e0 = s0[j]
+                if e0 == e1 or not ((e0 <= 0.0 and e1 >= 0.0) or (e0 >= 0.0 and e1 <= 0.0)):
+                    continue
+                t = e0 / (e0 - e1)  # in [0, 1]: where the edge crosses the line
+                along = abs(ax[i] + t * dxe) - blk if j % 2 == 0 else abs(ay[i] + t * dye) - bwk
+                if along <= TOL:  # the crossing falls within b's edge
+                    t_in = min(t_in, t)
+                    t_out = max(t_out, t)
+            px[8 + i], py[8 + i] = ax[i] + t_in * dxe, ay[i] + t_in * dye
+            valid[8 + i] = t_in <= 1.0
+            px[12 + i], py[12 + i] = ax[i] + t_out * dxe, ay[i] + t_out * dye
+            valid[12 + i] = t_out >= 0.0
+        out[k] = _ring_area(px, py, valid)
 
 
-def _subset(f: _PairFrame, mask: np.ndarray) -> _PairFrame:
-    """The pairs of ``f`` selected by ``mask (K,) bool``."""
-    return _PairFrame(*(arr[mask] for arr in f))
+@njit(cache=True)
+def _hull_kernel(cx, cy, c, s, al, aw, bl, bw, out) -> None:
+    """Area ``out (K,)`` m² of the convex hull of the 8 BEV corners of each pair (frame from ``_pairs``).
 
-
-def _blocked(fn, f: _PairFrame) -> np.ndarray:
-    """``fn(f) (K,)`` evaluated on blocks of at most :data:`BLOCK` pairs."""
-    k = f.cx.shape[0]
-    if k <= BLOCK:
-        return fn(f)
-    out = np.empty(k)
-    for start in range(0, k, BLOCK):
-        out[start:start + BLOCK] = fn(_PairFrame(*(arr[start:start + BLOCK] for arr in f)))
-    return out
+    A corner of ``a`` is on the hull iff, for some direction ``m`` in its normal cone, ``a`` reaches at
+    least as far as ``b`` along ``m`` (support functions ``h_a(m) >= h_b(m)``); checking ``a``'s two edge
+    normals at the corner and ``b``'s edge normals inside the cone suffices. Likewise for ``b``.
+    """
+    ax = np.empty(4)
+    ay = np.empty(4)
+    bx = np.empty(4)
+    by = np.empty(4)
+    nax = np.empty(4)
+    nay = np.empty(4)
+    ha_na = np.empty(4)
+    hb_na = np.empty(4)
+    ha_nb = np.empty(4)
+    hb_nb = np.empty(4)
+    pos = np.empty((4, 4), dtype=np.bool_)
+    px = np.empty(8)
+    py = np.empty(8)
+    on = np.empty(8, dtype=np.bool_)
+    for k in range(cx.shape[0]):
+        ck, sk, alk, awk, blk, bwk, cxk, cyk = c[k], s[k], al[k], aw[k], bl[k], bw[k], cx[k], cy[k]
+        # outward normals of a's edges (left, rear, right, front) in b's frame
+        nax[0], nax[1], nax[2], nax[3] = -sk, -ck, sk, ck
+        nay[0], nay[1], nay[2], nay[3] = ck, -sk, -ck, sk
+        abs_s, abs_c = abs(sk), abs(ck)
+        e_s = alk * abs_s + awk * abs_c  # reach of a from its centre along b's y axis
+        e_c = alk * abs_c + awk * abs_s  # ... along b's x axis
+        f_s = blk * abs_s + bwk * abs_c  # reach of b from its centre along a's w axis
+        f_c = blk * abs_c + bwk * abs_s  # ... along a's l axis
+        for i in range(4):
+            ha_na[i] = nax[i] * cxk + nay[i] * cyk + (awk if i % 2 == 0 else alk)
+            hb_na[i] = f_s if i % 2 == 0 else f_c
+            hb_nb[i] = bwk if i % 2 == 0 else blk
+        ha_nb[0], ha_nb[1], ha_nb[2], ha_nb[3] = cyk + e_s, e_c - cxk, e_s - cyk, cxk + e_c
+        for i in range(4):  # pos[i, j]: (a's normal i) . (b's normal j: +y, -x, -y, +x) >= 0
+            pos[i, 0] = nay[i] >= 0.0
+            pos[i, 1] = -nax[i] >= 0.0
+            pos[i, 2] = -nay[i] >= 0.0
+            pos[i, 3] = nax[i] >= 0.0
+        _pair_corners(cxk, cyk, ck, sk, alk, awk, blk, bwk, ax, ay, bx, by)
+        for i in range(4):
+            pi = (i + 3) % 4
+            a_on = ha_na[pi] >= hb_na[pi] - TOL or ha_na[i] >= hb_na[i] - TOL
+            b_on = hb_nb[pi] >= ha_nb[pi] - TOL or hb_nb[i] >= ha_nb[i] - TOL
+            for j in range(4):
+                # b's normal j in the cone of a's corner i and a reaches as far as b along it
+                if not a_on and pos[pi, j] and pos[i, j] and ha_nb[j] >= hb_nb[j] - TOL:
+                    a_on = True
+                # a's normal j in the cone of b's corner i and b reaches as far as a along it
+                if not b_on and pos[j, pi] and pos[j, i] and hb_na[j] >= ha_na[j] - TOL:
+                    b_on = True
+            px[i], py[i], on[i] = ax[i], ay[i], a_on
+            px[4 + i], py[4 + i], on[4 + i] = bx[i], by[i], b_on
+        out[k] = _ring_area(px, py, on)
 
 
 def _intersection(p: _Pairs) -> np.ndarray:
     """BEV intersection areas ``(K,) float64`` m² (0 for a zero-area box or far-apart boxes)."""
-    inter = np.zeros(p.dist.shape[0])
+    inter = np.empty(p.dist.shape[0])
     near = (p.dist <= p.reach + TOL) & (p.area_a > 0.0) & (p.area_b > 0.0)
-    if np.any(near):
-        inter[near] = _blocked(_intersection_area, _subset(p.frame, near))
+    _intersection_kernel(*p.frame, near, inter)
     return np.clip(inter, 0.0, np.minimum(p.area_a, p.area_b))
 
 
 def _hull(p: _Pairs) -> np.ndarray:
     """Areas ``(K,) float64`` m² of the convex hulls of the 8 BEV corners of the pairs."""
-    hull = _blocked(_hull_area, p.frame)
+    hull = np.empty(p.dist.shape[0])
+    _hull_kernel(*p.frame, hull)
     hull[hull <= HULL_EPS * (p.dist + p.reach) ** 2] = 0.0
     return hull
 
