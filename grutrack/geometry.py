@@ -298,9 +298,9 @@ SIMILARITIES = ("iou_bev", "giou_bev", "iou_3d", "giou_3d")
 
 
 @njit(cache=True)
-def _measures_kernel(ta, tb, outer, want, out) -> None:
-    """The measures flagged in ``want (4,) bool`` (order of :data:`SIMILARITIES`) of K box pairs into
-    ``out (4, K) float64``.
+def _measures_kernel(ta, tb, outer, todo, want, out) -> None:
+    """The measures flagged in ``want (4,) bool`` (order of :data:`SIMILARITIES`) of the K box pairs with
+    ``todo (K,) bool`` set into ``out (4, K) float64`` (other pairs are left as they are).
 
     ``ta (11, N)``, ``tb (11, M)``: terms from :func:`_box_terms`. Pairs: ``(a[k], b[k])`` (K = N = M), or
     if ``outer`` all ``(a[i], b[j])`` in ``a``-major order (K = N * M). Work is done in the frame of ``b``:
@@ -316,6 +316,8 @@ def _measures_kernel(ta, tb, outer, want, out) -> None:
     need_hull = want[_GIOU_BEV] or want[_GIOU_3D]
     m = tb.shape[1]
     for k in range(out.shape[1]):
+        if not todo[k]:
+            continue
         i, j = (k // m, k % m) if outer else (k, k)
         dx, dy = ta[_X, i] - tb[_X, j], ta[_Y, i] - tb[_Y, j]
         bc, bs, ac, as_ = tb[_C, j], tb[_S, j], ta[_C, i], ta[_S, i]
@@ -366,26 +368,37 @@ def _paired_measures(a: np.ndarray, b: np.ndarray, names) -> np.ndarray:
         raise ValueError(f"paired boxes need equal counts, got {a.shape[0]} and {b.shape[0]}")
     out = np.zeros((4, a.shape[0]))
     if a.shape[0]:
-        _measures_kernel(_box_terms(a), _box_terms(b), False, want, out)
+        _measures_kernel(_box_terms(a), _box_terms(b), False, np.ones(a.shape[0], dtype=np.bool_), want, out)
     return out
 
 
-def _pairwise_measure(name: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The measure ``name`` of all pairs of ``a (N, >=7)`` x ``b (M, >=7)`` -> ``(N, M) float64``."""
-    want = _want([name])
+def _pairwise_measures(a: np.ndarray, b: np.ndarray, names, where: np.ndarray | None = None) -> np.ndarray:
+    """Measures ``(4, N, M)`` (rows of :data:`SIMILARITIES`, only ``names`` filled) of all pairs of
+    ``a (N, >=7)`` x ``b (M, >=7)``; with ``where (N, M) bool`` only the selected pairs (others 0)."""
+    want = _want(names)
     a, b = _check_boxes(a, "a"), _check_boxes(b, "b")
     n, m = a.shape[0], b.shape[0]
-    out = np.zeros((n, m))
+    out = np.zeros((4, n, m))
     if n == 0 or m == 0:
         return out
+    if where is None:
+        where = np.ones((n, m), dtype=np.bool_)
+    elif where.shape != (n, m):
+        raise ValueError(f"where must have shape {(n, m)}, got {where.shape}")
     ta, tb = _box_terms(a), _box_terms(b)
     rows = max(1, CHUNK_PAIRS // m)
     for start in range(0, n, rows):
         stop = min(n, start + rows)
         buf = np.zeros((4, (stop - start) * m))
-        _measures_kernel(np.ascontiguousarray(ta[:, start:stop]), tb, True, want, buf)
-        out[start:stop] = buf[SIMILARITIES.index(name)].reshape(-1, m)
+        todo = np.ascontiguousarray(where[start:stop]).ravel()
+        _measures_kernel(np.ascontiguousarray(ta[:, start:stop]), tb, True, todo, want, buf)
+        out[:, start:stop] = buf.reshape(4, -1, m)
     return out
+
+
+def _pairwise_measure(name: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The measure ``name`` of all pairs of ``a (N, >=7)`` x ``b (M, >=7)`` -> ``(N, M) float64``."""
+    return _pairwise_measures(a, b, [name])[SIMILARITIES.index(name)]
 
 
 def paired_bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -421,6 +434,17 @@ def paired_similarities(a: np.ndarray, b: np.ndarray, names) -> dict[str, np.nda
     ``paired_*`` function; the intersection and the hull are computed once for all of them.
     """
     out = _paired_measures(a, b, names)
+    return {n: out[SIMILARITIES.index(n)] for n in SIMILARITIES if n in set(names)}
+
+
+def pairwise_similarities(a: np.ndarray, b: np.ndarray, names,
+                          where: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Several measures of all pairs of ``a (N, >=7)`` x ``b (M, >=7)`` from one geometry pass.
+
+    names: any of :data:`SIMILARITIES`. Returns ``{name: (N, M) float64}``, each equal to the matching
+    ``pairwise_*`` function where ``where (N, M) bool`` is set (default: everywhere) and 0 elsewhere.
+    """
+    out = _pairwise_measures(a, b, names, where)
     return {n: out[SIMILARITIES.index(n)] for n in SIMILARITIES if n in set(names)}
 
 

@@ -28,7 +28,8 @@ class Matches:
 
 
 def similarity_upper_bounds(a: np.ndarray, b: np.ndarray, names) -> dict[str, np.ndarray]:
-    """Cheap upper bounds of the named similarities between aligned pairs of boxes a, b (K, 9) -> {name: (K,)}.
+    """Cheap upper bounds of the named similarities between aligned pairs of boxes a, b (..., 9) (any
+    broadcastable shapes, e.g. (K, 9) and (K, 9), or (D, 1, 9) and (1, T, 9)) -> {name: (...)}.
 
     When the BEV centre distance d exceeds the sum of circumradii the footprints are disjoint (IoU = 0) and
     the convex hull contains the trapezoid spanned by the inscribed discs, of area >= d (rho_a + rho_b), so
@@ -36,18 +37,18 @@ def similarity_upper_bounds(a: np.ndarray, b: np.ndarray, names) -> dict[str, np
     times max(h_a, h_b). Elsewhere the bound is the trivial 1. Pairs whose bound cannot beat a threshold are
     skipped without computing the polygon geometry; the result is identical.
     """
-    d = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1])
-    disjoint = d > 0.5 * (np.hypot(a[:, 3], a[:, 4]) + np.hypot(b[:, 3], b[:, 4]))
-    hull = np.maximum(d * 0.5 * (np.minimum(a[:, 3], a[:, 4]) + np.minimum(b[:, 3], b[:, 4])), 1e-12)
+    d = np.hypot(a[..., 0] - b[..., 0], a[..., 1] - b[..., 1])
+    disjoint = d > 0.5 * (np.hypot(a[..., 3], a[..., 4]) + np.hypot(b[..., 3], b[..., 4]))
+    hull = np.maximum(d * 0.5 * (np.minimum(a[..., 3], a[..., 4]) + np.minimum(b[..., 3], b[..., 4])), 1e-12)
     out = {}
     for name in names:
         if name.startswith("iou"):
             out[name] = np.where(disjoint, 0.0, 1.0)
         elif name == "giou_3d":
-            vol = a[:, 3] * a[:, 4] * a[:, 5] + b[:, 3] * b[:, 4] * b[:, 5]
-            out[name] = np.where(disjoint, np.minimum(vol / (hull * np.maximum(a[:, 5], b[:, 5])) - 1.0, 1.0), 1.0)
+            vol = a[..., 3] * a[..., 4] * a[..., 5] + b[..., 3] * b[..., 4] * b[..., 5]
+            out[name] = np.where(disjoint, np.minimum(vol / (hull * np.maximum(a[..., 5], b[..., 5])) - 1.0, 1.0), 1.0)
         else:
-            area = a[:, 3] * a[:, 4] + b[:, 3] * b[:, 4]
+            area = a[..., 3] * a[..., 4] + b[..., 3] * b[..., 4]
             out[name] = np.where(disjoint, np.minimum(area / hull - 1.0, 1.0), 1.0)
     return out
 
@@ -81,27 +82,24 @@ def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: n
     """
     D, T = len(det_boxes), len(trk_boxes)
     costs = [np.full((D, T), _INVALID) for _ in stages]
-    di, ti = np.nonzero(det_labels[:, None] == trk_labels[None, :])
-    if len(di) == 0:
+    if D == 0 or T == 0:
         return costs
-    a, b, lab = det_boxes[di], trk_boxes[ti], det_labels[di]
-    present = np.unique(lab)
+    same = det_labels[:, None] == trk_labels[None, :]                                    # (D, T)
+    present = np.unique(det_labels)
     names = sorted({stage[0][c] for stage in stages for c in present})
-    code = {n: i for i, n in enumerate(names)}
-    codes = [np.array([code.get(m, -1) for m in metric])[lab] for metric, _ in stages]   # (K,) per stage
-    bounds = similarity_upper_bounds(a, b, names)
-    bound_of = np.stack([bounds[n] for n in names])                                     # (M, K)
-    k_idx = np.arange(len(di))
-    need = [bound_of[c, k_idx] > 1.0 - thr[lab] for c, (_, thr) in zip(codes, stages)]
-    idx = np.flatnonzero(np.any(need, axis=0))
-    if len(idx) == 0:
+    bounds = similarity_upper_bounds(det_boxes[:, None, :], trk_boxes[None, :, :], names)
+    bound_of = np.stack([np.broadcast_to(bounds[n], (D, T)) for n in names])             # (M, D, T)
+    rows = np.arange(D)
+    codes = [np.array([names.index(m) if m in names else 0 for m in metric])[det_labels]  # (D,) per stage
+             for metric, _ in stages]
+    need = [same & (bound_of[c, rows] > (1.0 - thr[det_labels])[:, None]) for c, (_, thr) in zip(codes, stages)]
+    todo = np.logical_or.reduce(need)
+    if not todo.any():
         return costs
-    sims = geometry.paired_similarities(a[idx], b[idx], names)
-    sim_of = np.stack([sims[n] for n in names])                                          # (M, len(idx))
-    cols = np.arange(len(idx))
+    sims = geometry.pairwise_similarities(det_boxes, trk_boxes, names, where=todo)
+    sim_of = np.stack([sims[n] for n in names])                                          # (M, D, T)
     for cost, c, nd in zip(costs, codes, need):
-        keep = nd[idx]
-        cost[di[idx[keep]], ti[idx[keep]]] = 1.0 - sim_of[c[idx], cols][keep]
+        cost[nd] = 1.0 - sim_of[c, rows][nd]
     return costs
 
 
