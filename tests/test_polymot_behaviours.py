@@ -248,3 +248,20 @@ def test_compare_tracks():
     fewer["results"]["a"].pop()
     p = compare_tracks(ref, fewer, scene)
     assert p.count_mismatch == ["a"] and p.paired_fraction == 0.75
+
+
+def test_report_poly_mot_rows_run_the_polymot_preset():
+    """Table III's Poly-MOT row and Table IV's EKF / KF rows (Poly-MOT's motion models) track with the polymot
+    preset (Table IV's with the model of bicycle and car replaced)."""
+    from pathlib import Path
+
+    cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "workflow/config/config.yaml").read_text())
+    report = cfg["reports"]["nusc_val"]
+    runs = cfg["experiments"][report["experiment"]]["runs"]
+    rows = [report["tables"]["III"]["Poly-MOT"]] + [report["tables"]["IV"][r] for r in
+                                                    ("Bicycle+EKF", "CTRA+EKF", "CA+KF")]
+    for run in rows:
+        assert runs[run]["tracker"] == "ekf"
+        assert cfg["tracker_presets"][runs[run]["preset"]]["base"] == "polymot", run
+    assert cfg["tracker_presets"][runs["ekf_ctra"]["preset"]]["overrides"] == \
+        {"motion": {"model_override": {"bicycle": "CTRA", "car": "CTRA"}}}
