@@ -298,56 +298,62 @@ SIMILARITIES = ("iou_bev", "giou_bev", "iou_3d", "giou_3d")
 
 
 @njit(cache=True)
-def _measures_kernel(ta, tb, outer, todo, want, out) -> None:
-    """The measures flagged in ``want (4,) bool`` (order of :data:`SIMILARITIES`) of the K box pairs with
-    ``todo (K,) bool`` set into ``out (4, K) float64`` (other pairs are left as they are).
+def _pair_measures(ta, i, tb, j, want, out, k, work, flags) -> None:
+    """The measures flagged in ``want (4,) bool`` (order of :data:`SIMILARITIES`) of the pair
+    ``(a[i], b[j])`` into ``out[:, k]`` (``out (4, K) float64``).
 
-    ``ta (11, N)``, ``tb (11, M)``: terms from :func:`_box_terms`. Pairs: ``(a[k], b[k])`` (K = N = M), or
-    if ``outer`` all ``(a[i], b[j])`` in ``a``-major order (K = N * M). Work is done in the frame of ``b``:
+    ``ta (11, N)``, ``tb (11, M)``: terms from :func:`_box_terms`; ``work (12, 16) float64`` and
+    ``flags (16,) bool`` are work arrays. Work is done in the frame of ``b``:
 
     * ``I`` BEV intersection (0 unless the circumscribed circles meet and both areas are positive), clipped
       to ``[0, min(A_a, A_b)]``; ``C`` hull area (0 below ``HULL_EPS (d + r_a + r_b)^2``);
     * BEV IoU ``I / U``, ``U = A_a + A_b - I``; GIoU ``IoU - (C - U) / C``;
     * 3D IoU ``I dz / (V_a + V_b - I dz)``; GIoU with ``V_C = C * span``.
     """
-    ax, ay, bx, by = np.empty(4), np.empty(4), np.empty(4), np.empty(4)
-    px, py, valid = np.empty(16), np.empty(16), np.empty(16, dtype=np.bool_)
-    sup = np.empty((6, 4))
-    need_hull = want[_GIOU_BEV] or want[_GIOU_3D]
+    dx, dy = ta[_X, i] - tb[_X, j], ta[_Y, i] - tb[_Y, j]
+    bc, bs, ac, as_ = tb[_C, j], tb[_S, j], ta[_C, i], ta[_S, i]
+    cx, cy = dx * bc + dy * bs, dy * bc - dx * bs  # centre of a in b's frame
+    c, s = ac * bc + as_ * bs, as_ * bc - ac * bs  # cosine and sine of yaw_a - yaw_b
+    al, aw, bl, bw = ta[_HL, i], ta[_HW, i], tb[_HL, j], tb[_HW, j]
+    area_a, area_b = ta[_AREA, i], tb[_AREA, j]
+    dist, reach = np.hypot(dx, dy), ta[_RADIUS, i] + tb[_RADIUS, j]
+    px, py = work[0], work[1]
+    inter = 0.0
+    if dist <= reach + TOL and area_a > 0.0 and area_b > 0.0:
+        inter = _intersection_area(cx, cy, c, s, al, aw, bl, bw, work[2], work[3], work[4], work[5],
+                                   px, py, flags)
+    inter = min(max(inter, 0.0), min(area_a, area_b))
+    hull = 0.0
+    if want[_GIOU_BEV] or want[_GIOU_3D]:
+        hull = _hull_area(cx, cy, c, s, al, aw, bl, bw, px, py, flags, work[6:12, :4])
+        if hull <= HULL_EPS * (dist + reach) ** 2:
+            hull = 0.0
+    if want[_IOU_BEV] or want[_GIOU_BEV]:
+        union = area_a + area_b - inter
+        iou = min(max(_ratio(inter, union), 0.0), 1.0)
+        out[_IOU_BEV, k] = iou
+        out[_GIOU_BEV, k] = _giou(iou, union, hull)
+    if want[_IOU_3D] or want[_GIOU_3D]:
+        overlap = max(0.0, min(ta[_HI, i], tb[_HI, j]) - max(ta[_LO, i], tb[_LO, j]))
+        span = max(ta[_HI, i], tb[_HI, j]) - min(ta[_LO, i], tb[_LO, j])
+        inter3 = inter * overlap
+        union3 = ta[_VOL, i] + tb[_VOL, j] - inter3
+        iou3 = min(max(_ratio(inter3, union3), 0.0), 1.0)
+        out[_IOU_3D, k] = iou3
+        out[_GIOU_3D, k] = _giou(iou3, union3, hull * span)
+
+
+@njit(cache=True)
+def _measures_kernel(ta, tb, outer, todo, want, out) -> None:
+    """:func:`_pair_measures` of the K pairs with ``todo (K,) bool`` set into ``out (4, K) float64``
+    (other pairs are left as they are). Pairs: ``(a[k], b[k])`` (K = N = M), or if ``outer`` all
+    ``(a[i], b[j])`` in ``a``-major order (K = N * M)."""
+    work, flags = np.empty((12, 16)), np.empty(16, dtype=np.bool_)
     m = tb.shape[1]
     for k in range(out.shape[1]):
-        if not todo[k]:
-            continue
-        i, j = (k // m, k % m) if outer else (k, k)
-        dx, dy = ta[_X, i] - tb[_X, j], ta[_Y, i] - tb[_Y, j]
-        bc, bs, ac, as_ = tb[_C, j], tb[_S, j], ta[_C, i], ta[_S, i]
-        cx, cy = dx * bc + dy * bs, dy * bc - dx * bs  # centre of a in b's frame
-        c, s = ac * bc + as_ * bs, as_ * bc - ac * bs  # cosine and sine of yaw_a - yaw_b
-        al, aw, bl, bw = ta[_HL, i], ta[_HW, i], tb[_HL, j], tb[_HW, j]
-        area_a, area_b = ta[_AREA, i], tb[_AREA, j]
-        dist, reach = np.hypot(dx, dy), ta[_RADIUS, i] + tb[_RADIUS, j]
-        inter = 0.0
-        if dist <= reach + TOL and area_a > 0.0 and area_b > 0.0:
-            inter = _intersection_area(cx, cy, c, s, al, aw, bl, bw, ax, ay, bx, by, px, py, valid)
-        inter = min(max(inter, 0.0), min(area_a, area_b))
-        hull = 0.0
-        if need_hull:
-            hull = _hull_area(cx, cy, c, s, al, aw, bl, bw, px, py, valid, sup)
-            if hull <= HULL_EPS * (dist + reach) ** 2:
-                hull = 0.0
-        if want[_IOU_BEV] or want[_GIOU_BEV]:
-            union = area_a + area_b - inter
-            iou = min(max(_ratio(inter, union), 0.0), 1.0)
-            out[_IOU_BEV, k] = iou
-            out[_GIOU_BEV, k] = _giou(iou, union, hull)
-        if want[_IOU_3D] or want[_GIOU_3D]:
-            overlap = max(0.0, min(ta[_HI, i], tb[_HI, j]) - max(ta[_LO, i], tb[_LO, j]))
-            span = max(ta[_HI, i], tb[_HI, j]) - min(ta[_LO, i], tb[_LO, j])
-            inter3 = inter * overlap
-            union3 = ta[_VOL, i] + tb[_VOL, j] - inter3
-            iou3 = min(max(_ratio(inter3, union3), 0.0), 1.0)
-            out[_IOU_3D, k] = iou3
-            out[_GIOU_3D, k] = _giou(iou3, union3, hull * span)
+        if todo[k]:
+            i, j = (k // m, k % m) if outer else (k, k)
+            _pair_measures(ta, i, tb, j, want, out, k, work, flags)
 
 
 def _want(names) -> np.ndarray:

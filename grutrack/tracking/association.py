@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy.optimize import linear_sum_assignment
 
 from grutrack import geometry
@@ -102,35 +103,71 @@ def threshold_margin(cost: np.ndarray, threshold: np.ndarray) -> tuple[np.ndarra
 ASSIGNMENT = {"most_pairs": hungarian, "threshold_margin": threshold_margin}
 
 
+@njit(cache=True)
+def _cost_kernel(det, det_labels, trk, trk_labels, ta, tb, codes, thresholds, costs) -> None:
+    """Fill ``costs (S, D, T)`` (pre-set to ``_INVALID``) with ``1 - similarity`` of every candidate pair.
+
+    det (D, >=7), trk (T, >=7): boxes; ta, tb: their :func:`geometry._box_terms`; codes (S, C) int: the
+    similarity (index into ``geometry.SIMILARITIES``) of each stage and class; thresholds (S, C): cost
+    thresholds. A pair is a candidate of stage s when its labels agree and the bound of
+    :func:`similarity_upper_bounds` can beat ``thresholds[s, label]``.
+    """
+    n_stages = codes.shape[0]
+    out, work, flags = np.zeros((4, 1)), np.empty((12, 16)), np.empty(16, dtype=np.bool_)
+    want, need = np.zeros(4, dtype=np.bool_), np.zeros(n_stages, dtype=np.bool_)
+    for i in range(det.shape[0]):
+        lab = det_labels[i]
+        ra = np.hypot(det[i, 3], det[i, 4])
+        for j in range(trk.shape[0]):
+            if trk_labels[j] != lab:
+                continue
+            d = np.hypot(det[i, 0] - trk[j, 0], det[i, 1] - trk[j, 1])
+            disjoint = d > 0.5 * (ra + np.hypot(trk[j, 3], trk[j, 4]))
+            hull = max(d * 0.5 * (min(det[i, 3], det[i, 4]) + min(trk[j, 3], trk[j, 4])), 1e-12)
+            want[:] = False
+            any_need = False
+            for st in range(n_stages):
+                code = codes[st, lab]
+                bound = 1.0
+                if disjoint:
+                    if code == geometry._IOU_BEV or code == geometry._IOU_3D:
+                        bound = 0.0
+                    elif code == geometry._GIOU_3D:
+                        vol = det[i, 3] * det[i, 4] * det[i, 5] + trk[j, 3] * trk[j, 4] * trk[j, 5]
+                        bound = min(vol / (hull * max(det[i, 5], trk[j, 5])) - 1.0, 1.0)
+                    else:
+                        area = det[i, 3] * det[i, 4] + trk[j, 3] * trk[j, 4]
+                        bound = min(area / hull - 1.0, 1.0)
+                need[st] = bound > 1.0 - thresholds[st, lab]
+                if need[st]:
+                    want[code] = True
+                    any_need = True
+            if not any_need:
+                continue
+            geometry._pair_measures(ta, i, tb, j, want, out, 0, work, flags)
+            for st in range(n_stages):
+                if need[st]:
+                    costs[st, i, j] = 1.0 - out[codes[st, lab], 0]
+
+
 def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray,
                      trk_labels: np.ndarray, stages: list[tuple[tuple[str, ...], np.ndarray]]) -> list[np.ndarray]:
-    """(D, T) cost matrices, one per stage, from ONE geometry pass over the candidate pairs.
+    """(D, T) cost matrices, one per stage, from ONE compiled geometry pass over the candidate pairs.
 
     stages: per stage, (metric name per class, cost threshold per class (C,)). A pair is a candidate of a
-    stage when its classes agree and the similarity bound can beat that stage's threshold; everything else
-    costs ``_INVALID``.
+    stage when its classes agree and the similarity bound (:func:`similarity_upper_bounds`) can beat that
+    stage's threshold; everything else costs ``_INVALID`` (the bound never prunes a pair that could pass).
     """
     D, T = len(det_boxes), len(trk_boxes)
-    costs = [np.full((D, T), _INVALID) for _ in stages]
-    if D == 0 or T == 0:
-        return costs
-    same = det_labels[:, None] == trk_labels[None, :]                                    # (D, T)
-    present = np.unique(det_labels)
-    names = sorted({stage[0][c] for stage in stages for c in present})
-    bounds = similarity_upper_bounds(det_boxes[:, None, :], trk_boxes[None, :, :], names)
-    bound_of = np.stack([np.broadcast_to(bounds[n], (D, T)) for n in names])             # (M, D, T)
-    rows = np.arange(D)
-    codes = [np.array([names.index(m) if m in names else 0 for m in metric])[det_labels]  # (D,) per stage
-             for metric, _ in stages]
-    need = [same & (bound_of[c, rows] > (1.0 - thr[det_labels])[:, None]) for c, (_, thr) in zip(codes, stages)]
-    todo = np.logical_or.reduce(need)
-    if not todo.any():
-        return costs
-    sims = geometry.pairwise_similarities(det_boxes, trk_boxes, names, where=todo)
-    sim_of = np.stack([sims[n] for n in names])                                          # (M, D, T)
-    for cost, c, nd in zip(costs, codes, need):
-        cost[nd] = 1.0 - sim_of[c, rows][nd]
-    return costs
+    costs = np.full((len(stages), D, T), _INVALID)
+    if D and T:
+        codes = np.array([[geometry.SIMILARITIES.index(m) for m in metric] for metric, _ in stages], dtype=np.int64)
+        thresholds = np.array([thr for _, thr in stages], dtype=np.float64)
+        det = geometry._check_boxes(det_boxes, "detection boxes")
+        trk = geometry._check_boxes(trk_boxes, "track boxes")
+        _cost_kernel(det, det_labels.astype(np.int64), trk, trk_labels.astype(np.int64), geometry._box_terms(det),
+                     geometry._box_terms(trk), codes, thresholds, costs)
+    return list(costs)
 
 
 def associate(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray, trk_labels: np.ndarray,
