@@ -103,6 +103,13 @@ def threshold_margin(cost: np.ndarray, threshold: np.ndarray) -> tuple[np.ndarra
 ASSIGNMENT = {"most_pairs": hungarian, "threshold_margin": threshold_margin}
 
 
+def _unmatched(n: int, matched: np.ndarray) -> np.ndarray:
+    """Sorted ``(n - K,) int64`` indices in ``0 .. n-1`` that are not in ``matched (K,)``."""
+    free = np.ones(n, dtype=bool)
+    free[matched] = False
+    return np.flatnonzero(free).astype(np.int64)
+
+
 @njit(cache=True)
 def _cost_kernel(det, det_labels, trk, trk_labels, ta, tb, codes, thresholds, costs) -> None:
     """Fill ``costs (S, D, T)`` (pre-set to ``_INVALID``) with ``1 - similarity`` of every candidate pair.
@@ -180,16 +187,14 @@ def associate(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarr
     assignment: the rule of both stages, a key of :data:`ASSIGNMENT`.
     """
     solve = ASSIGNMENT[assignment]
-    d_all = np.arange(len(det_boxes), dtype=np.int64)
-    t_all = np.arange(len(trk_boxes), dtype=np.int64)
     stages = [(tuple(first_metric), first_threshold)]
     if two_stage:
         stages.append(((second_metric,) * len(first_metric), second_threshold))
     costs = _candidate_costs(det_boxes, det_labels, trk_boxes, trk_labels, stages)
     md, mt = solve(costs[0], first_threshold[det_labels][:, None])
     if two_stage:
-        ud, ut = np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt)
+        ud, ut = _unmatched(len(det_boxes), md), _unmatched(len(trk_boxes), mt)
         if len(ud) and len(ut):
             r, c = solve(costs[1][np.ix_(ud, ut)], second_threshold[det_labels[ud]][:, None])
             md, mt = np.concatenate([md, ud[r]]), np.concatenate([mt, ut[c]])
-    return Matches(md, mt, np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt))
+    return Matches(md, mt, _unmatched(len(det_boxes), md), _unmatched(len(trk_boxes), mt))
