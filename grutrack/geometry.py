@@ -130,15 +130,16 @@ def _pseudo_angle(dx: float, dy: float) -> float:
     return 1.0 - p + (2.0 + 2.0 * p if dy < 0.0 else 0.0)
 
 
-@njit(cache=True)
-def _ring_area(x: np.ndarray, y: np.ndarray, valid: np.ndarray) -> float:
-    """Area (m²) of the convex polygon through the valid points ``x, y, valid (P,)`` (P <= 16).
+@njit(cache=True, inline="always")
+def _ring_area(x: np.ndarray, y: np.ndarray, valid: np.ndarray, p: int, keys: np.ndarray) -> float:
+    """Area (m²) of the convex polygon through the valid ones of the first ``p`` (<= 16) points
+    ``x, y, valid``; ``keys (>=p,) int64`` is a work array.
 
     The valid points must lie on the boundary of the polygon and include its vertices; repeats and points
-    along edges add nothing. They are sorted by angle about their mean and summed by the shoelace formula:
+    along edges add nothing. They are sorted by angle about their mean (integer keys: the quantised angle
+    with the point's index in the low 4 bits, insertion-sorted) and summed by the shoelace formula
     ``A = 1/2 sum_r (x_r y_{r+1} - y_r x_{r+1})``. No valid point gives area 0.
     """
-    p = x.shape[0]
     n = 0
     mx = 0.0
     my = 0.0
@@ -151,13 +152,16 @@ def _ring_area(x: np.ndarray, y: np.ndarray, valid: np.ndarray) -> float:
         return 0.0
     mx /= n
     my /= n
-    # Integer keys: quantised angle, invalid points last, the point's index in the low 4 bits.
-    keys = np.empty(p, dtype=np.int64)
+    m = 0
     for r in range(p):
-        dx, dy = x[r] - mx, y[r] - my
-        key = _pseudo_angle(dx, dy) if valid[r] else 9.0
-        keys[r] = np.int64(key * 2.0**44) * 16 + r
-    keys.sort()
+        if valid[r]:
+            key = np.int64(_pseudo_angle(x[r] - mx, y[r] - my) * 2.0**44) * 16 + r
+            q = m
+            while q > 0 and keys[q - 1] > key:
+                keys[q] = keys[q - 1]
+                q -= 1
+            keys[q] = key
+            m += 1
     twice = 0.0
     first = keys[0] & 15
     x0, y0 = x[first] - mx, y[first] - my
@@ -171,14 +175,14 @@ def _ring_area(x: np.ndarray, y: np.ndarray, valid: np.ndarray) -> float:
     return 0.5 * twice
 
 
-@njit(cache=True)
-def _intersection_area(cx, cy, c, s, al, aw, bl, bw, ax, ay, bx, by, px, py, valid) -> float:
+@njit(cache=True, inline="always")
+def _intersection_area(cx, cy, c, s, al, aw, bl, bw, ax, ay, bx, by, px, py, valid, keys) -> float:
     """BEV intersection area (m²) of box ``a`` (centre ``cx, cy``, heading ``(c, s)``, half sizes ``al, aw``)
     given in the frame of box ``b`` (the box ``|x| <= bl, |y| <= bw``).
 
     The intersection polygon's vertices are among 16 candidates: corners of either box inside the other, and
     where each edge of ``a`` enters and leaves ``b``. ``ax .. by (4,)``, ``px, py (16,)`` float64 and
-    ``valid (16,)`` bool are work arrays.
+    ``valid (16,)`` bool and ``keys (16,) int64`` are work arrays.
     """
     for k in range(4):
         su, sv = _SU_T[k], _SV_T[k]
@@ -217,11 +221,11 @@ def _intersection_area(cx, cy, c, s, al, aw, bl, bw, ax, ay, bx, by, px, py, val
         valid[8 + i] = t_in <= 1.0
         px[12 + i], py[12 + i] = ax[i] + t_out * dxe, ay[i] + t_out * dye
         valid[12 + i] = t_out >= 0.0
-    return _ring_area(px, py, valid)
+    return _ring_area(px, py, valid, 16, keys)
 
 
-@njit(cache=True)
-def _hull_area(cx, cy, c, s, al, aw, bl, bw, px, py, on, sup) -> float:
+@njit(cache=True, inline="always")
+def _hull_area(cx, cy, c, s, al, aw, bl, bw, px, py, on, sup, keys) -> float:
     """Area (m²) of the convex hull of the 8 BEV corners of box ``a`` (as in :func:`_intersection_area`,
     in ``b``'s frame) and box ``b``.
 
@@ -229,7 +233,7 @@ def _hull_area(cx, cy, c, s, al, aw, bl, bw, px, py, on, sup) -> float:
     least as far as ``b`` along ``m`` (support functions ``h_a(m) >= h_b(m)``); checking ``a``'s two edge
     normals at the corner and ``b``'s edge normals inside the cone suffices (the support of ``b`` is linear
     between those). Likewise for the corners of ``b``. ``px, py (>=8,)``, ``on (>=8,)``, ``sup (6, 4)``
-    are work arrays.
+    and ``keys (>=8,) int64`` are work arrays.
     """
     nax, nay, ha_na, hb_na, ha_nb, hb_nb = sup[0], sup[1], sup[2], sup[3], sup[4], sup[5]
     # outward normals of a's edges (left, rear, right, front) in b's frame
@@ -263,7 +267,7 @@ def _hull_area(cx, cy, c, s, al, aw, bl, bw, px, py, on, sup) -> float:
         py[i] = cy + su * (al * s) + sv * (aw * c)
         on[i] = a_on
         px[4 + i], py[4 + i], on[4 + i] = su * bl, sv * bw, b_on
-    return _ring_area(px[:8], py[:8], on[:8])
+    return _ring_area(px, py, on, 8, keys)
 
 
 @njit(cache=True, inline="always")
@@ -297,13 +301,13 @@ _IOU_BEV, _GIOU_BEV, _IOU_3D, _GIOU_3D = range(4)
 SIMILARITIES = ("iou_bev", "giou_bev", "iou_3d", "giou_3d")
 
 
-@njit(cache=True)
-def _pair_measures(ta, i, tb, j, want, out, k, work, flags) -> None:
+@njit(cache=True, inline="always")
+def _pair_measures(ta, i, tb, j, want, out, k, work, flags, keys) -> None:
     """The measures flagged in ``want (4,) bool`` (order of :data:`SIMILARITIES`) of the pair
     ``(a[i], b[j])`` into ``out[:, k]`` (``out (4, K) float64``).
 
-    ``ta (11, N)``, ``tb (11, M)``: terms from :func:`_box_terms`; ``work (12, 16) float64`` and
-    ``flags (16,) bool`` are work arrays. Work is done in the frame of ``b``:
+    ``ta (11, N)``, ``tb (11, M)``: terms from :func:`_box_terms`; ``work (12, 16) float64``,
+    ``flags (16,) bool`` and ``keys (16,) int64`` are work arrays. Work is done in the frame of ``b``:
 
     * ``I`` BEV intersection (0 unless the circumscribed circles meet and both areas are positive), clipped
       to ``[0, min(A_a, A_b)]``; ``C`` hull area (0 below ``HULL_EPS (d + r_a + r_b)^2``);
@@ -321,11 +325,11 @@ def _pair_measures(ta, i, tb, j, want, out, k, work, flags) -> None:
     inter = 0.0
     if dist <= reach + TOL and area_a > 0.0 and area_b > 0.0:
         inter = _intersection_area(cx, cy, c, s, al, aw, bl, bw, work[2], work[3], work[4], work[5],
-                                   px, py, flags)
+                                   px, py, flags, keys)
     inter = min(max(inter, 0.0), min(area_a, area_b))
     hull = 0.0
     if want[_GIOU_BEV] or want[_GIOU_3D]:
-        hull = _hull_area(cx, cy, c, s, al, aw, bl, bw, px, py, flags, work[6:12, :4])
+        hull = _hull_area(cx, cy, c, s, al, aw, bl, bw, px, py, flags, work[6:12, :4], keys)
         if hull <= HULL_EPS * (dist + reach) ** 2:
             hull = 0.0
     if want[_IOU_BEV] or want[_GIOU_BEV]:
@@ -348,12 +352,12 @@ def _measures_kernel(ta, tb, outer, todo, want, out) -> None:
     """:func:`_pair_measures` of the K pairs with ``todo (K,) bool`` set into ``out (4, K) float64``
     (other pairs are left as they are). Pairs: ``(a[k], b[k])`` (K = N = M), or if ``outer`` all
     ``(a[i], b[j])`` in ``a``-major order (K = N * M)."""
-    work, flags = np.empty((12, 16)), np.empty(16, dtype=np.bool_)
+    work, flags, keys = np.empty((12, 16)), np.empty(16, dtype=np.bool_), np.empty(16, dtype=np.int64)
     m = tb.shape[1]
     for k in range(out.shape[1]):
         if todo[k]:
             i, j = (k // m, k % m) if outer else (k, k)
-            _pair_measures(ta, i, tb, j, want, out, k, work, flags)
+            _pair_measures(ta, i, tb, j, want, out, k, work, flags, keys)
 
 
 def _want(names) -> np.ndarray:

@@ -121,6 +121,7 @@ def _cost_kernel(det, det_labels, trk, trk_labels, ta, tb, codes, thresholds, co
     """
     n_stages = codes.shape[0]
     out, work, flags = np.zeros((4, 1)), np.empty((12, 16)), np.empty(16, dtype=np.bool_)
+    keys = np.empty(16, dtype=np.int64)
     want, need = np.zeros(4, dtype=np.bool_), np.zeros(n_stages, dtype=np.bool_)
     for i in range(det.shape[0]):
         lab = det_labels[i]
@@ -151,7 +152,7 @@ def _cost_kernel(det, det_labels, trk, trk_labels, ta, tb, codes, thresholds, co
                     any_need = True
             if not any_need:
                 continue
-            geometry._pair_measures(ta, i, tb, j, want, out, 0, work, flags)
+            geometry._pair_measures(ta, i, tb, j, want, out, 0, work, flags, keys)
             for st in range(n_stages):
                 if need[st]:
                     costs[st, i, j] = 1.0 - out[codes[st, lab], 0]

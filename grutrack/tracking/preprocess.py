@@ -33,6 +33,7 @@ def _nms_kernel(boxes, terms, labels, order, threshold, class_aware, keep) -> No
     want = np.zeros(4, dtype=np.bool_)
     want[geometry._IOU_BEV] = True
     out, work, flags = np.zeros((4, 1)), np.empty((12, 16)), np.empty(16, dtype=np.bool_)
+    keys = np.empty(16, dtype=np.int64)
     for i in order:
         if removed[i]:
             continue
@@ -43,7 +44,7 @@ def _nms_kernel(boxes, terms, labels, order, threshold, class_aware, keep) -> No
             lo, hi = min(i, j), max(i, j)
             if np.hypot(boxes[lo, 0] - boxes[hi, 0], boxes[lo, 1] - boxes[hi, 1]) >= radius[lo] + radius[hi]:
                 continue
-            geometry._pair_measures(terms, lo, terms, hi, want, out, 0, work, flags)
+            geometry._pair_measures(terms, lo, terms, hi, want, out, 0, work, flags, keys)
             if out[geometry._IOU_BEV, 0] > threshold:
                 removed[j] = True
 
