@@ -22,6 +22,7 @@ COMMANDS: tuple[str, ...] = (
     "grutrack.cli.report",
     "grutrack.cli.render",
     "grutrack.cli.check",
+    "grutrack.cli.compare",
 )
 
 
