@@ -126,3 +126,29 @@ def associate(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarr
             r, c = hungarian(costs[1][np.ix_(ud, ut)], second_threshold[det_labels[ud]][:, None])
             md, mt = np.concatenate([md, ud[r]]), np.concatenate([mt, ut[c]])
     return Matches(md, mt, np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt))
+
+
+def gated_association_needed(cfg) -> bool:
+    """Whether a preset needs :func:`gated_association` (alignment-GIoU metrics or a distance gate)."""
+    metrics = set(cfg.first_metric) | {cfg.second_metric}
+    return bool(np.any(cfg.distance_gate > 0)) or any(m.startswith("a_") for m in metrics)
+
+
+def gated_association(cfg):
+    """Two-stage Hungarian association on dense costs with Fast-Poly's distance gate and A-GIoU metrics
+    (:func:`grutrack.tracking.fastpoly.gated_costs`); thresholds as :func:`associate`."""
+    from grutrack.tracking.fastpoly import gated_costs
+
+    def run(dets, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
+        d_all = np.arange(len(dets.boxes), dtype=np.int64)
+        t_all = np.arange(len(trk_boxes), dtype=np.int64)
+        c1, c2 = gated_costs(dets.boxes, dets.labels, trk_boxes, trk_labels, cfg.first_metric, cfg.second_metric,
+                             cfg.distance_gate, invalid=_INVALID)
+        md, mt = hungarian(c1, cfg.first_threshold[dets.labels][:, None])
+        if cfg.two_stage:
+            ud, ut = np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt)
+            if len(ud) and len(ut):
+                r, c = hungarian(c2[np.ix_(ud, ut)], cfg.second_threshold[dets.labels[ud]][:, None])
+                md, mt = np.concatenate([md, ud[r]]), np.concatenate([mt, ut[c]])
+        return Matches(md, mt, np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt))
+    return run

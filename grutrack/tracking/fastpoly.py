@@ -250,3 +250,106 @@ class ScoreHistory:
     @staticmethod
     def concat(a: "ScoreHistory", b: "ScoreHistory") -> "ScoreHistory":
         return ScoreHistory(np.concatenate([a.total, b.total]), np.concatenate([a.count, b.count]))
+
+
+@dataclass
+class GeometryState:
+    """State of a :class:`GeometryFilterBackend`: the wrapped backend's state and the geometry windows."""
+
+    motion: object
+    geometry: GeometryWindow
+    labels: np.ndarray
+
+
+class GeometryFilterBackend:
+    """A motion backend whose boxes take ``[z, w, l, h]`` from a window filter (Fast-Poly's decoupled geometry).
+
+    The wrapped backend still filters every state (in grutrack's models z, w, l, h form an independent block,
+    so the other states are unaffected); :meth:`boxes` replaces columns z, w, l, h by the median (or mean) of
+    the track's last ``window[label]`` matched detections. ``window`` (C,) int >= 1 and ``mean`` (C,) bool per
+    class label; a class with ``window`` 0 is passed through unchanged (geometry from the motion filter).
+    """
+
+    def __init__(self, inner, window: np.ndarray, mean: np.ndarray):
+        self.inner = inner
+        self.window = np.asarray(window, dtype=np.int64)
+        self.mean = np.asarray(mean, dtype=bool)
+
+    def initiate(self, z: np.ndarray, labels: np.ndarray) -> GeometryState:
+        """New tracks from detections z (N, 9)."""
+        win = np.maximum(self.window[labels], 1)
+        return GeometryState(self.inner.initiate(z, labels),
+                             GeometryWindow.start(z[:, 2:6], win, self.mean[labels]), labels.copy())
+
+    def predict(self, s: GeometryState, dt: float) -> GeometryState:
+        """Motion predicted ``dt`` seconds ahead; the geometry is constant."""
+        return GeometryState(self.inner.predict(s.motion, dt), s.geometry, s.labels)
+
+    def update(self, s: GeometryState, rows: np.ndarray, z: np.ndarray) -> GeometryState:
+        """Tracks ``rows (K,)`` corrected by z (K, 9); their windows take ``z[:, 2:6]``."""
+        g = GeometryWindow(s.geometry.hist.copy(), s.geometry.mean)
+        g.push(rows, z[:, 2:6], np.maximum(self.window[s.labels[rows]], 1))
+        return GeometryState(self.inner.update(s.motion, rows, z), g, s.labels)
+
+    def boxes(self, s: GeometryState) -> np.ndarray:
+        """(N, 9) boxes: the motion filter's, with z, w, l, h from the windows where the class uses them."""
+        out = self.inner.boxes(s.motion)
+        use = self.window[s.labels] > 0
+        out[use, 2:6] = s.geometry.estimate()[use]
+        return out
+
+    def select(self, s: GeometryState, index: np.ndarray) -> GeometryState:
+        return GeometryState(self.inner.select(s.motion, index), s.geometry.select(index), s.labels[index])
+
+    def concat(self, a: GeometryState, b: GeometryState) -> GeometryState:
+        return GeometryState(self.inner.concat(a.motion, b.motion), GeometryWindow.concat(a.geometry, b.geometry),
+                             np.concatenate([a.labels, b.labels]))
+
+
+#: similarities :func:`gated_costs` can compute densely
+DENSE_METRICS = ("a_giou_3d", "a_giou_bev", "giou_3d", "giou_bev", "iou_3d", "iou_bev")
+
+
+def _similarity(name: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(Na, Nb) similarity ``name`` between boxes a (Na, 9) and b (Nb, 9)."""
+    from grutrack import geometry
+
+    if name == "a_giou_3d":
+        return a_giou_3d(a, b)
+    if name == "a_giou_bev":
+        return a_giou_bev(a, b)
+    fn = {"giou_3d": geometry.pairwise_giou_3d, "giou_bev": geometry.pairwise_bev_giou,
+          "iou_3d": geometry.pairwise_iou_3d, "iou_bev": geometry.pairwise_bev_iou}[name]
+    return fn(a, b)
+
+
+def gated_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray, trk_labels: np.ndarray,
+                first_metric: tuple[str, ...], second_metric: str, gate: np.ndarray,
+                invalid: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+    """Stage-1 and stage-2 cost matrices (D, T) with Fast-Poly's distance gate; cost = 1 - similarity.
+
+    Stage 1: a pair is scored when its classes agree and its 3D centre distance is below ``gate[class]``
+    metres (``gate`` (C,), 0 = no gate for that class); other pairs cost ``invalid``.
+    Stage 2: as Fast-Poly, the gate only selects rows and columns: every same-class pair between a detection
+    that has a stage-1 candidate and a track that has one is scored with ``second_metric``, even when that
+    pair itself lies outside the gate.
+    """
+    D, T = len(det_boxes), len(trk_boxes)
+    c1, c2 = np.full((D, T), invalid), np.full((D, T), invalid)
+    same = det_labels[:, None] == trk_labels[None, :]
+    radius = np.where(gate > 0, gate, np.inf)[det_labels][:, None]
+    valid = same & distance_mask(det_boxes, trk_boxes, radius) if D and T else same
+    rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
+    if len(rows) == 0:
+        return c1, c2
+    a, b = det_boxes[rows], trk_boxes[cols]
+    sub = np.ix_(rows, cols)
+    names = {first_metric[c] for c in np.unique(det_labels[rows])} | {second_metric}
+    sims = {n: _similarity(n, a, b) for n in sorted(names)}
+    first = np.full((len(rows), len(cols)), -np.inf)
+    for c in np.unique(det_labels[rows]):
+        r = det_labels[rows] == c
+        first[r] = sims[first_metric[c]][r]
+    c1[sub] = np.where(valid[sub], 1.0 - first, invalid)
+    c2[sub] = np.where(same[sub], 1.0 - sims[second_metric], invalid)
+    return c1, c2

@@ -6,6 +6,7 @@ import numpy as np
 
 from grutrack.data.scene import BoxSet
 from grutrack.geometry import paired_bev_iou
+from grutrack.tracking.fastpoly import scale_nms_keep
 
 
 def score_filter(dets: BoxSet, thresholds: np.ndarray) -> BoxSet:
@@ -63,3 +64,16 @@ def preprocess(dets: BoxSet, score_threshold: np.ndarray, nms_threshold: float,
     """Score filter followed by NMS; returns the surviving detections in their original order."""
     dets = score_filter(dets, score_threshold)
     return dets.subset(nms_keep(dets.boxes, dets.scores, dets.labels, nms_threshold, nms_class_aware))
+
+
+def preprocess_frame(dets: BoxSet, cfg) -> BoxSet:
+    """Pre-processing of one frame as a tracker preset (:class:`TrackerConfig`) asks: score filter, then blend
+    NMS (:func:`nms_keep`, original order kept) or Fast-Poly's scale NMS (:func:`scale_nms_keep`; the
+    survivors come class by class, each class by descending score, as Fast-Poly orders them)."""
+    if cfg.nms_method == "blend":
+        return preprocess(dets, cfg.score_threshold, cfg.nms_threshold, cfg.nms_class_aware)
+    dets = score_filter(dets, cfg.score_threshold)
+    thr = np.full(len(cfg.score_threshold), cfg.nms_threshold)
+    gate = np.where(cfg.nms_distance_gate > 0, cfg.nms_distance_gate, np.inf)
+    return dets.subset(scale_nms_keep(dets.boxes, dets.scores, dets.labels, cfg.nms_metric, thr, cfg.nms_scale,
+                                      gate))
