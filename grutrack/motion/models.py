@@ -385,6 +385,135 @@ class Bicycle(MotionModel):
 
 
 # ----------------------------------------------------------------------------------------------------------------
+# Piecewise forms (Poly-MOT's CTRA and BICYCLE, motion_module/motion_model.py at its HEAD 5fead68)
+# ----------------------------------------------------------------------------------------------------------------
+
+#: |omega| (rad/s) or |beta| (rad) at which the piecewise forms switch to straight-line motion (Poly-MOT: 0.001)
+PIECEWISE_SWITCH = 1e-3
+
+
+def _straight_jacobian(J: np.ndarray, rows: np.ndarray, v, a, yaw, dt) -> None:
+    """Write, in place for the tracks ``rows (K,)`` of ``J (N, 10, 10)``, the position rows of a straight-line
+    step ``(x, y) += (v dt + a dt^2 / 2) (cos yaw, sin yaw)`` over [x, y, z, w, l, h, v, a, yaw, .]; the last
+    column (turn rate or steering) gets no entry."""
+    c, s, t = np.cos(yaw[rows]), np.sin(yaw[rows]), dt[rows]
+    ds = v[rows] * t + 0.5 * a[rows] * t * t
+    J[rows, 0:2, :] = 0.0
+    J[rows, 0, 0] = J[rows, 1, 1] = 1.0
+    J[rows, 0, 6], J[rows, 1, 6] = t * c, t * s
+    J[rows, 0, 7], J[rows, 1, 7] = 0.5 * t * t * c, 0.5 * t * t * s
+    J[rows, 0, 8], J[rows, 1, 8] = -ds * s, ds * c
+
+
+class CTRAPiecewise(CTRA):
+    """CTRA in Poly-MOT's piecewise form (tracker preset ``motion.ctra_form: piecewise``).
+
+    For ``|omega| >= 0.001`` rad/s it is :class:`CTRA` (the same arc, the same exact Jacobian). Below, the
+    position moves in a straight line, ``(x, y) += (v dt + a dt^2 / 2) (cos yaw, sin yaw)`` (yaw still advances
+    by omega dt), and F is the straight line's Jacobian: ``d(x, y)/d omega = 0``. Since every track starts at
+    omega = 0 this changes the covariance from the first prediction on. Discontinuous at |omega| = 0.001.
+    """
+
+    name = "CTRA"
+
+    def f(self, x: np.ndarray, dt) -> np.ndarray:
+        """Transition ``(N, 10) -> (N, 10)`` over ``dt`` s."""
+        x = np.asarray(x, dtype=np.float64)
+        dt = _as_dt(dt, x.shape[0])
+        out = super().f(x, dt)
+        small = np.abs(x[:, 9]) < PIECEWISE_SWITCH
+        if small.any():
+            v, a, yaw, t = x[small, 6], x[small, 7], x[small, 8], dt[small]
+            ds = v * t + 0.5 * a * t * t
+            out[small, 0] = x[small, 0] + ds * np.cos(yaw)
+            out[small, 1] = x[small, 1] + ds * np.sin(yaw)
+        return out
+
+    def F(self, x: np.ndarray, dt) -> np.ndarray:
+        """Jacobian ``(N, 10, 10)`` of :meth:`f` (straight-line rows below the switch)."""
+        x = np.asarray(x, dtype=np.float64)
+        dt = _as_dt(dt, x.shape[0])
+        J = super().F(x, dt)
+        rows = np.flatnonzero(np.abs(x[:, 9]) < PIECEWISE_SWITCH)
+        if len(rows):
+            _straight_jacobian(J, rows, x[:, 6], x[:, 7], x[:, 8], dt)
+        return J
+
+
+class BicyclePiecewise(Bicycle):
+    """The bicycle model in Poly-MOT's piecewise form (tracker preset ``motion.bicycle_form: piecewise``).
+
+    Slip angle ``beta = atan(lr / (lf + lr) tan delta)``. For ``|beta| > 0.001`` rad the reference point runs the
+    arc of :class:`Bicycle` at constant speed: ds = v dt, v' = v, and the acceleration is reset, a' = 0. For
+    ``|beta| <= 0.001`` it moves in a straight line along the heading, ``ds = v dt + a dt^2 / 2``, v' = v + a dt,
+    with the yaw unchanged. The Jacobians are Poly-MOT's: F has no d/dl and no d/ddelta column (and in the arc
+    branch no d/da column, with a zero row for a); H has no d(vx, vy)/ddelta terms.
+    """
+
+    name = "Bicycle"
+
+    def _slip(self, delta: np.ndarray):
+        """Slip angle beta = atan(k tan delta) (N,) and dbeta/ddelta (N,)."""
+        k = self._k
+        cd, sd = np.cos(delta), np.sin(delta)
+        return np.arctan(k * np.tan(delta)), k / (cd * cd + k * k * sd * sd)
+
+    def f(self, x: np.ndarray, dt) -> np.ndarray:
+        """Transition ``(N, 10) -> (N, 10)`` over ``dt`` s."""
+        x = np.asarray(x, dtype=np.float64)
+        dt = _as_dt(dt, x.shape[0])
+        v, a, yaw = x[:, 6], x[:, 7], x[:, 8]
+        beta, _, kappa, _, _ = self._curvature(x)
+        turning = np.abs(beta) > PIECEWISE_SWITCH
+        ds = np.where(turning, v * dt, v * dt + 0.5 * a * dt * dt)
+        psi = np.where(turning, yaw + beta, yaw)
+        phi = np.where(turning, kappa * ds, 0.0)
+        (e0r, e0i), = arc_moments(phi, order=0)
+        cp, sp = np.cos(psi), np.sin(psi)
+        out = x.copy()
+        out[:, 0] += ds * (cp * e0r - sp * e0i)
+        out[:, 1] += ds * (sp * e0r + cp * e0i)
+        out[:, 6] = np.where(turning, v, v + a * dt)
+        out[:, 7] = np.where(turning, 0.0, a)
+        out[:, 8] = yaw + phi
+        return out
+
+    def F(self, x: np.ndarray, dt) -> np.ndarray:
+        """Poly-MOT's Jacobian ``(N, 10, 10)`` of :meth:`f` (no d/dl, d/ddelta columns)."""
+        x = np.asarray(x, dtype=np.float64)
+        n = x.shape[0]
+        dt = _as_dt(dt, n)
+        v, a, yaw = x[:, 6], x[:, 7], x[:, 8]
+        beta, _, kappa, _, _ = self._curvature(x)
+        turning = np.abs(beta) > PIECEWISE_SWITCH
+        J = _eye_batch(n, self.dim_x)
+        rows = np.flatnonzero(turning)
+        if len(rows):
+            t, k = dt[rows], kappa[rows]
+            ds = v[rows] * t
+            psi, phi = yaw[rows] + beta[rows], k * ds
+            (e0r, e0i), = arc_moments(phi, order=0)
+            cp, sp = np.cos(psi), np.sin(psi)
+            J[rows, 0, 6], J[rows, 1, 6] = t * np.cos(psi + phi), t * np.sin(psi + phi)
+            J[rows, 0, 8] = -ds * (sp * e0r + cp * e0i)
+            J[rows, 1, 8] = ds * (cp * e0r - sp * e0i)
+            J[rows, 7, 7] = 0.0
+            J[rows, 8, 6] = t * k
+        rows = np.flatnonzero(~turning)
+        if len(rows):
+            _straight_jacobian(J, rows, v, a, yaw, dt)
+            J[rows, 6, 7] = dt[rows]
+        return J
+
+    def H(self, x: np.ndarray) -> np.ndarray:
+        """Jacobian ``(N, 9, 10)`` of :meth:`h` without the d(vx, vy)/ddelta terms (Poly-MOT's H)."""
+        J = super().H(x)
+        J[:, 7, 9] = 0.0
+        J[:, 8, 9] = 0.0
+        return J
+
+
+# ----------------------------------------------------------------------------------------------------------------
 # Linear models
 # ----------------------------------------------------------------------------------------------------------------
 
@@ -500,11 +629,20 @@ class CV(_LinearModel):
 MODELS: dict[str, type[MotionModel]] = {"CTRA": CTRA, "Bicycle": Bicycle, "CA": CA, "CV": CV}
 
 
-def make_model(name: str, **params) -> MotionModel:
-    """Instantiate a model by name (``CTRA``, ``Bicycle``, ``CA``, ``CV``; case-insensitive)."""
-    lookup = {k.lower(): v for k, v in MODELS.items()}
+#: The piecewise forms by model name (tracker preset keys ``motion.ctra_form``, ``motion.bicycle_form``).
+PIECEWISE: dict[str, type[MotionModel]] = {"CTRA": CTRAPiecewise, "Bicycle": BicyclePiecewise}
+
+
+def make_model(name: str, form: str = "arc", **params) -> MotionModel:
+    """Instantiate a model by name (``CTRA``, ``Bicycle``, ``CA``, ``CV``; case-insensitive).
+
+    ``form``: "arc" (the models above) or "piecewise" (:data:`PIECEWISE`; the linear models have one form).
+    """
+    lookup = {k.lower(): k for k in MODELS}
     try:
-        cls = lookup[name.lower()]
+        key = lookup[name.lower()]
     except KeyError:
         raise ValueError(f"unknown motion model {name!r}; choose one of {sorted(MODELS)}") from None
-    return cls(**params)
+    if form not in ("arc", "piecewise"):
+        raise ValueError(f"unknown model form {form!r}; choose 'arc' or 'piecewise'")
+    return (PIECEWISE.get(key, MODELS[key]) if form == "piecewise" else MODELS[key])(**params)

@@ -3,6 +3,15 @@
 Stage 1 scores every same-class (detection, track) pair with its class's similarity (3D or BEV GIoU/IoU),
 cost = 1 - similarity, and accepts assignments whose cost is below the class threshold. Stage 2 repeats
 this with one similarity (BEV GIoU by default) on what stage 1 left unmatched. Different classes never match.
+
+Two assignment rules (tracker preset key ``association.assignment``), both over the admissible pairs
+(cost < threshold):
+
+* ``most_pairs`` (:func:`hungarian`): the most admissible pairs, and among those the least total cost.
+* ``threshold_margin`` (:func:`threshold_margin`): the matching that maximises the total margin
+  ``sum (threshold - cost)`` over its pairs; a cheap pair is kept even when it leaves two others unmatched.
+  This is what ``lap.lapjv(cost, extend_cost=True, cost_limit=threshold)`` solves (Poly-MOT, Fast-Poly): lap
+  pads the matrix so that leaving a detection and a track unmatched costs ``threshold / 2`` each.
 """
 
 from __future__ import annotations
@@ -71,6 +80,27 @@ def hungarian(cost: np.ndarray, threshold: np.ndarray) -> tuple[np.ndarray, np.n
     return rows[ok].astype(np.int64), cols[ok].astype(np.int64)
 
 
+def threshold_margin(cost: np.ndarray, threshold: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Matching of maximum total margin ``sum (threshold - cost)`` among the pairs with ``cost < threshold``.
+
+    cost (D, T); threshold (D, T) or broadcastable -> (rows, cols). With ``G = min(cost - threshold, 0)``
+    (0 for inadmissible pairs) a full rectangular assignment minimising ``sum G`` restricted to its admissible
+    pairs is an optimal partial matching: any partial matching extends to a full assignment at no cost (the
+    added pairs are worth 0 or less), so both optima are equal. Same result as lap.lapjv with ``cost_limit``.
+    """
+    if cost.size == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    thr = np.broadcast_to(threshold, cost.shape)
+    allowed = cost < thr
+    rows, cols = linear_sum_assignment(np.where(allowed, cost - thr, 0.0))
+    ok = allowed[rows, cols]
+    return rows[ok].astype(np.int64), cols[ok].astype(np.int64)
+
+
+#: assignment rules by preset name (``association.assignment``)
+ASSIGNMENT = {"most_pairs": hungarian, "threshold_margin": threshold_margin}
+
+
 def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray,
                      trk_labels: np.ndarray, stages: list[tuple[tuple[str, ...], np.ndarray]]) -> list[np.ndarray]:
     """(D, T) cost matrices, one per stage, from ONE geometry pass over the candidate pairs.
@@ -107,23 +137,25 @@ def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: n
 
 def associate(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray, trk_labels: np.ndarray,
               first_metric: tuple[str, ...], first_threshold: np.ndarray, two_stage: bool,
-              second_metric: str, second_threshold: np.ndarray) -> Matches:
+              second_metric: str, second_threshold: np.ndarray, assignment: str = "most_pairs") -> Matches:
     """Two-stage association of D detections with T (predicted) tracks.
 
     det_boxes (D, 9), trk_boxes (T, 9): canonical boxes; labels (D,), (T,) class indices;
-    first_metric: similarity name per class; thresholds: cost thresholds per class.
+    first_metric: similarity name per class; thresholds: cost thresholds per class;
+    assignment: the rule of both stages, a key of :data:`ASSIGNMENT`.
     """
+    solve = ASSIGNMENT[assignment]
     d_all = np.arange(len(det_boxes), dtype=np.int64)
     t_all = np.arange(len(trk_boxes), dtype=np.int64)
     stages = [(tuple(first_metric), first_threshold)]
     if two_stage:
         stages.append(((second_metric,) * len(first_metric), second_threshold))
     costs = _candidate_costs(det_boxes, det_labels, trk_boxes, trk_labels, stages)
-    md, mt = hungarian(costs[0], first_threshold[det_labels][:, None])
+    md, mt = solve(costs[0], first_threshold[det_labels][:, None])
     if two_stage:
         ud, ut = np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt)
         if len(ud) and len(ut):
-            r, c = hungarian(costs[1][np.ix_(ud, ut)], second_threshold[det_labels[ud]][:, None])
+            r, c = solve(costs[1][np.ix_(ud, ut)], second_threshold[det_labels[ud]][:, None])
             md, mt = np.concatenate([md, ud[r]]), np.concatenate([mt, ut[c]])
     return Matches(md, mt, np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt))
 
@@ -136,19 +168,21 @@ def gated_association_needed(cfg) -> bool:
 
 def gated_association(cfg):
     """Two-stage Hungarian association on dense costs with Fast-Poly's distance gate and A-GIoU metrics
-    (:func:`grutrack.tracking.fastpoly.gated_costs`); thresholds as :func:`associate`."""
+    (:func:`grutrack.tracking.fastpoly.gated_costs`); thresholds and assignment rule as :func:`associate`."""
     from grutrack.tracking.fastpoly import gated_costs
+
+    solve = ASSIGNMENT[cfg.assignment]
 
     def run(dets, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
         d_all = np.arange(len(dets.boxes), dtype=np.int64)
         t_all = np.arange(len(trk_boxes), dtype=np.int64)
         c1, c2 = gated_costs(dets.boxes, dets.labels, trk_boxes, trk_labels, cfg.first_metric, cfg.second_metric,
                              cfg.distance_gate, invalid=_INVALID)
-        md, mt = hungarian(c1, cfg.first_threshold[dets.labels][:, None])
+        md, mt = solve(c1, cfg.first_threshold[dets.labels][:, None])
         if cfg.two_stage:
             ud, ut = np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt)
             if len(ud) and len(ut):
-                r, c = hungarian(c2[np.ix_(ud, ut)], cfg.second_threshold[dets.labels[ud]][:, None])
+                r, c = solve(c2[np.ix_(ud, ut)], cfg.second_threshold[dets.labels[ud]][:, None])
                 md, mt = np.concatenate([md, ud[r]]), np.concatenate([mt, ut[c]])
         return Matches(md, mt, np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt))
     return run
