@@ -183,9 +183,15 @@ class GeometryWindow:
         """(N, 4) ``[z, w, l, h]``: per track the median (or mean) over its window, ignoring empty slots."""
         if len(self.hist) == 0:
             return np.zeros((0, 4))
-        out = np.nanmedian(self.hist, axis=1)
+        filled = ~np.isnan(self.hist[:, :, 0])
+        n = filled.sum(axis=1)                                            # (N,) entries per window
+        rows = np.arange(len(self.hist))
+        s = np.sort(self.hist, axis=1)                                    # NaN sort last
+        # median: the middle entry (odd n) or the mean of the two middle ones (even n), as numpy's median
+        out = 0.5 * (s[rows, (n - 1) // 2] + s[rows, n // 2])
         if self.mean.any():
-            out[self.mean] = np.nanmean(self.hist[self.mean], axis=1)
+            total = np.where(filled[:, :, None], self.hist, 0.0).sum(axis=1)
+            out[self.mean] = (total / n[:, None])[self.mean]
         return out
 
     def select(self, index: np.ndarray) -> "GeometryWindow":
