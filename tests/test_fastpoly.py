@@ -119,3 +119,119 @@ def test_score_predict_update_and_average():
     assert h.select(np.array([1])).count.tolist() == [3]
     with pytest.raises(ValueError, match="unknown score update"):
         update_scores(pred, pred, "max")
+
+
+# ---- the pieces wired into the tracker ----------------------------------------------------------------------
+
+import copy  # noqa: E402
+
+import yaml  # noqa: E402
+
+from grutrack.classes import CLASS_INDEX  # noqa: E402
+from grutrack.data.scene import BoxSet  # noqa: E402
+from grutrack.errors import ConfigError  # noqa: E402
+from grutrack.tracking.config import PRESET_DIR, config_from_dict, load_tracker_config  # noqa: E402
+from grutrack.tracking.factory import build_tracker  # noqa: E402
+from grutrack.tracking.fastpoly import GeometryFilterBackend, gated_costs  # noqa: E402
+from grutrack.tracking.preprocess import preprocess_frame  # noqa: E402
+
+CAR, PED, BUS = CLASS_INDEX["car"], CLASS_INDEX["pedestrian"], CLASS_INDEX["bus"]
+
+
+def test_gated_costs_stage_one_gate_and_stage_two_rows_and_columns():
+    dets = np.stack([box(x=0.0), box(x=10.0), box(x=50.0), box(x=0.5)])
+    trks = np.stack([box(x=1.0), box(x=11.0), box(x=0.2)])
+    dl, tl = np.array([CAR, CAR, CAR, PED]), np.array([CAR, CAR, PED])
+    metric = ("a_giou_3d",) * 7
+    c1, c2 = gated_costs(dets, dl, trks, tl, metric, "a_giou_bev", np.full(7, 3.0))
+    # stage 1: only same-class pairs within 3 m
+    assert np.isfinite(c1).tolist() == [[True, False, False], [False, True, False], [False, False, False],
+                                        [False, False, True]]
+    np.testing.assert_allclose(c1[0, 0], 1.0 - a_giou_3d(dets[:1], trks[:1])[0, 0])
+    # stage 2: every same-class pair between gated-in detections (0, 1, 3) and tracks (0, 1, 2), 10 m apart or not
+    assert np.isfinite(c2).tolist() == [[True, True, False], [True, True, False], [False, False, False],
+                                        [False, False, True]]
+    np.testing.assert_allclose(c2[0, 1], 1.0 - a_giou_bev(dets[:1], trks[1:2])[0, 0])
+    # no gate: every same-class pair is scored in stage 1
+    c1, _ = gated_costs(dets, dl, trks, tl, metric, "a_giou_bev", np.zeros(7))
+    assert np.isfinite(c1).sum() == 7
+
+
+def test_geometry_filter_backend_takes_the_window_median():
+    cfg = load_tracker_config("fastpoly")
+    tracker = build_tracker("ekf", "fastpoly")
+    g = next(g for g in tracker.groups if g.classes[CAR])
+    assert isinstance(g.backend, GeometryFilterBackend)
+    be = g.backend
+    z0 = np.array([box(w=1.8, l=4.0, h=1.5, z=1.0)])
+    s = be.initiate(z0, np.array([CAR]))
+    for w, l, h, z in ((2.2, 4.4, 1.7, 1.2), (1.9, 5.0, 1.4, 0.7)):
+        s = be.predict(s, 0.5)
+        s = be.update(s, np.array([0]), np.array([box(w=w, l=l, h=h, z=z)]))
+    out = be.boxes(s)
+    # medians of (1.0, 1.2, 0.7), (1.8, 2.2, 1.9), (4.0, 4.4, 5.0), (1.5, 1.7, 1.4)
+    np.testing.assert_allclose(out[0, 2:6], [1.0, 1.9, 4.4, 1.5])
+    assert cfg.geometry_window[CAR] == 3 and cfg.geometry_filter[PED] == "mean"
+
+
+def test_preprocess_frame_scale_nms_order_and_score_filter():
+    cfg = load_tracker_config("fastpoly")
+    dets = BoxSet(np.stack([box(), box(x=0.1), box(x=30.0), box(x=60.0, w=2.5, l=10.0, h=3.0)]),
+                  np.array([0.5, 0.9, 0.15, 0.2]), np.array([CAR, CAR, CAR, BUS]))
+    kept = preprocess_frame(dets, cfg)
+    # car 2 (0.15) is below the car threshold 0.16; the bus (label 1) comes before the cars (label 2); car 0 is
+    # suppressed by car 1 (same class, 0.1 m apart)
+    assert kept.scores.tolist() == [0.2, 0.9]
+
+
+def test_fastpoly_score_update_and_average_score_termination():
+    tracker = build_tracker("ekf", "fastpoly")
+    car = BoxSet(np.array([box(z=1.0, w=1.8, l=4.5, h=1.6)]), np.array([0.5]), np.array([CAR]))
+    none = BoxSet(np.zeros((0, 9)), np.zeros(0), np.zeros(0, dtype=np.int64))
+    out = [tracker.step(car, 1_000_000), tracker.step(car, 1_500_000), tracker.step(none, 2_000_000)]
+    s1 = 1 - (1 - 0.5) * (1 - 0.5 * 0.52)          # multiply: 1 - (1 - s_det)(1 - s * decay)
+    assert [o.scores.tolist() for o in out] == [[0.5], [pytest.approx(s1)], [pytest.approx(s1 * 0.52)]]
+
+    # a pedestrian at 0.2 decays by 0.56 per missed frame; its mean score drops below 0.1 at the 5th frame
+    tracker = build_tracker("ekf", "fastpoly")
+    ped = BoxSet(np.array([box()]), np.array([0.2]), np.array([PED]))
+    tracker.step(ped, 0)
+    g = next(g for g in tracker.groups if g.classes[PED])
+    alive = []
+    for k in range(1, 6):
+        tracker.step(none, 500_000 * k)
+        alive.append(len(g))
+    scores = 0.2 * 0.56 ** np.arange(6)
+    assert (np.cumsum(scores) / np.arange(1, 7) >= 0.1).tolist()[1:] == [bool(a) for a in alive]
+    assert alive == [1, 1, 1, 0, 0]
+
+
+def test_fastpoly_preset_values_and_comments():
+    cfg = load_tracker_config("fastpoly")
+    assert cfg.nms_method == "scale" and cfg.score_update == "multiply" and cfg.termination == "average_score"
+    assert cfg.first_metric[BUS] == "a_giou_bev" and cfg.second_metric == "a_giou_bev"
+    assert cfg.distance_gate.tolist() == [3.0] * 7 and cfg.time_step == 0.5
+    text = (PRESET_DIR / "fastpoly.yaml").read_text().splitlines()
+    for i, line in enumerate(text):
+        s = line.strip()
+        if s and not s.startswith("#") and ":" in s and not s.endswith(":") and line.startswith("  "):
+            assert text[i - 1].strip().startswith("#"), f"key without a comment above it: {s}"
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda r: r["preprocessing"].__setitem__("nms_method", "soft"), "'preprocessing.nms_method' must be one of"),
+    (lambda r: r["preprocessing"]["nms_metric"].__setitem__("car", "giou_3d"),
+     "'preprocessing.nms_metric.car' must be one of"),
+    (lambda r: r["preprocessing"]["nms_scale"].__setitem__("car", 0), "must be a positive scale factor"),
+    (lambda r: r["association"]["distance_gate"].__setitem__("bus", -1), "'association.distance_gate.bus' must be"),
+    (lambda r: r["lifecycle"].__setitem__("termination", "score"), "'lifecycle.termination' must be one of"),
+    (lambda r: r["lifecycle"].__setitem__("score_update", "max"), "'lifecycle.score_update' must be one of"),
+    (lambda r: r["motion"]["geometry_filter"].__setitem__("truck", "mode"), "'motion.geometry_filter.truck' must be"),
+    (lambda r: r["motion"]["geometry_window"].__setitem__("truck", 0), "'motion.geometry_window.truck' must be"),
+    (lambda r: r["lifecycle"].pop("delete_threshold"), "missing key 'lifecycle.delete_threshold'"),
+])
+def test_bad_fastpoly_keys(mutate, message):
+    raw = copy.deepcopy(yaml.safe_load((PRESET_DIR / "fastpoly.yaml").read_text()))
+    mutate(raw)
+    with pytest.raises(ConfigError, match=message):
+        config_from_dict(raw, "preset.yaml")
