@@ -78,3 +78,19 @@ def test_box_for_box(nusc_mini, nusc_reference, preset, name):
     worst = max(diffs, key=diffs.get)
     assert diffs[worst] <= 1e-9, f"{worst}: {diffs[worst]}"
     assert math.isclose(summary["amota"], expected["amota"], abs_tol=1e-9)
+
+
+def test_compare_tracks_cli(nusc_root, nusc_reference, tmp_path, capsys):
+    from grutrack.cli import main
+
+    base = ["compare-tracks", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
+            "--reference", str(nusc_reference / "polymot_pointpillars_mini_val.json")]
+    assert main(base + ["--submission", str(nusc_reference / "polymot_pointpillars_mini_val.json")]) == 0
+    out = capsys.readouterr().out
+    assert "1095/1095 reference boxes paired" in out and out.strip().endswith("identical")
+    assert main(base + ["--submission", str(nusc_reference / "fastpoly_pointpillars_mini_val.json")]) == 1
+    assert capsys.readouterr().out.strip().endswith("different")
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"results": []}')
+    assert main(base + ["--submission", str(bad)]) == 2
+    assert f"{bad}: expected a JSON object with a 'results' object" in capsys.readouterr().err

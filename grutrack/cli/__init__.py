@@ -21,6 +21,7 @@ COMMANDS: tuple[str, ...] = (
     "grutrack.cli.submit",
     "grutrack.cli.report",
     "grutrack.cli.check",
+    "grutrack.cli.compare",
 )
 
 
