@@ -338,7 +338,9 @@ def gated_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.nda
     metres (``gate`` (C,), 0 = no gate for that class); other pairs cost ``invalid``.
     Stage 2: as Fast-Poly, the gate only selects rows and columns: every same-class pair between a detection
     that has a stage-1 candidate and a track that has one is scored with ``second_metric``, even when that
-    pair itself lies outside the gate.
+    pair itself lies outside the gate. (Fast-Poly selects those rows and columns with the largest radius of
+    any class; here each detection uses its own class's radius, the same when all radii are equal, as in its
+    default configuration.)
     """
     D, T = len(det_boxes), len(trk_boxes)
     c1, c2 = np.full((D, T), invalid), np.full((D, T), invalid)
