@@ -235,3 +235,16 @@ def test_bad_fastpoly_keys(mutate, message):
     mutate(raw)
     with pytest.raises(ConfigError, match=message):
         config_from_dict(raw, "preset.yaml")
+
+
+def test_aligned_extents_of_a_tilted_box_use_its_bottom_face():
+    b = np.stack([box(x=1.0, y=2.0, z=0.0, w=2.0, l=4.0, h=1.0, yaw=0.3)])
+    yaw_q = np.array([[np.cos(0.15), 0.0, 0.0, np.sin(0.15)]])
+    np.testing.assert_allclose(aligned_extents(b, 1.2, yaw_q), aligned_extents(b, 1.2), atol=1e-12)
+    # roll phi about +x (yaw 0): bottom corners at y = +-w/2 cos(phi) + h/2 sin(phi), x = +-l/2
+    phi = 0.2
+    flat = np.stack([box(w=2.0, l=4.0, h=1.0)])
+    roll_q = np.array([[np.cos(phi / 2), np.sin(phi / 2), 0.0, 0.0]])
+    shift = 0.5 * np.sin(phi)
+    np.testing.assert_allclose(aligned_extents(flat, 1.0, roll_q),
+                               [[-2.0, -np.cos(phi) + shift, 2.0, np.cos(phi) + shift]], atol=1e-12)

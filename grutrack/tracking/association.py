@@ -177,7 +177,7 @@ def gated_association(cfg):
         d_all = np.arange(len(dets.boxes), dtype=np.int64)
         t_all = np.arange(len(trk_boxes), dtype=np.int64)
         c1, c2 = gated_costs(dets.boxes, dets.labels, trk_boxes, trk_labels, cfg.first_metric, cfg.second_metric,
-                             cfg.distance_gate, invalid=_INVALID)
+                             cfg.distance_gate, invalid=_INVALID, det_quaternion=dets.extra.get("quaternion"))
         md, mt = solve(c1, cfg.first_threshold[dets.labels][:, None])
         if cfg.two_stage:
             ud, ut = np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt)

@@ -30,15 +30,36 @@ from grutrack.geometry import bev_corners, paired_bev_iou
 NMS_METRICS = ("a_giou_bev", "iou_bev")
 
 
-def aligned_extents(boxes: np.ndarray, scale: np.ndarray | float = 1.0) -> np.ndarray:
-    """Axis-aligned BEV extents of boxes whose footprint is scaled by ``scale`` about its centre.
+def aligned_extents(boxes: np.ndarray, scale: np.ndarray | float = 1.0,
+                    quaternion: np.ndarray | None = None) -> np.ndarray:
+    """Axis-aligned BEV extents of boxes whose size is scaled by ``scale`` about its centre.
 
     boxes (N, >=7); scale scalar or (N,) -> (N, 4) float64 ``[x_min, y_min, x_max, y_max]`` metres.
+    Without ``quaternion`` the footprint is the yaw-rotated w x l rectangle. With ``quaternion`` (N, 4)
+    ``[w, x, y, z]`` (a detection's own rotation, pitch and roll included) it is, as Fast-Poly's, the ground-plane
+    projection of the box's bottom face: ``c + R(q) [+-l/2, +-w/2, -h/2]`` with w, l, h scaled.
     """
-    scaled = np.array(boxes, dtype=np.float64, ndmin=2)[:, :7]
-    scaled[:, 3:5] *= np.broadcast_to(np.asarray(scale, dtype=np.float64), (len(boxes),))[:, None]
-    c = bev_corners(scaled)                                        # (N, 4, 2)
+    b = np.array(boxes, dtype=np.float64, ndmin=2)[:, :7]
+    k = np.broadcast_to(np.asarray(scale, dtype=np.float64), (len(b),))
+    if quaternion is None:
+        b[:, 3:5] *= k[:, None]
+        c = bev_corners(b)                                         # (N, 4, 2)
+    else:
+        R = rotation_matrices(quaternion)                          # (N, 3, 3)
+        local = np.stack([np.array([1, 1, -1, -1]) * (0.5 * k * b[:, 4])[:, None],
+                          np.array([-1, 1, 1, -1]) * (0.5 * k * b[:, 3])[:, None],
+                          np.broadcast_to((-0.5 * k * b[:, 5])[:, None], (len(b), 4))], axis=1)   # (N, 3, 4)
+        c = (np.einsum("nij,njk->nik", R[:, :2], local) + b[:, :2, None]).transpose(0, 2, 1)
     return np.concatenate([c.min(axis=1), c.max(axis=1)], axis=1)
+
+
+def rotation_matrices(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) of quaternions ``q (N, 4) [w, x, y, z]`` (normalised first)."""
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+                     np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+                     np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], axis=1)
 
 
 def _rect_area(e: np.ndarray) -> np.ndarray:
@@ -77,14 +98,14 @@ def pairwise_a_giou(ext_a: np.ndarray, ext_b: np.ndarray, z_h_a: np.ndarray | No
     return inter3 / union3 - (hull3 - union3) / hull3
 
 
-def a_giou_bev(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """BEV A-GIoU between boxes a (Na, 9) and b (Nb, 9) -> (Na, Nb)."""
-    return pairwise_a_giou(aligned_extents(a), aligned_extents(b))
+def a_giou_bev(a: np.ndarray, b: np.ndarray, qa: np.ndarray | None = None) -> np.ndarray:
+    """BEV A-GIoU between boxes a (Na, 9) and b (Nb, 9) -> (Na, Nb); ``qa`` (Na, 4): a's own quaternions."""
+    return pairwise_a_giou(aligned_extents(a, quaternion=qa), aligned_extents(b))
 
 
-def a_giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """3D A-GIoU between boxes a (Na, 9) and b (Nb, 9) -> (Na, Nb)."""
-    return pairwise_a_giou(aligned_extents(a), aligned_extents(b), a[:, [2, 5]], b[:, [2, 5]])
+def a_giou_3d(a: np.ndarray, b: np.ndarray, qa: np.ndarray | None = None) -> np.ndarray:
+    """3D A-GIoU between boxes a (Na, 9) and b (Nb, 9) -> (Na, Nb); ``qa`` (Na, 4): a's own quaternions."""
+    return pairwise_a_giou(aligned_extents(a, quaternion=qa), aligned_extents(b), a[:, [2, 5]], b[:, [2, 5]])
 
 
 def distance_mask(a: np.ndarray, b: np.ndarray, radius: np.ndarray | float) -> np.ndarray:
@@ -97,7 +118,8 @@ def distance_mask(a: np.ndarray, b: np.ndarray, radius: np.ndarray | float) -> n
 
 
 def scale_nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, metric: tuple[str, ...],
-                   threshold: np.ndarray, scale: np.ndarray, radius: np.ndarray) -> np.ndarray:
+                   threshold: np.ndarray, scale: np.ndarray, radius: np.ndarray,
+                   quaternion: np.ndarray | None = None) -> np.ndarray:
     """Fast-Poly's scale NMS; returns the kept indices (K,) int64, class by class (label 0 first), each class in
     descending score order.
 
@@ -109,7 +131,9 @@ def scale_nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, me
     rectangles) or ``iou_bev`` (rotated BEV IoU of the enlarged footprints). Boxes of different classes never
     suppress each other.
 
-    boxes (N, 9), scores (N,), labels (N,) int; metric: name per class (7,); threshold, scale, radius (7,).
+    boxes (N, 9), scores (N,), labels (N,) int; metric: name per class (7,); threshold, scale, radius (7,);
+    quaternion: optional (N, 4) own rotations of the boxes, for the A-GIoU footprints (:func:`aligned_extents`;
+    the rotated IoU always uses the yaw-only footprint).
     """
     keep = []
     for c in range(len(metric)):
@@ -118,7 +142,8 @@ def scale_nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, me
             continue
         order = idx[np.argsort(-scores[idx])]
         b = boxes[order]
-        over = _suppression_matrix(b, metric[c], threshold[c], scale[c], radius[c])
+        q = None if quaternion is None else quaternion[order]
+        over = _suppression_matrix(b, metric[c], threshold[c], scale[c], radius[c], q)
         removed = np.zeros(len(order), dtype=bool)
         for i in range(len(order)):
             if removed[i]:
@@ -128,11 +153,12 @@ def scale_nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, me
     return np.asarray(keep, dtype=np.int64)
 
 
-def _suppression_matrix(b: np.ndarray, metric: str, threshold: float, scale: float, radius: float) -> np.ndarray:
+def _suppression_matrix(b: np.ndarray, metric: str, threshold: float, scale: float, radius: float,
+                        quaternion: np.ndarray | None = None) -> np.ndarray:
     """(N, N) bool: box i would suppress box j (centres within ``radius``, similarity above ``threshold``)."""
     near = distance_mask(b, b, radius)
     if metric == "a_giou_bev":
-        e = aligned_extents(b, scale)
+        e = aligned_extents(b, scale, quaternion)
         return near & (pairwise_a_giou(e, e) > threshold)
     if metric == "iou_bev":
         i, j = np.nonzero(np.triu(near, k=1))
@@ -316,14 +342,15 @@ class GeometryFilterBackend:
 DENSE_METRICS = ("a_giou_3d", "a_giou_bev", "giou_3d", "giou_bev", "iou_3d", "iou_bev")
 
 
-def _similarity(name: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(Na, Nb) similarity ``name`` between boxes a (Na, 9) and b (Nb, 9)."""
+def _similarity(name: str, a: np.ndarray, b: np.ndarray, qa: np.ndarray | None = None) -> np.ndarray:
+    """(Na, Nb) similarity ``name`` between boxes a (Na, 9) and b (Nb, 9); ``qa`` (Na, 4) a's own quaternions
+    (A-GIoU footprints only)."""
     from grutrack import geometry
 
     if name == "a_giou_3d":
-        return a_giou_3d(a, b)
+        return a_giou_3d(a, b, qa)
     if name == "a_giou_bev":
-        return a_giou_bev(a, b)
+        return a_giou_bev(a, b, qa)
     fn = {"giou_3d": geometry.pairwise_giou_3d, "giou_bev": geometry.pairwise_bev_giou,
           "iou_3d": geometry.pairwise_iou_3d, "iou_bev": geometry.pairwise_bev_iou}[name]
     return fn(a, b)
@@ -331,7 +358,7 @@ def _similarity(name: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def gated_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray, trk_labels: np.ndarray,
                 first_metric: tuple[str, ...], second_metric: str, gate: np.ndarray,
-                invalid: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+                invalid: float = np.inf, det_quaternion: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Stage-1 and stage-2 cost matrices (D, T) with Fast-Poly's distance gate; cost = 1 - similarity.
 
     Stage 1: a pair is scored when its classes agree and its 3D centre distance is below ``gate[class]``
@@ -340,7 +367,8 @@ def gated_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.nda
     that has a stage-1 candidate and a track that has one is scored with ``second_metric``, even when that
     pair itself lies outside the gate. (Fast-Poly selects those rows and columns with the largest radius of
     any class; here each detection uses its own class's radius, the same when all radii are equal, as in its
-    default configuration.)
+    default configuration.) ``det_quaternion`` (D, 4): the detections' own rotations, for their A-GIoU
+    footprints (tracks are yaw-only boxes).
     """
     D, T = len(det_boxes), len(trk_boxes)
     c1, c2 = np.full((D, T), invalid), np.full((D, T), invalid)
@@ -353,7 +381,8 @@ def gated_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.nda
     a, b = det_boxes[rows], trk_boxes[cols]
     sub = np.ix_(rows, cols)
     names = {first_metric[c] for c in np.unique(det_labels[rows])} | {second_metric}
-    sims = {n: _similarity(n, a, b) for n in sorted(names)}
+    qa = None if det_quaternion is None else det_quaternion[rows]
+    sims = {n: _similarity(n, a, b, qa) for n in sorted(names)}
     first = np.full((len(rows), len(cols)), -np.inf)
     for c in np.unique(det_labels[rows]):
         r = det_labels[rows] == c

@@ -76,4 +76,4 @@ def preprocess_frame(dets: BoxSet, cfg) -> BoxSet:
     thr = np.full(len(cfg.score_threshold), cfg.nms_threshold)
     gate = np.where(cfg.nms_distance_gate > 0, cfg.nms_distance_gate, np.inf)
     return dets.subset(scale_nms_keep(dets.boxes, dets.scores, dets.labels, cfg.nms_metric, thr, cfg.nms_scale,
-                                      gate))
+                                      gate, dets.extra.get("quaternion")))
