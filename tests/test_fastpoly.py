@@ -248,3 +248,14 @@ def test_aligned_extents_of_a_tilted_box_use_its_bottom_face():
     shift = 0.5 * np.sin(phi)
     np.testing.assert_allclose(aligned_extents(flat, 1.0, roll_q),
                                [[-2.0, -np.cos(phi) + shift, 2.0, np.cos(phi) + shift]], atol=1e-12)
+
+
+def test_score_filter_above_drops_scores_equal_to_the_threshold():
+    from grutrack.tracking.preprocess import score_filter
+
+    dets = BoxSet(np.stack([box(), box(x=10.0), box(x=20.0)]), np.array([0.0, 0.16, 0.17]),
+                  np.array([CLASS_INDEX["truck"], CAR, CAR]))
+    thr = load_tracker_config("fastpoly").score_threshold      # truck 0.0, car 0.16
+    assert score_filter(dets, thr).scores.tolist() == [0.0, 0.16, 0.17]
+    assert score_filter(dets, thr, strict=True).scores.tolist() == [0.17]
+    assert preprocess_frame(dets, load_tracker_config("fastpoly")).scores.tolist() == [0.17]

@@ -19,6 +19,7 @@ from grutrack.errors import ConfigError
 PRESET_DIR = Path(__file__).resolve().parents[1] / "configs" / "trackers"
 METRICS = ("giou_3d", "giou_bev", "iou_3d", "iou_bev", "a_giou_3d", "a_giou_bev")
 NMS_METHODS = ("blend", "scale")
+SCORE_FILTERS = ("at_least", "above")
 NMS_METRICS = ("iou_bev", "a_giou_bev")
 SCORE_UPDATES = ("detection", "multiply")
 TERMINATIONS = ("age", "average_score")
@@ -36,7 +37,7 @@ MEASURED_YAWS = ("euler_z", "rotation_angle")
 # schema: section -> key -> kind; "per_class_float" etc. are maps over the 7 tracking classes
 SCHEMA: dict[str, dict[str, str]] = {
     "preprocessing": {"score_threshold": "per_class_unit", "nms_threshold": "unit", "nms_class_aware": "bool",
-                      "measured_yaw": "measured_yaw", "nms_method": "nms_method",
+                      "measured_yaw": "measured_yaw", "score_filter": "score_filter", "nms_method": "nms_method",
                       "nms_metric": "per_class_nms_metric", "nms_scale": "per_class_scale",
                       "nms_distance_gate": "per_class_gate"},
     "association": {"algorithm": "algorithm", "assignment": "assignment", "first_metric": "per_class_metric",
@@ -53,7 +54,7 @@ SCHEMA: dict[str, dict[str, str]] = {
 }
 
 
-_CHOICES = {"metric": METRICS, "nms_method": NMS_METHODS, "nms_metric": NMS_METRICS, "score_update": SCORE_UPDATES,
+_CHOICES = {"metric": METRICS, "score_filter": SCORE_FILTERS, "nms_method": NMS_METHODS, "nms_metric": NMS_METRICS, "score_update": SCORE_UPDATES,
             "termination": TERMINATIONS, "geometry_filter": GEOMETRY_FILTERS}
 _NAMED_PER_CLASS = ("per_class_metric", "per_class_nms_metric", "per_class_geometry_filter")
 
@@ -89,6 +90,7 @@ class TrackerConfig:
     max_boxes_per_sample: int
     raw: dict
     # Fast-Poly options (defaults: the Poly-MOT pipeline)
+    score_filter: str = "at_least"
     nms_method: str = "blend"
     nms_metric: tuple[str, ...] = ("iou_bev",) * 7
     nms_scale: np.ndarray = field(default_factory=lambda: np.ones(7))
@@ -150,7 +152,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         yaw_flip=v["motion.yaw_flip"], time_step=v["motion.time_step"], ctra_form=v["motion.ctra_form"],
         bicycle_form=v["motion.bicycle_form"], matched_box=v["output.matched_box"],
         max_boxes_per_sample=v["output.max_boxes_per_sample"], raw=raw,
-        nms_method=v["preprocessing.nms_method"], nms_metric=v["preprocessing.nms_metric"],
+        score_filter=v["preprocessing.score_filter"], nms_method=v["preprocessing.nms_method"], nms_metric=v["preprocessing.nms_metric"],
         nms_scale=v["preprocessing.nms_scale"], nms_distance_gate=v["preprocessing.nms_distance_gate"],
         distance_gate=v["association.distance_gate"], score_update=v["lifecycle.score_update"],
         termination=v["lifecycle.termination"], delete_threshold=v["lifecycle.delete_threshold"],

@@ -364,18 +364,19 @@ def gated_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.nda
     Stage 1: a pair is scored when its classes agree and its 3D centre distance is below ``gate[class]``
     metres (``gate`` (C,), 0 = no gate for that class); other pairs cost ``invalid``.
     Stage 2: as Fast-Poly, the gate only selects rows and columns: every same-class pair between a detection
-    that has a stage-1 candidate and a track that has one is scored with ``second_metric``, even when that
-    pair itself lies outside the gate. (Fast-Poly selects those rows and columns with the largest radius of
-    any class; here each detection uses its own class's radius, the same when all radii are equal, as in its
-    default configuration.) ``det_quaternion`` (D, 4): the detections' own rotations, for their A-GIoU
+    and a track that each have a same-class partner closer than the largest gate radius is scored with
+    ``second_metric``, even when that pair itself lies outside the gate (Fast-Poly's rows and columns come
+    from the union of its per-class distance masks). ``det_quaternion`` (D, 4): the detections' own rotations, for their A-GIoU
     footprints (tracks are yaw-only boxes).
     """
     D, T = len(det_boxes), len(trk_boxes)
     c1, c2 = np.full((D, T), invalid), np.full((D, T), invalid)
     same = det_labels[:, None] == trk_labels[None, :]
-    radius = np.where(gate > 0, gate, np.inf)[det_labels][:, None]
-    valid = same & distance_mask(det_boxes, trk_boxes, radius) if D and T else same
-    rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
+    radii = np.where(gate > 0, gate, np.inf)
+    dist = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2)
+    valid = same & (dist < radii[det_labels][:, None])                 # stage-1 pairs
+    near = same & (dist < radii.max())                                 # Fast-Poly's union of the class masks
+    rows, cols = np.flatnonzero(near.any(axis=1)), np.flatnonzero(near.any(axis=0))
     if len(rows) == 0:
         return c1, c2
     a, b = det_boxes[rows], trk_boxes[cols]
