@@ -16,9 +16,8 @@ from threadpoolctl import threadpool_limits
 
 from grutrack.boxes import empty_boxes
 from grutrack.data.scene import BoxSet, Scene
-from grutrack.tracking.association import Matches, associate
+from grutrack.tracking.association import Matches, associate, gated_association, gated_association_needed
 from grutrack.tracking.config import TrackerConfig
-from grutrack.tracking.association import gated_association, gated_association_needed
 from grutrack.tracking.fastpoly import update_scores
 from grutrack.tracking.preprocess import preprocess_frame
 
@@ -182,7 +181,7 @@ class Tracker:
             g.hits[rows] += 1
             alive = g.misses < self.cfg.max_age[g.labels]
             if self.cfg.termination == "average_score":
-                # Fast-Poly: the mean of the per-frame scores since birth, this frame included
+                # Fast-Poly: dead when mean_t(s_t) = sum_t s_t / n < delete_threshold (t: birth .. this frame)
                 g.score_total = g.score_total + g.scores
                 g.score_count = g.score_count + 1
                 alive &= g.score_total / g.score_count >= self.cfg.delete_threshold[g.labels]
