@@ -76,7 +76,8 @@ def _sample_boxes(path: Path, token: str, boxes: list, yaw_of) -> BoxSet:
     arr = arr[keep]
     yaw = yaw_of(arr[:, 6:10])
     out = np.column_stack([arr[:, 0:6], yaw, arr[:, 10:12]])
-    return BoxSet(out, arr[:, 12], labels)
+    # the file's unit quaternion [w, x, y, z], pitch and roll included (Fast-Poly's footprints use the whole rotation)
+    return BoxSet(out, arr[:, 12], labels, extra={"quaternion": arr[:, 6:10]})
 
 
 def _check_values(path: Path, token: str, names: list[str], arr: np.ndarray) -> None:

@@ -258,7 +258,8 @@ class Bicycle(MotionModel):
 
     Differences from Poly-MOT's BICYCLE: Poly-MOT drops the acceleration (a' = 0, v' = v) once |beta| > 0.001 and
     switches to a straight line below it; here the same arc formula holds for every beta (continuous at beta = 0)
-    and the Jacobians include the l and delta derivatives that Poly-MOT leaves out.
+    and the Jacobians include the l and delta derivatives that Poly-MOT leaves out. :class:`BicyclePiecewise` is
+    Poly-MOT's form.
     """
 
     name = "Bicycle"

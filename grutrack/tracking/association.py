@@ -192,10 +192,39 @@ def associate(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarr
     if two_stage:
         stages.append(((second_metric,) * len(first_metric), second_threshold))
     costs = _candidate_costs(det_boxes, det_labels, trk_boxes, trk_labels, stages)
+    return _solve_stages(solve, costs, det_labels, first_threshold, second_threshold)
+
+
+def _solve_stages(solve, costs: list[np.ndarray], det_labels: np.ndarray, first_threshold: np.ndarray,
+                  second_threshold: np.ndarray) -> Matches:
+    """Assign on ``costs[0] (D, T)`` with the per-class ``first_threshold``, then (when a second cost
+    matrix is given) on ``costs[1]`` restricted to what stage 1 left, with ``second_threshold``."""
+    n_det, n_trk = costs[0].shape
     md, mt = solve(costs[0], first_threshold[det_labels][:, None])
-    if two_stage:
-        ud, ut = _unmatched(len(det_boxes), md), _unmatched(len(trk_boxes), mt)
+    if len(costs) > 1:
+        ud, ut = _unmatched(n_det, md), _unmatched(n_trk, mt)
         if len(ud) and len(ut):
             r, c = solve(costs[1][np.ix_(ud, ut)], second_threshold[det_labels[ud]][:, None])
             md, mt = np.concatenate([md, ud[r]]), np.concatenate([mt, ut[c]])
-    return Matches(md, mt, _unmatched(len(det_boxes), md), _unmatched(len(trk_boxes), mt))
+    return Matches(md, mt, _unmatched(n_det, md), _unmatched(n_trk, mt))
+
+
+def gated_association_needed(cfg) -> bool:
+    """Whether a preset needs :func:`gated_association` (alignment-GIoU metrics or a distance gate)."""
+    metrics = set(cfg.first_metric) | {cfg.second_metric}
+    return bool(np.any(cfg.distance_gate > 0)) or any(m.startswith("a_") for m in metrics)
+
+
+def gated_association(cfg):
+    """Two-stage association on dense costs with Fast-Poly's distance gate and A-GIoU metrics
+    (:func:`grutrack.tracking.fastpoly.gated_costs`); thresholds and assignment rule as :func:`associate`."""
+    from grutrack.tracking.fastpoly import gated_costs
+
+    solve = ASSIGNMENT[cfg.assignment]
+
+    def run(dets, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
+        c1, c2 = gated_costs(dets.boxes, dets.labels, trk_boxes, trk_labels, cfg.first_metric, cfg.second_metric,
+                             cfg.distance_gate, invalid=_INVALID, det_quaternion=dets.extra.get("quaternion"))
+        return _solve_stages(solve, [c1, c2] if cfg.two_stage else [c1], dets.labels, cfg.first_threshold,
+                             cfg.second_threshold)
+    return run

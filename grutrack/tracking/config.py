@@ -6,7 +6,7 @@ per-class maps must list all 7 tracking classes: a misspelt key fails with the f
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +17,13 @@ from grutrack.classes import TRACKING_CLASSES
 from grutrack.errors import ConfigError
 
 PRESET_DIR = Path(__file__).resolve().parents[1] / "configs" / "trackers"
-METRICS = ("giou_3d", "giou_bev", "iou_3d", "iou_bev")
+METRICS = ("giou_3d", "giou_bev", "iou_3d", "iou_bev", "a_giou_3d", "a_giou_bev")
+NMS_METHODS = ("blend", "scale")
+SCORE_FILTERS = ("at_least", "above")
+NMS_METRICS = ("iou_bev", "a_giou_bev")
+SCORE_UPDATES = ("detection", "multiply")
+TERMINATIONS = ("age", "average_score")
+GEOMETRY_FILTERS = ("none", "median", "mean")
 MOTION_MODELS = ("CTRA", "BICYCLE", "CA", "CV")
 ALGORITHMS = ("hungarian", "greedy")
 #: association.assignment: which assignment the Hungarian stages solve (see grutrack/tracking/association.py)
@@ -31,16 +37,26 @@ MEASURED_YAWS = ("euler_z", "rotation_angle")
 # schema: section -> key -> kind; "per_class_float" etc. are maps over the 7 tracking classes
 SCHEMA: dict[str, dict[str, str]] = {
     "preprocessing": {"score_threshold": "per_class_unit", "nms_threshold": "unit", "nms_class_aware": "bool",
-                      "measured_yaw": "measured_yaw"},
+                      "measured_yaw": "measured_yaw", "score_filter": "score_filter", "nms_method": "nms_method",
+                      "nms_metric": "per_class_nms_metric", "nms_scale": "per_class_scale",
+                      "nms_distance_gate": "per_class_gate"},
     "association": {"algorithm": "algorithm", "assignment": "assignment", "first_metric": "per_class_metric",
                     "first_threshold": "per_class_cost", "two_stage": "bool", "second_metric": "metric",
-                    "second_threshold": "per_class_cost", "max_distance": "per_class_metres"},
+                    "second_threshold": "per_class_cost", "max_distance": "per_class_metres",
+                    "distance_gate": "per_class_gate"},
     "lifecycle": {"max_age": "per_class_posint", "min_hits": "per_class_posint", "decay_rate": "per_class_unit",
-                  "punish_num": "nonnegint"},
+                  "punish_num": "nonnegint", "score_update": "score_update", "termination": "termination",
+                  "delete_threshold": "per_class_unit"},
     "motion": {"config": "str", "model_override": "class_model_map", "yaw_flip": "bool", "time_step": "time_step",
-               "ctra_form": "model_form", "bicycle_form": "model_form"},
+               "ctra_form": "model_form", "bicycle_form": "model_form",
+               "geometry_filter": "per_class_geometry_filter", "geometry_window": "per_class_posint"},
     "output": {"matched_box": "matched_box", "max_boxes_per_sample": "posint"},
 }
+
+
+_CHOICES = {"metric": METRICS, "score_filter": SCORE_FILTERS, "nms_method": NMS_METHODS, "nms_metric": NMS_METRICS, "score_update": SCORE_UPDATES,
+            "termination": TERMINATIONS, "geometry_filter": GEOMETRY_FILTERS}
+_NAMED_PER_CLASS = ("per_class_metric", "per_class_nms_metric", "per_class_geometry_filter")
 
 
 @dataclass(frozen=True)
@@ -73,6 +89,18 @@ class TrackerConfig:
     matched_box: str
     max_boxes_per_sample: int
     raw: dict
+    # Fast-Poly options (defaults: the Poly-MOT pipeline)
+    score_filter: str = "at_least"
+    nms_method: str = "blend"
+    nms_metric: tuple[str, ...] = ("iou_bev",) * 7
+    nms_scale: np.ndarray = field(default_factory=lambda: np.ones(7))
+    nms_distance_gate: np.ndarray = field(default_factory=lambda: np.zeros(7))
+    distance_gate: np.ndarray = field(default_factory=lambda: np.zeros(7))
+    score_update: str = "detection"
+    termination: str = "age"
+    delete_threshold: np.ndarray = field(default_factory=lambda: np.zeros(7))
+    geometry_filter: tuple[str, ...] = ("none",) * 7
+    geometry_window: np.ndarray = field(default_factory=lambda: np.ones(7, dtype=np.int64))
 
 
 def preset_path(name_or_path: str | Path) -> Path:
@@ -123,7 +151,12 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         motion_config=v["motion.config"], model_override=v["motion.model_override"],
         yaw_flip=v["motion.yaw_flip"], time_step=v["motion.time_step"], ctra_form=v["motion.ctra_form"],
         bicycle_form=v["motion.bicycle_form"], matched_box=v["output.matched_box"],
-        max_boxes_per_sample=v["output.max_boxes_per_sample"], raw=raw)
+        max_boxes_per_sample=v["output.max_boxes_per_sample"], raw=raw,
+        score_filter=v["preprocessing.score_filter"], nms_method=v["preprocessing.nms_method"], nms_metric=v["preprocessing.nms_metric"],
+        nms_scale=v["preprocessing.nms_scale"], nms_distance_gate=v["preprocessing.nms_distance_gate"],
+        distance_gate=v["association.distance_gate"], score_update=v["lifecycle.score_update"],
+        termination=v["lifecycle.termination"], delete_threshold=v["lifecycle.delete_threshold"],
+        geometry_filter=v["motion.geometry_filter"], geometry_window=v["motion.geometry_window"])
 
 
 def _check_keys(source: str, prefix: str, given: dict, expected: dict) -> None:
@@ -151,7 +184,7 @@ def _value(source: str, key: str, val: Any, kind: str) -> Any:
             fail(f"a mapping over the tracking classes {', '.join(TRACKING_CLASSES)}")
         _check_keys(source, f"{key}.", val, {c: None for c in TRACKING_CLASSES})
         items = [_value(source, f"{key}.{c}", val[c], kind[len("per_class_"):]) for c in TRACKING_CLASSES]
-        return tuple(items) if kind == "per_class_metric" else np.asarray(items)
+        return tuple(items) if kind in _NAMED_PER_CLASS else np.asarray(items)
     if kind == "class_model_map":
         if not isinstance(val, dict):
             fail("a mapping {class: model}")
@@ -168,8 +201,8 @@ def _value(source: str, key: str, val: Any, kind: str) -> Any:
         return val if isinstance(val, str) and val else fail("a non-empty string")
     if kind == "matched_box":
         return val if val in ("filter", "detection") else fail("'filter' or 'detection'")
-    if kind == "metric":
-        return val if val in METRICS else fail(f"one of {', '.join(METRICS)}")
+    if kind in _CHOICES:
+        return val if val in _CHOICES[kind] else fail(f"one of {', '.join(_CHOICES[kind])}")
     if kind == "algorithm":
         return val if val in ALGORITHMS else fail(f"one of {', '.join(ALGORITHMS)}")
     if kind == "assignment":
@@ -188,6 +221,10 @@ def _value(source: str, key: str, val: Any, kind: str) -> Any:
         fail("a number")
     if kind == "unit":
         return float(val) if 0 <= val <= 1 else fail("a number in [0, 1]")
+    if kind == "scale":
+        return float(val) if val > 0 else fail("a positive scale factor")
+    if kind == "gate":
+        return float(val) if val >= 0 else fail("a distance in metres >= 0 (0: no gate)")
     if kind == "metres":
         return float(val) if val > 0 else fail("a positive distance in metres")
     if kind == "cost":

@@ -89,7 +89,11 @@ def remap_config(cfg: TrackerConfig, index: np.ndarray) -> TrackerConfig:
                    first_metric=tuple(cfg.first_metric[i] for i in index),
                    first_threshold=cfg.first_threshold[index], second_threshold=cfg.second_threshold[index],
                    max_distance=cfg.max_distance[index], max_age=cfg.max_age[index], min_hits=cfg.min_hits[index],
-                   decay_rate=cfg.decay_rate[index])
+                   decay_rate=cfg.decay_rate[index], nms_metric=tuple(cfg.nms_metric[i] for i in index),
+                   nms_scale=cfg.nms_scale[index], nms_distance_gate=cfg.nms_distance_gate[index],
+                   distance_gate=cfg.distance_gate[index], delete_threshold=cfg.delete_threshold[index],
+                   geometry_filter=tuple(cfg.geometry_filter[i] for i in index),
+                   geometry_window=cfg.geometry_window[index])
 
 
 def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None, backend_cls=None) -> list[TrackGroup]:
@@ -119,5 +123,19 @@ def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None, backend_cls=
             tables[key] = np.stack([motion[TRACKING_CLASSES[c]][key] if members[i] else np.zeros((d, d))
                                     for i, c in enumerate(index)])
         backend = (backend_cls or KalmanBackend)(model, tables["Q"], tables["R"], tables["P0"], yaw_flip=cfg.yaw_flip)
+        backend = with_geometry_filter(backend, cfg)
         groups.append(TrackGroup(backend, members))
     return groups
+
+
+def with_geometry_filter(backend, cfg: TrackerConfig):
+    """``backend`` wrapped in Fast-Poly's decoupled geometry when the preset asks for it for some label
+    (``motion.geometry_filter`` not ``none``), else ``backend`` itself. Per-label tables come from ``cfg``
+    (already re-indexed by dataset label)."""
+    use = np.array([f != "none" for f in cfg.geometry_filter])
+    if not use.any():
+        return backend
+    from grutrack.tracking.fastpoly import GeometryFilterBackend
+
+    window = np.where(use, cfg.geometry_window, 0)
+    return GeometryFilterBackend(backend, window, np.array([f == "mean" for f in cfg.geometry_filter]))

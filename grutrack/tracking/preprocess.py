@@ -7,14 +7,16 @@ from numba import njit
 
 from grutrack import geometry
 from grutrack.data.scene import BoxSet
+from grutrack.tracking.fastpoly import scale_nms_keep
 
 
-def score_filter(dets: BoxSet, thresholds: np.ndarray) -> BoxSet:
-    """Keep detections whose score is at least the threshold of their class.
+def score_filter(dets: BoxSet, thresholds: np.ndarray, strict: bool = False) -> BoxSet:
+    """Keep detections whose score is at least (``strict``: above) the threshold of their class.
 
     thresholds: (7,) float64 indexed by tracking-class label.
     """
-    return dets.subset(dets.scores >= thresholds[dets.labels])
+    thr = thresholds[dets.labels]
+    return dets.subset(dets.scores > thr if strict else dets.scores >= thr)
 
 
 @njit(cache=True)
@@ -72,3 +74,17 @@ def preprocess(dets: BoxSet, score_threshold: np.ndarray, nms_threshold: float,
     """Score filter followed by NMS; returns the surviving detections in their original order."""
     dets = score_filter(dets, score_threshold)
     return dets.subset(nms_keep(dets.boxes, dets.scores, dets.labels, nms_threshold, nms_class_aware))
+
+
+def preprocess_frame(dets: BoxSet, cfg) -> BoxSet:
+    """Pre-processing of one frame as a tracker preset (:class:`TrackerConfig`) asks: score filter (score at
+    least or above the class threshold, ``preprocessing.score_filter``), then blend
+    NMS (:func:`nms_keep`, original order kept) or Fast-Poly's scale NMS (:func:`scale_nms_keep`; the
+    survivors come class by class, each class by descending score, as Fast-Poly orders them)."""
+    dets = score_filter(dets, cfg.score_threshold, strict=cfg.score_filter == "above")
+    if cfg.nms_method == "blend":
+        return dets.subset(nms_keep(dets.boxes, dets.scores, dets.labels, cfg.nms_threshold, cfg.nms_class_aware))
+    thr = np.full(len(cfg.score_threshold), cfg.nms_threshold)
+    gate = np.where(cfg.nms_distance_gate > 0, cfg.nms_distance_gate, np.inf)
+    return dets.subset(scale_nms_keep(dets.boxes, dets.scores, dets.labels, cfg.nms_metric, thr, cfg.nms_scale,
+                                      gate, dets.extra.get("quaternion")))

@@ -16,9 +16,10 @@ from threadpoolctl import threadpool_limits
 
 from grutrack.boxes import empty_boxes
 from grutrack.data.scene import BoxSet, Scene
-from grutrack.tracking.association import Matches, associate
+from grutrack.tracking.association import Matches, associate, gated_association, gated_association_needed
 from grutrack.tracking.config import TrackerConfig
-from grutrack.tracking.preprocess import preprocess
+from grutrack.tracking.fastpoly import update_scores
+from grutrack.tracking.preprocess import preprocess_frame
 
 
 class MotionBackend(Protocol):
@@ -55,6 +56,9 @@ class TrackGroup:
     scores: np.ndarray = field(default_factory=lambda: np.zeros(0))
     misses: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # time since update
     hits: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    #: sum and number of the per-frame scores since birth (the average-score termination rule)
+    score_total: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    score_count: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -66,6 +70,7 @@ class TrackGroup:
         self.state = self.backend.select(self.state, mask) if len(self.ids) else self.state
         self.ids, self.labels, self.scores = self.ids[mask], self.labels[mask], self.scores[mask]
         self.misses, self.hits = self.misses[mask], self.hits[mask]
+        self.score_total, self.score_count = self.score_total[mask], self.score_count[mask]
 
     def add(self, z: np.ndarray, labels: np.ndarray, scores: np.ndarray, ids: np.ndarray) -> None:
         """Start tracks from detections ``z (N, 9)``."""
@@ -76,6 +81,8 @@ class TrackGroup:
         self.scores = np.concatenate([self.scores, scores])
         self.misses = np.concatenate([self.misses, np.zeros(len(ids), dtype=np.int64)])
         self.hits = np.concatenate([self.hits, np.ones(len(ids), dtype=np.int64)])
+        self.score_total = np.concatenate([self.score_total, scores])
+        self.score_count = np.concatenate([self.score_count, np.ones(len(ids), dtype=np.int64)])
 
 
 #: association of one frame: (detections after pre-processing, predicted track boxes (T, 9), track labels (T,),
@@ -85,6 +92,9 @@ AssociateFn = Callable[[BoxSet, np.ndarray, np.ndarray, float], Matches]
 
 def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
     """The default association: per-class similarity, Hungarian, optional second stage (DESIGN section 1)."""
+    if gated_association_needed(cfg):
+        return gated_association(cfg)
+
     def run(dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
         return associate(dets.boxes, dets.labels, trk_boxes, trk_labels, cfg.first_metric, cfg.first_threshold,
                          cfg.two_stage, cfg.second_metric, cfg.second_threshold, cfg.assignment)
@@ -136,7 +146,7 @@ class Tracker:
         self.frame_count += 1
         self._predict(dt)
         cfg = self.cfg
-        dets = preprocess(dets, cfg.score_threshold, cfg.nms_threshold, cfg.nms_class_aware)
+        dets = preprocess_frame(dets, cfg)
         trk_boxes = np.concatenate([g.backend.boxes(g.state) if len(g) else empty_boxes() for g in self.groups])
         trk_labels = np.concatenate([g.labels for g in self.groups])
         m = self.associate(dets, trk_boxes, trk_labels, dt)
@@ -166,11 +176,15 @@ class Tracker:
                 self.update_hook(g, rows, drows)
             matched = np.zeros(n, dtype=bool)
             matched[rows] = True
-            g.scores[rows] = dets.scores[drows]
+            self._update_scores(g, rows, dets.scores[drows], matched)
             g.misses[rows] = 0
             g.hits[rows] += 1
-            g.scores[~matched] *= self.cfg.decay_rate[g.labels[~matched]]
             alive = g.misses < self.cfg.max_age[g.labels]
+            if self.cfg.termination == "average_score":
+                # Fast-Poly: dead when mean_t(s_t) = sum_t s_t / n < delete_threshold (t: birth .. this frame)
+                g.score_total = g.score_total + g.scores
+                g.score_count = g.score_count + 1
+                alive &= g.score_total / g.score_count >= self.cfg.delete_threshold[g.labels]
             emit = alive & (matched | (g.misses <= self.cfg.punish_num)) & self._confirmed(g.hits, g.labels)
             boxes = g.backend.boxes(g.state)
             if self.cfg.matched_box == "detection" and len(rows):
@@ -178,6 +192,19 @@ class Tracker:
             out.append(BoxSet(boxes[emit], g.scores[emit], g.labels[emit], g.ids[emit]))
             g.keep(alive)
         return out
+
+    def _update_scores(self, g: TrackGroup, rows: np.ndarray, det_scores: np.ndarray, matched: np.ndarray) -> None:
+        """Scores of group ``g`` after this frame: unmatched tracks decay, ``s <- s * decay_rate``; matched
+        tracks ``rows (K,)`` take the detection's score (``detection``) or ``1 - (1 - s_det)(1 - s * decay_rate)``
+        (``multiply``, Fast-Poly)."""
+        decay = self.cfg.decay_rate[g.labels]
+        if self.cfg.score_update == "multiply":
+            predicted = g.scores * decay
+            g.scores = predicted
+            g.scores[rows] = update_scores(predicted[rows], det_scores)
+        else:
+            g.scores[rows] = det_scores
+            g.scores[~matched] *= decay[~matched]
 
     def _confirmed(self, hits: np.ndarray, labels: np.ndarray) -> np.ndarray:
         """(N,) bool: tracks with at least min_hits matched frames, or all while the scene is that young."""
