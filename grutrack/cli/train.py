@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from grutrack.data.nusc_detections import load_detections
@@ -38,7 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Train; prints the final checkpoint and the last logged figures."""
     from grutrack.training.config import load_train_config
-    from grutrack.training.trainer import Trainer
+    from grutrack.training.trainer import Trainer, TrainingInterrupted
     from grutrack.training.validation import make_validator
 
     overrides = {k: v for k, v in (("mode", args.mode), ("epochs", args.epochs), ("val_every", args.val_every),
@@ -50,7 +51,9 @@ def run(args: argparse.Namespace) -> int:
     scenes = load_scenes(nusc, args.split, with_gt=True)
     dets = load_detections(args.detections, [f.token for s in scenes for f in s.frames])
     validate = None
-    trainer = Trainer(cfg, scenes, dets, args.out, progress=not args.no_progress)
+    source = {"dataroot": str(Path(args.dataroot).resolve()), "version": args.version, "split": args.split,
+              "detections": str(Path(args.detections).resolve())}
+    trainer = Trainer(cfg, scenes, dets, args.out, progress=not args.no_progress, source=source)
     if args.val_split:
         val_scenes = load_scenes(nusc, args.val_split)
         val_dets = load_detections(args.val_detections, [f.token for s in val_scenes for f in s.frames])
@@ -58,8 +61,34 @@ def run(args: argparse.Namespace) -> int:
     trainer.validate = validate
     if args.resume:
         trainer.resume(Path(args.out) / "last.pt")
-    final = trainer.run()
+    write_training_yaml(cfg, args.config, Path(args.out) / "training.yaml", source)
+    try:
+        final = trainer.run()
+    except TrainingInterrupted as exc:
+        print(f"grutrack train: {exc}", file=sys.stderr)
+        return 130
     last = trainer.log_rows[-1] if trainer.log_rows else {}
     print(f"wrote {final} after {trainer.state.step} steps (loss {last.get('loss')}, "
           f"val AMOTA {last.get('val_amota') or 'n/a'}); log: {Path(args.out) / 'train_log.csv'}")
     return 0
+
+
+def write_training_yaml(cfg, config_arg: str, path: Path, source: dict) -> None:
+    """The resolved training config beside the checkpoint (unless --config is that very file), as
+    ``grutrack resolve-config`` writes it: a header naming its origin and data, then the YAML."""
+    import json
+    from dataclasses import asdict
+
+    import yaml
+
+    from grutrack import __version__
+    from grutrack.io import write_text_atomic
+    from grutrack.provenance import config_hash
+
+    if Path(config_arg).is_file() and Path(config_arg).resolve() == path.resolve():
+        return
+    d = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
+    header = (f"# Resolved training config, written by grutrack {__version__} train: --config '{config_arg}' with "
+              f"the command line's overrides.\n# data {json.dumps(source, sort_keys=True)}\n"
+              f"# config hash {config_hash(d)}\n")
+    write_text_atomic(path, header + yaml.safe_dump(d, sort_keys=False, default_flow_style=None, width=120))
