@@ -393,3 +393,33 @@ def test_prediction_terms_are_added_when_weighted(small_training_set, tmp_path):
     assert all(r["prediction_terms"] == 0 for r in plain.log_rows)
     assert all(r["prediction_terms"] > 0 for r in pred.log_rows)
     assert [r["loss"] for r in plain.log_rows] != [r["loss"] for r in pred.log_rows]
+
+
+def test_progress_is_written_from_the_first_step_and_training_yaml_beside_the_checkpoint(small_training_set,
+                                                                                         tmp_path, monkeypatch):
+    import yaml
+
+    from grutrack.cli.train import write_training_yaml
+    from grutrack.training import trainer as tr
+    from grutrack.training.config import load_train_config
+
+    scenes, dets = small_training_set
+    real, calls = tr.run_scene, []
+
+    def dies_in_step_2(*a, **k):
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError("killed")
+        return real(*a, **k)
+
+    monkeypatch.setattr(tr, "run_scene", dies_in_step_2)
+    t = _trainer(scenes, dets, tmp_path, epochs=2, checkpoint_every=10)
+    with pytest.raises(RuntimeError):
+        t.run()
+    rows = (tmp_path / "train_log.csv").read_text().splitlines()
+    assert len(rows) == 2 and rows[1].startswith("1,0,")
+    write_training_yaml(t.cfg, "grukf", tmp_path / "training.yaml", {"split": "mini_train"})
+    text = (tmp_path / "training.yaml").read_text()
+    assert '# data {"split": "mini_train"}' in text
+    assert load_train_config(tmp_path / "training.yaml") == t.cfg == load_train_config(
+        "grukf", {k: v for k, v in yaml.safe_load(text).items()})
