@@ -20,7 +20,7 @@ Table I classes) are dropped likewise (``other_category``). A frame without dete
 from __future__ import annotations
 
 import pickle
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +48,7 @@ class DetectionStats:
     kept: int = 0
     other_category: int = 0   # category valid but not tracked
     off_frame: int = 0        # valid sweep time, not a tracked frame (dropped, see module docstring)
+    empty_logs: list = field(default_factory=list)   # logs without any tracked detection
 
 
 def read_detection_table(path: str | Path) -> pd.DataFrame:
@@ -155,7 +156,10 @@ def load_detections(path: str | Path, root: str | Path, split: str, scenes: list
     ddir = split_dir(root, split)
     for scene in scenes:
         rows = np.flatnonzero(logs == scene.name)
+        kept = stats.kept
         out.update(_log_boxes(path, ddir / scene.name, scene, rows, ts, num, vel, labels, stats))
+        if stats.kept == kept:
+            stats.empty_logs.append(scene.name)
     return out, stats
 
 
