@@ -35,7 +35,7 @@ from grutrack.tracking.ekf_backend import KalmanBackend, KFState
 from grutrack.tracking.factory import grukf_group
 from grutrack.tracking.grukf_backend import GRUKFBackend, GRUState, resolve_device
 from grutrack.tracking.tracker import Tracker, TrackGroup, track_scenes
-from grutrack.training.checkpoint import read_checkpoint, save_checkpoint
+from grutrack.training.checkpoint import load_weights, read_checkpoint, save_checkpoint
 from grutrack.training.config import TrainConfig
 from grutrack.training.gt_association import StickyGTAssociation
 
@@ -301,7 +301,7 @@ class Trainer:
         self.out = Path(out_dir)
         self.validate = validate            # callable(net) -> AMOTA, or None
         self.progress = progress
-        self.device = resolve_device(cfg.device)
+        self.device = resolve_device(cfg.device, "training config 'device'")
         self.tracker_cfg = load_tracker_config(cfg.tracker_preset)
         torch.manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
@@ -332,7 +332,7 @@ class Trainer:
         settings (anything but :data:`RESUME_MAY_CHANGE`) raises :class:`ConfigError`."""
         ck = read_checkpoint(path, map_location=self.device)
         self._check_resumable(path, ck)
-        self.net.load_state_dict(ck["model"])
+        load_weights(self.net, ck, path)
         self.opt.load_state_dict(ck["optimizer"])
         self.sched.load_state_dict(ck["scheduler"])
         _set_rng_state(self.np_rng, ck["rng"])
