@@ -154,3 +154,106 @@ def test_evaluate_rejects_wrong_split_truncated_json_and_detections(nusc_mini, n
     ok.write_text(json.dumps(_submission(mini_val_tokens)))
     assert main(["evaluate", *map(str, common), "--submission", str(ok)]) == 0
     assert json.loads((tmp_path / "m.json").read_text())["overall"]["amota"] >= 0
+
+
+# ----- detection files, output paths, rates ------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def pp_results(pointpillars_mini_val):
+    return json.loads(pointpillars_mini_val.read_text())
+
+
+def _with(pp_results, tmp_path, mutate, name="d.json"):
+    data = json.loads(json.dumps(pp_results))
+    first = sorted(data["results"])[0]
+    mutate(data["results"], first)
+    path = tmp_path / name
+    path.write_text(json.dumps(data))
+    return path, first
+
+
+def test_detection_json_bad_values(nusc_root, pp_results, tmp_path, capsys):
+    common = ["track", "--dataroot", nusc_root, "--version", "v1.0-mini", "--split", "mini_val", "--out",
+              tmp_path / "o.json", "--no-progress", "--detections"]
+
+    def many(res, t):
+        res[t] = [dict(res[t][0])] * 100_000
+
+    path, t = _with(pp_results, tmp_path, many)
+    fails(capsys, [*common, path], f"{path}: sample {t} has 100000 boxes; the detection format allows at most 500")
+
+    def string_number(res, t):
+        res[t][1]["translation"] = [str(x) for x in res[t][1]["translation"]]
+
+    path, t = _with(pp_results, tmp_path, string_number)
+    fails(capsys, [*common, path], f"sample {t}, box 1: field 'translation' must hold JSON numbers",
+          "(a number written as a string)")
+
+    def other_sample(res, t):
+        res[t][2]["sample_token"] = "another"
+
+    path, t = _with(pp_results, tmp_path, other_sample)
+    fails(capsys, [*common, path], f"results['{t}'] box 2: field 'sample_token' is 'another', expected the sample")
+    feather = tmp_path / "d.feather"
+    import pandas as pd
+
+    pd.DataFrame({"a": [1.0, 2.0]}).to_feather(feather)
+    fails(capsys, [*common, feather], f"{feather}: detection file must be JSON text, but this file is binary")
+    assert not (tmp_path / "o.json").exists()
+
+
+def test_output_paths(mini_track, tmp_path, capsys):
+    (tmp_path / "file").write_text("x")
+    out = mini_track.index("--out") + 1
+    argv = list(mini_track)
+    argv[out] = tmp_path / "file" / "o.json"
+    fails(capsys, argv, f"{tmp_path / 'file' / 'o.json'}: cannot create its folder: {tmp_path / 'file'} is a file")
+    argv[out] = tmp_path
+    fails(capsys, argv, f"{tmp_path}: output is a folder; expected a file path")
+
+
+@pytest.mark.parametrize("rate", ["0", "-2", "nan"])
+def test_av2_rate(av2_root, tmp_path, capsys, rate):
+    fails(capsys, ["track", "--dataset", "av2", "--dataroot", av2_root, "--split", "val", "--detections",
+                   tmp_path / "d.feather", "--out", tmp_path / "o.pkl", "--rate", rate],
+          "--rate: the frame rate must be a positive number of frames per second")
+
+
+def test_lt3d_sweep_with_too_many_detections():
+    import numpy as np
+
+    from grutrack.data.lt3d_detections import MAX_DETECTIONS_PER_SWEEP, _check_sweep_counts
+    from grutrack.errors import InputFormatError
+
+    n = MAX_DETECTIONS_PER_SWEEP
+    logs = np.array(["a"] * n + ["b"] * (n + 1), dtype=object)
+    ts = np.array([5] * n + [7] * (n + 1), dtype=np.int64)
+    _check_sweep_counts("d.feather", logs[:n], ts[:n])
+    with pytest.raises(InputFormatError, match=f"log b, timestamp_ns 7 has {n + 1} detections; at most {n}"):
+        _check_sweep_counts("d.feather", logs, ts)
+
+
+# ----- training configuration and flags ----------------------------------------------------------------------
+def test_yaml_exponent_without_a_point_is_a_number(tmp_path):
+    import yaml
+
+    from grutrack.errors import ConfigError
+    from grutrack.training.config import CONFIG_DIR, load_train_config
+
+    text = (CONFIG_DIR / "grukf.yaml").read_text()
+    cfg_text = "\n".join("lr: 1e-5" if ln.startswith("lr:") else ln for ln in text.splitlines())
+    assert yaml.safe_load(cfg_text)["lr"] == "1e-5"          # what PyYAML makes of it
+    (tmp_path / "t.yaml").write_text(cfg_text)
+    assert load_train_config(tmp_path / "t.yaml").lr == 1e-5
+    (tmp_path / "u.yaml").write_text(cfg_text.replace("lr: 1e-5", "lr: fast"))
+    with pytest.raises(ConfigError, match=r"u.yaml: 'lr' must be a positive number, got 'fast'"):
+        load_train_config(tmp_path / "u.yaml")
+    (tmp_path / "v.yaml").write_text("- a list\n")
+    with pytest.raises(ConfigError, match="v.yaml: expected a mapping of training settings, got list"):
+        load_train_config(tmp_path / "v.yaml")
+
+
+def test_bad_training_flags_are_blamed_on_the_flag(tmp_path, capsys):
+    base = ["train", "--dataroot", tmp_path, "--version", "v1.0-mini", "--split", "mini_train", "--detections",
+            tmp_path / "d.json", "--out", tmp_path / "ck"]
+    fails(capsys, [*base, "--epochs", "0"], "grutrack train: error: --epochs must be an integer >= 1, got 0")
+    fails(capsys, [*base, "--val-every", "-1"], "--val-every must be an integer >= 0, got -1")

@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
 
     overrides = {k: v for k, v in (("mode", args.mode), ("epochs", args.epochs), ("val_every", args.val_every),
                                    ("seed", args.seed)) if v is not None}
-    cfg = load_train_config(args.config, overrides)
+    cfg = load_train_config(args.config, overrides, flags={k: "--" + k.replace("_", "-") for k in overrides})
     if (args.val_split is None) != (args.val_detections is None):
         raise ConfigError("--val-split and --val-detections go together")
     nusc = open_nuscenes(args.dataroot, args.version)

@@ -40,6 +40,10 @@ KNOWN_CATEGORIES = frozenset(COMPETITION_CATEGORIES + OTHER_ANNOTATION_CATEGORIE
 QUATERNION_TOLERANCE = 1e-2
 
 
+#: detections per sweep accepted: NMS compares every pair of a frame's boxes (memory grows with its square)
+MAX_DETECTIONS_PER_SWEEP = 5000
+
+
 @dataclass
 class DetectionStats:
     """What happened to the rows of a detection file."""
@@ -143,6 +147,7 @@ def load_detections(path: str | Path, root: str | Path, split: str, scenes: list
     _check_values(path, df, num)
     ts = _timestamps(path, df)
     logs = df["log_id"].astype(str).to_numpy()
+    _check_sweep_counts(path, logs, ts)
     known = {s.name for s in scenes}
     unknown = sorted(set(logs) - known)
     if unknown:
@@ -161,6 +166,19 @@ def load_detections(path: str | Path, root: str | Path, split: str, scenes: list
         if stats.kept == kept:
             stats.empty_logs.append(scene.name)
     return out, stats
+
+
+def _check_sweep_counts(path: Path, logs: np.ndarray, ts: np.ndarray) -> None:
+    """Refuse a sweep with more than :data:`MAX_DETECTIONS_PER_SWEEP` rows before any per-frame work."""
+    if len(ts) <= MAX_DETECTIONS_PER_SWEEP:
+        return
+    key = np.char.add(np.char.add(logs.astype(str), "|"), ts.astype(str))
+    keys, counts = np.unique(key, return_counts=True)
+    if counts.max() > MAX_DETECTIONS_PER_SWEEP:
+        i = int(np.flatnonzero(key == keys[np.argmax(counts)])[0])
+        raise InputFormatError(f"{path}: log {logs[i]}, timestamp_ns {ts[i]} has {counts.max()} detections; at "
+                               f"most {MAX_DETECTIONS_PER_SWEEP} per sweep are accepted (the tracker compares "
+                               f"every pair of a frame's boxes; keep the highest-scoring ones)")
 
 
 def _log_boxes(path: Path, log_dir: Path, scene: Scene, rows: np.ndarray, ts: np.ndarray, num: np.ndarray,
