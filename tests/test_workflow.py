@@ -153,7 +153,8 @@ def test_leaderboard_zip_validates_before_zipping(demo_run, tmp_path):
 @pytest.mark.parametrize("overlay, key", [
     ("datasets:\n  demo: {scenez: 3}\n", "scenez"),
     ("trakers: {}\n", "trakers"),
-    ("datasets:\n  demo: {scenes: three}\n", "datasets']['demo']['scenes"),
+    ("datasets:\n  demo: {scenes: three}\n", "config key datasets.demo.scenes (from --configfile "),
+    ("datasets:\n  demo: {scenes: three}\n", "bad.yaml): 'three' is not of type 'integer'"),
     ("tracker_presets:\n  ekf: {overrides: {lifecycle: {punish_nun: 2}}}\n", "lifecycle.punish_nun"),
 ])
 def test_misspelt_config_key_fails_before_any_rule_runs(tmp_path, overlay, key):
@@ -162,6 +163,24 @@ def test_misspelt_config_key_fails_before_any_rule_runs(tmp_path, overlay, key):
     assert proc.returncode != 0
     assert key in proc.stderr + proc.stdout
     assert not (tmp_path / "data").exists() and not (tmp_path / "logs").exists()   # nothing ran
+
+
+def test_config_overrides_on_the_command_line_are_typed(tmp_path):
+    from grutrack.pipeline.spec import typed_cli_config
+
+    got = typed_cli_config({"a": {"n": "12", "x": "1.2", "e": "1e-5", "b": "true", "z": "null", "s": "v1.0-mini",
+                                  "p": "/data/12", "l": ["3", "CTRA"]}, "top": 7})
+    assert got == {"a": {"n": 12, "x": 1.2, "e": 1e-5, "b": True, "z": None, "s": "v1.0-mini", "p": "/data/12",
+                         "l": [3, "CTRA"]}, "top": 7}
+    # numbers inside --config values reach the schema and the preset check as numbers
+    train = ("trainings={demo_grukf: {dataset: demo, split: demo_train, detector: centerpoint_sim, config: grukf, "
+             "overrides: {epochs: 12, lr: 1e-4}, validation: null}}")
+    preset = "tracker_presets={ekf: {base: ekf, overrides: {association: {first_threshold: {car: 1.2}}}}}"
+    proc = snakemake(tmp_path, "reports/demo_val.md", options=("-n", "--config", train, preset))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    proc = snakemake(tmp_path, "reports/demo_val.md", options=("-n", "--config", "datasets={demo: {scenes: 0}}"))
+    assert proc.returncode != 0
+    assert "config key datasets.demo.scenes (from --config): 0 is less than the minimum of" in proc.stderr
 
 
 def test_missing_dataroot_names_the_config_key(tmp_path):
