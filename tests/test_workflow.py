@@ -173,8 +173,7 @@ def test_config_overrides_on_the_command_line_are_typed(tmp_path):
     assert got == {"a": {"n": 12, "x": 1.2, "e": 1e-5, "b": True, "z": None, "s": "v1.0-mini", "p": "/data/12",
                          "l": [3, "CTRA"]}, "top": 7}
     # numbers inside --config values reach the schema and the preset check as numbers
-    train = ("trainings={demo_grukf: {dataset: demo, split: demo_train, detector: centerpoint_sim, config: grukf, "
-             "overrides: {epochs: 12, lr: 1e-4}, validation: null}}")
+    train = "trainings={demo_grukf: {overrides: {epochs: 12, lr: 1e-4}}}"      # as the README shows it
     preset = "tracker_presets={ekf: {base: ekf, overrides: {association: {first_threshold: {car: 1.2}}}}}"
     proc = snakemake(tmp_path, "reports/demo_val.md", options=("-n", "--config", train, preset))
     assert proc.returncode == 0, proc.stderr[-2000:]
