@@ -179,7 +179,7 @@ def test_config_overrides_on_the_command_line_are_typed(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     proc = snakemake(tmp_path, "reports/demo_val.md", options=("-n", "--config", "datasets={demo: {scenes: 0}}"))
     assert proc.returncode != 0
-    assert "config key datasets.demo.scenes (from --config): 0 is less than the minimum of" in proc.stderr
+    assert "config key datasets.demo.scenes (from --config): 0 is less than the minimum of" in proc.stdout + proc.stderr
 
 
 def test_missing_dataroot_names_the_config_key(tmp_path):
