@@ -440,7 +440,7 @@ def test_empty_logs_are_named_by_track_and_evaluate_with_the_roi(av2_root, oracl
     assert f"a.feather: 1 of 2 logs have no detection of a tracked category (first: {LOG_B})" in err
     assert all(len(f["track_id"]) == 0 for f in read_tracks_pickle(tmp_path / "a.pkl")[LOG_B])
     m = _evaluate(av2_root, tmp_path / "a.pkl", tmp_path / "m.json")
-    assert m["settings"]["drivable_area_roi"] is True
+    assert m["settings"]["drivable_area_roi"] is True and (m["logs"], m["frames"]) == (2, 64)
     car = m["per_class"]["REGULAR_VEHICLE"]
     assert 0.1 < car["hota"] < 0.9 and car["gt_boxes"] > 0 and np.isfinite(m["overall"]["hota"])
 

@@ -96,6 +96,16 @@ def test_nothing_to_do_after_the_run(demo_run):
     assert planned(snakemake(demo_run, "reports/demo_val.md", options=("-n",), configs=("tiny.yaml",))) == {}
 
 
+def test_demo_data_by_hand_with_the_same_settings_reruns_nothing(demo_run):
+    # the README's demo-data command, with the settings of the tiny config, over the workflow's demo dataset
+    proc = subprocess.run([sys.executable, "-m", "grutrack", "demo-data", "--out", "data/demo", "--scenes", "3",
+                           "--frames-per-scene", "12", "--seed", "0", "--version", "v1.0-demo"], cwd=demo_run,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0 and "already up to date" in proc.stdout, proc.stdout + proc.stderr
+    assert planned(snakemake(demo_run, "reports/demo_val.md", "reports/demo_lb.md", options=("-n",),
+                             configs=("tiny.yaml",))) == {}
+
+
 def test_tracker_threshold_change_reruns_track_submit_evaluate_report(demo_run):
     (demo_run / "thr.yaml").write_text(
         "tracker_presets:\n  ekf: {overrides: {preprocessing: {score_threshold: {car: 0.25}}}}\n")

@@ -74,8 +74,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def write_training_yaml(cfg, config_arg: str, path: Path, source: dict) -> None:
-    """The resolved training config beside the checkpoint (unless --config is that very file), as
-    ``grutrack resolve-config`` writes it: a header naming its origin and data, then the YAML."""
+    """The resolved training config beside the checkpoint, with a ``# data {...}`` line naming what it trains
+    on. When --config is that very file (the workflow resolves it there first), its header is kept."""
     import json
     from dataclasses import asdict
 
@@ -85,10 +85,13 @@ def write_training_yaml(cfg, config_arg: str, path: Path, source: dict) -> None:
     from grutrack.io import write_text_atomic
     from grutrack.provenance import config_hash
 
+    data = f"# data {json.dumps(source, sort_keys=True)}"
     if Path(config_arg).is_file() and Path(config_arg).resolve() == path.resolve():
+        lines = [ln for ln in path.read_text().splitlines() if not ln.startswith("# data ")]
+        n_head = next((i for i, ln in enumerate(lines) if not ln.startswith("#")), len(lines))
+        write_text_atomic(path, "\n".join([*lines[:n_head], data, *lines[n_head:]]) + "\n")
         return
     d = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
-    header = (f"# Resolved training config, written by grutrack {__version__} train: --config '{config_arg}' with "
-              f"the command line's overrides.\n# data {json.dumps(source, sort_keys=True)}\n"
-              f"# config hash {config_hash(d)}\n")
-    write_text_atomic(path, header + yaml.safe_dump(d, sort_keys=False, default_flow_style=None, width=120))
+    head = (f"# Resolved training config, written by grutrack {__version__} train: --config '{config_arg}' with "
+            f"the command line's overrides.\n# config hash {config_hash(d)}\n{data}\n")
+    write_text_atomic(path, head + yaml.safe_dump(d, sort_keys=False, default_flow_style=None, width=120))

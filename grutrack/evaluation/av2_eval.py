@@ -248,6 +248,7 @@ def evaluate_submission(root: str | Path, split: str, submission: str | Path, *,
                              trackeval_dir=trackeval_dir, verbose=verbose)
     doc = metrics_document(out, split=split, submission=str(submission), rate_hz=rate_hz, max_range_m=max_range_m,
                            roi=use_roi, workers=workers)
+    doc["logs"], doc["frames"] = len(labels), sum(len(v) for v in labels.values())
     doc["seconds"] = round(time.perf_counter() - t0, 3)
     return doc
 
