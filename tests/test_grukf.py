@@ -423,3 +423,39 @@ def test_progress_is_written_from_the_first_step_and_training_yaml_beside_the_ch
     assert '# data {"split": "mini_train"}' in text
     assert load_train_config(tmp_path / "training.yaml") == t.cfg == load_train_config(
         "grukf", {k: v for k, v in yaml.safe_load(text).items()})
+
+
+def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(nusc_mini, nusc_root, tmp_path, capsys,
+                                                                       monkeypatch):
+    import json
+    import os
+    import signal
+
+    from grutrack.cli import main
+    from grutrack.data.detection_sim import simulate_nuscenes
+    from grutrack.training import trainer as tr
+    from grutrack.training.checkpoint import read_checkpoint
+
+    dets = tmp_path / "d.json"
+    dets.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5,
+                                                 nusc=nusc_mini)))
+    real, calls = tr.run_scene, []
+
+    def ctrl_c_in_step_2(*a, **k):
+        calls.append(1)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGINT)
+        return real(*a, **k)
+
+    monkeypatch.setattr(tr, "run_scene", ctrl_c_in_step_2)
+    argv = ["train", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_train",
+            "--detections", str(dets), "--out", str(tmp_path / "ck"), "--epochs", "1", "--no-progress"]
+    assert main(argv) == 130
+    err = capsys.readouterr().err
+    assert "grutrack train: interrupted after step 2; resumable checkpoint" in err and "Traceback" not in err
+    assert read_checkpoint(tmp_path / "ck" / "last.pt")["train_state"]["step"] == 2
+    assert len((tmp_path / "ck" / "train_log.csv").read_text().splitlines()) == 3
+    assert '"split": "mini_train"' in (tmp_path / "ck" / "training.yaml").read_text()
+    monkeypatch.setattr(tr, "run_scene", real)
+    assert main([*argv[:-2], "2", "--no-progress", "--resume"]) == 2
+    assert "last.pt: cannot resume with other training settings (epochs 1 -> 2)" in capsys.readouterr().err
