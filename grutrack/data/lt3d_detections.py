@@ -170,13 +170,16 @@ def load_detections(path: str | Path, root: str | Path, split: str, scenes: list
 
 def _check_sweep_counts(path: Path, logs: np.ndarray, ts: np.ndarray) -> None:
     """Refuse a sweep with more than :data:`MAX_DETECTIONS_PER_SWEEP` rows before any per-frame work."""
-    if len(ts) <= MAX_DETECTIONS_PER_SWEEP:
-        return
-    key = np.char.add(np.char.add(logs.astype(str), "|"), ts.astype(str))
-    keys, counts = np.unique(key, return_counts=True)
+    if len(ts) <= MAX_DETECTIONS_PER_SWEEP or np.unique(ts, return_counts=True)[1].max() <= MAX_DETECTIONS_PER_SWEEP:
+        return    # no timestamp has that many rows, so no (log, sweep) has
+    codes = pd.factorize(logs)[0]
+    order = np.lexsort((ts, codes))                        # rows of one (log, sweep) are now adjacent
+    c, t = codes[order], ts[order]
+    starts = np.flatnonzero(np.r_[True, (c[1:] != c[:-1]) | (t[1:] != t[:-1])])
+    counts = np.diff(np.r_[starts, len(order)])
     if counts.max() > MAX_DETECTIONS_PER_SWEEP:
-        i = int(np.flatnonzero(key == keys[np.argmax(counts)])[0])
-        raise InputFormatError(f"{path}: log {logs[i]}, timestamp_ns {ts[i]} has {counts.max()} detections; at "
+        i = int(order[starts[np.argmax(counts)]])
+        raise InputFormatError(f"{path}: log {logs[i]}, timestamp_ns {ts[i]} has {int(counts.max())} detections; at "
                                f"most {MAX_DETECTIONS_PER_SWEEP} per sweep are accepted (the tracker compares "
                                f"every pair of a frame's boxes; keep the highest-scoring ones)")
 
