@@ -47,6 +47,12 @@ def pointpillars_mini_val() -> Path:
 
 
 @pytest.fixture(scope="session")
+def nusc_reference() -> Path:
+    """Poly-MOT's and Fast-Poly's own outputs and their detection inputs (nuscenes/reference, see its README)."""
+    return _require(_data_root() / "nuscenes" / "reference" / "MD5SUMS").parent
+
+
+@pytest.fixture(scope="session")
 def av2_root() -> Path:
     """AV2 sensor root holding ``val/<log_id>/``."""
     return _require(_data_root() / "av2" / "sensor")

@@ -57,8 +57,8 @@ def run_nuscenes(args: argparse.Namespace) -> int:
     nusc = open_nuscenes(args.dataroot, args.version)
     scenes = load_scenes(nusc, args.split)
     tokens = [f.token for s in scenes for f in s.frames]
-    dets = load_detections(args.detections, tokens)
     tracker = build_tracker(args.tracker, args.config, checkpoint=args.checkpoint, device=args.device)
+    dets = load_detections(args.detections, tokens, tracker.cfg.measured_yaw)
     with tqdm(total=len(tokens), unit="frame", desc=f"tracking {args.split}", disable=args.no_progress,
               file=sys.stderr) as bar:
         run_ = tracker_run(tracker, scenes, dets, bar.update)

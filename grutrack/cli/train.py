@@ -38,6 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Train; prints the final checkpoint and the last logged figures."""
+    from grutrack.tracking.config import load_tracker_config
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer, TrainingInterrupted
     from grutrack.training.validation import make_validator
@@ -49,14 +50,15 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--val-split and --val-detections go together")
     nusc = open_nuscenes(args.dataroot, args.version)
     scenes = load_scenes(nusc, args.split, with_gt=True)
-    dets = load_detections(args.detections, [f.token for s in scenes for f in s.frames])
+    yaw = load_tracker_config(cfg.tracker_preset).measured_yaw  # the preset's measured-yaw definition
+    dets = load_detections(args.detections, [f.token for s in scenes for f in s.frames], yaw)
     validate = None
     source = {"dataroot": str(Path(args.dataroot).resolve()), "version": args.version, "split": args.split,
               "detections": str(Path(args.detections).resolve())}
     trainer = Trainer(cfg, scenes, dets, args.out, progress=not args.no_progress, source=source)
     if args.val_split:
         val_scenes = load_scenes(nusc, args.val_split)
-        val_dets = load_detections(args.val_detections, [f.token for s in val_scenes for f in s.frames])
+        val_dets = load_detections(args.val_detections, [f.token for s in val_scenes for f in s.frames], yaw)
         validate = make_validator(nusc, args.val_split, val_scenes, val_dets, trainer.tracker_cfg, cfg.device)
     trainer.validate = validate
     if args.resume:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from grutrack.boxes import yaw_from_quaternion
+from grutrack.boxes import MEASURED_YAW
 from grutrack.classes import CLASS_INDEX, DETECTION_CLASSES, DETECTION_TO_TRACKING
 from grutrack.data.scene import BoxSet
 from grutrack.errors import InputFormatError
@@ -33,8 +33,11 @@ def read_detection_json(path: str | Path) -> dict:
     return data
 
 
-def load_detections(path: str | Path, sample_tokens: list[str]) -> dict[str, BoxSet]:
+def load_detections(path: str | Path, sample_tokens: list[str], measured_yaw: str = "euler_z") -> dict[str, BoxSet]:
     """Detections of the given samples as canonical box sets (tracking classes only).
+
+    ``measured_yaw``: how a box's quaternion becomes its yaw, a key of :data:`grutrack.boxes.MEASURED_YAW`
+    (``euler_z``: the Euler yaw; ``rotation_angle``: the whole rotation angle, as Poly-MOT).
 
     Every token in ``sample_tokens`` must be a key of ``results`` (an empty list is fine); extra samples
     in the file are ignored. Raises :class:`InputFormatError` naming the file, sample, box and field.
@@ -46,10 +49,11 @@ def load_detections(path: str | Path, sample_tokens: list[str]) -> dict[str, Box
         raise InputFormatError(
             f"{path}: {len(missing)} of {len(sample_tokens)} sample tokens of the split are missing from "
             f"'results' (first: {missing[:3]}); every sample must be present, with [] when it has no boxes")
-    return {token: _sample_boxes(path, token, results[token]) for token in sample_tokens}
+    yaw_of = MEASURED_YAW[measured_yaw]
+    return {token: _sample_boxes(path, token, results[token], yaw_of) for token in sample_tokens}
 
 
-def _sample_boxes(path: Path, token: str, boxes: list) -> BoxSet:
+def _sample_boxes(path: Path, token: str, boxes: list, yaw_of) -> BoxSet:
     """Validate and convert the box dicts of one sample."""
     if not isinstance(boxes, list):
         raise InputFormatError(f"{path}: results['{token}'] must be a list of boxes, got {type(boxes).__name__}")
@@ -83,7 +87,7 @@ def _sample_boxes(path: Path, token: str, boxes: list) -> BoxSet:
     keep = np.array([DETECTION_TO_TRACKING[n] is not None for n in names], dtype=bool)
     labels = np.array([CLASS_INDEX[DETECTION_TO_TRACKING[n]] for n, k in zip(names, keep) if k], dtype=np.int64)
     arr = arr[keep]
-    yaw = yaw_from_quaternion(arr[:, 6:10])
+    yaw = yaw_of(arr[:, 6:10])
     out = np.column_stack([arr[:, 0:6], yaw, arr[:, 10:12]])
     return BoxSet(out, arr[:, 12], labels)
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from grutrack.boxes import BOX_DIM, wrap_angle
 
@@ -46,34 +47,45 @@ def _series_coefficients(n: int) -> tuple[np.ndarray, np.ndarray]:
 _COEFFS = [_series_coefficients(n) for n in range(3)]
 
 
-def _poly(coeffs: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Horner evaluation of sum_k coeffs[k] * u**k."""
-    out = np.full_like(u, coeffs[-1])
-    for c in coeffs[-2::-1]:
-        out = out * u + c
-    return out
+_COEFF_TABLE = np.array([[c, d] for c, d in _COEFFS])  # (3, 2, _SERIES_TERMS): Re / Im series per order
+
+
+@njit(cache=True)
+def _arc_moments_kernel(phi, cp, sp, coeffs, out) -> None:
+    """``out (order+1, 2, N)``: Re and Im of ``E_n(phi)`` for ``phi (N,)`` with ``cp, sp = cos, sin`` of the
+    safe divisor (``phi``, or 1 where ``|phi| < _SERIES_LIMIT``). Closed form by the recursion
+    ``E_n = (e^{i phi} - n E_{n-1}) / (i phi)``; Horner-evaluated power series below the limit."""
+    n_terms = coeffs.shape[2]
+    for k in range(phi.shape[0]):
+        ph = phi[k]
+        small = abs(ph) < _SERIES_LIMIT
+        p = 1.0 if small else ph
+        u = ph * ph
+        prev_r, prev_i = 1.0, 0.0  # "n E_{n-1}" term for n = 0 is 1
+        for n in range(out.shape[0]):
+            # (e^{ip} - n E_{n-1}) / (i p) = (b / p, -a / p) with a + ib the numerator
+            num_r = cp[k] - (prev_r if n == 0 else n * prev_r)
+            num_i = sp[k] - (prev_i if n == 0 else n * prev_i)
+            closed_r, closed_i = num_i / p, -num_r / p
+            if small:
+                er, ei = coeffs[n, 0, n_terms - 1], coeffs[n, 1, n_terms - 1]
+                for t in range(n_terms - 2, -1, -1):
+                    er = er * u + coeffs[n, 0, t]
+                    ei = ei * u + coeffs[n, 1, t]
+                out[n, 0, k], out[n, 1, k] = er, ph * ei
+            else:
+                out[n, 0, k], out[n, 1, k] = closed_r, closed_i
+            prev_r, prev_i = closed_r, closed_i
 
 
 def arc_moments(phi: np.ndarray, order: int = 2) -> list[tuple[np.ndarray, np.ndarray]]:
     """``[(Re E_n, Im E_n) for n in 0..order]`` for ``phi (N,)`` (radians turned over the step)."""
-    phi = np.asarray(phi, dtype=np.float64)
-    small = np.abs(phi) < _SERIES_LIMIT
-    p = np.where(small, 1.0, phi)  # a safe divisor for the closed form; its value is discarded where small
-    cp, sp = np.cos(p), np.sin(p)
-    u = phi * phi
-    out = []
-    prev_r, prev_i = np.ones_like(p), np.zeros_like(p)  # "n E_{n-1}" term for n = 0 is 1
-    for n in range(order + 1):
-        # (e^{ip} - n E_{n-1}) / (i p) = (b / p, -a / p) with a + ib the numerator
-        num_r = cp - (prev_r if n == 0 else n * prev_r)
-        num_i = sp - (prev_i if n == 0 else n * prev_i)
-        closed_r, closed_i = num_i / p, -num_r / p
-        c, d = _COEFFS[n]
-        er = np.where(small, _poly(c, u), closed_r)
-        ei = np.where(small, phi * _poly(d, u), closed_i)
-        out.append((er, ei))
-        prev_r, prev_i = closed_r, closed_i
-    return out
+    phi = np.ascontiguousarray(phi, dtype=np.float64)
+    p = np.where(np.abs(phi) < _SERIES_LIMIT, 1.0, phi)  # a safe divisor for the closed form
+    out = np.empty((order + 1, 2) + phi.shape)
+    _arc_moments_kernel(phi.reshape(-1), np.cos(p).reshape(-1), np.sin(p).reshape(-1), _COEFF_TABLE,
+                        out.reshape(order + 1, 2, -1))
+    return [(out[n, 0], out[n, 1]) for n in range(order + 1)]
 
 
 def _as_dt(dt, n: int) -> np.ndarray:
@@ -385,6 +397,135 @@ class Bicycle(MotionModel):
 
 
 # ----------------------------------------------------------------------------------------------------------------
+# Piecewise forms (Poly-MOT's CTRA and BICYCLE, motion_module/motion_model.py at its HEAD 5fead68)
+# ----------------------------------------------------------------------------------------------------------------
+
+#: |omega| (rad/s) or |beta| (rad) at which the piecewise forms switch to straight-line motion (Poly-MOT: 0.001)
+PIECEWISE_SWITCH = 1e-3
+
+
+def _straight_jacobian(J: np.ndarray, rows: np.ndarray, v, a, yaw, dt) -> None:
+    """Write, in place for the tracks ``rows (K,)`` of ``J (N, 10, 10)``, the position rows of a straight-line
+    step ``(x, y) += (v dt + a dt^2 / 2) (cos yaw, sin yaw)`` over [x, y, z, w, l, h, v, a, yaw, .]; the last
+    column (turn rate or steering) gets no entry."""
+    c, s, t = np.cos(yaw[rows]), np.sin(yaw[rows]), dt[rows]
+    ds = v[rows] * t + 0.5 * a[rows] * t * t
+    J[rows, 0:2, :] = 0.0
+    J[rows, 0, 0] = J[rows, 1, 1] = 1.0
+    J[rows, 0, 6], J[rows, 1, 6] = t * c, t * s
+    J[rows, 0, 7], J[rows, 1, 7] = 0.5 * t * t * c, 0.5 * t * t * s
+    J[rows, 0, 8], J[rows, 1, 8] = -ds * s, ds * c
+
+
+class CTRAPiecewise(CTRA):
+    """CTRA in Poly-MOT's piecewise form (tracker preset ``motion.ctra_form: piecewise``).
+
+    For ``|omega| >= 0.001`` rad/s it is :class:`CTRA` (the same arc, the same exact Jacobian). Below, the
+    position moves in a straight line, ``(x, y) += (v dt + a dt^2 / 2) (cos yaw, sin yaw)`` (yaw still advances
+    by omega dt), and F is the straight line's Jacobian: ``d(x, y)/d omega = 0``. Since every track starts at
+    omega = 0 this changes the covariance from the first prediction on. Discontinuous at |omega| = 0.001.
+    """
+
+    name = "CTRA"
+
+    def f(self, x: np.ndarray, dt) -> np.ndarray:
+        """Transition ``(N, 10) -> (N, 10)`` over ``dt`` s."""
+        x = np.asarray(x, dtype=np.float64)
+        dt = _as_dt(dt, x.shape[0])
+        out = super().f(x, dt)
+        small = np.abs(x[:, 9]) < PIECEWISE_SWITCH
+        if small.any():
+            v, a, yaw, t = x[small, 6], x[small, 7], x[small, 8], dt[small]
+            ds = v * t + 0.5 * a * t * t
+            out[small, 0] = x[small, 0] + ds * np.cos(yaw)
+            out[small, 1] = x[small, 1] + ds * np.sin(yaw)
+        return out
+
+    def F(self, x: np.ndarray, dt) -> np.ndarray:
+        """Jacobian ``(N, 10, 10)`` of :meth:`f` (straight-line rows below the switch)."""
+        x = np.asarray(x, dtype=np.float64)
+        dt = _as_dt(dt, x.shape[0])
+        J = super().F(x, dt)
+        rows = np.flatnonzero(np.abs(x[:, 9]) < PIECEWISE_SWITCH)
+        if len(rows):
+            _straight_jacobian(J, rows, x[:, 6], x[:, 7], x[:, 8], dt)
+        return J
+
+
+class BicyclePiecewise(Bicycle):
+    """The bicycle model in Poly-MOT's piecewise form (tracker preset ``motion.bicycle_form: piecewise``).
+
+    Slip angle ``beta = atan(lr / (lf + lr) tan delta)``. For ``|beta| > 0.001`` rad the reference point runs the
+    arc of :class:`Bicycle` at constant speed: ds = v dt, v' = v, and the acceleration is reset, a' = 0. For
+    ``|beta| <= 0.001`` it moves in a straight line along the heading, ``ds = v dt + a dt^2 / 2``, v' = v + a dt,
+    with the yaw unchanged. The Jacobians are Poly-MOT's: F has no d/dl and no d/ddelta column (and in the arc
+    branch no d/da column, with a zero row for a); H has no d(vx, vy)/ddelta terms.
+    """
+
+    name = "Bicycle"
+
+    def _slip(self, delta: np.ndarray):
+        """Slip angle beta = atan(k tan delta) (N,) and dbeta/ddelta (N,)."""
+        k = self._k
+        cd, sd = np.cos(delta), np.sin(delta)
+        return np.arctan(k * np.tan(delta)), k / (cd * cd + k * k * sd * sd)
+
+    def f(self, x: np.ndarray, dt) -> np.ndarray:
+        """Transition ``(N, 10) -> (N, 10)`` over ``dt`` s."""
+        x = np.asarray(x, dtype=np.float64)
+        dt = _as_dt(dt, x.shape[0])
+        v, a, yaw = x[:, 6], x[:, 7], x[:, 8]
+        beta, _, kappa, _, _ = self._curvature(x)
+        turning = np.abs(beta) > PIECEWISE_SWITCH
+        ds = np.where(turning, v * dt, v * dt + 0.5 * a * dt * dt)
+        psi = np.where(turning, yaw + beta, yaw)
+        phi = np.where(turning, kappa * ds, 0.0)
+        (e0r, e0i), = arc_moments(phi, order=0)
+        cp, sp = np.cos(psi), np.sin(psi)
+        out = x.copy()
+        out[:, 0] += ds * (cp * e0r - sp * e0i)
+        out[:, 1] += ds * (sp * e0r + cp * e0i)
+        out[:, 6] = np.where(turning, v, v + a * dt)
+        out[:, 7] = np.where(turning, 0.0, a)
+        out[:, 8] = yaw + phi
+        return out
+
+    def F(self, x: np.ndarray, dt) -> np.ndarray:
+        """Poly-MOT's Jacobian ``(N, 10, 10)`` of :meth:`f` (no d/dl, d/ddelta columns)."""
+        x = np.asarray(x, dtype=np.float64)
+        n = x.shape[0]
+        dt = _as_dt(dt, n)
+        v, a, yaw = x[:, 6], x[:, 7], x[:, 8]
+        beta, _, kappa, _, _ = self._curvature(x)
+        turning = np.abs(beta) > PIECEWISE_SWITCH
+        J = _eye_batch(n, self.dim_x)
+        rows = np.flatnonzero(turning)
+        if len(rows):
+            t, k = dt[rows], kappa[rows]
+            ds = v[rows] * t
+            psi, phi = yaw[rows] + beta[rows], k * ds
+            (e0r, e0i), = arc_moments(phi, order=0)
+            cp, sp = np.cos(psi), np.sin(psi)
+            J[rows, 0, 6], J[rows, 1, 6] = t * np.cos(psi + phi), t * np.sin(psi + phi)
+            J[rows, 0, 8] = -ds * (sp * e0r + cp * e0i)
+            J[rows, 1, 8] = ds * (cp * e0r - sp * e0i)
+            J[rows, 7, 7] = 0.0
+            J[rows, 8, 6] = t * k
+        rows = np.flatnonzero(~turning)
+        if len(rows):
+            _straight_jacobian(J, rows, v, a, yaw, dt)
+            J[rows, 6, 7] = dt[rows]
+        return J
+
+    def H(self, x: np.ndarray) -> np.ndarray:
+        """Jacobian ``(N, 9, 10)`` of :meth:`h` without the d(vx, vy)/ddelta terms (Poly-MOT's H)."""
+        J = super().H(x)
+        J[:, 7, 9] = 0.0
+        J[:, 8, 9] = 0.0
+        return J
+
+
+# ----------------------------------------------------------------------------------------------------------------
 # Linear models
 # ----------------------------------------------------------------------------------------------------------------
 
@@ -500,11 +641,20 @@ class CV(_LinearModel):
 MODELS: dict[str, type[MotionModel]] = {"CTRA": CTRA, "Bicycle": Bicycle, "CA": CA, "CV": CV}
 
 
-def make_model(name: str, **params) -> MotionModel:
-    """Instantiate a model by name (``CTRA``, ``Bicycle``, ``CA``, ``CV``; case-insensitive)."""
-    lookup = {k.lower(): v for k, v in MODELS.items()}
+#: The piecewise forms by model name (tracker preset keys ``motion.ctra_form``, ``motion.bicycle_form``).
+PIECEWISE: dict[str, type[MotionModel]] = {"CTRA": CTRAPiecewise, "Bicycle": BicyclePiecewise}
+
+
+def make_model(name: str, form: str = "arc", **params) -> MotionModel:
+    """Instantiate a model by name (``CTRA``, ``Bicycle``, ``CA``, ``CV``; case-insensitive).
+
+    ``form``: "arc" (the models above) or "piecewise" (:data:`PIECEWISE`; the linear models have one form).
+    """
+    lookup = {k.lower(): k for k in MODELS}
     try:
-        cls = lookup[name.lower()]
+        key = lookup[name.lower()]
     except KeyError:
         raise ValueError(f"unknown motion model {name!r}; choose one of {sorted(MODELS)}") from None
-    return cls(**params)
+    if form not in ("arc", "piecewise"):
+        raise ValueError(f"unknown model form {form!r}; choose 'arc' or 'piecewise'")
+    return (PIECEWISE.get(key, MODELS[key]) if form == "piecewise" else MODELS[key])(**params)

@@ -20,16 +20,25 @@ PRESET_DIR = Path(__file__).resolve().parents[1] / "configs" / "trackers"
 METRICS = ("giou_3d", "giou_bev", "iou_3d", "iou_bev")
 MOTION_MODELS = ("CTRA", "BICYCLE", "CA", "CV")
 ALGORITHMS = ("hungarian", "greedy")
+#: association.assignment: which assignment the Hungarian stages solve (see grutrack/tracking/association.py)
+ASSIGNMENTS = ("most_pairs", "threshold_margin")
+#: motion.ctra_form / motion.bicycle_form: "arc" (grutrack/motion/models.py CTRA, Bicycle) or "piecewise"
+#: (CTRAPiecewise, BicyclePiecewise: Poly-MOT's forms)
+MODEL_FORMS = ("arc", "piecewise")
+#: preprocessing.measured_yaw: how a detection's quaternion becomes its yaw (grutrack/boxes.py)
+MEASURED_YAWS = ("euler_z", "rotation_angle")
 
 # schema: section -> key -> kind; "per_class_float" etc. are maps over the 7 tracking classes
 SCHEMA: dict[str, dict[str, str]] = {
-    "preprocessing": {"score_threshold": "per_class_unit", "nms_threshold": "unit", "nms_class_aware": "bool"},
-    "association": {"algorithm": "algorithm", "first_metric": "per_class_metric", "first_threshold": "per_class_cost",
-                    "two_stage": "bool", "second_metric": "metric", "second_threshold": "per_class_cost",
-                    "max_distance": "per_class_metres"},
+    "preprocessing": {"score_threshold": "per_class_unit", "nms_threshold": "unit", "nms_class_aware": "bool",
+                      "measured_yaw": "measured_yaw"},
+    "association": {"algorithm": "algorithm", "assignment": "assignment", "first_metric": "per_class_metric",
+                    "first_threshold": "per_class_cost", "two_stage": "bool", "second_metric": "metric",
+                    "second_threshold": "per_class_cost", "max_distance": "per_class_metres"},
     "lifecycle": {"max_age": "per_class_posint", "min_hits": "per_class_posint", "decay_rate": "per_class_unit",
                   "punish_num": "nonnegint"},
-    "motion": {"config": "str", "model_override": "class_model_map", "yaw_flip": "bool"},
+    "motion": {"config": "str", "model_override": "class_model_map", "yaw_flip": "bool", "time_step": "time_step",
+               "ctra_form": "model_form", "bicycle_form": "model_form"},
     "output": {"matched_box": "matched_box", "max_boxes_per_sample": "posint"},
 }
 
@@ -42,7 +51,9 @@ class TrackerConfig:
     score_threshold: np.ndarray
     nms_threshold: float
     nms_class_aware: bool
+    measured_yaw: str
     algorithm: str
+    assignment: str
     first_metric: tuple[str, ...]
     first_threshold: np.ndarray
     two_stage: bool
@@ -56,6 +67,9 @@ class TrackerConfig:
     motion_config: str
     model_override: dict[str, str]
     yaw_flip: bool
+    time_step: float | None     # fixed prediction step (s), None: the timestamp difference
+    ctra_form: str
+    bicycle_form: str
     matched_box: str
     max_boxes_per_sample: int
     raw: dict
@@ -99,14 +113,16 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
     return TrackerConfig(
         source=source,
         score_threshold=v["preprocessing.score_threshold"], nms_threshold=v["preprocessing.nms_threshold"],
-        nms_class_aware=v["preprocessing.nms_class_aware"], algorithm=v["association.algorithm"],
+        nms_class_aware=v["preprocessing.nms_class_aware"], measured_yaw=v["preprocessing.measured_yaw"],
+        algorithm=v["association.algorithm"], assignment=v["association.assignment"],
         first_metric=v["association.first_metric"], first_threshold=v["association.first_threshold"],
         two_stage=v["association.two_stage"], second_metric=v["association.second_metric"],
         second_threshold=v["association.second_threshold"], max_distance=v["association.max_distance"],
         max_age=v["lifecycle.max_age"], min_hits=v["lifecycle.min_hits"], decay_rate=v["lifecycle.decay_rate"],
         punish_num=v["lifecycle.punish_num"],
         motion_config=v["motion.config"], model_override=v["motion.model_override"],
-        yaw_flip=v["motion.yaw_flip"], matched_box=v["output.matched_box"],
+        yaw_flip=v["motion.yaw_flip"], time_step=v["motion.time_step"], ctra_form=v["motion.ctra_form"],
+        bicycle_form=v["motion.bicycle_form"], matched_box=v["output.matched_box"],
         max_boxes_per_sample=v["output.max_boxes_per_sample"], raw=raw)
 
 
@@ -156,6 +172,18 @@ def _value(source: str, key: str, val: Any, kind: str) -> Any:
         return val if val in METRICS else fail(f"one of {', '.join(METRICS)}")
     if kind == "algorithm":
         return val if val in ALGORITHMS else fail(f"one of {', '.join(ALGORITHMS)}")
+    if kind == "assignment":
+        return val if val in ASSIGNMENTS else fail(f"one of {', '.join(ASSIGNMENTS)}")
+    if kind == "model_form":
+        return val if val in MODEL_FORMS else fail(f"one of {', '.join(MODEL_FORMS)}")
+    if kind == "measured_yaw":
+        return val if val in MEASURED_YAWS else fail(f"one of {', '.join(MEASURED_YAWS)}")
+    if kind == "time_step":
+        if val == "timestamps":
+            return None
+        if isinstance(val, bool) or not isinstance(val, (int, float)) or not np.isfinite(val) or val <= 0:
+            fail("'timestamps' or a positive number of seconds")
+        return float(val)
     if isinstance(val, bool) or not isinstance(val, (int, float)) or not np.isfinite(val):
         fail("a number")
     if kind == "unit":

@@ -116,7 +116,8 @@ def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None, backend_cls=
         if not members.any():
             continue
         first = motion[TRACKING_CLASSES[index[int(np.argmax(members))]]]
-        model = make_model(model_name, **first["params"])
+        form = {"CTRA": cfg.ctra_form, "Bicycle": cfg.bicycle_form}.get(model_name, "arc")
+        model = make_model(model_name, form, **first["params"])
         tables = {}
         for key in ("Q", "R", "P0"):
             d = first[key].shape[0]

@@ -87,7 +87,7 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
     """The default association: per-class similarity, Hungarian, optional second stage (DESIGN section 1)."""
     def run(dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
         return associate(dets.boxes, dets.labels, trk_boxes, trk_labels, cfg.first_metric, cfg.first_threshold,
-                         cfg.two_stage, cfg.second_metric, cfg.second_threshold)
+                         cfg.two_stage, cfg.second_metric, cfg.second_threshold, cfg.assignment)
     return run
 
 
@@ -125,9 +125,13 @@ class Tracker:
     def step(self, dets: BoxSet, timestamp: int) -> BoxSet:
         """Process one frame: detections (canonical, global frame) at ``timestamp`` (µs).
 
+        Tracks are predicted by the time since the previous frame, or by the preset's fixed ``time_step``.
+
         Returns the boxes to write for this frame with their track ids (``ids`` int64).
         """
         dt = 0.0 if self.last_timestamp is None else (timestamp - self.last_timestamp) * 1e-6
+        if self.cfg.time_step is not None and self.last_timestamp is not None:
+            dt = self.cfg.time_step  # a fixed prediction step (preset motion.time_step), e.g. Poly-MOT's 0.5 s
         self.last_timestamp = timestamp
         self.frame_count += 1
         self._predict(dt)
