@@ -11,12 +11,24 @@ import os
 import sys
 from pathlib import Path
 
-from snakemake.utils import min_version, validate
+import yaml
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import min_version, update_config, validate
+
+from grutrack.errors import ConfigError
+from grutrack.pipeline import spec as S
 
 min_version("9.0")
 
 configfile: os.path.join(workflow.basedir, "workflow/config/config.yaml")
-validate(config, "workflow/schemas/config.schema.yaml", set_default=False)
+# --config values arrive with every nested scalar as a string ('12', '1.2', 'null'): type them as YAML would
+_CLI_CONFIG = S.typed_cli_config(workflow.config_settings.config)
+update_config(config, _CLI_CONFIG)
+try:
+    S.validate_config(config, os.path.join(workflow.basedir, "workflow/schemas/config.schema.yaml"),
+                      [(f, yaml.safe_load(open(f))) for f in workflow.overwrite_configfiles], _CLI_CONFIG)
+except ConfigError as exc:
+    raise WorkflowError(str(exc)) from None
 
 include: "workflow/rules/common.smk"
 include: "workflow/rules/data.smk"

@@ -17,3 +17,7 @@ class ConfigError(GrutrackError, ValueError):
 
 class DatasetError(GrutrackError, FileNotFoundError):
     """A dataset root, version or split cannot be found or read."""
+
+
+class OutputPathError(GrutrackError, OSError):
+    """An output path cannot be written: it is a folder, or its folder cannot be created or written."""

@@ -14,7 +14,7 @@ from typing import Any, Iterator
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success it is renamed onto ``path``, on error removed."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    _check_output(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions of a new file
@@ -27,6 +27,25 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
             tmp_path.unlink()
 
 
+def _check_output(path: Path) -> None:
+    """Create the folder of an output file; an output that is a folder, or a folder that cannot be created
+    or written, raises :class:`OutputPathError` naming the path."""
+    from grutrack.errors import OutputPathError
+
+    if path.is_dir():
+        raise OutputPathError(f"{path}: output is a folder; expected a file path (e.g. {path / 'out'}.<ext>)")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError) as exc:
+        blocker = next((q for q in [path.parent, *path.parent.parents] if q.exists() and not q.is_dir()), None)
+        raise OutputPathError(f"{path}: cannot create its folder: {blocker or exc.filename} is a file, not a "
+                              f"folder") from exc
+    except PermissionError as exc:
+        raise OutputPathError(f"{path}: cannot create its folder ({exc.strerror}: {exc.filename})") from exc
+    if not os.access(path.parent, os.W_OK | os.X_OK):
+        raise OutputPathError(f"{path}: the folder {path.parent} is not writable")
+
+
 def read_json(path: str | os.PathLike, what: str = "JSON file"):
     """Parse a JSON file; a missing file or invalid JSON raises InputFormatError naming the file."""
     from grutrack.errors import InputFormatError
@@ -35,7 +54,10 @@ def read_json(path: str | os.PathLike, what: str = "JSON file"):
     if not path.is_file():
         raise InputFormatError(f"{path}: {what} does not exist")
     try:
-        return json.loads(path.read_text())
+        return json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise InputFormatError(f"{path}: {what} must be JSON text, but this file is binary (not UTF-8 at byte "
+                               f"{exc.start}; a feather or pickle file?)") from exc
     except json.JSONDecodeError as exc:
         raise InputFormatError(f"{path}: not valid JSON ({exc})") from exc
 

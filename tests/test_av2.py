@@ -431,6 +431,20 @@ def test_frames_without_detections_never_trip_the_evaluator(av2_root, scenes, or
     assert not (tmp_path / "m.json").exists()
 
 
+def test_empty_logs_are_named_by_track_and_evaluate_with_the_roi(av2_root, oracle_table, tmp_path, capsys):
+    # only log A has detections: track says so; the official evaluation with the drivable-area ROI (the maps
+    # are present) scores the submission whose log B has no track at all
+    oracle_table[oracle_table["log_id"] == LOG_A].reset_index(drop=True).to_feather(tmp_path / "a.feather")
+    _track(av2_root, tmp_path / "a.feather", tmp_path / "a.pkl", "greedy")
+    err = capsys.readouterr().err
+    assert f"a.feather: 1 of 2 logs have no detection of a tracked category (first: {LOG_B})" in err
+    assert all(len(f["track_id"]) == 0 for f in read_tracks_pickle(tmp_path / "a.pkl")[LOG_B])
+    m = _evaluate(av2_root, tmp_path / "a.pkl", tmp_path / "m.json")
+    assert m["settings"]["drivable_area_roi"] is True and (m["logs"], m["frames"]) == (2, 64)
+    car = m["per_class"]["REGULAR_VEHICLE"]
+    assert 0.1 < car["hota"] < 0.9 and car["gt_boxes"] > 0 and np.isfinite(m["overall"]["hota"])
+
+
 def test_cli_dataset_options(av2_root, tmp_path, capsys):
     assert main(["track", "--dataroot", str(av2_root), "--split", "val", "--detections", "x.json",
                  "--out", str(tmp_path / "o.json")]) == 2

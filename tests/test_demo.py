@@ -7,6 +7,7 @@ import contextlib
 import filecmp
 import io
 import json
+import os
 from collections import defaultdict
 from pathlib import Path
 
@@ -243,3 +244,22 @@ def test_cli_demo_data_and_stats(tmp_path, capsys):
     assert json.loads(stats_json.read_text())["classes"]["car"]["boxes"] > 0
     assert main(["dataset-stats", "--dataroot", str(tmp_path / "missing"), "--split", "demo_val"]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_the_same_demo_again_is_left_untouched(tmp_path, capsys):
+    """Running the README's demo-data command over the workflow's demo leaves every file and time as it was (a
+    workflow sees nothing new); other parameters, or an edited file, replace it."""
+
+    out = tmp_path / "demo"
+    argv = ["demo-data", "--out", str(out), "--scenes", "2", "--frames-per-scene", "6", "--seed", "1"]
+    assert main(argv) == 0 and capsys.readouterr().out.startswith("wrote SYNTHETIC")
+    (out / ".snakemake_timestamp").write_text("")                 # what the workflow adds to the folder
+    stamp = {p: p.stat().st_mtime_ns for p in [out, *out.rglob("*")]}
+    os.utime(out / VERSION / "scene.json", ns=(1, 1))             # an old time that a rewrite would change
+    stamp[out / VERSION / "scene.json"] = 1
+    assert main(argv) == 0 and capsys.readouterr().out.startswith("already up to date (left untouched)")
+    assert {p: p.stat().st_mtime_ns for p in [out, *out.rglob("*")]} == stamp
+    (out / VERSION / "scene.json").write_text("[]")               # damaged: rewritten
+    assert main(argv) == 0 and capsys.readouterr().out.startswith("wrote SYNTHETIC")
+    assert len(json.loads((out / VERSION / "scene.json").read_text())) == 2
+    assert main([*argv[:-1], "2"]) == 0 and capsys.readouterr().out.startswith("wrote SYNTHETIC")

@@ -138,12 +138,12 @@ def small_training_set(nusc_mini):
     return scenes, dets
 
 
-def _trainer(scenes, dets, out, **over):
+def _trainer(scenes, dets, out, source=None, **over):
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer
 
     cfg = load_train_config("grukf", {"epochs": 2, "checkpoint_every": 0, "device": "cpu", "lr": 1e-3, **over})
-    return Trainer(cfg, scenes, dets, out, progress=False)
+    return Trainer(cfg, scenes, dets, out, progress=False, source=source)
 
 
 def test_training_is_deterministic_and_resumes_exactly(small_training_set, tmp_path):
@@ -164,6 +164,85 @@ def test_training_is_deterministic_and_resumes_exactly(small_training_set, tmp_p
     assert any(not torch.equal(init[k], sa[k]) for k in sa)
     text = (tmp_path / "a" / "train_log.csv").read_text().splitlines()
     assert text[0].startswith("step,epoch,scene,loss") and len(text) == 5
+
+
+@pytest.fixture(scope="module")
+def uninterrupted_run(small_training_set, tmp_path_factory):
+    """A 3-epoch (6-step) run never stopped: weights and log rows."""
+    scenes, dets = small_training_set
+    a = _trainer(scenes, dets, tmp_path_factory.mktemp("ref"), epochs=3)
+    a.run()
+    return a.net.state_dict(), a.log_rows
+
+
+@pytest.mark.parametrize("how,checkpoint_every,stop_at", [
+    ("crash", 2, 5),    # periodic checkpoint at step 4, the process dies inside step 5 (mid-epoch 3)
+    ("crash", 1, 3),    # checkpoint after step 2 (the end of epoch 1), dies inside step 3
+    ("crash", 5, 6),    # checkpoint at step 5 (mid-epoch), dies inside the last step
+    ("sigint", 0, 1),   # Ctrl-C during step 1, no periodic checkpoints at all
+    ("sigint", 2, 4),   # Ctrl-C during the last step of epoch 2
+])
+def test_resume_after_interruption_equals_uninterrupted_run(small_training_set, uninterrupted_run, tmp_path,
+                                                            monkeypatch, how, checkpoint_every, stop_at):
+    import os
+    import signal
+
+    from grutrack.training import trainer as tr
+    from grutrack.training.checkpoint import read_checkpoint
+
+    scenes, dets = small_training_set
+    ref_state, ref_log = uninterrupted_run
+    real, calls = tr.run_scene, []
+
+    def interrupted(*a, **k):
+        calls.append(1)
+        if len(calls) == stop_at:
+            if how == "crash":
+                raise RuntimeError("power cut")
+            os.kill(os.getpid(), signal.SIGINT)   # a real SIGINT, as Ctrl-C sends it
+        return real(*a, **k)
+
+    monkeypatch.setattr(tr, "run_scene", interrupted)
+    t = _trainer(scenes, dets, tmp_path, epochs=3, checkpoint_every=checkpoint_every)
+    if how == "crash":
+        with pytest.raises(RuntimeError, match="power cut"):
+            t.run()
+        saved = (stop_at - 1) // checkpoint_every * checkpoint_every
+    else:
+        with pytest.raises(tr.TrainingInterrupted, match=f"after step {stop_at}.*last.pt"):
+            t.run()
+        saved = stop_at                       # the step under way completes, then last.pt is written
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert read_checkpoint(tmp_path / "last.pt")["train_state"]["step"] == saved
+    monkeypatch.setattr(tr, "run_scene", real)
+    r = _trainer(scenes, dets, tmp_path, epochs=3, checkpoint_every=checkpoint_every)
+    r.resume(tmp_path / "last.pt")
+    r.run()
+    state = r.net.state_dict()
+    assert all(torch.equal(ref_state[k], state[k]) for k in ref_state)   # bit for bit
+    assert r.state.step == 6 and [x["step"] for x in r.log_rows] == [1, 2, 3, 4, 5, 6]
+    assert [(x["scene"], x["loss"], x["lr"]) for x in r.log_rows] == [(x["scene"], x["loss"], x["lr"])
+                                                                       for x in ref_log]
+
+
+def test_resume_on_other_data_or_settings_is_refused(small_training_set, tmp_path):
+    from grutrack.errors import ConfigError
+
+    scenes, dets = small_training_set
+    t = _trainer(scenes, dets, tmp_path, epochs=2, source={"detections": "/d/a.json"})
+    t.run(max_steps=1)
+    with pytest.raises(ConfigError, match=r"last.pt: cannot resume with other training settings \(epochs 2 -> 3"):
+        _trainer(scenes, dets, tmp_path, epochs=3).resume(tmp_path / "last.pt")
+    with pytest.raises(ConfigError, match="cannot resume on other training data"):
+        _trainer(scenes[:1], dets, tmp_path, epochs=2).resume(tmp_path / "last.pt")
+    token = scenes[0].frames[3].token
+    fewer = dict(dets, **{token: dets[token].subset(np.arange(len(dets[token]) - 1))})
+    with pytest.raises(ConfigError, match=r"other training data .*detections '/d/a.json' -> '/d/b.json'"):
+        _trainer(scenes, fewer, tmp_path, epochs=2, source={"detections": "/d/b.json"}).resume(tmp_path / "last.pt")
+    # settings that leave the weights alone may change
+    ok = _trainer(scenes, dets, tmp_path, epochs=2, val_every=7, checkpoint_every=3)
+    ok.resume(tmp_path / "last.pt")
+    assert ok.state.step == 1
 
 
 def test_supervised_mode_has_no_pseudo_labels(small_training_set, tmp_path):
@@ -314,3 +393,69 @@ def test_prediction_terms_are_added_when_weighted(small_training_set, tmp_path):
     assert all(r["prediction_terms"] == 0 for r in plain.log_rows)
     assert all(r["prediction_terms"] > 0 for r in pred.log_rows)
     assert [r["loss"] for r in plain.log_rows] != [r["loss"] for r in pred.log_rows]
+
+
+def test_progress_is_written_from_the_first_step_and_training_yaml_beside_the_checkpoint(small_training_set,
+                                                                                         tmp_path, monkeypatch):
+    import yaml
+
+    from grutrack.cli.train import write_training_yaml
+    from grutrack.training import trainer as tr
+    from grutrack.training.config import load_train_config
+
+    scenes, dets = small_training_set
+    real, calls = tr.run_scene, []
+
+    def dies_in_step_2(*a, **k):
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError("killed")
+        return real(*a, **k)
+
+    monkeypatch.setattr(tr, "run_scene", dies_in_step_2)
+    t = _trainer(scenes, dets, tmp_path, epochs=2, checkpoint_every=10)
+    with pytest.raises(RuntimeError):
+        t.run()
+    rows = (tmp_path / "train_log.csv").read_text().splitlines()
+    assert len(rows) == 2 and rows[1].startswith("1,0,")
+    write_training_yaml(t.cfg, "grukf", tmp_path / "training.yaml", {"split": "mini_train"})
+    text = (tmp_path / "training.yaml").read_text()
+    assert '# data {"split": "mini_train"}' in text
+    assert load_train_config(tmp_path / "training.yaml") == t.cfg == load_train_config(
+        "grukf", {k: v for k, v in yaml.safe_load(text).items()})
+
+
+def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(nusc_mini, nusc_root, tmp_path, capsys,
+                                                                       monkeypatch):
+    import json
+    import os
+    import signal
+
+    from grutrack.cli import main
+    from grutrack.data.detection_sim import simulate_nuscenes
+    from grutrack.training import trainer as tr
+    from grutrack.training.checkpoint import read_checkpoint
+
+    dets = tmp_path / "d.json"
+    dets.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5,
+                                                 nusc=nusc_mini)))
+    real, calls = tr.run_scene, []
+
+    def ctrl_c_in_step_2(*a, **k):
+        calls.append(1)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGINT)
+        return real(*a, **k)
+
+    monkeypatch.setattr(tr, "run_scene", ctrl_c_in_step_2)
+    argv = ["train", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_train",
+            "--detections", str(dets), "--out", str(tmp_path / "ck"), "--epochs", "1", "--no-progress"]
+    assert main(argv) == 130
+    err = capsys.readouterr().err
+    assert "grutrack train: interrupted after step 2; resumable checkpoint" in err and "Traceback" not in err
+    assert read_checkpoint(tmp_path / "ck" / "last.pt")["train_state"]["step"] == 2
+    assert len((tmp_path / "ck" / "train_log.csv").read_text().splitlines()) == 3
+    assert '"split": "mini_train"' in (tmp_path / "ck" / "training.yaml").read_text()
+    monkeypatch.setattr(tr, "run_scene", real)
+    assert main([*argv[:-2], "2", "--no-progress", "--resume"]) == 2
+    assert "last.pt: cannot resume with other training settings (epochs 1 -> 2)" in capsys.readouterr().err

@@ -106,3 +106,64 @@ def test_semi_supervised_report_from_two_logs(tmp_path):
     text = out.read_text()
     assert "| semi_supervised | 8 | 2 | 0.660 | 0.660 (step 8) |" in text
     assert "1,700 steps" in text and (tmp_path / "figures/s/val_amota_vs_step.png").is_file()
+
+
+def test_reports_name_their_sources_training_data_and_scored_logs(tmp_path, monkeypatch):
+    from grutrack.cli.train import write_training_yaml
+    from grutrack.report import figures
+    from grutrack.training.config import load_train_config
+
+    # a training folder as `grutrack train` leaves it inside the workflow: training.yaml resolved first
+    ck = tmp_path / "checkpoints/nusc_grukf"
+    ck.mkdir(parents=True)
+    (ck / "train_log.csv").write_text("step,epoch,scene,loss,gt_terms,pseudo_terms,lr,val_amota,seconds\n"
+                                      "1,0,s,0.5,3,1,1e-5,,1.0\n2,0,s,0.4,3,1,1e-5,,1.0\n3,1,s,0.3,3,1,1e-5,,1.0\n")
+    assert main(["resolve-config", "training", "--base", "grukf", "--overrides", "{}", "--out",
+                 str(ck / "training.yaml")]) == 0
+    before = (ck / "training.yaml").read_text()
+    src = {"dataroot": "/data/nuscenes", "version": "v1.0-trainval", "split": "train",
+           "detections": "/d/centerpoint_train.json"}
+    write_training_yaml(load_train_config(ck / "training.yaml"), str(ck / "training.yaml"), ck / "training.yaml", src)
+    after = (ck / "training.yaml").read_text()
+    assert after.replace('# data ' + json.dumps(src, sort_keys=True) + "\n", "") == before   # header and body kept
+    args = ["report", "nusc_val", "--out", str(tmp_path / "r.md"), "--paper", str(PAPER), "--experiment",
+            "nusc_val:nuscenes:val:centerpoint", "--row", "III:Ours=grukf", "--run",
+            f"grukf={nusc_metrics(tmp_path / 'g.json', 0.73, 0.5, 270)}", "--train-log",
+            f"nusc_grukf={ck / 'train_log.csv'}"]
+    assert main(args) == 0
+    text = (tmp_path / "r.md").read_text()
+    assert "## How the GRU-KF was trained" in text
+    assert ("split train of v1.0-trainval at `/data/nuscenes`; detections `/d/centerpoint_train.json` | "
+            "3 steps, 2 epochs |") in text
+    # the semi-supervised report says it reads training logs, and names where the data is said
+    out = tmp_path / "s.md"
+    assert main(["report", "semi_supervised", "--out", str(out), "--paper", str(PAPER), "--train-log",
+                 f"semi_supervised={ck / 'train_log.csv'}"]) == 0
+    text = out.read_text()
+    assert "from the training logs (train_log.csv) written by `grutrack train`" in text
+    assert "metrics JSON" not in text and '"trained on" column under Provenance' in text
+    assert "| split train of v1.0-trainval" in text
+
+    # figures: a flat AMOTA curve is drawn flat; legends sit beside the bars, never on them
+    captured = []
+    monkeypatch.setattr(figures, "_save", lambda fig, path: captured.append(fig) or Path(path))
+    figures.lines(tmp_path / "l.png", {"a": ([1, 2, 3], [0.50001, 0.50004, 0.50006])}, "t", "x", "y", min_span=0.1)
+    lo, hi = captured[-1].axes[0].get_ylim()
+    assert hi - lo == pytest.approx(0.1)
+    figures.grouped_bars(tmp_path / "b.png", ["bicycle", "bus", "car"],
+                         {"paper Ours": [90.0, 95.0, 99.0], "reproduced Ours": [89.0, 96.0, 98.0],
+                          "reproduced Greedy": [80.0, 85.0, 97.0]}, "t", "HOTA")
+    fig = captured[-1]
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    ax = fig.axes[0]
+    legend = ax.get_legend().get_window_extent(r)
+    assert ax.patches and not any(legend.overlaps(p.get_window_extent(r)) for p in ax.patches)
+
+
+def test_av2_report_says_how_many_logs_it_scored(tmp_path):
+    from grutrack.report.av2_val import _scored
+
+    doc = {"logs": 150, "frames": 4700, "settings": {"rate_hz": 2.0}}
+    assert _scored({"a": doc, "b": doc}) == "150 logs, 4700 frames at 2 Hz"
+    assert "not in the metrics JSONs" in _scored({"a": {"settings": {}}})

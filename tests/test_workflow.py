@@ -101,6 +101,16 @@ def test_nothing_to_do_after_the_run(demo_run):
     assert planned(snakemake(demo_run, "reports/demo_val.md", options=("-n",), configs=("tiny.yaml",))) == {}
 
 
+def test_demo_data_by_hand_with_the_same_settings_reruns_nothing(demo_run):
+    # the README's demo-data command, with the settings of the tiny config, over the workflow's demo dataset
+    proc = subprocess.run([sys.executable, "-m", "grutrack", "demo-data", "--out", "data/demo", "--scenes", "3",
+                           "--frames-per-scene", "12", "--seed", "0", "--version", "v1.0-demo"], cwd=demo_run,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0 and "already up to date" in proc.stdout, proc.stdout + proc.stderr
+    assert planned(snakemake(demo_run, "reports/demo_val.md", "reports/demo_lb.md", options=("-n",),
+                             configs=("tiny.yaml",))) == {}
+
+
 def test_tracker_threshold_change_reruns_track_submit_evaluate_render_report(demo_run):
     (demo_run / "thr.yaml").write_text(
         "tracker_presets:\n  ekf: {overrides: {preprocessing: {score_threshold: {car: 0.25}}}}\n")
@@ -158,7 +168,8 @@ def test_leaderboard_zip_validates_before_zipping(demo_run, tmp_path):
 @pytest.mark.parametrize("overlay, key", [
     ("datasets:\n  demo: {scenez: 3}\n", "scenez"),
     ("trakers: {}\n", "trakers"),
-    ("datasets:\n  demo: {scenes: three}\n", "datasets']['demo']['scenes"),
+    ("datasets:\n  demo: {scenes: three}\n", "config key datasets.demo.scenes (from --configfile "),
+    ("datasets:\n  demo: {scenes: three}\n", "bad.yaml): 'three' is not of type 'integer'"),
     ("tracker_presets:\n  ekf: {overrides: {lifecycle: {punish_nun: 2}}}\n", "lifecycle.punish_nun"),
 ])
 def test_misspelt_config_key_fails_before_any_rule_runs(tmp_path, overlay, key):
@@ -167,6 +178,23 @@ def test_misspelt_config_key_fails_before_any_rule_runs(tmp_path, overlay, key):
     assert proc.returncode != 0
     assert key in proc.stderr + proc.stdout
     assert not (tmp_path / "data").exists() and not (tmp_path / "logs").exists()   # nothing ran
+
+
+def test_config_overrides_on_the_command_line_are_typed(tmp_path):
+    from grutrack.pipeline.spec import typed_cli_config
+
+    got = typed_cli_config({"a": {"n": "12", "x": "1.2", "e": "1e-5", "b": "true", "z": "null", "s": "v1.0-mini",
+                                  "p": "/data/12", "l": ["3", "CTRA"]}, "top": 7})
+    assert got == {"a": {"n": 12, "x": 1.2, "e": 1e-5, "b": True, "z": None, "s": "v1.0-mini", "p": "/data/12",
+                         "l": [3, "CTRA"]}, "top": 7}
+    # numbers inside --config values reach the schema and the preset check as numbers
+    train = "trainings={demo_grukf: {overrides: {epochs: 12, lr: 1e-4}}}"      # as the README shows it
+    preset = "tracker_presets={ekf: {base: ekf, overrides: {association: {first_threshold: {car: 1.2}}}}}"
+    proc = snakemake(tmp_path, "reports/demo_val.md", options=("-n", "--config", train, preset))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    proc = snakemake(tmp_path, "reports/demo_val.md", options=("-n", "--config", "datasets={demo: {scenes: 0}}"))
+    assert proc.returncode != 0
+    assert "config key datasets.demo.scenes (from --config): 0 is less than the minimum of" in proc.stdout + proc.stderr
 
 
 def test_missing_dataroot_names_the_config_key(tmp_path):

@@ -47,6 +47,9 @@ def main(argv: list[str] | None = None) -> int:
     except GrutrackError as exc:
         print(f"grutrack {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"grutrack {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

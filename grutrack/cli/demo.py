@@ -56,7 +56,8 @@ def run_demo_data(args: argparse.Namespace) -> int:
 
     summary = generate_demo(args.out, scenes=args.scenes, frames=args.frames_per_scene, seed=args.seed,
                             version=args.version)
-    print(f"wrote SYNTHETIC demo dataset {summary['dataroot']}/{summary['version']}: {summary['scenes']} scenes, "
+    verb = "already up to date (left untouched):" if summary["unchanged"] else "wrote"
+    print(f"{verb} SYNTHETIC demo dataset {summary['dataroot']}/{summary['version']}: {summary['scenes']} scenes, "
           f"{summary['samples']} samples, {summary['instances']} instances, {summary['annotations']} annotations; "
           f"splits " + ", ".join(f"{k} ({v} scenes)" for k, v in summary["splits"].items()))
     return 0

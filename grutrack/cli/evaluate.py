@@ -5,12 +5,11 @@ evaluation, HOTA)."""
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 from grutrack.cli.common import add_dataset_args
 from grutrack.data.nuscenes import open_nuscenes, split_scene_names
-from grutrack.errors import ConfigError, InputFormatError
+from grutrack.errors import ConfigError
 from grutrack.evaluation.nuscenes_eval import (devkit_tracking_eval, format_summary, metrics_document,
                                                write_metrics)
 
@@ -73,13 +72,13 @@ def run_nuscenes(args: argparse.Namespace) -> int:
     nusc = open_nuscenes(args.dataroot, args.version)
     split_scene_names(nusc, args.split)  # clear error for an unknown split before the devkit asserts
     t0 = time.perf_counter()
+    sub = _valid_submission(nusc, args.split, args.submission)   # the checks leaderboard-zip makes
     if args.evaluator == "devkit":
-        _check_submission_tokens(nusc, args.split, args.submission)
         summary = devkit_tracking_eval(args.dataroot, args.version, args.split, args.submission)
     else:
         from grutrack.evaluation.fast_amota import fast_tracking_eval
 
-        summary = fast_tracking_eval(nusc, args.submission, args.split)
+        summary = fast_tracking_eval(nusc, sub, args.split)
     doc = metrics_document(summary, dataset="nuscenes", version=args.version, split=args.split,
                            evaluator=args.evaluator, submission=args.submission)
     doc["seconds"] = round(time.perf_counter() - t0, 3)
@@ -89,16 +88,10 @@ def run_nuscenes(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_submission_tokens(nusc, split: str, path: str) -> None:
-    """Fail with a clear message when the submission does not hold exactly the split's samples."""
+def _valid_submission(nusc, split: str, path: str) -> dict:
+    """The submission, checked against the official format for exactly the split's samples (one-line
+    :class:`InputFormatError` otherwise, as ``leaderboard-zip`` gives)."""
     from grutrack.data.nuscenes import load_scenes
+    from grutrack.export.leaderboard import load_valid_submission
 
-    try:
-        res = json.loads(open(path).read())["results"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise InputFormatError(f"{path}: not a tracking submission with a 'results' object ({exc})") from exc
-    tokens = {f.token for s in load_scenes(nusc, split) for f in s.frames}
-    missing, extra = tokens - set(res), set(res) - tokens
-    if missing or extra:
-        raise InputFormatError(f"{path}: 'results' must hold exactly the {len(tokens)} samples of split "
-                               f"'{split}' ({len(missing)} missing, {len(extra)} from other splits)")
+    return load_valid_submission(path, [f.token for s in load_scenes(nusc, split) for f in s.frames])

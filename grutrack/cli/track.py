@@ -79,6 +79,10 @@ def run_av2(args: argparse.Namespace) -> int:
     vocab = av2.vocabulary(args.all_categories)
     scenes = av2.load_scenes(args.dataroot, args.split, rate_hz=args.rate, all_categories=args.all_categories)
     dets, stats = load_lt3d(args.detections, args.dataroot, args.split, scenes, vocab)
+    if stats.empty_logs:
+        print(f"grutrack track: warning: {args.detections}: {len(stats.empty_logs)} of {len(scenes)} logs have no "
+              f"detection of a tracked category (first: {stats.empty_logs[0]}); their tracks are empty "
+              f"(is this the detection file of split '{args.split}'?)", file=sys.stderr)
     tracker = build_tracker(args.tracker, args.config, param_classes=vocab.param_classes,
                             checkpoint=args.checkpoint, device=args.device)
     n_frames = sum(len(s) for s in scenes)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from grutrack.data.nusc_detections import load_detections
@@ -39,12 +40,12 @@ def run(args: argparse.Namespace) -> int:
     """Train; prints the final checkpoint and the last logged figures."""
     from grutrack.tracking.config import load_tracker_config
     from grutrack.training.config import load_train_config
-    from grutrack.training.trainer import Trainer
+    from grutrack.training.trainer import Trainer, TrainingInterrupted
     from grutrack.training.validation import make_validator
 
     overrides = {k: v for k, v in (("mode", args.mode), ("epochs", args.epochs), ("val_every", args.val_every),
                                    ("seed", args.seed)) if v is not None}
-    cfg = load_train_config(args.config, overrides)
+    cfg = load_train_config(args.config, overrides, flags={k: "--" + k.replace("_", "-") for k in overrides})
     if (args.val_split is None) != (args.val_detections is None):
         raise ConfigError("--val-split and --val-detections go together")
     nusc = open_nuscenes(args.dataroot, args.version)
@@ -52,7 +53,9 @@ def run(args: argparse.Namespace) -> int:
     yaw = load_tracker_config(cfg.tracker_preset).measured_yaw  # the preset's measured-yaw definition
     dets = load_detections(args.detections, [f.token for s in scenes for f in s.frames], yaw)
     validate = None
-    trainer = Trainer(cfg, scenes, dets, args.out, progress=not args.no_progress)
+    source = {"dataroot": str(Path(args.dataroot).resolve()), "version": args.version, "split": args.split,
+              "detections": str(Path(args.detections).resolve())}
+    trainer = Trainer(cfg, scenes, dets, args.out, progress=not args.no_progress, source=source)
     if args.val_split:
         val_scenes = load_scenes(nusc, args.val_split)
         val_dets = load_detections(args.val_detections, [f.token for s in val_scenes for f in s.frames], yaw)
@@ -60,8 +63,37 @@ def run(args: argparse.Namespace) -> int:
     trainer.validate = validate
     if args.resume:
         trainer.resume(Path(args.out) / "last.pt")
-    final = trainer.run()
+    write_training_yaml(cfg, args.config, Path(args.out) / "training.yaml", source)
+    try:
+        final = trainer.run()
+    except TrainingInterrupted as exc:
+        print(f"grutrack train: {exc}", file=sys.stderr)
+        return 130
     last = trainer.log_rows[-1] if trainer.log_rows else {}
     print(f"wrote {final} after {trainer.state.step} steps (loss {last.get('loss')}, "
           f"val AMOTA {last.get('val_amota') or 'n/a'}); log: {Path(args.out) / 'train_log.csv'}")
     return 0
+
+
+def write_training_yaml(cfg, config_arg: str, path: Path, source: dict) -> None:
+    """The resolved training config beside the checkpoint, with a ``# data {...}`` line naming what it trains
+    on. When --config is that very file (the workflow resolves it there first), its header is kept."""
+    import json
+    from dataclasses import asdict
+
+    import yaml
+
+    from grutrack import __version__
+    from grutrack.io import write_text_atomic
+    from grutrack.provenance import config_hash
+
+    data = f"# data {json.dumps(source, sort_keys=True)}"
+    if Path(config_arg).is_file() and Path(config_arg).resolve() == path.resolve():
+        lines = [ln for ln in path.read_text().splitlines() if not ln.startswith("# data ")]
+        n_head = next((i for i, ln in enumerate(lines) if not ln.startswith("#")), len(lines))
+        write_text_atomic(path, "\n".join([*lines[:n_head], data, *lines[n_head:]]) + "\n")
+        return
+    d = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
+    head = (f"# Resolved training config, written by grutrack {__version__} train: --config '{config_arg}' with "
+            f"the command line's overrides.\n# config hash {config_hash(d)}\n{data}\n")
+    write_text_atomic(path, head + yaml.safe_dump(d, sort_keys=False, default_flow_style=None, width=120))

@@ -28,7 +28,7 @@ import pandas as pd
 
 from grutrack.boxes import wrap_angle
 from grutrack.data.scene import BoxSet, Frame, Scene
-from grutrack.errors import DatasetError, InputFormatError
+from grutrack.errors import ConfigError, DatasetError, InputFormatError
 
 #: Table I classes, in the paper's column order.
 TABLE_I_CLASSES: tuple[str, ...] = (
@@ -317,6 +317,9 @@ def load_scenes(root: str | Path, split: str, *, rate_hz: float | None = DEFAULT
 
     Labels of the GT index :func:`vocabulary` (``all_categories``); boxes are in the city frame.
     """
+    if rate_hz is not None and not (isinstance(rate_hz, (int, float)) and np.isfinite(rate_hz) and rate_hz > 0):
+        raise ConfigError(f"--rate: the frame rate must be a positive number of frames per second (the "
+                          f"annotations are at 10 Hz), got {rate_hz}")
     known = list_logs(root, split)
     if log_ids is not None:
         unknown = [lg for lg in log_ids if lg not in known]

@@ -848,17 +848,13 @@ def readme_text(scenes: int, frames: int, seed: int, version: str, splits: dict,
         "attribute names are nuScenes' so that the devkit's class mappings and evaluators apply.\n")
 
 
-def _dump(path: Path, obj) -> None:
-    """Compact JSON (json.dumps uses the C encoder; json.dump would not)."""
-    path.write_text(json.dumps(obj, separators=(",", ":")))
-
-
 def generate_demo(out: str | os.PathLike, scenes: int = DEFAULT_SCENES, frames: int = FRAMES_PER_SCENE,
                   seed: int = 0, version: str = VERSION) -> dict:
     """Write a demo dataset to ``out`` atomically (built in a temporary folder beside it, then renamed).
 
-    An existing ``out`` is replaced only if it is empty or a previous demo (has the README marker).
-    Returns a summary: scenes, samples, instances, annotations, splits.
+    An existing ``out`` is replaced only if it is empty or a previous demo (has the README marker); one that
+    already holds exactly this dataset is left untouched (so a workflow does not see it as new).
+    Returns a summary: scenes, samples, instances, annotations, splits, unchanged (bool).
     """
     if scenes < 1 or frames < 2:
         raise ConfigError(f"demo-data: need at least 1 scene and 2 frames per scene (got {scenes}, {frames})")
@@ -867,25 +863,39 @@ def generate_demo(out: str | os.PathLike, scenes: int = DEFAULT_SCENES, frames: 
     out = Path(out)
     _check_replaceable(out)
     tables, splits = build_tables(scenes, frames, seed, version)
+    files = {f"{version}/{name}.json": json.dumps(recs, separators=(",", ":")).encode()
+             for name, recs in tables.items()}
+    files[f"{version}/splits.json"] = json.dumps(splits, indent=1).encode()
+    files[tables["map"][0]["filename"]] = placeholder_png()
+    files["README.txt"] = readme_text(scenes, frames, seed, version, splits, tables).encode()
+    summary = {"dataroot": str(out), "version": version, "scenes": scenes, "samples": len(tables["sample"]),
+               "instances": len(tables["instance"]), "annotations": len(tables["sample_annotation"]),
+               "splits": {k: len(v) for k, v in splits.items()}, "unchanged": _same_files(out, files)}
+    if summary["unchanged"]:
+        return summary      # byte for byte the same dataset: leave it (and its times) alone
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
     os.chmod(tmp, 0o755)                                  # mkdtemp makes it private; a dataset is for reading
     try:
-        (tmp / version).mkdir()
-        (tmp / "maps").mkdir()
-        for name, recs in tables.items():
-            _dump(tmp / version / f"{name}.json", recs)
-        with open(tmp / version / "splits.json", "w") as f:
-            json.dump(splits, f, indent=1)
-        (tmp / tables["map"][0]["filename"]).write_bytes(placeholder_png())
-        (tmp / "README.txt").write_text(readme_text(scenes, frames, seed, version, splits, tables))
+        for rel, data in files.items():
+            (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
+            (tmp / rel).write_bytes(data)
         _swap_in(tmp, out)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
-    return {"dataroot": str(out), "version": version, "scenes": scenes, "samples": len(tables["sample"]),
-            "instances": len(tables["instance"]), "annotations": len(tables["sample_annotation"]),
-            "splits": {k: len(v) for k, v in splits.items()}}
+    return summary
+
+
+def _same_files(out: Path, files: dict[str, bytes]) -> bool:
+    """Whether ``out`` holds exactly ``files`` (relative path -> bytes) and nothing else (besides the
+    ``.snakemake_timestamp`` a workflow keeps in the folders it writes)."""
+    if not out.is_dir():
+        return False
+    present = {p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()} - {".snakemake_timestamp"}
+    if present != set(files):
+        return False
+    return all((out / rel).read_bytes() == data for rel, data in files.items())
 
 
 def _check_replaceable(out: Path) -> None:

@@ -20,7 +20,7 @@ Table I classes) are dropped likewise (``other_category``). A frame without dete
 from __future__ import annotations
 
 import pickle
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +40,10 @@ KNOWN_CATEGORIES = frozenset(COMPETITION_CATEGORIES + OTHER_ANNOTATION_CATEGORIE
 QUATERNION_TOLERANCE = 1e-2
 
 
+#: detections per sweep accepted: NMS compares every pair of a frame's boxes (memory grows with its square)
+MAX_DETECTIONS_PER_SWEEP = 5000
+
+
 @dataclass
 class DetectionStats:
     """What happened to the rows of a detection file."""
@@ -48,6 +52,7 @@ class DetectionStats:
     kept: int = 0
     other_category: int = 0   # category valid but not tracked
     off_frame: int = 0        # valid sweep time, not a tracked frame (dropped, see module docstring)
+    empty_logs: list = field(default_factory=list)   # logs without any tracked detection
 
 
 def read_detection_table(path: str | Path) -> pd.DataFrame:
@@ -142,6 +147,7 @@ def load_detections(path: str | Path, root: str | Path, split: str, scenes: list
     _check_values(path, df, num)
     ts = _timestamps(path, df)
     logs = df["log_id"].astype(str).to_numpy()
+    _check_sweep_counts(path, logs, ts)
     known = {s.name for s in scenes}
     unknown = sorted(set(logs) - known)
     if unknown:
@@ -155,8 +161,27 @@ def load_detections(path: str | Path, root: str | Path, split: str, scenes: list
     ddir = split_dir(root, split)
     for scene in scenes:
         rows = np.flatnonzero(logs == scene.name)
+        kept = stats.kept
         out.update(_log_boxes(path, ddir / scene.name, scene, rows, ts, num, vel, labels, stats))
+        if stats.kept == kept:
+            stats.empty_logs.append(scene.name)
     return out, stats
+
+
+def _check_sweep_counts(path: Path, logs: np.ndarray, ts: np.ndarray) -> None:
+    """Refuse a sweep with more than :data:`MAX_DETECTIONS_PER_SWEEP` rows before any per-frame work."""
+    if len(ts) <= MAX_DETECTIONS_PER_SWEEP or np.unique(ts, return_counts=True)[1].max() <= MAX_DETECTIONS_PER_SWEEP:
+        return    # no timestamp has that many rows, so no (log, sweep) has
+    codes = pd.factorize(logs)[0]
+    order = np.lexsort((ts, codes))                        # rows of one (log, sweep) are now adjacent
+    c, t = codes[order], ts[order]
+    starts = np.flatnonzero(np.r_[True, (c[1:] != c[:-1]) | (t[1:] != t[:-1])])
+    counts = np.diff(np.r_[starts, len(order)])
+    if counts.max() > MAX_DETECTIONS_PER_SWEEP:
+        i = int(order[starts[np.argmax(counts)]])
+        raise InputFormatError(f"{path}: log {logs[i]}, timestamp_ns {ts[i]} has {int(counts.max())} detections; at "
+                               f"most {MAX_DETECTIONS_PER_SWEEP} per sweep are accepted (the tracker compares "
+                               f"every pair of a frame's boxes; keep the highest-scoring ones)")
 
 
 def _log_boxes(path: Path, log_dir: Path, scene: Scene, rows: np.ndarray, ts: np.ndarray, num: np.ndarray,

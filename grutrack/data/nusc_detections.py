@@ -18,6 +18,9 @@ from grutrack.errors import InputFormatError
 from grutrack.io import read_json
 
 QUATERNION_TOLERANCE = 1e-2  # |‖q‖ - 1| allowed; JSON writers round quaternions to a few digits
+#: boxes per sample the official detection format allows (the devkit's ``max_boxes_per_sample``); it also bounds
+#: the tracker's per-frame work (NMS compares every pair of a frame's boxes)
+MAX_BOXES_PER_SAMPLE = 500
 
 
 def read_detection_json(path: str | Path) -> dict:
@@ -56,17 +59,27 @@ def _sample_boxes(path: Path, token: str, boxes: list, yaw_of) -> BoxSet:
         raise InputFormatError(f"{path}: results['{token}'] must be a list of boxes, got {type(boxes).__name__}")
     if not boxes:
         return BoxSet.empty()
+    if len(boxes) > MAX_BOXES_PER_SAMPLE:
+        raise InputFormatError(f"{path}: sample {token} has {len(boxes)} boxes; the detection format allows at "
+                               f"most {MAX_BOXES_PER_SAMPLE} per sample (keep the highest-scoring ones)")
     try:
         names = [b["detection_name"] for b in boxes]
-        arr = np.array([[*b["translation"], *b["size"], *b["rotation"], *b["velocity"][:2],
-                         b["detection_score"]] for b in boxes], dtype=np.float64)
+        other = next((i for i, b in enumerate(boxes) if b.get("sample_token", token) != token), None)
+        raw = np.array([[*b["translation"], *b["size"], *b["rotation"], *b["velocity"][:2],
+                         b["detection_score"]] for b in boxes])
     except KeyError as exc:
         raise InputFormatError(f"{path}: a box of sample {token} has no field {exc} (needs translation, size, "
                                f"rotation, velocity, detection_name, detection_score)") from exc
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, AttributeError) as exc:
         raise InputFormatError(f"{path}: a box of sample {token} has a malformed numeric field: translation "
                                f"[x,y,z], size [w,l,h], rotation [w,x,y,z], velocity [vx,vy] and "
                                f"detection_score must be numbers ({exc})") from exc
+    if other is not None:
+        raise InputFormatError(f"{path}: results['{token}'] box {other}: field 'sample_token' is "
+                               f"{boxes[other]['sample_token']!r}, expected the sample it is listed under")
+    if raw.ndim != 2 or raw.dtype.kind not in "fiu":
+        raise InputFormatError(_not_numbers(path, token, boxes))
+    arr = raw.astype(np.float64)
     if arr.shape[1] != 13:
         raise InputFormatError(f"{path}: boxes of sample {token} have wrong field lengths (expected translation 3, "
                                f"size 3, rotation 4, velocity 2)")
@@ -78,6 +91,19 @@ def _sample_boxes(path: Path, token: str, boxes: list, yaw_of) -> BoxSet:
     out = np.column_stack([arr[:, 0:6], yaw, arr[:, 10:12]])
     # the file's unit quaternion [w, x, y, z], pitch and roll included (Fast-Poly's footprints use the whole rotation)
     return BoxSet(out, arr[:, 12], labels, extra={"quaternion": arr[:, 6:10]})
+
+
+def _not_numbers(path: Path, token: str, boxes: list) -> str:
+    """The message for a sample whose numeric fields are not all JSON numbers (strings, null, nested lists)."""
+    for i, b in enumerate(boxes):
+        for key in ("translation", "size", "rotation", "velocity", "detection_score"):
+            vals = b[key] if isinstance(b[key], list) else [b[key]]
+            bad = next((v for v in vals if not isinstance(v, (int, float)) or isinstance(v, bool)), None)
+            if bad is not None or (key == "velocity" and len(vals) < 2):
+                return (f"{path}: sample {token}, box {i}: field '{key}' must hold JSON numbers, got {b[key]!r}"
+                        f"{' (a number written as a string)' if isinstance(bad, str) else ''}")
+    return (f"{path}: boxes of sample {token} have wrong field lengths (expected translation 3, size 3, "
+            f"rotation 4, velocity 2)")
 
 
 def _check_values(path: Path, token: str, names: list[str], arr: np.ndarray) -> None:

@@ -10,6 +10,8 @@ What the wrapper adds around the official function, without changing its numbers
   ``os.sched_getaffinity``) instead of ``multiprocessing.cpu_count()``; one worker runs in-process;
 - TrackEval's side outputs (per-class summary / detailed files, PDF/PNG curves, console tables) are switched
   off, or written under ``trackeval_dir`` when given; nothing is written to the working directory;
+- the drivable-area filter is given only frames that hold boxes (the official one fails on an empty frame,
+  e.g. a log without tracks; an empty frame has nothing to filter);
 - the map / pose loader is remembered for the second of its two identical calls (labels, then tracks);
 - IDF1 (TrackEval's Identity metric) is computed on exactly the labels and score-filtered tracks that the
   official final evaluation scores (the official function computes HOTA and CLEAR only).
@@ -123,6 +125,22 @@ def _memoised(load):
     return cached
 
 
+def _skip_empty_frames(filter_roi):
+    """The official drivable-area filter, given only frames that hold boxes: it cannot build the box array of
+    an empty frame (a (0,) quaternion array), and an empty frame has nothing to filter, so the result is the
+    same. Frames are filtered in place, as the official function does."""
+    def filtered(tracks, dataset_dir):
+        if dataset_dir is None:
+            return tracks
+        held = {lg: [f for f in frames if len(f["translation_m"])] for lg, frames in tracks.items()}
+        held = {lg: frames for lg, frames in held.items() if frames}
+        if held:
+            filter_roi(held, dataset_dir)
+        return tracks
+
+    return filtered
+
+
 @contextlib.contextmanager
 def _official_settings(workers: int, quiet: bool, idf1_out: dict):
     """Patches scoped to one call: worker count, TrackEval side outputs, the IDF1 tap."""
@@ -138,6 +156,8 @@ def _official_settings(workers: int, quiet: bool, idf1_out: dict):
                                               _identity_tap(official.evaluate_tracking, idf1_out)))
         stack.enter_context(mock.patch.object(official, "load_mapped_avm_and_egoposes",
                                               _memoised(official.load_mapped_avm_and_egoposes)))
+        stack.enter_context(mock.patch.object(official, "filter_drivable_area",
+                                              _skip_empty_frames(official.filter_drivable_area)))
         if quiet:
             cfg = _quiet_eval_config()
             stack.enter_context(mock.patch.object(trackeval.Evaluator, "get_default_eval_config",
@@ -228,6 +248,7 @@ def evaluate_submission(root: str | Path, split: str, submission: str | Path, *,
                              trackeval_dir=trackeval_dir, verbose=verbose)
     doc = metrics_document(out, split=split, submission=str(submission), rate_hz=rate_hz, max_range_m=max_range_m,
                            roi=use_roi, workers=workers)
+    doc["logs"], doc["frames"] = len(labels), sum(len(v) for v in labels.values())
     doc["seconds"] = round(time.perf_counter() - t0, 3)
     return doc
 

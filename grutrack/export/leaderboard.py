@@ -21,6 +21,14 @@ def read_submission(path: str | Path) -> dict:
         raise InputFormatError(f"{path}: cannot read a tracking submission JSON ({exc})") from exc
 
 
+def load_valid_submission(path: str | Path, tokens: list[str]) -> dict:
+    """Read a tracking submission JSON and check it against the official format for the split's sample
+    ``tokens`` (every sample, nothing else); the checks every command that reads a submission makes."""
+    sub = read_submission(path)
+    validate_submission(sub, tokens, where=str(path))
+    return sub
+
+
 def devkit_check(path: str | Path) -> None:
     """Load the file with nuscenes-devkit's ``load_prediction`` (the loader the official evaluation uses)."""
     from nuscenes.eval.common.config import config_factory
@@ -41,8 +49,7 @@ def counts(sub: dict) -> dict:
 
 def write_validated(tracks: str | Path, tokens: list[str], out: str | Path) -> dict:
     """Validate the tracker's JSON for the split's samples and write it as the submission; returns counts."""
-    sub = read_submission(tracks)
-    validate_submission(sub, tokens, where=str(tracks))
+    sub = load_valid_submission(tracks, tokens)
     write_json_atomic(out, sub)
     devkit_check(out)
     return counts(sub)
@@ -52,8 +59,7 @@ def build_zip(submission: str | Path, tokens: list[str], out: str | Path) -> dic
     """Validate ``submission`` again (official format, every sample of the split) and zip it atomically, the
     JSON as the archive's only member; returns the member name and counts."""
     submission = Path(submission)
-    sub = read_submission(submission)
-    validate_submission(sub, tokens, where=str(submission))
+    sub = load_valid_submission(submission, tokens)
     devkit_check(submission)
     with atomic_path(out) as tmp:
         with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:

@@ -85,15 +85,22 @@ def _validate_box(where: str, token: str, i: int, box: dict) -> None:
         raise InputFormatError(f"{where}: sample {token} box {i}: tracking_id must be a string")
     for key, n in (("translation", 3), ("size", 3), ("rotation", 4), ("velocity", 2)):
         v = box[key]
-        if len(v) != n or not np.all(np.isfinite(v)):
-            raise InputFormatError(f"{where}: sample {token} box {i}: '{key}' must be {n} finite numbers, got {v}")
+        if not _numbers(v, n):
+            raise InputFormatError(f"{where}: sample {token} box {i}: '{key}' must be {n} finite numbers, got {v!r}")
     if min(box["size"]) <= 0:
         raise InputFormatError(f"{where}: sample {token} box {i}: 'size' must be positive, got {box['size']}")
     if abs(np.linalg.norm(box["rotation"]) - 1) > 1e-6:
         raise InputFormatError(f"{where}: sample {token} box {i}: 'rotation' must be a unit quaternion")
     s = box["tracking_score"]
-    if not np.isfinite(s) or not 0 <= s <= 1:
-        raise InputFormatError(f"{where}: sample {token} box {i}: tracking_score must be in [0, 1], got {s}")
+    if not _numbers([s], 1) or not 0 <= s <= 1:
+        raise InputFormatError(f"{where}: sample {token} box {i}: tracking_score must be a number in [0, 1], "
+                               f"got {s!r}")
+
+
+def _numbers(v, n: int) -> bool:
+    """Whether ``v`` is a list of ``n`` finite JSON numbers (not strings, not booleans)."""
+    return (isinstance(v, list) and len(v) == n
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in v))
 
 
 def write_submission(path: str | Path, sub: dict, sample_tokens: list[str]) -> None:

@@ -26,6 +26,81 @@ DATAROOT_HINT = {
 
 
 # ------------------------------------------------------------------------------------------------------------
+# command-line values and the schema check
+# ------------------------------------------------------------------------------------------------------------
+
+def typed_cli_config(cli: dict) -> dict:
+    """Snakemake's ``--config key=value`` with the scalars of its values typed as YAML types them.
+
+    Snakemake reads a value such as ``{epochs: 12}`` or ``{car: 1.2}`` with YAML's BaseLoader, so every
+    nested scalar arrives as a string (``'12'``, ``'1.2'``, ``'null'``); the schema then refuses it. Here a
+    string that spells a YAML null, boolean (true/false) or number (``12``, ``1.2``, ``1e-5``) becomes that
+    value; every other string stays a string. Only the ``--config`` values are typed, never a config file's.
+    """
+    def typed(v):
+        if isinstance(v, dict):
+            return {k: typed(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [typed(x) for x in v]
+        if not isinstance(v, str):
+            return v
+        t = v.strip()
+        if t in ("null", "Null", "NULL", "~"):
+            return None
+        if t.lower() in ("true", "false"):
+            return t.lower() == "true"
+        try:
+            return int(t) if t.lstrip("+-").isdigit() else float(t) if _looks_numeric(t) else v
+        except ValueError:
+            return v
+
+    return typed(cli or {})
+
+
+def _looks_numeric(t: str) -> bool:
+    import re
+
+    return re.fullmatch(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?", t) is not None
+
+
+def validate_config(cfg: dict, schema_path: str | Path, files: list, cli: dict | None = None) -> None:
+    """Check ``cfg`` against the JSON schema at ``schema_path``; the first error is one :class:`ConfigError`
+    line naming the key, its value, what the schema expects and where the value came from (a ``--configfile``
+    of ``files`` (path, loaded dict), ``--config``, or the shipped config)."""
+    import jsonschema
+    import yaml
+
+    schema = yaml.safe_load(Path(schema_path).read_text())
+    errors = list(jsonschema.validators.validator_for(schema)(schema).iter_errors(cfg))
+    if not errors:
+        return
+    err = jsonschema.exceptions.best_match(errors)
+    path = list(err.absolute_path)
+    if err.validator == "additionalProperties" and isinstance(err.instance, dict):
+        extra = sorted(set(err.instance) - set(err.schema.get("properties", {})))
+        path += extra[:1]
+    key = ".".join(str(p) for p in path) or "<top level>"
+    origin = "workflow/config/config.yaml"
+    if _has_path(cli or {}, path):
+        origin = "--config"
+    else:
+        for fname, content in reversed(files):
+            if _has_path(content, path):
+                origin = f"--configfile {fname}"
+                break
+    raise ConfigError(f"config key {key} (from {origin}): {err.message}")
+
+
+def _has_path(d, path: list) -> bool:
+    """Whether the nested dict ``d`` sets the key ``path`` (or a parent of it that is not a dict)."""
+    for p in path:
+        if not isinstance(d, dict) or p not in d:
+            return False
+        d = d[p]
+    return True
+
+
+# ------------------------------------------------------------------------------------------------------------
 # cross-references
 # ------------------------------------------------------------------------------------------------------------
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import (AV2_OVERALL, check_section, header, image, mirror_tables, provenance,
-                                      runs_table, setting_note)
+                                      runs_table, setting_note, training_provenance)
 from grutrack.report.paper import get_table, reproduced
 
 AVERAGE_NOTE = ("Note: the paper's average for Ours (47.3) is not the mean of its seven per-class values (54.1) "
@@ -20,8 +20,8 @@ def build(inp: ReportInputs) -> str:
     exp = inp.experiment or {}
     tbl = get_table(inp.paper, "I")
     parts = [header(f"Argoverse 2 {exp.get('split', 'val')}: Table I",
-                    [f"Detections: {exp.get('detector', '?')}. Official AV2 tracking evaluation (HOTA). Paper "
-                     "numbers are labelled **Paper numbers**."])]
+                    [f"Detections: {exp.get('detector', '?')}. Official AV2 tracking evaluation (HOTA) of "
+                     f"{_scored(docs)}. Paper numbers are labelled **Paper numbers**."])]
     note = setting_note(tbl, exp, exp.get("detector"))
     parts += ["", f"## {tbl['title']}", "", *([note, ""] if note else []), mirror_tables(tbl, inp.row_docs("I")),
               "", AVERAGE_NOTE, "",
@@ -29,7 +29,17 @@ def build(inp: ReportInputs) -> str:
     parts += ["", "## Every run (Table I average over 7 classes, ×100)", "", runs_table(docs, AV2_OVERALL)]
     parts += ["", "## Check against the tolerances of paper.yaml", "", check_section("I", tbl, inp.row_docs("I"))]
     parts += ["", "## Provenance", "", provenance(inp.runs, docs)]
+    if inp.train_logs:
+        parts += ["", "## How the GRU-KF was trained", "", training_provenance(inp.train_logs)]
     return "\n".join(parts) + "\n"
+
+
+def _scored(docs: dict[str, dict]) -> str:
+    """How many logs and frames the runs were scored on (the same for every run, else each is listed)."""
+    seen = {(d.get("logs"), d.get("frames"), (d.get("settings") or {}).get("rate_hz")) for d in docs.values()}
+    if not docs or any(s[0] is None for s in seen):
+        return "the split's logs (their number is not in the metrics JSONs: re-run `grutrack evaluate`)"
+    return "; ".join(f"{n} logs, {f} frames at {r:g} Hz" for n, f, r in sorted(seen))
 
 
 def _figure(inp: ReportInputs, tbl: dict) -> str:

@@ -32,19 +32,25 @@ def grouped_bars(path: str | Path, categories: list[str], series: dict[str, list
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=10)
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)  # beside, never on a bar
     return _save(fig, Path(path))
 
 
 def lines(path: str | Path, series: dict[str, tuple[list[float], list[float]]], title: str, xlabel: str,
-          ylabel: str, hlines: dict[str, float] | None = None) -> Path:
-    """Line plot of (x, y) series, with optional labelled horizontal reference lines."""
+          ylabel: str, hlines: dict[str, float] | None = None, min_span: float | None = None) -> Path:
+    """Line plot of (x, y) series, with optional labelled horizontal reference lines; the y axis spans at
+    least ``min_span`` (centred on the data), so that differences below it do not fill the plot."""
     fig, ax = plt.subplots(figsize=(6.0, 3.6))
     for label, (x, y) in series.items():
         ax.plot(x, y, marker="o", markersize=3, label=label)
     for label, y in (hlines or {}).items():
         ax.axhline(y, linestyle="--", linewidth=1, color="grey")
         ax.annotate(label, (ax.get_xlim()[0], y), fontsize=7, color="grey", va="bottom")
+    if min_span:
+        lo, hi = ax.get_ylim()
+        if hi - lo < min_span:
+            mid = (lo + hi) / 2
+            ax.set_ylim(mid - min_span / 2, mid + min_span / 2)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=10)

@@ -6,7 +6,7 @@ from __future__ import annotations
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import (check_section, header, image, mirror_tables, provenance, runs_table,
-                                      setting_note, worst_scene_strips)
+                                      setting_note, training_provenance, worst_scene_strips)
 from grutrack.report.paper import get_table, reproduced
 
 
@@ -30,6 +30,8 @@ def build(inp: ReportInputs) -> str:
     parts += ["", "## Check against the tolerances of paper.yaml", ""]
     parts += ["\n\n".join(check_section(tid, get_table(inp.paper, tid), inp.row_docs(tid)) for tid in inp.rows)]
     parts += ["", "## Provenance", "", provenance(inp.runs, docs)]
+    if inp.train_logs:
+        parts += ["", "## How the GRU-KF was trained", "", training_provenance(inp.train_logs)]
     return "\n".join(parts) + "\n"
 
 

@@ -8,15 +8,20 @@ from grutrack.report.inputs import ReportInputs, read_train_log
 from grutrack.report.markdown import DASH, header, image, table, training_provenance
 
 
+#: the y axis of the AMOTA figure spans at least this much, so that a flat curve looks flat
+MIN_AMOTA_SPAN = 0.1
+
+
 def build(inp: ReportInputs) -> str:
     """The markdown text (figures are written into ``inp.figures``)."""
     logs = {label: read_train_log(p) for label, p in inp.train_logs.items()}
     paper = inp.paper.get("figures", {}).get("semi_supervised", {})
     parts = [header("Semi-supervised vs supervised training of the GRU-KF",
                     ["Validation AMOTA is the one logged by `grutrack train` (`val_amota` of train_log.csv, "
-                     "official semantics). The paper's figure is on real nuScenes; the run here uses the dataset "
-                     "named under Provenance (the SYNTHETIC demo by default), so the curves show the method's "
-                     "behaviour, not the paper's values."])]
+                     "official semantics). The paper's figure is on real nuScenes; the runs here were trained on "
+                     "the data in the \"trained on\" column under Provenance (the SYNTHETIC demo by default), so "
+                     "the curves show the method's behaviour, not the paper's values."],
+                    source="the training logs (train_log.csv) written by `grutrack train`")]
     parts += ["", "## Validation AMOTA against step", "", _figure(inp, logs), "",
               "## Summary", "", _summary(logs), "",
               "## What the paper reports (**paper numbers**, nuScenes)", "", _paper(paper),
@@ -32,7 +37,7 @@ def _figure(inp: ReportInputs, logs: dict[str, list[dict]]) -> str:
     series = {label: ([r["step"] for r in _validated(rows)], [r["val_amota"] for r in _validated(rows)])
               for label, rows in logs.items()}
     path = figures.lines(inp.figures / "val_amota_vs_step.png", series, "Validation AMOTA against training step",
-                         "step (one optimizer step per scene)", "validation AMOTA")
+                         "step (one optimizer step per scene)", "validation AMOTA", min_span=MIN_AMOTA_SPAN)
     return image(path, inp.out.parent, "validation AMOTA against step")
 
 

@@ -32,14 +32,19 @@ def build_tracker(name: str = "ekf", config: str | Path | None = None,
     """
     if name not in TRACKERS:
         raise ConfigError(f"unknown tracker '{name}' (available: {', '.join(TRACKERS)})")
+    if checkpoint is not None and name != "grukf":
+        raise ConfigError(f"--checkpoint is for --tracker grukf; --tracker {name} has no learned model (drop "
+                          f"--checkpoint, or use --tracker grukf)")
     cfg = load_tracker_config(config or DEFAULT_PRESET[name])
     index = _param_index(param_classes)
     cfg = remap_config(cfg, index)
     if name == "grukf":
         if checkpoint is None:
             raise ConfigError("--tracker grukf needs --checkpoint CKPT (a model written by `grutrack train`)")
+        from grutrack.tracking.grukf_backend import resolve_device
         from grutrack.training.checkpoint import load_network
 
+        device = resolve_device(device)   # a device this machine lacks is refused before the model is read
         return Tracker(cfg, [grukf_group(load_network(checkpoint), len(index), device, class_index=index)],
                        _association(cfg))
     return Tracker(cfg, _baseline_groups(name, cfg, index), _association(cfg))

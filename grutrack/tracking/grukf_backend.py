@@ -12,14 +12,30 @@ from dataclasses import dataclass, fields
 import numpy as np
 import torch
 
+from grutrack.errors import ConfigError
+
 from grutrack.motion.grukf import GRUKalmanNet
 
 
-def resolve_device(device: str = "auto") -> torch.device:
-    """``auto`` -> CUDA when available, else CPU; otherwise the named torch device."""
+def resolve_device(device: str = "auto", what: str = "--device") -> torch.device:
+    """``auto`` -> CUDA when available, else CPU; otherwise the named torch device, which must exist here.
+    ``what`` names the flag or config field the value came from, for the error message."""
     if device == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(device)
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError) as exc:
+        raise ConfigError(f"{what}: unknown torch device {device!r} (expected auto, cpu, cuda or cuda:N)") from exc
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            why = (f"this torch build ({torch.__version__}) has no CUDA support (see the README: a CUDA build "
+                   f"of torch)") if torch.version.cuda is None else "no CUDA GPU is visible"
+            raise ConfigError(f"{what}: {device!r} asked for a GPU, but {why}; use auto or cpu")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ConfigError(f"{what}: {device!r} but only {torch.cuda.device_count()} CUDA device(s) are visible")
+    elif dev.type != "cpu":
+        raise ConfigError(f"{what}: unsupported torch device {device!r} (expected auto, cpu, cuda or cuda:N)")
+    return dev
 
 
 @dataclass

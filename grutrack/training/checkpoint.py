@@ -39,7 +39,29 @@ def read_checkpoint(path: str | Path, map_location="cpu") -> dict:
 def load_network(path: str | Path, map_location="cpu") -> GRUKalmanNet:
     """The trained network of a checkpoint (weights loaded once, never re-initialised afterwards)."""
     ck = read_checkpoint(path, map_location)
-    net = GRUKalmanNet(GRUKFConfig(**ck["arch"]))
-    net.load_state_dict(ck["model"])
+    try:
+        net = GRUKalmanNet(GRUKFConfig(**ck["arch"]))
+    except (TypeError, ValueError, KeyError) as exc:
+        raise InputFormatError(f"{path}: field 'arch' is not a GRU-KF architecture ({exc})") from exc
+    load_weights(net, ck, path)
     net.eval()
     return net
+
+
+def load_weights(net: GRUKalmanNet, ck: dict, path: str | Path) -> None:
+    """Load ``ck['model']`` into ``net``; a missing, extra or mis-shaped tensor raises InputFormatError naming
+    the file and the tensor."""
+    state = ck.get("model")
+    if not isinstance(state, dict):
+        raise InputFormatError(f"{path}: field 'model' must hold the network's tensors")
+    own = net.state_dict()
+    missing, extra = sorted(set(own) - set(state)), sorted(set(state) - set(own))
+    if missing or extra:
+        raise InputFormatError(f"{path}: field 'model' does not fit the architecture in 'arch' (missing tensors "
+                               f"{missing[:3]}, unexpected {extra[:3]})")
+    for k, v in state.items():
+        if not isinstance(v, torch.Tensor) or tuple(v.shape) != tuple(own[k].shape):
+            got = tuple(v.shape) if isinstance(v, torch.Tensor) else type(v).__name__
+            raise InputFormatError(f"{path}: tensor 'model.{k}' has shape {got}, expected {tuple(own[k].shape)} "
+                                   f"(the architecture in 'arch')")
+    net.load_state_dict(state)

@@ -12,8 +12,12 @@ AdamW step per scene; cosine annealing over all steps.
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import random
+import signal
+import sys
+import threading
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -22,7 +26,7 @@ import numpy as np
 import torch
 
 from grutrack.data.scene import BoxSet, Scene
-from grutrack.errors import GrutrackError
+from grutrack.errors import ConfigError, GrutrackError, InputFormatError
 from grutrack.io import atomic_path
 from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig, MEAS_PLANAR, STATE_PLANAR
 from grutrack.motion.torch_models import wrap_angle_t
@@ -31,12 +35,15 @@ from grutrack.tracking.ekf_backend import KalmanBackend, KFState
 from grutrack.tracking.factory import grukf_group
 from grutrack.tracking.grukf_backend import GRUKFBackend, GRUState, resolve_device
 from grutrack.tracking.tracker import Tracker, TrackGroup, track_scenes
-from grutrack.training.checkpoint import read_checkpoint, save_checkpoint
+from grutrack.training.checkpoint import load_weights, read_checkpoint, save_checkpoint
 from grutrack.training.config import TrainConfig
 from grutrack.training.gt_association import StickyGTAssociation
 
 #: a gain entry beyond this (a correction of 1000x the innovation) means the learned filter has diverged
 MAX_ABS_GAIN = 1e3
+
+#: between periodic checkpoints, train_log.csv is rewritten after the first step and then at most this often (s)
+LOG_EVERY_S = 30.0
 
 LOG_FIELDS = ("step", "epoch", "scene", "loss", "gt_terms", "pseudo_terms", "prediction_terms", "lr", "val_amota",
               "seconds")
@@ -56,6 +63,38 @@ def ekf_backend(cfg: TrainConfig) -> KalmanBackend:
 
 class TrainingDiverged(GrutrackError):
     """The loss, a gradient or the learned gain became non-finite or exploded."""
+
+
+class TrainingInterrupted(Exception):
+    """Ctrl-C (SIGINT) stopped training after a completed step; ``path`` is the resumable checkpoint."""
+
+    def __init__(self, path: Path, step: int):
+        super().__init__(f"interrupted after step {step}; resumable checkpoint {path} (continue with --resume)")
+        self.path, self.step = path, step
+
+
+#: training-config keys a resumed run may change: they touch neither the weights, the scene order nor the schedule
+RESUME_MAY_CHANGE = ("device", "val_every", "checkpoint_every")
+
+
+def data_fingerprint(scenes: list[Scene], dets: dict[str, BoxSet]) -> str:
+    """SHA-256 (hex) over the training scenes (names, frame tokens, timestamps, ground truth) and the
+    detections of their frames: a resumed run must train on the same data."""
+    h = hashlib.sha256()
+    for s in scenes:
+        h.update(f"{s.name}|{s.token}|{len(s.frames)}".encode())
+        for f in s.frames:
+            h.update(f"{f.token}|{f.timestamp}".encode())
+            for bs in (f.gt, dets.get(f.token)):
+                if bs is None:
+                    h.update(b"-")
+                    continue
+                h.update(np.ascontiguousarray(bs.boxes, dtype=np.float64).tobytes())
+                h.update(np.ascontiguousarray(bs.scores, dtype=np.float64).tobytes())
+                h.update(np.ascontiguousarray(bs.labels, dtype=np.int64).tobytes())
+                if bs.ids is not None:
+                    h.update("|".join(map(str, bs.ids)).encode())
+    return h.hexdigest()
 
 
 class PairedBackend:
@@ -233,6 +272,11 @@ class TrainState:
     order: list | None = None   # the epoch's scene order
 
 
+def _plain(v):
+    """Config values compared across a checkpoint round trip (tuples come back as lists)."""
+    return list(v) if isinstance(v, tuple) else v
+
+
 def _rng_state(np_rng: np.random.Generator) -> dict:
     return {"numpy": np_rng.bit_generator.state, "torch": torch.get_rng_state(), "python": random.getstate()}
 
@@ -248,12 +292,16 @@ class Trainer:
     validation every ``val_every`` steps and resumable checkpoints in ``out_dir``."""
 
     def __init__(self, cfg: TrainConfig, scenes: list[Scene], dets: dict[str, BoxSet], out_dir: str | Path,
-                 validate=None, progress: bool = True):
+                 validate=None, progress: bool = True, source: dict | None = None):
         self.cfg, self.scenes, self.dets = cfg, scenes, dets
+        self.source = dict(source or {})    # where the data came from (dataroot, split, detections), for messages
+        self.fingerprint = data_fingerprint(scenes, dets)
+        self._interrupted = False
+        self._log_written = time.monotonic()
         self.out = Path(out_dir)
         self.validate = validate            # callable(net) -> AMOTA, or None
         self.progress = progress
-        self.device = resolve_device(cfg.device)
+        self.device = resolve_device(cfg.device, "training config 'device'")
         self.tracker_cfg = load_tracker_config(cfg.tracker_preset)
         torch.manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
@@ -275,21 +323,44 @@ class Trainer:
         save_checkpoint(path, self.net, {
             "optimizer": self.opt.state_dict(), "scheduler": self.sched.state_dict(),
             "rng": _rng_state(self.np_rng), "train_state": asdict(self.state), "train_config": asdict(self.cfg),
-            "log": self.log_rows})
+            "log": self.log_rows, "data_fingerprint": self.fingerprint, "data_source": self.source})
         self._write_log()
         return path
 
     def resume(self, path: str | Path) -> None:
-        """Continue exactly from a checkpoint written by :meth:`save`."""
+        """Continue exactly from a checkpoint written by :meth:`save`; a checkpoint of other data or of other
+        settings (anything but :data:`RESUME_MAY_CHANGE`) raises :class:`ConfigError`."""
         ck = read_checkpoint(path, map_location=self.device)
-        self.net.load_state_dict(ck["model"])
+        self._check_resumable(path, ck)
+        load_weights(self.net, ck, path)
         self.opt.load_state_dict(ck["optimizer"])
         self.sched.load_state_dict(ck["scheduler"])
         _set_rng_state(self.np_rng, ck["rng"])
         self.state = TrainState(**ck["train_state"])
         self.log_rows = list(ck["log"])
 
+    def _check_resumable(self, path: str | Path, ck: dict) -> None:
+        """Refuse to resume ``ck`` unless it was written by a run of the same data and settings."""
+        for key in ("train_state", "train_config", "optimizer", "rng", "log"):
+            if key not in ck:
+                raise InputFormatError(f"{path}: not a resumable checkpoint (no '{key}'; model.pt files of old "
+                                       f"versions cannot be resumed)")
+        old, new = ck["train_config"], asdict(self.cfg)
+        changed = [k for k in new if k not in RESUME_MAY_CHANGE and _plain(old.get(k)) != _plain(new[k])]
+        if changed:
+            diff = ", ".join(f"{k} {old.get(k)!r} -> {new[k]!r}" for k in changed)
+            raise ConfigError(f"{path}: cannot resume with other training settings ({diff}); use the settings "
+                              f"of that run or another --out")
+        if ck.get("data_fingerprint") != self.fingerprint:
+            was = ck.get("data_source") or {}
+            diff = ", ".join(f"{k} {was.get(k)!r} -> {self.source.get(k)!r}" for k in sorted(set(was) | set(
+                self.source)) if was.get(k) != self.source.get(k))
+            raise ConfigError(f"{path}: cannot resume on other training data (the scenes, ground truth or "
+                              f"detections differ{': ' + diff if diff else ''}); use the data of that run or "
+                              f"another --out")
+
     def _write_log(self) -> None:
+        self._log_written = time.monotonic()
         buf = io.StringIO()
         w = csv.DictWriter(buf, fieldnames=LOG_FIELDS)
         w.writeheader()
@@ -312,16 +383,19 @@ class Trainer:
         done = 0
         bar = tqdm(total=self.total_steps, initial=self.state.step, unit="step", desc="training GRU-KF",
                    disable=not self.progress)
-        while self.state.epoch < self.cfg.epochs and (max_steps is None or done < max_steps):
-            if self.state.order is None:
-                self.state.order = [int(i) for i in self.np_rng.permutation(len(self.scenes))]
-            while self.state.index < len(self.state.order) and (max_steps is None or done < max_steps):
+        with self._sigint_deferred():
+            while self.state.epoch < self.cfg.epochs and (max_steps is None or done < max_steps):
+                if self.state.order is None:
+                    self.state.order = [int(i) for i in self.np_rng.permutation(len(self.scenes))]
                 self._step(self.scenes[self.state.order[self.state.index]])
-                self.state.index += 1
+                self._advance()
                 done += 1
                 bar.update(1)
-            if self.state.index >= len(self.state.order):
-                self.state.epoch, self.state.index, self.state.order = self.state.epoch + 1, 0, None
+                if self._interrupted:
+                    bar.close()
+                    raise TrainingInterrupted(self.save(), self.state.step)
+                if self.cfg.checkpoint_every and self.state.step % self.cfg.checkpoint_every == 0:
+                    self.save()
         bar.close()
         if self.state.epoch >= self.cfg.epochs and self.validate is not None and \
                 (not self.log_rows or self.log_rows[-1]["val_amota"] == ""):
@@ -329,6 +403,41 @@ class Trainer:
         self.save()
         final = self.save("model.pt") if self.state.epoch >= self.cfg.epochs else self.out / "last.pt"
         return final
+
+    def _advance(self) -> None:
+        """Move the position past the step just taken (into the next epoch after its last scene), so that a
+        checkpoint written now resumes with the next step."""
+        self.state.index += 1
+        if self.state.index >= len(self.state.order):
+            self.state.epoch, self.state.index, self.state.order = self.state.epoch + 1, 0, None
+
+    def _sigint_deferred(self):
+        """Context: the first Ctrl-C (SIGINT) lets the current step finish, then training saves last.pt and
+        stops with :class:`TrainingInterrupted`; a second one interrupts at once (nothing more is saved)."""
+        import contextlib
+
+        @contextlib.contextmanager
+        def ctx():
+            if threading.current_thread() is not threading.main_thread():
+                yield
+                return
+            previous = signal.getsignal(signal.SIGINT)
+            self._interrupted = False
+
+            def handler(signum, frame):
+                if self._interrupted:
+                    raise KeyboardInterrupt
+                self._interrupted = True
+                print("\ninterrupt: finishing the current step, then saving last.pt (Ctrl-C again to abort)",
+                      file=sys.stderr, flush=True)
+
+            signal.signal(signal.SIGINT, handler)
+            try:
+                yield
+            finally:
+                signal.signal(signal.SIGINT, previous)
+
+        return ctx()
 
     def _diverged(self, scene: Scene, what: str) -> None:
         """Keep the last good state (the step was not applied) as last.pt and stop with a clear message."""
@@ -365,5 +474,5 @@ class Trainer:
             self.net.eval()
             row["val_amota"] = round(float(self.validate(self.net)), 6)
         self.log_rows.append(row)
-        if self.cfg.checkpoint_every and self.state.step % self.cfg.checkpoint_every == 0:
-            self.save()
+        if self.state.step == 1 or time.monotonic() - self._log_written >= LOG_EVERY_S:
+            self._write_log()   # progress shows in train_log.csv from the first step on

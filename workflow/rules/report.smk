@@ -25,7 +25,7 @@ def _report_trainings(rep):
         runs = config["experiments"][rep["experiment"]]["runs"]
         names = {r["training"]: r["training"] for r in runs.values() if r["training"]}
     return [(label, f"checkpoints/{t}/train_log.csv", f"checkpoints/{t}/training.yaml") for label, t in names.items()
-            if rep["kind"] in ("semi_supervised", "demo")]
+            if rep["kind"] in ("semi_supervised", "demo", "nusc_val", "av2_val")]
 
 
 def _report_renders(rep):
