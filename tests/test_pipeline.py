@@ -87,6 +87,8 @@ def test_default_config_cross_references(cfg, paper):
     (("experiments", "demo_val", "runs", "ekf", "preset"), "ekff", "experiments.demo_val.runs.ekf.preset"),
     (("experiments", "demo_val", "runs", "grukf", "training"), "nope", "experiments.demo_val.runs.grukf.training"),
     (("reports", "nusc_val", "tables", "IV", "CTRA+Ours"), "missing_run", "reports.nusc_val.tables.IV.CTRA+Ours"),
+    (("reports", "nusc_val", "extra_rows", "III", "Fast-Poly"), "missing_run",
+     "reports.nusc_val.extra_rows.III.Fast-Poly"),
     (("detectors", "centerpoint", "sources", "val"), "no_such_source", "detectors.centerpoint.sources.val"),
     (("trainings", "demo_grukf", "split"), "demo_test", "detectors.centerpoint_sim.seeds"),
 ])
@@ -122,3 +124,10 @@ def test_core_geometry_and_box_code_re_run_tracking():
         for path in ("geometry.py", "boxes.py", "data/scene.py", "tracking", "motion"):
             assert path in STAGE_SOURCES[stage], (stage, path)
     assert "evaluation/fast_loading.py" in STAGE_SOURCES["evaluate"]
+
+
+def test_extra_row_that_is_a_paper_row_is_refused(cfg, paper):
+    bad = copy.deepcopy(cfg)
+    bad["reports"]["nusc_val"]["extra_rows"] = {"III": {"Poly-MOT": "polymot"}}
+    with pytest.raises(ConfigError, match=r"reports.nusc_val.extra_rows.III.Poly-MOT: 'Poly-MOT' is a row of the paper"):
+        spec.check_config(bad, paper, load_registry())

@@ -73,10 +73,12 @@ def test_check_other_row_and_per_class_table(tmp_path, capsys):
 
 
 def test_nusc_val_report_has_paper_reproduced_and_difference(tmp_path):
-    runs = {"grukf": (0.730, 0.515, 270), "polymot": (0.725, 0.53, 300), "ekf": (0.72, 0.52, 280)}
+    runs = {"grukf": (0.730, 0.515, 270), "polymot": (0.725, 0.53, 300), "ekf": (0.72, 0.52, 280),
+            "fastpoly": (0.737, 0.49, 250)}
     args = ["report", "nusc_val", "--out", str(tmp_path / "r.md"), "--paper", str(PAPER),
             "--experiment", "nusc_val:nuscenes:val:centerpoint", "--row", "III:Ours=grukf",
-            "--row", "III:Poly-MOT=polymot", "--row", "IV:CTRA+Ours=grukf", "--row", "IV:CTRA+EKF=ekf"]
+            "--row", "III:Poly-MOT=polymot", "--row", "IV:CTRA+Ours=grukf", "--row", "IV:CTRA+EKF=ekf",
+            "--extra-row", "III:Fast-Poly=fastpoly"]
     for run, (a, p, i) in runs.items():
         args += ["--run", f"{run}={nusc_metrics(tmp_path / f'{run}.json', a, p, i)}"]
     assert main(args) == 0
@@ -84,6 +86,9 @@ def test_nusc_val_report_has_paper_reproduced_and_difference(tmp_path):
     assert "**Paper numbers**" in text and "**Reproduced**" in text and "**Difference**" in text
     assert re.search(r"^\| Ours \| 73\.0 \| 51\.5 \| 270 \|$", text, re.M)   # reproduced row
     assert re.search(r"^\| Ours \| -0\.2 \| \+0\.4 \| \+3 \|$", text, re.M)   # difference row
+    # a row that is not in the paper: reproduced, labelled, never among the paper numbers or the differences
+    assert len(re.findall(r"^\| Fast-Poly \(not in the paper\) \| 73\.7 \| 49\.0 \| 250 \|$", text, re.M)) == 1
+    assert "Fast-Poly" not in text.split("**Reproduced**")[0] and "Fast-Poly" not in text.split("**Difference**")[1]
     for link in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text):
         png = (tmp_path / link)
         assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

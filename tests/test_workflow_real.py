@@ -73,7 +73,7 @@ def mini_run(tmp_path_factory, nusc_root, pointpillars_mini_val):
             "nusc_grukf_bicycle": {"split": "mini_train", "detector": "centerpoint_sim",
                                    "overrides": {"epochs": 1, "ss_model": "BICYCLE"}},
         },
-        # the nusc_val experiment (all 7 runs of Tables III and IV) on mini_val with the PointPillars detections
+        # the nusc_val experiment (all 8 runs of Tables III and IV) on mini_val with the PointPillars detections
         "experiments": {"nusc_val": {"split": "mini_val", "detectors": ["pointpillars"]}},
         "tracking": {"device": "cpu"},
     }
@@ -114,7 +114,7 @@ def test_mini_val_report_numbers_equal_the_cli_and_metrics(mini_run):
     cli = json.loads((mini_run / "cli/metrics.json").read_text())["overall"]
 
     every = _table(text, "## Every run", "")
-    assert set(every) == {"ekf", "polymot", "grukf", "ekf_bicycle", "ekf_ctra", "kf_ca", "grukf_bicycle"}
+    assert set(every) == {"ekf", "polymot", "fastpoly", "grukf", "ekf_bicycle", "ekf_ctra", "kf_ca", "grukf_bicycle"}
     # columns: AMOTA AMOTP MOTA recall IDS FRAG TP FP FN
     ekf = every["ekf"]
     assert [ekf[0], ekf[1], ekf[4]] == [f"{100 * cli['amota']:.1f}", f"{100 * cli['amotp']:.1f}",
@@ -125,9 +125,10 @@ def test_mini_val_report_numbers_equal_the_cli_and_metrics(mini_run):
                            f"{100 * o['recall']:.1f}", f"{o['ids']:.0f}"], run
 
     t3 = _table(text, "## Table III", "**Reproduced**")
-    for row, run in {"Ours": "grukf", "Poly-MOT": "polymot"}.items():
+    for row, run in {"Ours": "grukf", "Poly-MOT": "polymot", "Fast-Poly (not in the paper)": "fastpoly"}.items():
         o = _metrics(mini_run, run)["overall"]
         assert t3[row] == [f"{100 * o['amota']:.1f}", f"{100 * o['amotp']:.1f}", f"{o['ids']:.0f}"], row
+    assert "Fast-Poly" not in _table(text, "## Table III", "**Difference**")  # no paper number to subtract
 
     t4 = _table(text, "## Table IV", "**Reproduced**")
     rows = {"Bicycle+EKF": "ekf_bicycle", "CTRA+EKF": "ekf_ctra", "CA+KF": "kf_ca", "CTRA+Ours": "grukf",

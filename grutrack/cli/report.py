@@ -30,6 +30,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--run", action="append", default=[], metavar="RUN=METRICS_JSON", help="a run's metrics JSON")
     p.add_argument("--row", action="append", default=[], metavar="TABLE:ROW=RUN",
                    help="paper row reproduced by a run, e.g. III:Ours=grukf")
+    p.add_argument("--extra-row", action="append", default=[], metavar="TABLE:ROW=RUN",
+                   help="a row that is not in the paper's table, shown reproduced only (e.g. Fast-Poly)")
     p.add_argument("--train-log", action="append", default=[], metavar="LABEL=CSV", help="a train_log.csv")
     p.add_argument("--zip", action="append", default=[], metavar="DETECTOR=ZIP", help="a leaderboard zip")
     p.add_argument("--render", action="append", default=[], metavar="RUN=COUNTS_JSON",
@@ -49,14 +51,14 @@ def _pairs(values: list[str], option: str) -> dict[str, str]:
     return out
 
 
-def _rows(values: list[str]) -> dict[str, dict[str, str]]:
+def _rows(values: list[str], option: str = "--row") -> dict[str, dict[str, str]]:
     """``TABLE:ROW=RUN`` arguments as {table: {row: run}}."""
     out: dict[str, dict[str, str]] = {}
     for v in values:
         left, sep, run_ = v.rpartition("=")
         tid, colon, row = left.partition(":")
         if not sep or not colon or not (tid and row and run_):
-            raise ConfigError(f"--row expects TABLE:ROW=RUN, got '{v}'")
+            raise ConfigError(f"{option} expects TABLE:ROW=RUN, got '{v}'")
         out.setdefault(tid, {})[row] = run_
     return out
 
@@ -81,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
     inp = ReportInputs(name=name, out=out, figures=Path(args.figures or out.parent / "figures" / name),
                        paper=load_paper(paper_path), paper_path=paper_path, experiment=_experiment(args.experiment),
                        runs={k: Path(v) for k, v in _pairs(args.run, "--run").items()}, rows=_rows(args.row),
+                       extra_rows=_rows(args.extra_row, "--extra-row"),
                        train_logs={k: Path(v) for k, v in _pairs(args.train_log, "--train-log").items()},
                        zips={k: Path(v) for k, v in _pairs(args.zip, "--zip").items()},
                        renders={k: Path(v) for k, v in _pairs(args.render, "--render").items()})

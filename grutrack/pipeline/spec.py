@@ -217,6 +217,13 @@ def _check_report(cfg: dict, paper: dict, name: str, rep: dict) -> None:
         for row, run in rows.items():
             _need(paper["tables"][table]["rows"], row, f"{key}.tables.{table}", f"paper.yaml tables.{table}.rows")
             _need(exp["runs"], run, f"{key}.tables.{table}.{row}", f"experiments.{rep['experiment']}.runs")
+    for table, rows in rep.get("extra_rows", {}).items():
+        _need(paper["tables"], table, f"{key}.extra_rows", "the paper tables (paper.yaml)")
+        for row, run in rows.items():
+            if row in paper["tables"][table]["rows"]:
+                raise ConfigError(f"config key {key}.extra_rows.{table}.{row}: '{row}' is a row of the paper's table "
+                                  f"{table}; list it under {key}.tables.{table}")
+            _need(exp["runs"], run, f"{key}.extra_rows.{table}.{row}", f"experiments.{rep['experiment']}.runs")
 
 
 # ------------------------------------------------------------------------------------------------------------

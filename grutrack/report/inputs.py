@@ -23,6 +23,7 @@ class ReportInputs:
     experiment: dict | None = None                             # name, dataset, split, detector
     runs: dict[str, Path] = field(default_factory=dict)        # run -> metrics JSON
     rows: dict[str, dict[str, str]] = field(default_factory=dict)  # paper table -> paper row -> run
+    extra_rows: dict[str, dict[str, str]] = field(default_factory=dict)  # paper table -> row not in it -> run
     train_logs: dict[str, Path] = field(default_factory=dict)  # label -> train_log.csv
     zips: dict[str, Path] = field(default_factory=dict)        # detector -> leaderboard zip
     renders: dict[str, Path] = field(default_factory=dict)     # run -> counts.json of its `grutrack render`
@@ -34,11 +35,11 @@ class ReportInputs:
             self._docs = {run: load_metrics(p) for run, p in self.runs.items()}
         return self._docs
 
-    def row_docs(self, tid: str) -> dict[str, dict]:
-        """Paper row -> metrics JSON of the run that reproduces it."""
+    def row_docs(self, tid: str, extra: bool = False) -> dict[str, dict]:
+        """Paper row -> metrics JSON of the run that reproduces it (``extra``: the rows not in the paper)."""
         docs = self.docs()
         out = {}
-        for row, run in self.rows.get(tid, {}).items():
+        for row, run in (self.extra_rows if extra else self.rows).get(tid, {}).items():
             if run not in docs:
                 raise InputFormatError(f"table {tid} row '{row}' is mapped to run '{run}', which has no --run")
             out[row] = docs[run]

@@ -35,9 +35,10 @@ def column_is_count(tbl: dict, col: str) -> bool:
     return tbl["columns"][col]["scale"] == 1
 
 
-def mirror_tables(tbl: dict, docs: dict[str, dict | None]) -> str:
+def mirror_tables(tbl: dict, docs: dict[str, dict | None], extra: dict[str, dict] | None = None) -> str:
     """The paper table as printed (PAPER numbers), the same layout with the reproduced numbers, and the
-    difference reproduced - paper; ``docs`` maps a paper row to the metrics JSON that reproduces it."""
+    difference reproduced - paper; ``docs`` maps a paper row to the metrics JSON that reproduces it, ``extra``
+    a row that is not in the paper (reproduced only, labelled "not in the paper") to its metrics JSON."""
     cols = list(tbl["columns"])
     paper_rows, repro_rows, diff_rows = [], [], []
     for row, numbers in tbl["rows"].items():
@@ -47,6 +48,9 @@ def mirror_tables(tbl: dict, docs: dict[str, dict | None]) -> str:
             repro_rows.append([row] + [num(values[c], column_is_count(tbl, c)) for c in cols])
             diff_rows.append([row] + [num(None if values[c] is None or c not in numbers else values[c] - numbers[c],
                                           column_is_count(tbl, c), signed=True) for c in cols])
+    for row, doc in (extra or {}).items():
+        values = reproduced(tbl, doc)
+        repro_rows.append([f"{row} (not in the paper)"] + [num(values[c], column_is_count(tbl, c)) for c in cols])
     out = [f"**Paper numbers** ({tbl['title']}; as printed in the paper):", "", table(["method"] + cols, paper_rows)]
     if repro_rows:
         out += ["", "**Reproduced** (same layout; read from the metrics JSONs listed under Provenance):", "",

@@ -22,7 +22,7 @@ def build(inp: ReportInputs) -> str:
             tbl = get_table(inp.paper, tid)
             note = setting_note(tbl, exp, exp.get("detector"))
             parts += ["", f"## {tbl['title']}", "", *([note, ""] if note else []),
-                      mirror_tables(tbl, inp.row_docs(tid)), "",
+                      mirror_tables(tbl, inp.row_docs(tid), inp.row_docs(tid, extra=True)), "",
                       _figure(inp, tid, tbl)]
     parts += ["", "## Every run", "", runs_table(docs)]
     strips = worst_scene_strips(inp)

@@ -76,6 +76,8 @@ def _report_args(w):
     args += [f"--render {run}={folder}/counts.json" for run, folder in _report_renders(rep)]
     args += [f"--row {shlex.quote(f'{table}:{row}={run}')}" for table, rows in rep["tables"].items()
              for row, run in rows.items()]
+    args += [f"--extra-row {shlex.quote(f'{table}:{row}={run}')}" for table, rows in rep.get("extra_rows", {}).items()
+             for row, run in rows.items()]
     return " ".join(args)
 
 
