@@ -42,14 +42,15 @@ is on the hull iff ``a`` reaches at least as far as ``b`` in some direction of t
 cone), then summed the same way. All work is done in the frame of box ``b`` (centre at the origin),
 so large global coordinates cost no precision. Inside / on-edge tests have a slack of
 :data:`TOL` metres; repeated or collinear boundary points add no area, so identical, nested and
-touching boxes are exact to rounding.
+touching boxes are exact to rounding. The per-pair polygon work (candidate points, angular sort,
+shoelace sums) runs in numba-compiled kernels, one pair at a time with no temporaries; they are compiled
+once and cached on disk beside this module.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
+from numba import njit
 
 TOL = 1e-10
 """Slack in metres of the inside / on-the-edge tests (points this close to a boundary count as on it).
@@ -64,31 +65,11 @@ collinear point set and count as 0 (so, e.g., two collinear segments have GIoU 0
 CHUNK_PAIRS = 1 << 16
 """Pairs handled at once by the ``pairwise_*`` functions (bounds temporary memory)."""
 
-BLOCK = 512
-"""Pairs per block of the polygon work: keeps each temporary array under 128 KiB, which avoids
-fresh memory mappings (and their page faults) for every numpy temporary."""
-
 # Corner order in the box frame (+x along l, +y along w): front-left, rear-left, rear-right,
 # front-right, i.e. counter-clockwise. Edge k runs from corner k to corner k+1.
 _SU = np.array([1.0, -1.0, -1.0, 1.0])
 _SV = np.array([1.0, 1.0, -1.0, -1.0])
-
-
-class _PairFrame(NamedTuple):
-    """Box ``a`` of each pair expressed in the frame of box ``b`` (all ``(K,) float64``).
-
-    ``cx, cy``: centre of ``a`` in metres; ``c, s``: cosine and sine of ``yaw_a - yaw_b``;
-    ``al, aw`` / ``bl, bw``: half length and half width of ``a`` / ``b`` in metres.
-    """
-
-    cx: np.ndarray
-    cy: np.ndarray
-    c: np.ndarray
-    s: np.ndarray
-    al: np.ndarray
-    aw: np.ndarray
-    bl: np.ndarray
-    bw: np.ndarray
+_SU_T, _SV_T = (1.0, -1.0, -1.0, 1.0), (1.0, 1.0, -1.0, -1.0)  # the same as tuples, for the kernels
 
 
 def _check_boxes(boxes: np.ndarray, name: str, min_cols: int = 7) -> np.ndarray:
@@ -122,343 +103,317 @@ def bev_corners(boxes: np.ndarray) -> np.ndarray:
     return np.stack([x, y], axis=-1)
 
 
-class _Boxes(NamedTuple):
-    """Per-box terms, all ``(N,) float64``: centre ``x, y`` (m); ``c, s`` cosine and sine of the yaw;
-    half length ``hl`` and half width ``hw`` (m); bottom ``lo`` and top ``hi`` (m); footprint ``area``
-    (m²); volume ``vol`` (m³); circumradius ``radius`` of the footprint (m)."""
-
-    x: np.ndarray
-    y: np.ndarray
-    c: np.ndarray
-    s: np.ndarray
-    hl: np.ndarray
-    hw: np.ndarray
-    lo: np.ndarray
-    hi: np.ndarray
-    area: np.ndarray
-    vol: np.ndarray
-    radius: np.ndarray
+#: rows of the per-box term array made by :func:`_box_terms`
+_X, _Y, _C, _S, _HL, _HW, _LO, _HI, _AREA, _VOL, _RADIUS = range(11)
 
 
-def _box_terms(boxes: np.ndarray) -> _Boxes:
-    """Per-box terms of validated ``boxes (N, >=7)``."""
-    hl, hw, half_h = 0.5 * boxes[:, 4], 0.5 * boxes[:, 3], 0.5 * boxes[:, 5]
-    area = boxes[:, 3] * boxes[:, 4]
-    return _Boxes(x=boxes[:, 0].copy(), y=boxes[:, 1].copy(), c=np.cos(boxes[:, 6]),
-                  s=np.sin(boxes[:, 6]), hl=hl, hw=hw, lo=boxes[:, 2] - half_h,
-                  hi=boxes[:, 2] + half_h, area=area, vol=area * boxes[:, 5], radius=np.hypot(hl, hw))
+def _box_terms(boxes: np.ndarray) -> np.ndarray:
+    """Per-box terms ``(11, N) float64`` of validated ``boxes (N, >=7)``: centre ``x, y`` (m); cosine and
+    sine of the yaw; half length and half width (m); bottom and top (m); footprint area (m²); volume (m³);
+    circumradius of the footprint (m). Rows are named by ``_X`` ... ``_RADIUS``."""
+    t = np.empty((11, boxes.shape[0]))
+    t[_X], t[_Y] = boxes[:, 0], boxes[:, 1]
+    t[_C], t[_S] = np.cos(boxes[:, 6]), np.sin(boxes[:, 6])
+    t[_HL], t[_HW] = 0.5 * boxes[:, 4], 0.5 * boxes[:, 3]
+    half_h = 0.5 * boxes[:, 5]
+    t[_LO], t[_HI] = boxes[:, 2] - half_h, boxes[:, 2] + half_h
+    t[_AREA] = boxes[:, 3] * boxes[:, 4]
+    t[_VOL] = t[_AREA] * boxes[:, 5]
+    t[_RADIUS] = np.hypot(t[_HL], t[_HW])
+    return t
 
 
-def _take(boxes: _Boxes, start: int, stop: int) -> _Boxes:
-    """Boxes ``start:stop`` of ``boxes``."""
-    return _Boxes(*(v[start:stop] for v in boxes))
+@njit(cache=True, inline="always")
+def _pseudo_angle(dx: float, dy: float) -> float:
+    """A key in [0, 4) increasing with the angle of ``(dx, dy)`` from +x, counter-clockwise; ``(0, 0)`` -> 1."""
+    p = dx / (abs(dx) + abs(dy) + 1e-300)
+    return 1.0 - p + (2.0 + 2.0 * p if dy < 0.0 else 0.0)
 
 
-class _Pairs(NamedTuple):
-    """K pairs of boxes: ``frame`` (box ``a`` in the frame of box ``b``) and ``(K,) float64`` terms:
-    centre distance ``dist`` and sum of circumradii ``reach`` (m), footprint areas (m²), volumes
-    (m³), vertical ``overlap`` and ``span`` (m) of the two boxes."""
+@njit(cache=True, inline="always")
+def _ring_area(x: np.ndarray, y: np.ndarray, valid: np.ndarray, p: int, keys: np.ndarray) -> float:
+    """Area (m²) of the convex polygon through the valid ones of the first ``p`` (<= 16) points
+    ``x, y, valid``; ``keys (>=p,) int64`` is a work array.
 
-    frame: _PairFrame
-    dist: np.ndarray
-    reach: np.ndarray
-    area_a: np.ndarray
-    area_b: np.ndarray
-    vol_a: np.ndarray
-    vol_b: np.ndarray
-    overlap: np.ndarray
-    span: np.ndarray
-
-
-def _pairs(a: _Boxes, b: _Boxes, outer: bool) -> _Pairs:
-    """Aligned pairs ``(a[k], b[k])`` or, if ``outer``, all ``N * M`` pairs (``a``-major order)."""
-    if outer:
-        shape = (a.x.shape[0], b.x.shape[0])
-        a, b = _Boxes(*(v[:, None] for v in a)), _Boxes(*(v[None, :] for v in b))
-    else:
-        shape = a.x.shape
-
-    def flat(v: np.ndarray) -> np.ndarray:
-        """The per-pair term ``v`` broadcast to all pairs, as a contiguous ``(K,)`` array."""
-        return np.ascontiguousarray(np.broadcast_to(v, shape)).ravel()
-
-    dx, dy = a.x - b.x, a.y - b.y
-    # Centre of a rotated into b's frame; cosine and sine of yaw_a - yaw_b.
-    frame = _PairFrame(cx=flat(dx * b.c + dy * b.s), cy=flat(dy * b.c - dx * b.s),
-                       c=flat(a.c * b.c + a.s * b.s), s=flat(a.s * b.c - a.c * b.s),
-                       al=flat(a.hl), aw=flat(a.hw), bl=flat(b.hl), bw=flat(b.hw))
-    overlap = np.maximum(0.0, np.minimum(a.hi, b.hi) - np.maximum(a.lo, b.lo))
-    span = np.maximum(a.hi, b.hi) - np.minimum(a.lo, b.lo)
-    return _Pairs(frame=frame, dist=flat(np.hypot(dx, dy)), reach=flat(a.radius + b.radius),
-                  area_a=flat(a.area), area_b=flat(b.area), vol_a=flat(a.vol), vol_b=flat(b.vol),
-                  overlap=flat(overlap), span=flat(span))
-
-
-# Internally, per-pair quantities are laid out points-first, ``(P, K)`` with the K pairs last, so
-# that every numpy operation runs over long contiguous rows.
-
-
-def _corners_a(f: _PairFrame) -> tuple[np.ndarray, np.ndarray]:
-    """Corners of ``a`` in ``b``'s frame: x, y ``(4, K)`` metres, counter-clockwise."""
-    su, sv = _SU[:, None], _SV[:, None]
-    x = f.cx + su * (f.al * f.c) - sv * (f.aw * f.s)
-    y = f.cy + su * (f.al * f.s) + sv * (f.aw * f.c)
-    return x, y
-
-
-def _corners_b(f: _PairFrame) -> tuple[np.ndarray, np.ndarray]:
-    """Corners of ``b`` in its own frame: x, y ``(4, K)`` metres, counter-clockwise."""
-    return _SU[:, None] * f.bl, _SV[:, None] * f.bw
-
-
-def _rows(*rows: np.ndarray) -> np.ndarray:
-    """Stack equal-shaped arrays along a new first axis (a cheaper ``np.stack(rows)``)."""
-    out = np.empty((len(rows),) + rows[0].shape)
-    for i, row in enumerate(rows):
-        out[i] = row
-    return out
-
-
-def _pseudo_angle(dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
-    """A key in [0, 4) increasing with the angle of ``(dx, dy)`` (any equal shapes) from +x, CCW.
-
-    ``(0, 0)`` gets key 1.
+    The valid points must lie on the boundary of the polygon and include its vertices; repeats and points
+    along edges add nothing. They are sorted by angle about their mean (integer keys: the quantised angle
+    with the point's index in the low 4 bits, insertion-sorted) and summed by the shoelace formula
+    ``A = 1/2 sum_r (x_r y_{r+1} - y_r x_{r+1})``. No valid point gives area 0.
     """
-    p = dx / (np.abs(dx) + np.abs(dy) + 1e-300)
-    return 1.0 - p + (dy < 0.0) * (2.0 + 2.0 * p)
-
-
-def _batcher_network(n: int) -> list[tuple[int, int]]:
-    """Comparators ``(i, j)``, ``i < j``, of Batcher's odd-even merge sort of ``n`` keys (a power of 2)."""
-    pairs = []
-    p = 1
-    while p < n:
-        k = p
-        while k >= 1:
-            for j in range(k % p, n - k, 2 * k):
-                for i in range(min(k, n - j - k)):
-                    if (i + j) // (2 * p) == (i + j + k) // (2 * p):
-                        pairs.append((i + j, i + j + k))
-            k //= 2
-        p *= 2
-    return pairs
-
-
-_NETWORKS = {8: _batcher_network(8), 16: _batcher_network(16)}
-
-
-def _sort_columns(keys: np.ndarray) -> np.ndarray:
-    """``keys (P, K)`` (P = 8 or 16) sorted ascending within each column, by a sorting network."""
-    rows = list(keys)
-    for i, j in _NETWORKS[len(rows)]:
-        lo = np.minimum(rows[i], rows[j])
-        rows[j] = np.maximum(rows[i], rows[j])
-        rows[i] = lo
-    return np.stack(rows)
-
-
-def _ring_area(x: np.ndarray, y: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Area ``(K,) float64`` m² of the convex polygon through the valid points of each column.
-
-    ``x, y`` (metres, finite) and ``valid`` are ``(P, K)`` with P = 8 or 16. The valid points of a
-    column must lie on the boundary of its convex polygon and include its vertices; repeats and
-    points along edges add nothing. They are sorted by angle about their mean and summed by the
-    shoelace formula. No valid point gives area 0.
-    """
-    p, k = x.shape
-    vf = valid.astype(np.float64)
-    n = vf.sum(axis=0)
-    nn = np.maximum(n, 1.0)
-    dx = (x - (x * vf).sum(axis=0) / nn) * vf  # invalid points sit on the mean: they add no area
-    dy = (y - (y * vf).sum(axis=0) / nn) * vf
-    key = _pseudo_angle(dx, dy) + 8.0 * (1.0 - vf)  # in [0, 12); invalid points sort last
-    # Quantise to integers and put the row index in the low 4 bits: distinct keys that carry
-    # their point along through the sort.
-    ikey = (key * 2.0**44).astype(np.int64) * 16 + np.arange(p)[:, None]
-    idx = (_sort_columns(ikey) & 15) * k + np.arange(k)
-    sx, sy = dx.ravel()[idx], dy.ravel()[idx]  # (P, K) in angular order
-    twice = (sx[:-1] * sy[1:] - sy[:-1] * sx[1:]).sum(axis=0)
-    last = np.maximum(n.astype(np.intp) - 1, 0)  # close the ring: last valid point -> first
-    cols = np.arange(k)
-    twice += sx[last, cols] * sy[0] - sy[last, cols] * sx[0]
+    n = 0
+    mx = 0.0
+    my = 0.0
+    for r in range(p):
+        if valid[r]:
+            n += 1
+            mx += x[r]
+            my += y[r]
+    if n == 0:
+        return 0.0
+    mx /= n
+    my /= n
+    m = 0
+    for r in range(p):
+        if valid[r]:
+            key = np.int64(_pseudo_angle(x[r] - mx, y[r] - my) * 2.0**44) * 16 + r
+            q = m
+            while q > 0 and keys[q - 1] > key:
+                keys[q] = keys[q - 1]
+                q -= 1
+            keys[q] = key
+            m += 1
+    twice = 0.0
+    first = keys[0] & 15
+    x0, y0 = x[first] - mx, y[first] - my
+    xp, yp = x0, y0
+    for r in range(1, n):
+        q = keys[r] & 15
+        xq, yq = x[q] - mx, y[q] - my
+        twice += xp * yq - yp * xq
+        xp, yp = xq, yq
+    twice += xp * y0 - yp * x0
     return 0.5 * twice
 
 
-_NEXT = np.array([1, 2, 3, 0])  # corner k+1 (end of edge k)
-_PREV = np.array([3, 0, 1, 2])  # corner k-1
+@njit(cache=True, inline="always")
+def _intersection_area(cx, cy, c, s, al, aw, bl, bw, ax, ay, bx, by, px, py, valid, keys) -> float:
+    """BEV intersection area (m²) of box ``a`` (centre ``cx, cy``, heading ``(c, s)``, half sizes ``al, aw``)
+    given in the frame of box ``b`` (the box ``|x| <= bl, |y| <= bw``).
 
-
-def _intersection_area(f: _PairFrame) -> np.ndarray:
-    """BEV intersection area ``(K,) float64`` m² of each pair (frame from :func:`_pairs`)."""
-    ax, ay = _corners_a(f)  # (4, K) in b's frame, where b is the box |x| <= bl, |y| <= bw
-    bx, by = _corners_b(f)
-    a_in = (np.abs(ax) <= f.bl + TOL) & (np.abs(ay) <= f.bw + TOL)
-    ex, ey = bx - f.cx, by - f.cy  # corners of b along a's axes
-    b_in = ((np.abs(ex * f.c + ey * f.s) <= f.al + TOL)
-            & (np.abs(ey * f.c - ex * f.s) <= f.aw + TOL))
-    # Edges of a against the lines of b's edges y = bw, x = -bl, y = -bw, x = bl:
-    # s0[i, j] / s1[i, j] = signed distance outside line j of the start / end of a's edge i.
-    s0 = np.stack([ay - f.bw, -ax - f.bl, -ay - f.bw, ax - f.bl], axis=1)  # (4, 4, K)
-    s1 = s0[_NEXT]
-    crosses = (((s0 <= 0.0) & (s1 >= 0.0)) | ((s0 >= 0.0) & (s1 <= 0.0))) & (s0 != s1)
-    den = s0 - s1
-    den[~crosses] = 1.0
-    t = s0 / den  # in [0, 1] where the edge crosses the line
-    dxe, dye = ax[_NEXT] - ax, ay[_NEXT] - ay  # (4, K) edge vectors
-    px, py = ax[:, None] + t * dxe[:, None], ay[:, None] + t * dye[:, None]
-    # The crossing must fall within b's edge (|x| <= bl on lines 0 and 2, |y| <= bw on 1 and 3).
-    along = np.stack([np.abs(px[:, 0]) - f.bl, np.abs(py[:, 1]) - f.bw,
-                      np.abs(px[:, 2]) - f.bl, np.abs(py[:, 3]) - f.bw], axis=1)
-    bad = ~(crosses & (along <= TOL))
-    # Each edge of a enters and leaves b at most once: keep its first and last valid crossing.
-    t_in = np.where(bad, 2.0, t).min(axis=1)  # (4, K); > 1 if none
-    t_out = np.where(bad, -1.0, t).max(axis=1)  # < 0 if none
-    x = np.concatenate([ax, bx, ax + t_in * dxe, ax + t_out * dxe])
-    y = np.concatenate([ay, by, ay + t_in * dye, ay + t_out * dye])
-    valid = np.concatenate([a_in, b_in, t_in <= 1.0, t_out >= 0.0])
-    return _ring_area(x, y, valid)
-
-
-def _hull_area(f: _PairFrame) -> np.ndarray:
-    """Area ``(K,) float64`` m² of the convex hull of the 8 BEV corners of each pair.
-
-    A corner of ``a`` is on the hull iff, for some direction ``m`` in its normal cone, ``a`` reaches
-    at least as far as ``b`` along ``m``; checking ``a``'s two edge normals at the corner and ``b``'s
-    edge normals inside the cone suffices (the support of ``b`` is linear between those). Likewise
-    for the corners of ``b``.
+    The intersection polygon's vertices are among 16 candidates: corners of either box inside the other, and
+    where each edge of ``a`` enters and leaves ``b``. ``ax .. by (4,)``, ``px, py (16,)`` float64 and
+    ``valid (16,)`` bool and ``keys (16,) int64`` are work arrays.
     """
-    c, s, al, aw, bl, bw = f.c, f.s, f.al, f.aw, f.bl, f.bw
-    # Outward normals of a's edges (left, rear, right, front) in b's frame, (4, K) components.
-    nax, nay = _rows(-s, -c, s, c), _rows(c, -s, -c, s)
-    abs_s, abs_c = np.abs(s), np.abs(c)
+    for k in range(4):
+        su, sv = _SU_T[k], _SV_T[k]
+        ax[k] = cx + su * (al * c) - sv * (aw * s)
+        ay[k] = cy + su * (al * s) + sv * (aw * c)
+        bx[k] = su * bl
+        by[k] = sv * bw
+    for i in range(4):
+        px[i], py[i] = ax[i], ay[i]
+        valid[i] = abs(ax[i]) <= bl + TOL and abs(ay[i]) <= bw + TOL
+        ex, ey = bx[i] - cx, by[i] - cy  # corner of b relative to a's centre
+        px[4 + i], py[4 + i] = bx[i], by[i]
+        valid[4 + i] = abs(ex * c + ey * s) <= al + TOL and abs(ey * c - ex * s) <= aw + TOL
+    for i in range(4):
+        nx = (i + 1) % 4
+        dxe, dye = ax[nx] - ax[i], ay[nx] - ay[i]
+        t_in, t_out = 2.0, -1.0
+        for j in range(4):
+            # signed distances outside b's edge line j (y = bw, x = -bl, y = -bw, x = bl) of the edge's ends
+            if j == 0:
+                e0, e1 = ay[i] - bw, ay[nx] - bw
+            elif j == 1:
+                e0, e1 = -ax[i] - bl, -ax[nx] - bl
+            elif j == 2:
+                e0, e1 = -ay[i] - bw, -ay[nx] - bw
+            else:
+                e0, e1 = ax[i] - bl, ax[nx] - bl
+            if e0 == e1 or not ((e0 <= 0.0 and e1 >= 0.0) or (e0 >= 0.0 and e1 <= 0.0)):
+                continue
+            t = e0 / (e0 - e1)  # in [0, 1]: where the edge crosses the line
+            along = abs(ax[i] + t * dxe) - bl if j % 2 == 0 else abs(ay[i] + t * dye) - bw
+            if along <= TOL:  # the crossing falls within b's edge
+                t_in = min(t_in, t)
+                t_out = max(t_out, t)
+        px[8 + i], py[8 + i] = ax[i] + t_in * dxe, ay[i] + t_in * dye
+        valid[8 + i] = t_in <= 1.0
+        px[12 + i], py[12 + i] = ax[i] + t_out * dxe, ay[i] + t_out * dye
+        valid[12 + i] = t_out >= 0.0
+    return _ring_area(px, py, valid, 16, keys)
+
+
+@njit(cache=True, inline="always")
+def _hull_area(cx, cy, c, s, al, aw, bl, bw, px, py, on, sup, keys) -> float:
+    """Area (m²) of the convex hull of the 8 BEV corners of box ``a`` (as in :func:`_intersection_area`,
+    in ``b``'s frame) and box ``b``.
+
+    A corner of ``a`` is on the hull iff, for some direction ``m`` in its normal cone, ``a`` reaches at
+    least as far as ``b`` along ``m`` (support functions ``h_a(m) >= h_b(m)``); checking ``a``'s two edge
+    normals at the corner and ``b``'s edge normals inside the cone suffices (the support of ``b`` is linear
+    between those). Likewise for the corners of ``b``. ``px, py (>=8,)``, ``on (>=8,)``, ``sup (6, 4)``
+    and ``keys (>=8,) int64`` are work arrays.
+    """
+    nax, nay, ha_na, hb_na, ha_nb, hb_nb = sup[0], sup[1], sup[2], sup[3], sup[4], sup[5]
+    # outward normals of a's edges (left, rear, right, front) in b's frame
+    nax[0], nax[1], nax[2], nax[3] = -s, -c, s, c
+    nay[0], nay[1], nay[2], nay[3] = c, -s, -c, s
+    abs_s, abs_c = abs(s), abs(c)
     e_s = al * abs_s + aw * abs_c  # reach of a from its centre along b's y axis
     e_c = al * abs_c + aw * abs_s  # ... along b's x axis
     f_s = bl * abs_s + bw * abs_c  # reach of b from its centre along a's w axis
     f_c = bl * abs_c + bw * abs_s  # ... along a's l axis
-    # Support of a and b along a's normals, and along b's normals (+y, -x, -y, +x).
-    ha_na = nax * f.cx + nay * f.cy + _rows(aw, al, aw, al)
-    hb_na = _rows(f_s, f_c, f_s, f_c)
-    ha_nb = _rows(f.cy + e_s, e_c - f.cx, e_s - f.cy, f.cx + e_c)
-    hb_nb = _rows(bw, bl, bw, bl)
-    a_na, a_nb = ha_na >= hb_na - TOL, ha_nb >= hb_nb - TOL  # (4, K): a reaches as far as b
-    b_na, b_nb = hb_na >= ha_na - TOL, hb_nb >= ha_nb - TOL
-    # pos[i, j]: (a's normal i) . (b's normal j) >= 0.
-    pos = _rows(nay, -nax, -nay, nax).transpose(1, 0, 2) >= 0.0  # (4, 4, K)
-    a_cone = pos[_PREV] & pos  # [i, j]: b's normal j lies in the cone of a's corner i
-    b_cone = pos[:, _PREV] & pos  # [i, j]: a's normal i lies in the cone of b's corner j
-    a_on = a_na[_PREV] | a_na | (a_cone & a_nb[None]).any(axis=1)
-    b_on = b_nb[_PREV] | b_nb | (b_cone & b_na[:, None]).any(axis=0)
-    ax, ay = _corners_a(f)
-    bx, by = _corners_b(f)
-    return _ring_area(np.concatenate([ax, bx]), np.concatenate([ay, by]),
-                      np.concatenate([a_on, b_on]))
+    for i in range(4):
+        ha_na[i] = nax[i] * cx + nay[i] * cy + (aw if i % 2 == 0 else al)  # supports along a's normals
+        hb_na[i] = f_s if i % 2 == 0 else f_c
+        hb_nb[i] = bw if i % 2 == 0 else bl  # supports along b's normals +y, -x, -y, +x
+    ha_nb[0], ha_nb[1], ha_nb[2], ha_nb[3] = cy + e_s, e_c - cx, e_s - cy, cx + e_c
+    for i in range(4):
+        pi = (i + 3) % 4
+        a_on = ha_na[pi] >= hb_na[pi] - TOL or ha_na[i] >= hb_na[i] - TOL
+        b_on = hb_nb[pi] >= ha_nb[pi] - TOL or hb_nb[i] >= ha_nb[i] - TOL
+        for j in range(4):
+            # b's normal j in the cone of a's corner i, and a reaches as far as b along it
+            if not a_on and _dot_nonneg(nax[pi], nay[pi], j) and _dot_nonneg(nax[i], nay[i], j) \
+                    and ha_nb[j] >= hb_nb[j] - TOL:
+                a_on = True
+            # a's normal j in the cone of b's corner i, and b reaches as far as a along it
+            if not b_on and _dot_nonneg(nax[j], nay[j], pi) and _dot_nonneg(nax[j], nay[j], i) \
+                    and hb_na[j] >= ha_na[j] - TOL:
+                b_on = True
+        su, sv = _SU_T[i], _SV_T[i]
+        px[i] = cx + su * (al * c) - sv * (aw * s)
+        py[i] = cy + su * (al * s) + sv * (aw * c)
+        on[i] = a_on
+        px[4 + i], py[4 + i], on[4 + i] = su * bl, sv * bw, b_on
+    return _ring_area(px, py, on, 8, keys)
 
 
-def _subset(f: _PairFrame, mask: np.ndarray) -> _PairFrame:
-    """The pairs of ``f`` selected by ``mask (K,) bool``."""
-    return _PairFrame(*(arr[mask] for arr in f))
+@njit(cache=True, inline="always")
+def _dot_nonneg(nx: float, ny: float, j: int) -> bool:
+    """Whether the normal ``(nx, ny)`` has a non-negative dot product with b's edge normal ``j``
+    (+y, -x, -y, +x)."""
+    if j == 0:
+        return ny >= 0.0
+    if j == 1:
+        return -nx >= 0.0
+    if j == 2:
+        return -ny >= 0.0
+    return nx >= 0.0
 
 
-def _blocked(fn, f: _PairFrame) -> np.ndarray:
-    """``fn(f) (K,)`` evaluated on blocks of at most :data:`BLOCK` pairs."""
-    k = f.cx.shape[0]
-    if k <= BLOCK:
-        return fn(f)
-    out = np.empty(k)
-    for start in range(0, k, BLOCK):
-        out[start:start + BLOCK] = fn(_PairFrame(*(arr[start:start + BLOCK] for arr in f)))
-    return out
+@njit(cache=True, inline="always")
+def _ratio(num: float, den: float) -> float:
+    """``num / den``, 0 where ``den <= 0``."""
+    return num / den if den > 0.0 else 0.0
 
 
-def _intersection(p: _Pairs) -> np.ndarray:
-    """BEV intersection areas ``(K,) float64`` m² (0 for a zero-area box or far-apart boxes)."""
-    inter = np.zeros(p.dist.shape[0])
-    near = (p.dist <= p.reach + TOL) & (p.area_a > 0.0) & (p.area_b > 0.0)
-    if np.any(near):
-        inter[near] = _blocked(_intersection_area, _subset(p.frame, near))
-    return np.clip(inter, 0.0, np.minimum(p.area_a, p.area_b))
-
-
-def _hull(p: _Pairs) -> np.ndarray:
-    """Areas ``(K,) float64`` m² of the convex hulls of the 8 BEV corners of the pairs."""
-    hull = _blocked(_hull_area, p.frame)
-    hull[hull <= HULL_EPS * (p.dist + p.reach) ** 2] = 0.0
-    return hull
-
-
-def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
-    """``num / den`` elementwise, 0 where ``den <= 0``."""
-    return np.divide(num, den, out=np.zeros_like(num), where=den > 0.0)
-
-
-def _giou(iou: np.ndarray, union: np.ndarray, hull: np.ndarray) -> np.ndarray:
+@njit(cache=True, inline="always")
+def _giou(iou: float, union: float, hull: float) -> float:
     """``iou - (hull - union) / hull`` clipped to [-1, 1]; ``iou`` where ``hull`` is 0."""
-    hull = np.maximum(hull, union)
-    return np.clip(iou - _ratio(hull - union, hull), -1.0, 1.0)
+    hull = max(hull, union)
+    return min(max(iou - _ratio(hull - union, hull), -1.0), 1.0)
 
 
-def _bev_iou_union(p: _Pairs) -> tuple[np.ndarray, np.ndarray]:
-    """BEV IoU ``(K,)`` and union area ``(K,)`` m²."""
-    inter = _intersection(p)
-    union = p.area_a + p.area_b - inter
-    return np.clip(_ratio(inter, union), 0.0, 1.0), union
+#: measure indices: rows of the kernel's output
+_IOU_BEV, _GIOU_BEV, _IOU_3D, _GIOU_3D = range(4)
+SIMILARITIES = ("iou_bev", "giou_bev", "iou_3d", "giou_3d")
 
 
-def _iou_3d_union(p: _Pairs) -> tuple[np.ndarray, np.ndarray]:
-    """3D IoU ``(K,)`` and union volume ``(K,)`` m³."""
-    inter = _intersection(p) * p.overlap
-    union = p.vol_a + p.vol_b - inter
-    return np.clip(_ratio(inter, union), 0.0, 1.0), union
+@njit(cache=True, inline="always")
+def _pair_measures(ta, i, tb, j, want, out, k, work, flags, keys) -> None:
+    """The measures flagged in ``want (4,) bool`` (order of :data:`SIMILARITIES`) of the pair
+    ``(a[i], b[j])`` into ``out[:, k]`` (``out (4, K) float64``).
+
+    ``ta (11, N)``, ``tb (11, M)``: terms from :func:`_box_terms`; ``work (12, 16) float64``,
+    ``flags (16,) bool`` and ``keys (16,) int64`` are work arrays. Work is done in the frame of ``b``:
+
+    * ``I`` BEV intersection (0 unless the circumscribed circles meet and both areas are positive), clipped
+      to ``[0, min(A_a, A_b)]``; ``C`` hull area (0 below ``HULL_EPS (d + r_a + r_b)^2``);
+    * BEV IoU ``I / U``, ``U = A_a + A_b - I``; GIoU ``IoU - (C - U) / C``;
+    * 3D IoU ``I dz / (V_a + V_b - I dz)``; GIoU with ``V_C = C * span``.
+    """
+    dx, dy = ta[_X, i] - tb[_X, j], ta[_Y, i] - tb[_Y, j]
+    bc, bs, ac, as_ = tb[_C, j], tb[_S, j], ta[_C, i], ta[_S, i]
+    cx, cy = dx * bc + dy * bs, dy * bc - dx * bs  # centre of a in b's frame
+    c, s = ac * bc + as_ * bs, as_ * bc - ac * bs  # cosine and sine of yaw_a - yaw_b
+    al, aw, bl, bw = ta[_HL, i], ta[_HW, i], tb[_HL, j], tb[_HW, j]
+    area_a, area_b = ta[_AREA, i], tb[_AREA, j]
+    dist, reach = np.hypot(dx, dy), ta[_RADIUS, i] + tb[_RADIUS, j]
+    px, py = work[0], work[1]
+    inter = 0.0
+    if dist <= reach + TOL and area_a > 0.0 and area_b > 0.0:
+        inter = _intersection_area(cx, cy, c, s, al, aw, bl, bw, work[2], work[3], work[4], work[5],
+                                   px, py, flags, keys)
+    inter = min(max(inter, 0.0), min(area_a, area_b))
+    hull = 0.0
+    if want[_GIOU_BEV] or want[_GIOU_3D]:
+        hull = _hull_area(cx, cy, c, s, al, aw, bl, bw, px, py, flags, work[6:12, :4], keys)
+        if hull <= HULL_EPS * (dist + reach) ** 2:
+            hull = 0.0
+    if want[_IOU_BEV] or want[_GIOU_BEV]:
+        union = area_a + area_b - inter
+        iou = min(max(_ratio(inter, union), 0.0), 1.0)
+        out[_IOU_BEV, k] = iou
+        out[_GIOU_BEV, k] = _giou(iou, union, hull)
+    if want[_IOU_3D] or want[_GIOU_3D]:
+        overlap = max(0.0, min(ta[_HI, i], tb[_HI, j]) - max(ta[_LO, i], tb[_LO, j]))
+        span = max(ta[_HI, i], tb[_HI, j]) - min(ta[_LO, i], tb[_LO, j])
+        inter3 = inter * overlap
+        union3 = ta[_VOL, i] + tb[_VOL, j] - inter3
+        iou3 = min(max(_ratio(inter3, union3), 0.0), 1.0)
+        out[_IOU_3D, k] = iou3
+        out[_GIOU_3D, k] = _giou(iou3, union3, hull * span)
 
 
-def _bev_iou(p: _Pairs) -> np.ndarray:
-    """BEV IoU ``(K,)`` of pairs."""
-    return _bev_iou_union(p)[0]
+@njit(cache=True)
+def _measures_kernel(ta, tb, outer, todo, want, out) -> None:
+    """:func:`_pair_measures` of the K pairs with ``todo (K,) bool`` set into ``out (4, K) float64``
+    (other pairs are left as they are). Pairs: ``(a[k], b[k])`` (K = N = M), or if ``outer`` all
+    ``(a[i], b[j])`` in ``a``-major order (K = N * M)."""
+    work, flags, keys = np.empty((12, 16)), np.empty(16, dtype=np.bool_), np.empty(16, dtype=np.int64)
+    m = tb.shape[1]
+    for k in range(out.shape[1]):
+        if todo[k]:
+            i, j = (k // m, k % m) if outer else (k, k)
+            _pair_measures(ta, i, tb, j, want, out, k, work, flags, keys)
 
 
-def _bev_giou(p: _Pairs) -> np.ndarray:
-    """BEV GIoU ``(K,)`` of pairs."""
-    iou, union = _bev_iou_union(p)
-    return _giou(iou, union, _hull(p))
+def _want(names) -> np.ndarray:
+    """``(4,) bool`` flags of the named measures; ``ValueError`` on an unknown name."""
+    names = set(names)
+    unknown = names - set(SIMILARITIES)
+    if unknown:
+        raise ValueError(f"unknown similarity {sorted(unknown)}; expected {SIMILARITIES}")
+    return np.array([n in names for n in SIMILARITIES])
 
 
-def _iou_3d(p: _Pairs) -> np.ndarray:
-    """3D IoU ``(K,)`` of pairs."""
-    return _iou_3d_union(p)[0]
-
-
-def _giou_3d(p: _Pairs) -> np.ndarray:
-    """3D GIoU ``(K,)`` of pairs."""
-    iou, union = _iou_3d_union(p)
-    return _giou(iou, union, _hull(p) * p.span)
-
-
-def _paired(fn, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Apply the pair measure ``fn`` to aligned pairs of ``a, b (K, >=7)`` -> ``(K,)``."""
+def _paired_measures(a: np.ndarray, b: np.ndarray, names) -> np.ndarray:
+    """Measures ``(4, K)`` (rows of :data:`SIMILARITIES`, only ``names`` filled) of aligned pairs of
+    ``a, b (K, >=7)``."""
+    want = _want(names)
     a, b = _check_boxes(a, "a"), _check_boxes(b, "b")
     if a.shape[0] != b.shape[0]:
         raise ValueError(f"paired boxes need equal counts, got {a.shape[0]} and {b.shape[0]}")
-    return fn(_pairs(_box_terms(a), _box_terms(b), outer=False))
+    out = np.zeros((4, a.shape[0]))
+    if a.shape[0]:
+        _measures_kernel(_box_terms(a), _box_terms(b), False, np.ones(a.shape[0], dtype=np.bool_), want, out)
+    return out
 
 
-def _pairwise(fn, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Apply the pair measure ``fn`` to all pairs of ``a (N, >=7)`` x ``b (M, >=7)`` -> ``(N, M)``."""
+def _pairwise_measures(a: np.ndarray, b: np.ndarray, names, where: np.ndarray | None = None) -> np.ndarray:
+    """Measures ``(4, N, M)`` (rows of :data:`SIMILARITIES`, only ``names`` filled) of all pairs of
+    ``a (N, >=7)`` x ``b (M, >=7)``; with ``where (N, M) bool`` only the selected pairs (others 0)."""
+    want = _want(names)
     a, b = _check_boxes(a, "a"), _check_boxes(b, "b")
     n, m = a.shape[0], b.shape[0]
-    out = np.zeros((n, m))
+    out = np.zeros((4, n, m))
     if n == 0 or m == 0:
         return out
-    terms_a, terms_b = _box_terms(a), _box_terms(b)
+    if where is None:
+        where = np.ones((n, m), dtype=np.bool_)
+    elif where.shape != (n, m):
+        raise ValueError(f"where must have shape {(n, m)}, got {where.shape}")
+    ta, tb = _box_terms(a), _box_terms(b)
     rows = max(1, CHUNK_PAIRS // m)
     for start in range(0, n, rows):
         stop = min(n, start + rows)
-        out[start:stop] = fn(_pairs(_take(terms_a, start, stop), terms_b, outer=True)).reshape(-1, m)
+        buf = np.zeros((4, (stop - start) * m))
+        todo = np.ascontiguousarray(where[start:stop]).ravel()
+        _measures_kernel(np.ascontiguousarray(ta[:, start:stop]), tb, True, todo, want, buf)
+        out[:, start:stop] = buf.reshape(4, -1, m)
     return out
+
+
+def _pairwise_measure(name: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The measure ``name`` of all pairs of ``a (N, >=7)`` x ``b (M, >=7)`` -> ``(N, M) float64``."""
+    return _pairwise_measures(a, b, [name])[SIMILARITIES.index(name)]
 
 
 def paired_bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """BEV IoU ``(K,) float64`` in [0, 1] of aligned pairs ``a[k], b[k]``, both ``(K, >=7)``."""
-    return _paired(_bev_iou, a, b)
+    return _paired_measures(a, b, ["iou_bev"])[_IOU_BEV]
 
 
 def paired_bev_giou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -466,12 +421,12 @@ def paired_bev_giou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
     The enclosing region is the convex hull of the 8 BEV corners.
     """
-    return _paired(_bev_giou, a, b)
+    return _paired_measures(a, b, ["giou_bev"])[_GIOU_BEV]
 
 
 def paired_iou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """3D IoU ``(K,) float64`` in [0, 1] of aligned pairs ``a[k], b[k]``, both ``(K, >=7)``."""
-    return _paired(_iou_3d, a, b)
+    return _paired_measures(a, b, ["iou_3d"])[_IOU_3D]
 
 
 def paired_giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -479,10 +434,7 @@ def paired_giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
     The enclosing volume is the convex hull of the 8 BEV corners times the vertical span of both.
     """
-    return _paired(_giou_3d, a, b)
-
-
-SIMILARITIES = ("iou_bev", "giou_bev", "iou_3d", "giou_3d")
+    return _paired_measures(a, b, ["giou_3d"])[_GIOU_3D]
 
 
 def paired_similarities(a: np.ndarray, b: np.ndarray, names) -> dict[str, np.ndarray]:
@@ -491,51 +443,39 @@ def paired_similarities(a: np.ndarray, b: np.ndarray, names) -> dict[str, np.nda
     names: any of :data:`SIMILARITIES`. Returns ``{name: (K,) float64}``, each equal to the matching
     ``paired_*`` function; the intersection and the hull are computed once for all of them.
     """
-    names = set(names)
-    unknown = names - set(SIMILARITIES)
-    if unknown:
-        raise ValueError(f"unknown similarity {sorted(unknown)}; expected {SIMILARITIES}")
-    a, b = _check_boxes(a, "a"), _check_boxes(b, "b")
-    if a.shape[0] != b.shape[0]:
-        raise ValueError(f"paired boxes need equal counts, got {a.shape[0]} and {b.shape[0]}")
-    p = _pairs(_box_terms(a), _box_terms(b), outer=False)
-    inter = _intersection(p)
-    hull = _hull(p) if names & {"giou_bev", "giou_3d"} else None
-    out = {}
-    if names & {"iou_bev", "giou_bev"}:
-        union = p.area_a + p.area_b - inter
-        iou = np.clip(_ratio(inter, union), 0.0, 1.0)
-        out["iou_bev"] = iou
-        if "giou_bev" in names:
-            out["giou_bev"] = _giou(iou, union, hull)
-    if names & {"iou_3d", "giou_3d"}:
-        inter3 = inter * p.overlap
-        union3 = p.vol_a + p.vol_b - inter3
-        iou3 = np.clip(_ratio(inter3, union3), 0.0, 1.0)
-        out["iou_3d"] = iou3
-        if "giou_3d" in names:
-            out["giou_3d"] = _giou(iou3, union3, hull * p.span)
-    return {k: v for k, v in out.items() if k in names}
+    out = _paired_measures(a, b, names)
+    return {n: out[SIMILARITIES.index(n)] for n in SIMILARITIES if n in set(names)}
+
+
+def pairwise_similarities(a: np.ndarray, b: np.ndarray, names,
+                          where: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Several measures of all pairs of ``a (N, >=7)`` x ``b (M, >=7)`` from one geometry pass.
+
+    names: any of :data:`SIMILARITIES`. Returns ``{name: (N, M) float64}``, each equal to the matching
+    ``pairwise_*`` function where ``where (N, M) bool`` is set (default: everywhere) and 0 elsewhere.
+    """
+    out = _pairwise_measures(a, b, names, where)
+    return {n: out[SIMILARITIES.index(n)] for n in SIMILARITIES if n in set(names)}
 
 
 def pairwise_bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """BEV IoU ``(N, M) float64`` in [0, 1] between ``a (N, >=7)`` and ``b (M, >=7)``."""
-    return _pairwise(_bev_iou, a, b)
+    return _pairwise_measure("iou_bev", a, b)
 
 
 def pairwise_bev_giou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """BEV GIoU ``(N, M) float64`` in [-1, 1] between ``a (N, >=7)`` and ``b (M, >=7)``."""
-    return _pairwise(_bev_giou, a, b)
+    return _pairwise_measure("giou_bev", a, b)
 
 
 def pairwise_iou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """3D IoU ``(N, M) float64`` in [0, 1] between ``a (N, >=7)`` and ``b (M, >=7)``."""
-    return _pairwise(_iou_3d, a, b)
+    return _pairwise_measure("iou_3d", a, b)
 
 
 def pairwise_giou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """3D GIoU ``(N, M) float64`` in [-1, 1] between ``a (N, >=7)`` and ``b (M, >=7)``."""
-    return _pairwise(_giou_3d, a, b)
+    return _pairwise_measure("giou_3d", a, b)
 
 
 def pairwise_centre_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -471,3 +471,53 @@ def test_ekf_on_simulated_demo_val(tmp_path):
                  "--profile", "centerpoint", "--seed", "9", "--out", str(dets)]) == 0
     nusc = open_nuscenes(data, "v1.0-demo")
     assert_parity(nusc, _tracked_submission(nusc, "demo_val", dets), "demo_val")
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Per-box decisions (what grutrack render draws)
+# ----------------------------------------------------------------------------------------------------------------
+
+def _decision_sums(decisions, class_name: str) -> Dict[str, float]:
+    from grutrack.evaluation.fast_amota import MATCH, MISS_OR_FP, SWITCH
+
+    c = decisions.class_names.index(class_name)
+    g = decisions.g_status[decisions.g_cls == c]
+    p = decisions.p_status[decisions.p_cls == c]
+    return {"tp": float(np.sum(g == MATCH)), "fp": float(np.sum(p == MISS_OR_FP)),
+            "fn": float(np.sum(g == MISS_OR_FP)), "ids": float(np.sum(g == SWITCH))}
+
+
+def _assert_decisions_match(decisions, label_metrics: Dict[str, Dict[str, float]]) -> None:
+    for name in decisions.class_names:
+        sums = _decision_sums(decisions, name)
+        for key in ("tp", "fp", "fn", "ids"):
+            ref = label_metrics[key][name]
+            if ref is None or (isinstance(ref, float) and math.isnan(ref)):
+                # No value in the summary: a class without an achieved threshold has no FP / IDS decisions.
+                assert sums[key] == 0, (name, key, sums)
+            else:
+                assert sums[key] == ref, (name, key, sums[key], ref)
+
+
+def test_match_decisions_sum_to_the_devkit_counts(nusc_mini, mini_val_gt, devkit_reference):
+    """Per-box decisions at each class's best-MOTA threshold add up to the devkit's TP / FP / FN / IDS."""
+    from grutrack.evaluation.fast_amota import match_decisions
+
+    sub = corrupt_submission(nusc_mini, "mini_val", seed=0, base=mini_val_gt)
+    summary = devkit_reference("corrupted_mini_val", nusc_mini, sub, "mini_val")[0]
+    tracks_gt, tracks_pred, _ = load_tracks(nusc_mini, sub, "mini_val")
+    decisions, _ = match_decisions(tracks_gt, tracks_pred)
+    assert sum(_decision_sums(decisions, "car").values()) > 0 and summary["ids"] > 0
+    _assert_decisions_match(decisions, summary["label_metrics"])
+    assert len(decisions.frame_keys) == 81
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_match_decisions_random_crowded_tracks(seed):
+    """Contested frames, switches and repeated ids: the decisions' sums equal the summary's counts."""
+    from grutrack.evaluation.fast_amota import match_decisions
+
+    tracks_gt, tracks_pred = _random_tracks(seed)
+    decisions, metrics = match_decisions(tracks_gt, tracks_pred)
+    _assert_decisions_match(decisions, metrics.serialize()["label_metrics"])
+    assert metrics.serialize()["ids"] > 0

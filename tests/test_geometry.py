@@ -406,9 +406,8 @@ def test_pairwise_equals_paired_and_is_symmetric(monkeypatch):
         # Only the first 7 columns matter.
         np.testing.assert_allclose(full[name], pairwise(a[:, :7], b[:, :7]), atol=0)
     assert np.any(full["bev_iou"] > 0)
-    # Small chunks and blocks give the same numbers.
+    # Small chunks give the same numbers.
     monkeypatch.setattr(geo, "CHUNK_PAIRS", 50)
-    monkeypatch.setattr(geo, "BLOCK", 7)
     for name, (_, pairwise) in MEASURES.items():
         np.testing.assert_allclose(pairwise(a, b), full[name], atol=1e-12)
 
@@ -464,13 +463,6 @@ def test_invalid_values_raise():
     velocity_nan = good.copy()
     velocity_nan[:, 7] = np.nan  # ignored columns may hold anything
     assert np.all(np.isfinite(geo.pairwise_giou_3d(velocity_nan, good)))
-
-
-def test_sorting_network_sorts_every_binary_input():
-    """0-1 principle: a comparator network sorts all inputs iff it sorts all 0/1 inputs."""
-    for n in (8, 16):
-        bits = (np.arange(2**n)[None, :] >> np.arange(n)[:, None]) & 1  # (n, 2**n) every 0/1 column
-        np.testing.assert_array_equal(geo._sort_columns(bits), np.sort(bits, axis=0))
 
 
 def test_paired_similarities_equal_the_single_measures():

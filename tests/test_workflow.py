@@ -90,18 +90,23 @@ def test_demo_report_tables_match_metrics_json(demo_run):
     assert links
     for link in links:
         assert (demo_run / "reports" / link).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # a strip of key frames of each run's worst scene, from its render folder
+    for run in ("ekf", "grukf"):
+        assert f"figures/demo_val/worst_scene_{run}.png" in links
+        counts = json.loads((demo_run / f"reports/renders/demo_val/centerpoint_sim/{run}/counts.json").read_text())
+        assert len(counts["scenes"]) == 1 and f"**{run}**: {counts['scenes'][0]['name']}, frames" in text
 
 
 def test_nothing_to_do_after_the_run(demo_run):
     assert planned(snakemake(demo_run, "reports/demo_val.md", options=("-n",), configs=("tiny.yaml",))) == {}
 
 
-def test_tracker_threshold_change_reruns_track_submit_evaluate_report(demo_run):
+def test_tracker_threshold_change_reruns_track_submit_evaluate_render_report(demo_run):
     (demo_run / "thr.yaml").write_text(
         "tracker_presets:\n  ekf: {overrides: {preprocessing: {score_threshold: {car: 0.25}}}}\n")
     proc = snakemake(demo_run, "reports/demo_val.md", options=("-n", "--quiet", "rules"),
                      configs=("tiny.yaml", "thr.yaml"))
-    assert planned(proc) == {"track": 2, "submit": 2, "evaluate": 2, "report": 1}, proc.stdout[-2000:]
+    assert planned(proc) == {"track": 2, "submit": 2, "evaluate": 2, "render": 2, "report": 1}, proc.stdout[-2000:]
 
 
 def test_training_change_reruns_train_and_its_dependents_only(demo_run):
@@ -109,7 +114,7 @@ def test_training_change_reruns_train_and_its_dependents_only(demo_run):
     proc = snakemake(demo_run, "reports/demo_val.md", options=("-n", "--quiet", "rules"),
                      configs=("tiny.yaml", "lr.yaml"))
     # only the GRU-KF run depends on the training; the EKF run is untouched
-    assert planned(proc) == {"train": 1, "track": 1, "submit": 1, "evaluate": 1, "report": 1}
+    assert planned(proc) == {"train": 1, "track": 1, "submit": 1, "evaluate": 1, "render": 1, "report": 1}
 
 
 def test_paper_numbers_change_reruns_only_the_report(demo_run):

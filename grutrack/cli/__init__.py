@@ -20,6 +20,7 @@ COMMANDS: tuple[str, ...] = (
     "grutrack.cli.resolve",
     "grutrack.cli.submit",
     "grutrack.cli.report",
+    "grutrack.cli.render",
     "grutrack.cli.check",
     "grutrack.cli.compare",
 )

@@ -32,6 +32,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="paper row reproduced by a run, e.g. III:Ours=grukf")
     p.add_argument("--train-log", action="append", default=[], metavar="LABEL=CSV", help="a train_log.csv")
     p.add_argument("--zip", action="append", default=[], metavar="DETECTOR=ZIP", help="a leaderboard zip")
+    p.add_argument("--render", action="append", default=[], metavar="RUN=COUNTS_JSON",
+                   help="a run's `grutrack render` folder (its counts.json): the report shows key frames of its "
+                        "worst scene")
     p.set_defaults(func=run)
 
 
@@ -79,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
                        paper=load_paper(paper_path), paper_path=paper_path, experiment=_experiment(args.experiment),
                        runs={k: Path(v) for k, v in _pairs(args.run, "--run").items()}, rows=_rows(args.row),
                        train_logs={k: Path(v) for k, v in _pairs(args.train_log, "--train-log").items()},
-                       zips={k: Path(v) for k, v in _pairs(args.zip, "--zip").items()})
+                       zips={k: Path(v) for k, v in _pairs(args.zip, "--zip").items()},
+                       renders={k: Path(v) for k, v in _pairs(args.render, "--render").items()})
     inp.figures.mkdir(parents=True, exist_ok=True)
     text = importlib.import_module(KINDS[args.kind]).build(inp)
     write_text_atomic(out, text)

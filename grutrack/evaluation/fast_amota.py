@@ -30,7 +30,9 @@ much faster:
   ``TrackingMetricDataList``, serialised by the devkit.
 
 Public entry points: :func:`fast_tracking_eval` (the ``metrics_summary.json`` dict), :func:`load_tracks`
-(loading and filtering) and :func:`evaluate_tracks` (accumulation and metrics on loaded tracks).
+(loading and filtering), :func:`evaluate_tracks` (accumulation and metrics on loaded tracks) and
+:func:`match_decisions` (the decision behind every counted TP, FP, FN and IDS, box by box, at each class's
+best-MOTA threshold: what ``grutrack render`` draws).
 """
 
 from __future__ import annotations
@@ -44,7 +46,8 @@ from typing import Any, Dict, List, Tuple, Union
 
 import numpy as np
 
-__all__ = ["fast_tracking_eval", "load_tracks", "evaluate_tracks", "exact_center_distances"]
+__all__ = ["fast_tracking_eval", "load_tracks", "evaluate_tracks", "exact_center_distances", "match_decisions",
+           "MatchDecisions"]
 
 _MOT_METRICS = ("gt", "tp", "motar", "mota", "motp", "faf", "mt", "ml", "fp", "fn", "ids", "frag", "recall",
                 "tid", "lgd")
@@ -181,6 +184,8 @@ class _Flat:
     p_xy: np.ndarray
     p_score: np.ndarray
     obj_raw_id: List[Any]       # tracking_id of each object (objects are per scene)
+    frame_keys: List[Tuple[Any, Any]]   # (scene token, timestamp) of every frame
+    p_raw_id: List[Any]         # tracking_id of each prediction box
 
 
 def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
@@ -195,6 +200,8 @@ def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
     p_xy: List[Tuple[float, float]] = []
     p_score: List[float] = []
     obj_raw_id: List[Any] = []
+    frame_keys: List[Tuple[Any, Any]] = []
+    p_raw_id: List[Any] = []
     n_hyp = 0
     f = 0
     # The devkit iterates the GT scenes and, within each, the GT timestamps; prediction ids are per scene
@@ -230,6 +237,8 @@ def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
                 p_hyp.append(h)
                 p_xy.append((box.translation[0], box.translation[1]))
                 p_score.append(box.tracking_score)
+                p_raw_id.append(box.tracking_id)
+            frame_keys.append((scene_token, timestamp))
             f += 1
     return _Flat(
         n_frames=f,
@@ -243,6 +252,8 @@ def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
         p_xy=np.asarray(p_xy, dtype=np.float64).reshape(-1, 2),
         p_score=np.asarray(p_score, dtype=np.float64),
         obj_raw_id=obj_raw_id,
+        frame_keys=frame_keys,
+        p_raw_id=p_raw_id,
     )
 
 
@@ -882,6 +893,93 @@ def evaluate_tracks(tracks_gt, tracks_pred, config=None):
 
     metrics.add_runtime(time.time() - start)
     return metrics, md_list
+
+
+#: decision codes of :class:`MatchDecisions` (GT and prediction boxes)
+MATCH, SWITCH, MISS_OR_FP, BELOW_THRESHOLD, UNSCORED = 0, 1, 2, 3, 4
+
+
+@dataclass
+class MatchDecisions:
+    """The evaluator's own decision for every evaluated box, at each class's best-MOTA threshold.
+
+    Boxes are those the metrics read (after the class-range / zero-point filter and, for predictions, the
+    track-gap interpolation), in the devkit's frame order. Decision codes: ``MATCH`` (TP), ``SWITCH`` (matched,
+    counted as an id switch, not a TP), ``MISS_OR_FP`` (GT: missed, FN; prediction: kept but unmatched, FP),
+    ``BELOW_THRESHOLD`` (prediction whose track score is under its class's threshold: not scored) and
+    ``UNSCORED`` (every box of a class for which no threshold is achieved: the devkit reports TP 0, FN = GT
+    and no FP / IDS; its GT are still counted as misses, code ``MISS_OR_FP``).
+
+    frame_keys: (scene token, timestamp in microseconds) of every frame index.
+    g_frame, g_cls, g_status: (G,) int64; g_id: (G,) tracking ids (instance tokens); g_xy: (G, 2) float64,
+    global frame, metres. p_frame, p_cls, p_status: (P,) int64; p_id: (P,) track ids; p_xy: (P, 2) float64,
+    metres; p_score: (P,) float64 track score (mean box score of the track, as the devkit computes it).
+    g_partner: (G,) int64 index of the matched prediction, -1 if none.
+    thresholds: {class: best-MOTA threshold, or None when the class has none}.
+    """
+    frame_keys: List[Tuple[Any, Any]]
+    g_frame: np.ndarray
+    g_cls: np.ndarray
+    g_id: List[Any]
+    g_xy: np.ndarray
+    g_status: np.ndarray
+    g_partner: np.ndarray
+    p_frame: np.ndarray
+    p_cls: np.ndarray
+    p_id: List[Any]
+    p_xy: np.ndarray
+    p_score: np.ndarray
+    p_status: np.ndarray
+    thresholds: Dict[str, Any]
+    class_names: List[str]
+
+
+def match_decisions(tracks_gt, tracks_pred, config=None) -> Tuple[MatchDecisions, Any]:
+    """Per-box decisions of the tracking evaluation (what :func:`evaluate_tracks` counts at each class's
+    best-MOTA threshold): summing them per class gives the summary's TP, FP, FN and IDS exactly.
+
+    :return: ``(MatchDecisions, TrackingMetrics)``; the metrics are those of :func:`evaluate_tracks`.
+    :raises ValueError: for ground truth the fast path does not model (duplicate GT ids in a frame).
+    """
+    cfg = config if config is not None else _default_config()
+    assert cfg.dist_fcn == "center_distance"
+    from nuscenes.eval.tracking.data_classes import TrackingMetricData
+
+    nelem = TrackingMetricData.nelem
+    flat = _flatten(tracks_gt, tracks_pred, cfg.class_names)
+    g_status = np.full(len(flat.g_frame), MISS_OR_FP, dtype=np.int64)
+    g_partner = np.full(len(flat.g_frame), -1, dtype=np.int64)
+    p_status = np.full(len(flat.p_frame), UNSCORED, dtype=np.int64)
+    thresholds: Dict[str, Any] = {}
+    for c, class_name in enumerate(cfg.class_names):
+        ce = _ClassEval(flat, c, cfg.dist_th_tp)
+        try:
+            md = _accumulate_class(ce, cfg, nelem)
+        except _NeedsDevkit as exc:
+            raise ValueError("ground truth with a repeated id in one frame (class %s): per-box decisions are "
+                             "not available" % class_name) from exc
+        thresholds[class_name] = None
+        if ce.n_gt == 0 or np.all(np.isnan(md.mota)):
+            continue
+        threshold = md.confidence[int(np.nanargmax(md.mota))]
+        if threshold is None or np.isnan(threshold):
+            continue
+        thresholds[class_name] = float(threshold)
+        kept = ce.ps >= threshold
+        res = ce.run_pass(kept)
+        gi = np.flatnonzero(flat.g_cls == c)
+        pi = np.flatnonzero(flat.p_cls == c)
+        p_status[pi] = np.where(kept, MISS_OR_FP, BELOW_THRESHOLD)
+        g_status[gi[res.g]] = np.where(res.switch, SWITCH, MATCH)
+        p_status[pi[res.p]] = np.where(res.switch, SWITCH, MATCH)
+        g_partner[gi[res.g]] = pi[res.p]
+    metrics, _ = evaluate_tracks(tracks_gt, tracks_pred, cfg)
+    decisions = MatchDecisions(
+        frame_keys=flat.frame_keys, g_frame=flat.g_frame, g_cls=flat.g_cls,
+        g_id=[flat.obj_raw_id[o] for o in flat.g_obj.tolist()], g_xy=flat.g_xy, g_status=g_status,
+        g_partner=g_partner, p_frame=flat.p_frame, p_cls=flat.p_cls, p_id=flat.p_raw_id, p_xy=flat.p_xy,
+        p_score=flat.p_score, p_status=p_status, thresholds=thresholds, class_names=list(cfg.class_names))
+    return decisions, metrics
 
 
 def fast_tracking_eval(nusc, submission: Union[dict, str, os.PathLike], eval_split: str, config=None,

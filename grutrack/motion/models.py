@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from grutrack.boxes import BOX_DIM, wrap_angle
 
@@ -46,34 +47,45 @@ def _series_coefficients(n: int) -> tuple[np.ndarray, np.ndarray]:
 _COEFFS = [_series_coefficients(n) for n in range(3)]
 
 
-def _poly(coeffs: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Horner evaluation of sum_k coeffs[k] * u**k."""
-    out = np.full_like(u, coeffs[-1])
-    for c in coeffs[-2::-1]:
-        out = out * u + c
-    return out
+_COEFF_TABLE = np.array([[c, d] for c, d in _COEFFS])  # (3, 2, _SERIES_TERMS): Re / Im series per order
+
+
+@njit(cache=True)
+def _arc_moments_kernel(phi, cp, sp, coeffs, out) -> None:
+    """``out (order+1, 2, N)``: Re and Im of ``E_n(phi)`` for ``phi (N,)`` with ``cp, sp = cos, sin`` of the
+    safe divisor (``phi``, or 1 where ``|phi| < _SERIES_LIMIT``). Closed form by the recursion
+    ``E_n = (e^{i phi} - n E_{n-1}) / (i phi)``; Horner-evaluated power series below the limit."""
+    n_terms = coeffs.shape[2]
+    for k in range(phi.shape[0]):
+        ph = phi[k]
+        small = abs(ph) < _SERIES_LIMIT
+        p = 1.0 if small else ph
+        u = ph * ph
+        prev_r, prev_i = 1.0, 0.0  # "n E_{n-1}" term for n = 0 is 1
+        for n in range(out.shape[0]):
+            # (e^{ip} - n E_{n-1}) / (i p) = (b / p, -a / p) with a + ib the numerator
+            num_r = cp[k] - (prev_r if n == 0 else n * prev_r)
+            num_i = sp[k] - (prev_i if n == 0 else n * prev_i)
+            closed_r, closed_i = num_i / p, -num_r / p
+            if small:
+                er, ei = coeffs[n, 0, n_terms - 1], coeffs[n, 1, n_terms - 1]
+                for t in range(n_terms - 2, -1, -1):
+                    er = er * u + coeffs[n, 0, t]
+                    ei = ei * u + coeffs[n, 1, t]
+                out[n, 0, k], out[n, 1, k] = er, ph * ei
+            else:
+                out[n, 0, k], out[n, 1, k] = closed_r, closed_i
+            prev_r, prev_i = closed_r, closed_i
 
 
 def arc_moments(phi: np.ndarray, order: int = 2) -> list[tuple[np.ndarray, np.ndarray]]:
     """``[(Re E_n, Im E_n) for n in 0..order]`` for ``phi (N,)`` (radians turned over the step)."""
-    phi = np.asarray(phi, dtype=np.float64)
-    small = np.abs(phi) < _SERIES_LIMIT
-    p = np.where(small, 1.0, phi)  # a safe divisor for the closed form; its value is discarded where small
-    cp, sp = np.cos(p), np.sin(p)
-    u = phi * phi
-    out = []
-    prev_r, prev_i = np.ones_like(p), np.zeros_like(p)  # "n E_{n-1}" term for n = 0 is 1
-    for n in range(order + 1):
-        # (e^{ip} - n E_{n-1}) / (i p) = (b / p, -a / p) with a + ib the numerator
-        num_r = cp - (prev_r if n == 0 else n * prev_r)
-        num_i = sp - (prev_i if n == 0 else n * prev_i)
-        closed_r, closed_i = num_i / p, -num_r / p
-        c, d = _COEFFS[n]
-        er = np.where(small, _poly(c, u), closed_r)
-        ei = np.where(small, phi * _poly(d, u), closed_i)
-        out.append((er, ei))
-        prev_r, prev_i = closed_r, closed_i
-    return out
+    phi = np.ascontiguousarray(phi, dtype=np.float64)
+    p = np.where(np.abs(phi) < _SERIES_LIMIT, 1.0, phi)  # a safe divisor for the closed form
+    out = np.empty((order + 1, 2) + phi.shape)
+    _arc_moments_kernel(phi.reshape(-1), np.cos(p).reshape(-1), np.sin(p).reshape(-1), _COEFF_TABLE,
+                        out.reshape(order + 1, 2, -1))
+    return [(out[n, 0], out[n, 1]) for n in range(order + 1)]
 
 
 def _as_dt(dt, n: int) -> np.ndarray:

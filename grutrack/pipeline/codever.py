@@ -39,7 +39,9 @@ STAGE_SOURCES: dict[str, tuple[str, ...]] = {
                  "data/nuscenes.py", "cli/evaluate.py", "cli/common.py"),
     "evaluate_av2": ("evaluation/av2_eval.py", "data/av2.py", "export/av2_tracks.py", "cli/evaluate.py",
                      "cli/common.py"),
-    "report": ("report", "cli/report.py"),
+    "render": ("render", "evaluation/fast_amota.py", "evaluation/fast_loading.py", "data/nuscenes.py",
+               "data/nusc_detections.py", "cli/render.py", "cli/common.py"),
+    "report": ("report", "render", "cli/report.py"),
 }
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs, read_train_log
 from grutrack.report.markdown import (header, image, per_class_table, provenance, runs_table, table, num,
-                                      training_provenance)
+                                      training_provenance, worst_scene_strips)
 from grutrack.report.paper import get_table
 
 BANNER = ("> **SYNTHETIC DATA.** Every reproduced number in this report is measured on grutrack's synthetic demo "
@@ -26,6 +26,8 @@ def build(inp: ReportInputs) -> str:
               "Overall (official nuScenes TrackingEval, `tracking_nips_2019`; rates ×100, AMOTP in cm):", "",
               runs_table(docs), "", "AMOTA per class (×100):", "", per_class_table(docs, "amota")]
     parts += ["", _amota_figure(inp, docs)]
+    strips = worst_scene_strips(inp)
+    parts += ["", strips] if strips else []
     parts += _training_sections(inp)
     parts += ["", "## Paper numbers (real nuScenes val; reference only, not comparable)", "", _paper_table(inp)]
     parts += ["", "## Provenance", "", provenance(inp.runs, docs)]

@@ -25,6 +25,7 @@ class ReportInputs:
     rows: dict[str, dict[str, str]] = field(default_factory=dict)  # paper table -> paper row -> run
     train_logs: dict[str, Path] = field(default_factory=dict)  # label -> train_log.csv
     zips: dict[str, Path] = field(default_factory=dict)        # detector -> leaderboard zip
+    renders: dict[str, Path] = field(default_factory=dict)     # run -> counts.json of its `grutrack render`
     _docs: dict | None = None
 
     def docs(self) -> dict[str, dict]:

@@ -170,3 +170,25 @@ def training_provenance(train_logs: dict[str, Path]) -> str:
         model_txt = f"`{model}` (sha256 {short(sha256_file(model))})" if model.is_file() else DASH
         rows.append([label, f"`{log}`", f"`{cfg_path}` (config hash {cfg_hash})", model_txt])
     return table(["training", "log", "training config", "checkpoint"], rows, "llll")
+
+
+def worst_scene_strips(inp) -> str:
+    """A section with, per rendered run, a strip of key frames of its worst scene (id-switch moments first),
+    from the run's ``grutrack render`` folder; empty when the report has no renders."""
+    if not inp.renders:
+        return ""
+    from grutrack.render.draw import strip_from_counts
+
+    parts = ["## Worst scene per run (key frames)", "",
+             "Bird's-eye frames of each run's scene with the most id switches + false positives + misses "
+             "(`grutrack render --worst 1`): tracks coloured by id, false-positive tracks red, missed ground truth "
+             "orange dashed, id switches ringed in magenta (old \u2192 new track); the evaluator's own matching."]
+    for run, counts in inp.renders.items():
+        info = strip_from_counts(counts, inp.figures / f"worst_scene_{run}.png")
+        t = info["totals"]
+        sw = ", ".join(f"{a}\u2192{b}" for a, b in info["id_switches"]) or "none"
+        parts += ["", f"**{run}**: {info['scene']}, frames {', '.join(map(str, info['frames']))} "
+                      f"(id switches shown: {sw}; FP {t['fp']}, FN {t['fn']} in these frames)", "",
+                  image(inp.figures / f"worst_scene_{run}.png", inp.out.parent,
+                        f"{run}: key frames of {info['scene']}")]
+    return "\n".join(parts)

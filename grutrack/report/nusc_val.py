@@ -6,7 +6,7 @@ from __future__ import annotations
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import (check_section, header, image, mirror_tables, provenance, runs_table,
-                                      setting_note)
+                                      setting_note, worst_scene_strips)
 from grutrack.report.paper import get_table, reproduced
 
 
@@ -25,6 +25,8 @@ def build(inp: ReportInputs) -> str:
                       mirror_tables(tbl, inp.row_docs(tid)), "",
                       _figure(inp, tid, tbl)]
     parts += ["", "## Every run", "", runs_table(docs)]
+    strips = worst_scene_strips(inp)
+    parts += ["", strips] if strips else []
     parts += ["", "## Check against the tolerances of paper.yaml", ""]
     parts += ["\n\n".join(check_section(tid, get_table(inp.paper, tid), inp.row_docs(tid)) for tid in inp.rows)]
     parts += ["", "## Provenance", "", provenance(inp.runs, docs)]

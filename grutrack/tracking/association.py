@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy.optimize import linear_sum_assignment
 
 from grutrack import geometry
@@ -37,7 +38,8 @@ class Matches:
 
 
 def similarity_upper_bounds(a: np.ndarray, b: np.ndarray, names) -> dict[str, np.ndarray]:
-    """Cheap upper bounds of the named similarities between aligned pairs of boxes a, b (K, 9) -> {name: (K,)}.
+    """Cheap upper bounds of the named similarities between aligned pairs of boxes a, b (..., 9) (any
+    broadcastable shapes, e.g. (K, 9) and (K, 9), or (D, 1, 9) and (1, T, 9)) -> {name: (...)}.
 
     When the BEV centre distance d exceeds the sum of circumradii the footprints are disjoint (IoU = 0) and
     the convex hull contains the trapezoid spanned by the inscribed discs, of area >= d (rho_a + rho_b), so
@@ -45,18 +47,18 @@ def similarity_upper_bounds(a: np.ndarray, b: np.ndarray, names) -> dict[str, np
     times max(h_a, h_b). Elsewhere the bound is the trivial 1. Pairs whose bound cannot beat a threshold are
     skipped without computing the polygon geometry; the result is identical.
     """
-    d = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1])
-    disjoint = d > 0.5 * (np.hypot(a[:, 3], a[:, 4]) + np.hypot(b[:, 3], b[:, 4]))
-    hull = np.maximum(d * 0.5 * (np.minimum(a[:, 3], a[:, 4]) + np.minimum(b[:, 3], b[:, 4])), 1e-12)
+    d = np.hypot(a[..., 0] - b[..., 0], a[..., 1] - b[..., 1])
+    disjoint = d > 0.5 * (np.hypot(a[..., 3], a[..., 4]) + np.hypot(b[..., 3], b[..., 4]))
+    hull = np.maximum(d * 0.5 * (np.minimum(a[..., 3], a[..., 4]) + np.minimum(b[..., 3], b[..., 4])), 1e-12)
     out = {}
     for name in names:
         if name.startswith("iou"):
             out[name] = np.where(disjoint, 0.0, 1.0)
         elif name == "giou_3d":
-            vol = a[:, 3] * a[:, 4] * a[:, 5] + b[:, 3] * b[:, 4] * b[:, 5]
-            out[name] = np.where(disjoint, np.minimum(vol / (hull * np.maximum(a[:, 5], b[:, 5])) - 1.0, 1.0), 1.0)
+            vol = a[..., 3] * a[..., 4] * a[..., 5] + b[..., 3] * b[..., 4] * b[..., 5]
+            out[name] = np.where(disjoint, np.minimum(vol / (hull * np.maximum(a[..., 5], b[..., 5])) - 1.0, 1.0), 1.0)
         else:
-            area = a[:, 3] * a[:, 4] + b[:, 3] * b[:, 4]
+            area = a[..., 3] * a[..., 4] + b[..., 3] * b[..., 4]
             out[name] = np.where(disjoint, np.minimum(area / hull - 1.0, 1.0), 1.0)
     return out
 
@@ -101,38 +103,79 @@ def threshold_margin(cost: np.ndarray, threshold: np.ndarray) -> tuple[np.ndarra
 ASSIGNMENT = {"most_pairs": hungarian, "threshold_margin": threshold_margin}
 
 
+def _unmatched(n: int, matched: np.ndarray) -> np.ndarray:
+    """Sorted ``(n - K,) int64`` indices in ``0 .. n-1`` that are not in ``matched (K,)``."""
+    free = np.ones(n, dtype=bool)
+    free[matched] = False
+    return np.flatnonzero(free).astype(np.int64)
+
+
+@njit(cache=True)
+def _cost_kernel(det, det_labels, trk, trk_labels, ta, tb, codes, thresholds, costs) -> None:
+    """Fill ``costs (S, D, T)`` (pre-set to ``_INVALID``) with ``1 - similarity`` of every candidate pair.
+
+    det (D, >=7), trk (T, >=7): boxes; ta, tb: their :func:`geometry._box_terms`; codes (S, C) int: the
+    similarity (index into ``geometry.SIMILARITIES``) of each stage and class; thresholds (S, C): cost
+    thresholds. A pair is a candidate of stage s when its labels agree and the bound of
+    :func:`similarity_upper_bounds` can beat ``thresholds[s, label]``.
+    """
+    n_stages = codes.shape[0]
+    out, work, flags = np.zeros((4, 1)), np.empty((12, 16)), np.empty(16, dtype=np.bool_)
+    keys = np.empty(16, dtype=np.int64)
+    want, need = np.zeros(4, dtype=np.bool_), np.zeros(n_stages, dtype=np.bool_)
+    for i in range(det.shape[0]):
+        lab = det_labels[i]
+        ra = np.hypot(det[i, 3], det[i, 4])
+        for j in range(trk.shape[0]):
+            if trk_labels[j] != lab:
+                continue
+            d = np.hypot(det[i, 0] - trk[j, 0], det[i, 1] - trk[j, 1])
+            disjoint = d > 0.5 * (ra + np.hypot(trk[j, 3], trk[j, 4]))
+            hull = max(d * 0.5 * (min(det[i, 3], det[i, 4]) + min(trk[j, 3], trk[j, 4])), 1e-12)
+            want[:] = False
+            any_need = False
+            for st in range(n_stages):
+                code = codes[st, lab]
+                bound = 1.0
+                if disjoint:
+                    if code == geometry._IOU_BEV or code == geometry._IOU_3D:
+                        bound = 0.0
+                    elif code == geometry._GIOU_3D:
+                        vol = det[i, 3] * det[i, 4] * det[i, 5] + trk[j, 3] * trk[j, 4] * trk[j, 5]
+                        bound = min(vol / (hull * max(det[i, 5], trk[j, 5])) - 1.0, 1.0)
+                    else:
+                        area = det[i, 3] * det[i, 4] + trk[j, 3] * trk[j, 4]
+                        bound = min(area / hull - 1.0, 1.0)
+                need[st] = bound > 1.0 - thresholds[st, lab]
+                if need[st]:
+                    want[code] = True
+                    any_need = True
+            if not any_need:
+                continue
+            geometry._pair_measures(ta, i, tb, j, want, out, 0, work, flags, keys)
+            for st in range(n_stages):
+                if need[st]:
+                    costs[st, i, j] = 1.0 - out[codes[st, lab], 0]
+
+
 def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray,
                      trk_labels: np.ndarray, stages: list[tuple[tuple[str, ...], np.ndarray]]) -> list[np.ndarray]:
-    """(D, T) cost matrices, one per stage, from ONE geometry pass over the candidate pairs.
+    """(D, T) cost matrices, one per stage, from ONE compiled geometry pass over the candidate pairs.
 
     stages: per stage, (metric name per class, cost threshold per class (C,)). A pair is a candidate of a
-    stage when its classes agree and the similarity bound can beat that stage's threshold; everything else
-    costs ``_INVALID``.
+    stage when its classes agree and the similarity bound (:func:`similarity_upper_bounds`) can beat that
+    stage's threshold; everything else costs ``_INVALID`` (the bound never prunes a pair that could pass).
     """
     D, T = len(det_boxes), len(trk_boxes)
-    costs = [np.full((D, T), _INVALID) for _ in stages]
-    di, ti = np.nonzero(det_labels[:, None] == trk_labels[None, :])
-    if len(di) == 0:
-        return costs
-    a, b, lab = det_boxes[di], trk_boxes[ti], det_labels[di]
-    present = np.unique(lab)
-    names = sorted({stage[0][c] for stage in stages for c in present})
-    code = {n: i for i, n in enumerate(names)}
-    codes = [np.array([code.get(m, -1) for m in metric])[lab] for metric, _ in stages]   # (K,) per stage
-    bounds = similarity_upper_bounds(a, b, names)
-    bound_of = np.stack([bounds[n] for n in names])                                     # (M, K)
-    k_idx = np.arange(len(di))
-    need = [bound_of[c, k_idx] > 1.0 - thr[lab] for c, (_, thr) in zip(codes, stages)]
-    idx = np.flatnonzero(np.any(need, axis=0))
-    if len(idx) == 0:
-        return costs
-    sims = geometry.paired_similarities(a[idx], b[idx], names)
-    sim_of = np.stack([sims[n] for n in names])                                          # (M, len(idx))
-    cols = np.arange(len(idx))
-    for cost, c, nd in zip(costs, codes, need):
-        keep = nd[idx]
-        cost[di[idx[keep]], ti[idx[keep]]] = 1.0 - sim_of[c[idx], cols][keep]
-    return costs
+    costs = np.full((len(stages), D, T), _INVALID)
+    if D and T:
+        codes = np.array([[geometry.SIMILARITIES.index(m) for m in metric] for metric, _ in stages], dtype=np.int64)
+        thresholds = np.array([thr for _, thr in stages], dtype=np.float64)
+        det = geometry._check_boxes(det_boxes, "detection boxes")
+        trk = geometry._check_boxes(trk_boxes, "track boxes")
+        _cost_kernel(det, det_labels.astype(np.int64), trk, trk_labels.astype(np.int64), geometry._box_terms(det),
+                     geometry._box_terms(trk), codes, thresholds, costs)
+    return list(costs)
 
 
 def associate(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray, trk_labels: np.ndarray,
@@ -145,16 +188,14 @@ def associate(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarr
     assignment: the rule of both stages, a key of :data:`ASSIGNMENT`.
     """
     solve = ASSIGNMENT[assignment]
-    d_all = np.arange(len(det_boxes), dtype=np.int64)
-    t_all = np.arange(len(trk_boxes), dtype=np.int64)
     stages = [(tuple(first_metric), first_threshold)]
     if two_stage:
         stages.append(((second_metric,) * len(first_metric), second_threshold))
     costs = _candidate_costs(det_boxes, det_labels, trk_boxes, trk_labels, stages)
     md, mt = solve(costs[0], first_threshold[det_labels][:, None])
     if two_stage:
-        ud, ut = np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt)
+        ud, ut = _unmatched(len(det_boxes), md), _unmatched(len(trk_boxes), mt)
         if len(ud) and len(ut):
             r, c = solve(costs[1][np.ix_(ud, ut)], second_threshold[det_labels[ud]][:, None])
             md, mt = np.concatenate([md, ud[r]]), np.concatenate([mt, ut[c]])
-    return Matches(md, mt, np.setdiff1d(d_all, md), np.setdiff1d(t_all, mt))
+    return Matches(md, mt, _unmatched(len(det_boxes), md), _unmatched(len(trk_boxes), mt))

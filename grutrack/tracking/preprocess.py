@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
+from grutrack import geometry
 from grutrack.data.scene import BoxSet
-from grutrack.geometry import paired_bev_iou
 
 
 def score_filter(dets: BoxSet, thresholds: np.ndarray) -> BoxSet:
@@ -16,23 +17,36 @@ def score_filter(dets: BoxSet, thresholds: np.ndarray) -> BoxSet:
     return dets.subset(dets.scores >= thresholds[dets.labels])
 
 
-def overlap_matrix(boxes: np.ndarray, labels: np.ndarray | None, threshold: float) -> np.ndarray:
-    """(N, N) bool: BEV IoU of boxes i, j above ``threshold`` (and same label when ``labels`` is given).
+@njit(cache=True)
+def _nms_kernel(boxes, terms, labels, order, threshold, class_aware, keep) -> None:
+    """Greedy NMS over ``order (N,)`` (descending score): set ``keep[i]`` for each box that no kept box
+    overlaps with BEV IoU > ``threshold``. boxes (N, >=7), terms: :func:`geometry._box_terms`, labels (N,).
 
-    Only pairs whose circumscribed circles intersect can overlap, so IoU is computed for those alone.
+    Only pairs whose circumscribed circles meet can overlap; IoU is computed for those alone, always with the
+    lower index first so that it equals :func:`geometry.paired_bev_iou` of that pair.
     """
-    n = len(boxes)
-    i, j = np.triu_indices(n, k=1)
-    radius = 0.5 * np.hypot(boxes[:, 3], boxes[:, 4])
-    near = np.hypot(boxes[i, 0] - boxes[j, 0], boxes[i, 1] - boxes[j, 1]) < radius[i] + radius[j]
-    if labels is not None:
-        near &= labels[i] == labels[j]
-    i, j = i[near], j[near]
-    over = np.zeros((n, n), dtype=bool)
-    hit = paired_bev_iou(boxes[i], boxes[j]) > threshold
-    over[i[hit], j[hit]] = True
-    over[j[hit], i[hit]] = True
-    return over
+    n = boxes.shape[0]
+    radius = np.empty(n)
+    for i in range(n):
+        radius[i] = 0.5 * np.hypot(boxes[i, 3], boxes[i, 4])
+    removed = np.zeros(n, dtype=np.bool_)
+    want = np.zeros(4, dtype=np.bool_)
+    want[geometry._IOU_BEV] = True
+    out, work, flags = np.zeros((4, 1)), np.empty((12, 16)), np.empty(16, dtype=np.bool_)
+    keys = np.empty(16, dtype=np.int64)
+    for i in order:
+        if removed[i]:
+            continue
+        keep[i] = True
+        for j in range(n):
+            if removed[j] or keep[j] or (class_aware and labels[j] != labels[i]):
+                continue
+            lo, hi = min(i, j), max(i, j)
+            if np.hypot(boxes[lo, 0] - boxes[hi, 0], boxes[lo, 1] - boxes[hi, 1]) >= radius[lo] + radius[hi]:
+                continue
+            geometry._pair_measures(terms, lo, terms, hi, want, out, 0, work, flags, keys)
+            if out[geometry._IOU_BEV, 0] > threshold:
+                removed[j] = True
 
 
 def nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, threshold: float,
@@ -46,16 +60,11 @@ def nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, threshol
     n = len(boxes)
     if n <= 1:
         return np.arange(n, dtype=np.int64)
-    over = overlap_matrix(boxes, labels if class_aware else None, threshold)
-    order = np.argsort(-scores, kind="stable")
-    removed = np.zeros(n, dtype=bool)
-    keep = []
-    for i in order:
-        if removed[i]:
-            continue
-        keep.append(i)
-        removed |= over[i]
-    return np.sort(np.asarray(keep, dtype=np.int64))
+    boxes = geometry._check_boxes(boxes, "boxes")
+    keep = np.zeros(n, dtype=np.bool_)
+    _nms_kernel(boxes, geometry._box_terms(boxes), np.asarray(labels, dtype=np.int64),
+                np.argsort(-scores, kind="stable"), float(threshold), bool(class_aware), keep)
+    return np.flatnonzero(keep).astype(np.int64)
 
 
 def preprocess(dets: BoxSet, score_threshold: np.ndarray, nms_threshold: float,

@@ -28,6 +28,16 @@ def _report_trainings(rep):
             if rep["kind"] in ("semi_supervised", "demo")]
 
 
+def _report_renders(rep):
+    """(run, render folder) of a report that shows each run's worst scene (nuScenes experiments with ground
+    truth)."""
+    if rep["kind"] not in ("demo", "nusc_val"):
+        return []
+    exp_name = rep["experiment"]
+    det = config["experiments"][exp_name]["detectors"][0]
+    return [(run, f"reports/renders/{exp_name}/{det}/{run}") for run in config["experiments"][exp_name]["runs"]]
+
+
 def _report_zips(rep):
     """(detector, zip, manifest) of a leaderboard report."""
     if rep["kind"] != "nusc_test":
@@ -48,6 +58,7 @@ def _report_inputs(w):
         files += [log_csv, cfg]
     for _, zp, manifest in _report_zips(rep):
         files += [zp, manifest]
+    files += [folder for _, folder in _report_renders(rep)]
     return files
 
 
@@ -62,9 +73,28 @@ def _report_args(w):
     args += [f"--run {run}={metrics}" for run, metrics, _ in _report_runs(rep)]
     args += [f"--train-log {label}={log_csv}" for label, log_csv, _ in _report_trainings(rep)]
     args += [f"--zip {det}={zp}" for det, zp, _ in _report_zips(rep)]
+    args += [f"--render {run}={folder}/counts.json" for run, folder in _report_renders(rep)]
     args += [f"--row {shlex.quote(f'{table}:{row}={run}')}" for table, rows in rep["tables"].items()
              for row, run in rows.items()]
     return " ".join(args)
+
+
+rule render:
+    """Bird's-eye frames of a run's worst scene with the evaluator's decisions (the reports' key-frame strips)."""
+    input: unpack(_eval_inputs)
+    output: directory("reports/renders/{experiment}/{detector}/{run}")
+    wildcard_constraints:
+        experiment=NUSC_EXPERIMENTS,
+    params:
+        dataroot=lambda w: dataroot(experiment(w)["dataset"]),
+        version=lambda w: S.version_for(config, experiment(w)["dataset"], experiment(w)["split"]),
+        split=lambda w: experiment(w)["split"],
+        code=code_version("render"),
+    log: "logs/render/{experiment}/{detector}/{run}.log"
+    benchmark: "logs/benchmarks/render/{experiment}/{detector}/{run}.tsv"
+    shell:
+        "{GRUTRACK} render --dataroot {params.dataroot:q} --version {params.version} --split {params.split} "
+        "--submission {input.submission} --worst 1 --no-animation --out {output} > {log} 2>&1 " + ON_FAIL
 
 
 rule report:

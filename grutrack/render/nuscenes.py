@@ -1,0 +1,127 @@
+"""Render a nuScenes tracking submission: load the split, run the fast exact evaluator's matching, pick scenes,
+draw them and write ``counts.json``.
+
+``counts.json``: ``{"dataset", "version", "split", "submission", "detections", "thresholds": {class: float|None},
+"scenes": [{"name", "token", "animation", "errors", "frames": [{"index" (from 0), "frame" (from 1, as drawn),
+"sample_token", "timestamp", "png", "ego": {"xy", "yaw"}, "totals": {tp, fp, fn, ids}, "per_class": {class: {tp, fp, fn, ids}}, "false_positives": [...],
+"missed": [...], "id_switches": [...]}]}], "per_class": {class: {tp, fp, fn, ids}}}``. ``per_class`` sums the
+rendered frames; as in the metrics JSON, FP and IDS are null for a class without an achieved threshold and
+every count is null for a class without ground truth in the split.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from grutrack.errors import ConfigError, DatasetError, InputFormatError
+from grutrack.io import read_json, write_json_atomic
+from grutrack.render.views import COUNT_KEYS, FrameView, build_views, scene_errors
+
+
+def load_evaluation(dataroot: str, version: str, split: str, submission: str | Path):
+    """(nusc, scenes with GT, submission results, MatchDecisions) of a split and a tracking submission.
+
+    Raises InputFormatError / DatasetError (exit 2) for a missing or malformed submission, one of another
+    split, or an unknown split.
+    """
+    from grutrack.data.nuscenes import load_scenes, open_nuscenes
+    from grutrack.evaluation.fast_amota import load_tracks, match_decisions
+
+    nusc = open_nuscenes(dataroot, version)
+    scenes = load_scenes(nusc, split, with_gt=True)
+    doc = read_json(submission, "tracking submission")
+    results = doc.get("results") if isinstance(doc, dict) else None
+    if not isinstance(results, dict) or not isinstance(doc.get("meta"), dict):
+        raise InputFormatError(f"{submission}: expected a tracking submission with 'meta' and 'results' objects")
+    tokens = {f.token for s in scenes for f in s.frames}
+    missing, extra = tokens - set(results), set(results) - tokens
+    if missing or extra:
+        raise InputFormatError(f"{submission}: 'results' must hold exactly the {len(tokens)} samples of split "
+                               f"'{split}' ({len(missing)} missing, {len(extra)} from other splits)")
+    try:
+        tracks_gt, tracks_pred, _ = load_tracks(nusc, doc, split)
+        decisions, _ = match_decisions(tracks_gt, tracks_pred)
+    except (AssertionError, KeyError, TypeError, ValueError) as exc:
+        why = str(exc) or type(exc).__name__
+        raise InputFormatError(f"{submission}: the tracking evaluation rejects it ({why})") from exc
+    return nusc, scenes, results, decisions
+
+
+def select_scenes(scenes: list, decisions, names: list[str] | None, worst: int | None) -> list:
+    """The scenes named (in the given order), or the ``worst`` scenes by id switches + FP + FN (ties: split
+    order)."""
+    by_name = {s.name: s for s in scenes}
+    if names:
+        unknown = [n for n in names if n not in by_name]
+        if unknown:
+            raise DatasetError(f"--scene {unknown[0]}: not a scene of this split (scenes: {', '.join(by_name)})")
+        return [by_name[n] for n in dict.fromkeys(names)]
+    if worst is None or worst < 1:
+        raise ConfigError("--worst must be at least 1")
+    errors = scene_errors(decisions)
+    ranked = sorted(range(len(scenes)), key=lambda i: (-errors.get(scenes[i].token, 0), i))
+    return [scenes[i] for i in ranked[:worst]]
+
+
+def sum_counts(views: list[FrameView], thresholds: dict, gt_classes: set) -> dict:
+    """{class: {tp, fp, fn, ids}} summed over frames; None where the metrics JSON has no value."""
+    out = {}
+    for c, thr in thresholds.items():
+        if c not in gt_classes:
+            out[c] = dict.fromkeys(COUNT_KEYS)
+            continue
+        tot = {k: 0 for k in COUNT_KEYS}
+        for v in views:
+            for k in COUNT_KEYS:
+                tot[k] += (v.counts.get(c, {}).get(k) or 0)
+        if thr is None:
+            tot["fp"] = tot["ids"] = None
+        out[c] = tot
+    return out
+
+
+def frame_record(v: FrameView, png: Path, out: Path) -> dict:
+    """The counts.json entry of one frame."""
+    return {"index": v.index, "frame": v.index + 1, "sample_token": v.sample_token, "timestamp": v.timestamp,
+            "png": str(png.relative_to(out)),
+            "ego": {"xy": [round(float(x), 4) for x in v.ego_xy], "yaw": round(v.ego_yaw, 6)},
+            "totals": v.totals(), "per_class": v.counts,
+            "false_positives": v.false_positives, "missed": v.missed, "id_switches": v.id_switches}
+
+
+def render_nuscenes(dataroot: str, version: str, split: str, submission: str, out: str | Path,
+                    scene_names: list[str] | None = None, worst: int | None = None,
+                    detections: str | None = None, animation: bool = True) -> dict:
+    """Render the chosen scenes into ``out`` and write ``out/counts.json``; returns that document."""
+    from grutrack.render.draw import BevCanvas, TRAIL_FRAMES, render_scene
+
+    t_start = time.perf_counter()
+    nusc, scenes, results, decisions = load_evaluation(dataroot, version, split, submission)
+    chosen = select_scenes(scenes, decisions, scene_names, worst)
+    det = None
+    if detections:
+        from grutrack.data.nusc_detections import load_detections
+
+        det = load_detections(detections, [f.token for s in chosen for f in s.frames])
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    canvas = BevCanvas(thresholds=decisions.thresholds)
+    errors = scene_errors(decisions)
+    all_views, scene_docs = [], []
+    for scene in chosen:
+        views = build_views(scene, results, decisions, det, trail_frames=TRAIL_FRAMES)
+        pngs, gif = render_scene(views, out, decisions.thresholds, canvas, animation=animation)
+        all_views += views
+        scene_docs.append({"name": scene.name, "token": scene.token, "errors": errors.get(scene.token, 0),
+                           "animation": str(gif.relative_to(out)) if gif else None,
+                           "frames": [frame_record(v, p, out) for v, p in zip(views, pngs)]})
+    gt_classes = {decisions.class_names[c] for c in set(decisions.g_cls.tolist())}
+    doc = {"dataset": "nuscenes", "version": version, "split": split, "submission": str(submission),
+           "detections": str(detections) if detections else None, "thresholds": decisions.thresholds,
+           "matching": "fast exact nuScenes evaluator (tracking_nips_2019): per class at its best-MOTA "
+                       "threshold, 2 m centre distance",
+           "scenes": scene_docs, "per_class": sum_counts(all_views, decisions.thresholds, gt_classes),
+           "seconds": round(time.perf_counter() - t_start, 3)}
+    write_json_atomic(out / "counts.json", doc, indent=1)
+    return doc
