@@ -23,6 +23,7 @@ the heading by up to K * pi; ``yaw_flip=False`` reproduces that.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from grutrack.boxes import BOX_DIM, wrap_angle
 from grutrack.motion.models import MotionModel
@@ -55,6 +56,127 @@ def wrap_yaw_residual(r_yaw: np.ndarray, yaw_flip: bool) -> np.ndarray:
     return r
 
 
+@njit(cache=True)
+def _propagate_kernel(F, P, Q, out) -> None:
+    """``out[n] = sym(F[n] P[n] F[n]^T + Q[n])`` for ``F, P, Q, out (N, d, d)``; ``sym(A) = (A + A^T) / 2``."""
+    d = F.shape[1]
+    FP = np.empty((d, d))
+    A = np.empty((d, d))
+    for n in range(F.shape[0]):
+        for i in range(d):
+            for j in range(d):
+                acc = 0.0
+                for k in range(d):
+                    acc += F[n, i, k] * P[n, k, j]
+                FP[i, j] = acc
+        for i in range(d):
+            for j in range(d):
+                acc = 0.0
+                for k in range(d):
+                    acc += FP[i, k] * F[n, j, k]
+                A[i, j] = acc + Q[n, i, j]
+        for i in range(d):
+            for j in range(d):
+                out[n, i, j] = 0.5 * (A[i, j] + A[j, i])
+
+
+@njit(cache=True)
+def _joseph_kernel(x, P, H, r, R, x_out, P_out) -> None:
+    """EKF correction of each track n, Joseph form, into ``x_out (N, d)`` and ``P_out (N, d, d)``.
+
+    ``x (N, d)``, ``P (N, d, d)``, ``H (N, m, d)``, residual ``r (N, m)``, ``R (N, m, m)``:
+    ``S = sym(H P H^T + R)``, ``K = P H^T S^-1`` (``K^T = S^-1 (H P)`` by LU with partial pivoting),
+    ``x' = x + K r``, ``P' = sym((I - K H) P (I - K H)^T + K R K^T)``.
+    """
+    d, m = x.shape[1], H.shape[1]
+    HP, KT = np.empty((m, d)), np.empty((m, d))
+    S = np.empty((m, m))
+    IKH, T1, KR, A = np.empty((d, d)), np.empty((d, d)), np.empty((d, m)), np.empty((d, d))
+    perm = np.empty(m, dtype=np.int64)
+    for n in range(x.shape[0]):
+        for i in range(m):
+            for j in range(d):
+                acc = 0.0
+                for k in range(d):
+                    acc += H[n, i, k] * P[n, k, j]
+                HP[i, j] = acc
+        for i in range(m):
+            for j in range(m):
+                acc = 0.0
+                for k in range(d):
+                    acc += HP[i, k] * H[n, j, k]
+                S[i, j] = acc + R[n, i, j]
+        for i in range(m):
+            for j in range(i + 1, m):
+                S[i, j] = S[j, i] = 0.5 * (S[i, j] + S[j, i])
+        _lu_solve(S, HP, KT, perm)
+        for i in range(d):
+            acc = 0.0
+            for j in range(m):
+                acc += KT[j, i] * r[n, j]
+            x_out[n, i] = x[n, i] + acc
+        for i in range(d):
+            for k in range(d):
+                acc = 0.0
+                for j in range(m):
+                    acc += KT[j, i] * H[n, j, k]
+                IKH[i, k] = (1.0 if i == k else 0.0) - acc
+        for i in range(d):
+            for j in range(d):
+                acc = 0.0
+                for k in range(d):
+                    acc += IKH[i, k] * P[n, k, j]
+                T1[i, j] = acc
+            for j in range(m):
+                acc = 0.0
+                for k in range(m):
+                    acc += KT[k, i] * R[n, k, j]
+                KR[i, j] = acc
+        for i in range(d):
+            for j in range(d):
+                acc = 0.0
+                for k in range(d):
+                    acc += T1[i, k] * IKH[j, k]
+                for k in range(m):
+                    acc += KR[i, k] * KT[k, j]
+                A[i, j] = acc
+        for i in range(d):
+            for j in range(d):
+                P_out[n, i, j] = 0.5 * (A[i, j] + A[j, i])
+
+
+@njit(cache=True)
+def _lu_solve(S, B, X, perm) -> None:
+    """``X = S^-1 B`` for ``S (m, m)`` (overwritten by its LU factors) and ``B, X (m, k)``; partial pivoting."""
+    m, k = S.shape[0], B.shape[1]
+    for i in range(m):
+        perm[i] = i
+    for c in range(m):
+        p = c
+        for i in range(c + 1, m):
+            if abs(S[i, c]) > abs(S[p, c]):
+                p = i
+        if p != c:
+            for j in range(m):
+                S[c, j], S[p, j] = S[p, j], S[c, j]
+            perm[c], perm[p] = perm[p], perm[c]
+        for i in range(c + 1, m):
+            S[i, c] /= S[c, c]
+            for j in range(c + 1, m):
+                S[i, j] -= S[i, c] * S[c, j]
+    for col in range(k):
+        for i in range(m):  # forward substitution with the unit lower factor
+            acc = B[perm[i], col]
+            for j in range(i):
+                acc -= S[i, j] * X[j, col]
+            X[i, col] = acc
+        for i in range(m - 1, -1, -1):  # back substitution with the upper factor
+            acc = X[i, col]
+            for j in range(i + 1, m):
+                acc -= S[i, j] * X[j, col]
+            X[i, col] = acc / S[i, i]
+
+
 class BatchKalmanFilter:
     """EKF (non-linear model) or KF (linear model) over a batch of tracks; see the module docstring."""
 
@@ -79,8 +201,9 @@ class BatchKalmanFilter:
         n, d = x.shape[0], self.model.dim_x
         F = self.model.F(x, dt)
         x_new = self.model.wrap_state(self.model.f(x, dt))
-        P_new = F @ _batch(P, n, d, "P") @ np.swapaxes(F, -1, -2) + _batch(Q, n, d, "Q")
-        return x_new, _symmetrise(P_new)
+        P_new = np.empty((n, d, d))
+        _propagate_kernel(F, _batch(P, n, d, "P"), _batch(Q, n, d, "Q"), P_new)
+        return x_new, P_new
 
     def residual(self, x: np.ndarray, z: np.ndarray) -> np.ndarray:
         """Innovation ``z - h(x)`` ``(N, 9)`` with the yaw component wrapped (and flip-corrected if enabled)."""
@@ -104,11 +227,8 @@ class BatchKalmanFilter:
             return x.copy(), np.zeros((0, d, d))
         P = _batch(P, n, d, "P")
         R = _batch(R, n, BOX_DIM, "R")
-        _, H, S = self.project(x, P, R)
+        H = self.model.H(x)
         r = self.residual(x, z)
-        HP = H @ P  # (N, 9, d) = (P H^T)^T since P is symmetric
-        K = np.swapaxes(np.linalg.solve(S, HP), -1, -2)  # P H^T S^-1, (N, d, 9)
-        x_new = self.model.wrap_state(x + np.einsum("nij,nj->ni", K, r))
-        I_KH = np.eye(d) - K @ H
-        P_new = I_KH @ P @ np.swapaxes(I_KH, -1, -2) + K @ R @ np.swapaxes(K, -1, -2)
-        return x_new, _symmetrise(P_new)
+        x_new, P_new = np.empty((n, d)), np.empty((n, d, d))
+        _joseph_kernel(x, P, H, r, R, x_new, P_new)
+        return self.model.wrap_state(x_new), P_new
