@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from grutrack.data.nusc_detections import load_detections
@@ -54,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
     if args.val_split:
         val_scenes = load_scenes(nusc, args.val_split)
         val_dets = load_detections(args.val_detections, [f.token for s in val_scenes for f in s.frames])
-        validate = make_validator(nusc, args.val_split, val_scenes, val_dets, trainer.tracker_cfg, cfg.device)
+        validate = make_validator(nusc, args.val_split, val_scenes, val_dets,
+                                  replace(trainer.tracker_cfg, matched_box=cfg.matched_box), cfg.device)
     trainer.validate = validate
     if args.resume:
         trainer.resume(Path(args.out) / "last.pt")

@@ -43,3 +43,10 @@ def load_network(path: str | Path, map_location="cpu") -> GRUKalmanNet:
     net.load_state_dict(ck["model"])
     net.eval()
     return net
+
+
+def checkpoint_matched_box(path: str | Path) -> str:
+    """The box a tracker running this checkpoint's network writes for a matched track by default: the training
+    config's ``matched_box`` ("filter" or "detection"); "detection" for checkpoints written before that key."""
+    cfg = read_checkpoint(path).get("train_config") or {}
+    return cfg.get("matched_box", "detection")

@@ -32,6 +32,7 @@ class TrainConfig:
     gt_match_distance: float
     loss_weights: tuple
     prediction_weight: float
+    matched_box: str
     val_every: int
     checkpoint_every: int
 
@@ -57,6 +58,7 @@ _CHECKS = {
                                                                             for x in v), "9 non-negative numbers"),
     "prediction_weight": (lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and v >= 0,
                           "a number >= 0"),
+    "matched_box": (lambda v: v in ("filter", "detection"), "'filter' or 'detection'"),
     "val_every": (lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
     "checkpoint_every": (lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
 }
