@@ -27,6 +27,8 @@ class TrainConfig:
     class_gain: bool
     age_bins: int
     gap_bins: int
+    yaw_flip: bool
+    aux_inputs: bool
     tracker_preset: str
     motion_config: str
     gt_match_distance: float
@@ -51,6 +53,8 @@ _CHECKS = {
                  "an integer from 0 to 100"),
     "gap_bins": (lambda v: isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 100,
                  "an integer from 0 to 100"),
+    "yaw_flip": (lambda v: isinstance(v, bool), "true or false"),
+    "aux_inputs": (lambda v: isinstance(v, bool), "true or false"),
     "tracker_preset": (lambda v: isinstance(v, str) and v != "", "a tracker preset name or path"),
     "motion_config": (lambda v: isinstance(v, str) and v != "", "a motion config name or path"),
     "gt_match_distance": (lambda v: isinstance(v, (int, float)) and v > 0, "a positive distance in metres"),
