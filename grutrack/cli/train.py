@@ -51,7 +51,13 @@ def run(args: argparse.Namespace) -> int:
     scenes = load_scenes(nusc, args.split, with_gt=True)
     dets = load_detections(args.detections, [f.token for s in scenes for f in s.frames])
     validate = None
-    trainer = Trainer(cfg, scenes, dets, args.out, progress=not args.no_progress)
+    if cfg.resample_profiles:
+        from grutrack.training.resample import NuscDetectionResampler, ResamplingTrainer
+
+        resampler = NuscDetectionResampler(nusc, args.split, [f.token for s in scenes for f in s.frames])
+        trainer = ResamplingTrainer(cfg, scenes, dets, args.out, resampler, progress=not args.no_progress)
+    else:
+        trainer = Trainer(cfg, scenes, dets, args.out, progress=not args.no_progress)
     if args.val_split:
         val_scenes = load_scenes(nusc, args.val_split)
         val_dets = load_detections(args.val_detections, [f.token for s in val_scenes for f in s.frames])

@@ -34,6 +34,7 @@ class TrainConfig:
     gt_match_distance: float
     loss_weights: tuple
     prediction_weight: float
+    resample_profiles: tuple
     matched_box: str
     val_every: int
     checkpoint_every: int
@@ -62,6 +63,8 @@ _CHECKS = {
                                                                             for x in v), "9 non-negative numbers"),
     "prediction_weight": (lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and v >= 0,
                           "a number >= 0"),
+    "resample_profiles": (lambda v: isinstance(v, list) and all(isinstance(x, str) and x for x in v),
+                          "a list of detector profile names or YAML paths (empty: no resampling)"),
     "matched_box": (lambda v: v in ("filter", "detection"), "'filter' or 'detection'"),
     "val_every": (lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
     "checkpoint_every": (lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
@@ -97,6 +100,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrainConfig:
             raise ConfigError(f"{source}: '{k}' must be {expected}, got {raw[k]!r}")
     vals = dict(raw)
     vals["loss_weights"] = tuple(float(x) for x in raw["loss_weights"])
+    vals["resample_profiles"] = tuple(str(x) for x in raw["resample_profiles"])
     vals["lr"], vals["weight_decay"] = float(raw["lr"]), float(raw["weight_decay"])
     vals["gt_match_distance"] = float(raw["gt_match_distance"])
     vals["prediction_weight"] = float(raw["prediction_weight"])
