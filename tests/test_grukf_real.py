@@ -1,8 +1,10 @@
 """The GRU-KF against the EKF it replaces, on real nuScenes mini (issue acceptance): trained with the shipped
 training config on mini_train ground truth with simulated CenterPoint-like detections (seed 1), evaluated on
-mini_val with the real PointPillars detections and with simulated detections of another seed (2). AMOTA must be
-at least the EKF's - 0.005 and AMOTP at most the EKF's + 0.01 (official semantics via the exact fast evaluator,
-equal to the devkit's TrackingEval to 1e-15)."""
+mini_val with the real PointPillars detections and with simulated detections of other seeds (2, 11). The GRU-KF
+tracker writes its posterior for matched tracks (training config matched_box: filter, stored in the checkpoint),
+so its accuracy shows in AMOTP: on the simulated sets its mean AMOTA must be at least the EKF's and its mean AMOTP
+at least 0.015 m below the EKF's; on the real PointPillars file AMOTA at least the EKF's - 0.002 (official
+semantics via the exact fast evaluator, equal to the devkit's TrackingEval to 1e-15)."""
 
 from __future__ import annotations
 
@@ -47,14 +49,27 @@ def trained(nusc_mini, tmp_path_factory):
     return Trainer(cfg, scenes, dets, tmp / "ck", progress=False).run(), tmp
 
 
-@pytest.mark.parametrize("detections", ["pointpillars", "simulated_seed2"])
-def test_grukf_tracks_at_least_as_well_as_ekf(nusc_mini, pointpillars_mini_val, trained, detections):
+def test_grukf_tracks_at_least_as_well_as_ekf_with_a_lower_amotp(nusc_mini, trained):
     checkpoint, tmp = trained
     scenes = load_scenes(nusc_mini, "mini_val")
     tokens = [f.token for s in scenes for f in s.frames]
-    dets = (load_detections(pointpillars_mini_val, tokens) if detections == "pointpillars"
-            else _simulated(nusc_mini, "mini_val", 2, tokens, tmp))
+    gru_tracker = build_tracker("grukf", checkpoint=checkpoint, device="cpu")
+    assert gru_tracker.cfg.matched_box == "filter"
+    ekf, gru = [], []
+    for seed in (2, 11):
+        dets = _simulated(nusc_mini, "mini_val", seed, tokens, tmp)
+        ekf.append(_score(nusc_mini, build_tracker("ekf"), scenes, dets))
+        gru.append(_score(nusc_mini, build_tracker("grukf", checkpoint=checkpoint, device="cpu"), scenes, dets))
+    mean = lambda rows, k: sum(r[k] for r in rows) / len(rows)  # noqa: E731
+    assert mean(gru, "amota") >= mean(ekf, "amota"), (gru, ekf)
+    assert mean(gru, "amotp") <= mean(ekf, "amotp") - 0.015, (gru, ekf)
+
+
+def test_grukf_keeps_the_ekf_amota_on_real_pointpillars(nusc_mini, pointpillars_mini_val, trained):
+    checkpoint, _ = trained
+    scenes = load_scenes(nusc_mini, "mini_val")
+    tokens = [f.token for s in scenes for f in s.frames]
+    dets = load_detections(pointpillars_mini_val, tokens)
     ekf = _score(nusc_mini, build_tracker("ekf"), scenes, dets)
     gru = _score(nusc_mini, build_tracker("grukf", checkpoint=checkpoint, device="cpu"), scenes, dets)
-    assert gru["amota"] >= ekf["amota"] - 0.005, (gru["amota"], ekf["amota"])
-    assert gru["amotp"] <= ekf["amotp"] + 0.01, (gru["amotp"], ekf["amotp"])
+    assert gru["amota"] >= ekf["amota"] - 0.002, (gru["amota"], ekf["amota"])

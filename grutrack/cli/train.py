@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from grutrack.data.nusc_detections import load_detections
@@ -55,11 +56,19 @@ def run(args: argparse.Namespace) -> int:
     validate = None
     source = {"dataroot": str(Path(args.dataroot).resolve()), "version": args.version, "split": args.split,
               "detections": str(Path(args.detections).resolve())}
-    trainer = Trainer(cfg, scenes, dets, args.out, progress=not args.no_progress, source=source)
+    if cfg.resample_profiles:
+        from grutrack.training.resample import NuscDetectionResampler, ResamplingTrainer
+
+        resampler = NuscDetectionResampler(nusc, args.split, [f.token for s in scenes for f in s.frames])
+        trainer = ResamplingTrainer(cfg, scenes, dets, args.out, resampler, progress=not args.no_progress,
+                                    source=source)
+    else:
+        trainer = Trainer(cfg, scenes, dets, args.out, progress=not args.no_progress, source=source)
     if args.val_split:
         val_scenes = load_scenes(nusc, args.val_split)
         val_dets = load_detections(args.val_detections, [f.token for s in val_scenes for f in s.frames], yaw)
-        validate = make_validator(nusc, args.val_split, val_scenes, val_dets, trainer.tracker_cfg, cfg.device)
+        validate = make_validator(nusc, args.val_split, val_scenes, val_dets,
+                                  replace(trainer.tracker_cfg, matched_box=cfg.matched_box), cfg.device)
     trainer.validate = validate
     if args.resume:
         trainer.resume(Path(args.out) / "last.pt")

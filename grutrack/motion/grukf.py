@@ -26,12 +26,16 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+import math
+
 import torch
 from torch import nn
 
 from grutrack.motion.torch_models import make_torch_model, wrap_angle_t
 
 MEAS_DIM = 9
+#: extra inputs with ``aux_inputs``: log(1 + norm) of the four features, log(update count), log(gap)
+AUX_DIM = 6
 MIN_SIZE = 0.05  # metres: lower bound of the posterior w, l, h
 _YAW_Z = 6
 
@@ -48,6 +52,11 @@ class GRUKFConfig:
     frame, ..., gap_bins and more). Each cell starts at the EKF's mean gain in that cell minus the shared one,
     so an untrained network follows the EKF's gain schedule, which grows after missed detections as the EKF's
     covariance does (a grutrack choice; the network and SS model stay shared by all classes).
+    yaw_flip: a yaw innovation (and observation difference) beyond 90 degrees is taken as a detection with the
+    reversed heading and turned by pi, as the EKF does (``grutrack.motion.kalman``; a grutrack addition).
+    aux_inputs: the magnitudes the L2 normalisation removes, ``log(1 + |f|)`` of each of the four features
+    (metres-like units), and ``log(n_updates)``, ``log(gap)`` of the track (see :func:`aux_features`), as AUX_DIM
+    extra inputs of the S-GRU's input layer and of the output layer (a grutrack addition).
     """
 
     ss_model: str = "CTRA"
@@ -58,6 +67,8 @@ class GRUKFConfig:
     age_bins: int = 0
     gap_bins: int = 0
     n_classes: int = 7
+    yaw_flip: bool = False
+    aux_inputs: bool = False
 
     @property
     def table_shape(self) -> tuple[int, int, int]:
@@ -113,7 +124,8 @@ class GRUKalmanNet(nn.Module):
         self.fc_fwd_evol = _fc(m, m * cfg.in_mult)                       # input layer of the Σ-GRU
         self.gru_sigma = nn.GRUCell(self.h_q + m * cfg.in_mult, self.h_sigma)
         self.fc_sigma_to_s = _fc(self.h_sigma, n * n)
-        self.fc_obs = _fc(2 * n, 2 * n * cfg.in_mult)                    # input layer of the S-GRU
+        a = AUX_DIM if cfg.aux_inputs else 0
+        self.fc_obs = _fc(2 * n + a, 2 * n * cfg.in_mult)                    # input layer of the S-GRU
         r_dim = 0
         if cfg.four_gru:
             self.gru_r = nn.GRUCell(n * cfg.in_mult, n * n)
@@ -121,7 +133,7 @@ class GRUKalmanNet(nn.Module):
             r_dim = n * n
         self.gru_s = nn.GRUCell(n * n + 2 * n * cfg.in_mult + r_dim, self.h_s)
         hidden = (self.h_sigma + self.h_s) * cfg.out_mult // 10
-        self.fc_gain = nn.Sequential(nn.Linear(self.h_sigma + self.h_s, hidden), nn.ReLU(),
+        self.fc_gain = nn.Sequential(nn.Linear(self.h_sigma + self.h_s + a, hidden), nn.ReLU(),
                                      nn.Linear(hidden, m * n))            # output layer: K
         self.fc_back1 = _fc(self.h_s + m * n, m * m)
         self.fc_back2 = _fc(self.h_sigma + m * m, self.h_sigma)
@@ -174,6 +186,8 @@ class GRUKalmanNet(nn.Module):
         dt = self.fc_gain[2].weight.dtype
         f_upd, f_evol = feats["fwd_update"].to(dt), feats["fwd_evol"].to(dt)
         f_obs = torch.cat([feats["obs_diff"], feats["innovation"]], dim=1).to(dt)
+        aux = [feats["aux"].to(dt)] if self.cfg.aux_inputs else []
+        f_obs = torch.cat([f_obs, *aux], dim=1)
         h_q = self.gru_q(self.fc_fwd_update(f_upd), hidden["q"])
         h_sigma = self.gru_sigma(torch.cat([h_q, self.fc_fwd_evol(f_evol)], dim=1), hidden["sigma"])
         s_in = [self.fc_sigma_to_s(h_sigma), self.fc_obs(f_obs)]
@@ -183,7 +197,7 @@ class GRUKalmanNet(nn.Module):
             s_in.append(h_r)
             new["r"] = h_r
         h_s = self.gru_s(torch.cat(s_in, dim=1), hidden["s"])
-        K = self.fc_gain(torch.cat([h_sigma, h_s], dim=1))
+        K = self.fc_gain(torch.cat([h_sigma, h_s, *aux], dim=1))
         if self.cfg.has_table:
             if cells is None:
                 raise ValueError("this GRU-KF's gain table needs the class, update count and gap of every track")
@@ -195,18 +209,19 @@ class GRUKalmanNet(nn.Module):
 
     def correct(self, x_prior: torch.Tensor, y: torch.Tensor, y_prev: torch.Tensor, x_post_prev: torch.Tensor,
                 x_prior_prev: torch.Tensor, x_post_prev2: torch.Tensor, hidden: dict[str, torch.Tensor],
-                cells: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None
-                ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+                cells: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None,
+                counts: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """One update of K tracks (all (K, ·) float64): prior x^-_n, measurement y_n, previous measurement,
         previous posterior x_{n-1|n-1}, previous prior x_{n-1|n-2}, posterior before that x_{n-2|n-2};
-        ``cells``: the tracks' cells of the gain table (:meth:`table_index`; only with a table).
-        Returns the posterior (K, m) and the new hidden states.
+        ``cells``: the tracks' cells of the gain table (:meth:`table_index`; only with a table); ``counts``
+        (K, 2): each track's update count at this update (1 = the first) and frames since its last update
+        (only with ``aux_inputs``). Returns the posterior (K, m) and the new hidden states.
         """
         yaw = x_prior[:, self.ss.yaw_index]
         innov = y - self.ss.h(x_prior)
-        innov = torch.cat([innov[:, :_YAW_Z], wrap_angle_t(innov[:, _YAW_Z:_YAW_Z + 1]), innov[:, _YAW_Z + 1:]], 1)
+        innov = torch.cat([innov[:, :_YAW_Z], self._yaw_res(innov[:, _YAW_Z:_YAW_Z + 1]), innov[:, _YAW_Z + 1:]], 1)
         obs_diff = y - y_prev
-        obs_diff = torch.cat([obs_diff[:, :_YAW_Z], wrap_angle_t(obs_diff[:, _YAW_Z:_YAW_Z + 1]),
+        obs_diff = torch.cat([obs_diff[:, :_YAW_Z], self._yaw_res(obs_diff[:, _YAW_Z:_YAW_Z + 1]),
                               obs_diff[:, _YAW_Z + 1:]], 1)
         yi = self.ss.yaw_index
         fwd_evol = x_post_prev - x_post_prev2
@@ -214,10 +229,14 @@ class GRUKalmanNet(nn.Module):
         fwd_evol = torch.cat([fwd_evol[:, :yi], wrap_angle_t(fwd_evol[:, yi:yi + 1]), fwd_evol[:, yi + 1:]], 1)
         fwd_upd = torch.cat([fwd_upd[:, :yi], wrap_angle_t(fwd_upd[:, yi:yi + 1]), fwd_upd[:, yi + 1:]], 1)
         innov_h = to_heading_frame(innov, yaw, MEAS_PLANAR)
-        feats = {"innovation": _normalise(innov_h),
-                 "obs_diff": _normalise(to_heading_frame(obs_diff, yaw, MEAS_PLANAR)),
-                 "fwd_evol": _normalise(to_heading_frame(fwd_evol, yaw, STATE_PLANAR)),
-                 "fwd_update": _normalise(to_heading_frame(fwd_upd, yaw, STATE_PLANAR))}
+        raw = {"innovation": innov_h, "obs_diff": to_heading_frame(obs_diff, yaw, MEAS_PLANAR),
+               "fwd_evol": to_heading_frame(fwd_evol, yaw, STATE_PLANAR),
+               "fwd_update": to_heading_frame(fwd_upd, yaw, STATE_PLANAR)}
+        feats = {k: _normalise(v) for k, v in raw.items()}
+        if self.cfg.aux_inputs:
+            if counts is None:
+                raise ValueError("this GRU-KF's aux inputs need the update count and gap of every track")
+            feats["aux"] = aux_features(raw, counts)
         K, new_hidden = self.gain(feats, hidden, cells)
         if len(K):
             self.max_abs_gain = max(self.max_abs_gain, float(K.detach().abs().max()))
@@ -229,6 +248,23 @@ class GRUKalmanNet(nn.Module):
                        x[:, yi + 1:]], 1)
         return x, new_hidden
 
+    def _yaw_res(self, r: torch.Tensor) -> torch.Tensor:
+        """Yaw residuals (K, 1) wrapped to [-pi, pi); with ``yaw_flip`` those beyond pi/2 turned by pi."""
+        r = wrap_angle_t(r)
+        if self.cfg.yaw_flip:
+            r = torch.where(r.abs() > 0.5 * math.pi, wrap_angle_t(r + math.pi), r)
+        return r
+
     def config_dict(self) -> dict:
         """The architecture as a plain dict (for checkpoints)."""
         return asdict(self.cfg)
+
+
+def aux_features(raw: dict[str, torch.Tensor], counts: torch.Tensor) -> torch.Tensor:
+    """The magnitudes normalisation hides: (K, AUX_DIM) = log(1 + L2 norm) of the innovation, observation
+    difference, forward-evolution and forward-update differences (raw (K, ·) each, metres / radians / m/s
+    mixed as in the state), then log(update count) and log(frames since the last update) from ``counts`` (K, 2)
+    (both >= 1)."""
+    norms = [torch.log1p(raw[k].norm(dim=1)) for k in ("innovation", "obs_diff", "fwd_evol", "fwd_update")]
+    c = torch.log(counts.to(raw["innovation"].dtype).clamp_min(1.0))
+    return torch.stack([*norms, c[:, 0], c[:, 1]], dim=1)

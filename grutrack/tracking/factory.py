@@ -28,7 +28,8 @@ def build_tracker(name: str = "ekf", config: str | Path | None = None,
     ``param_classes``: for a dataset whose labels are not the 7 nuScenes tracking classes (e.g. AV2
     categories), the nuScenes tracking class whose parameters each dataset label uses; labels stay distinct
     (boxes of different labels never match) while thresholds and motion models come from the mapped class.
-    ``checkpoint``: the trained GRU-KF (``grukf`` only); ``device``: auto, cpu, cuda, ...
+    ``checkpoint``: the trained GRU-KF (``grukf`` only; without ``config`` the preset's ``output.matched_box``
+    is the one stored in the checkpoint's training config); ``device``: auto, cpu, cuda, ...
     """
     if name not in TRACKERS:
         raise ConfigError(f"unknown tracker '{name}' (available: {', '.join(TRACKERS)})")
@@ -42,9 +43,11 @@ def build_tracker(name: str = "ekf", config: str | Path | None = None,
         if checkpoint is None:
             raise ConfigError("--tracker grukf needs --checkpoint CKPT (a model written by `grutrack train`)")
         from grutrack.tracking.grukf_backend import resolve_device
-        from grutrack.training.checkpoint import load_network
+        from grutrack.training.checkpoint import checkpoint_matched_box, load_network
 
         device = resolve_device(device)   # a device this machine lacks is refused before the model is read
+        if config is None:  # the default preset writes what the network was trained to give (see grukf.yaml)
+            cfg = replace(cfg, matched_box=checkpoint_matched_box(checkpoint))
         return Tracker(cfg, [grukf_group(load_network(checkpoint), len(index), device, class_index=index)],
                        _association(cfg))
     return Tracker(cfg, _baseline_groups(name, cfg, index), _association(cfg))

@@ -104,6 +104,14 @@ class GRUKFBackend:
              for a in (cls, s.n_updates[rows] + 1, np.maximum(s.since[rows], 1))]
         return self.net.table_index(*t)
 
+    def _counts(self, s: GRUState, rows: np.ndarray) -> torch.Tensor | None:
+        """(K, 2) update count at this update and frames since the last one of tracks ``rows`` (None unless
+        the network has aux inputs)."""
+        if not self.net.cfg.aux_inputs:
+            return None
+        c = np.stack([s.n_updates[rows] + 1, np.maximum(s.since[rows], 1)], axis=1)
+        return torch.as_tensor(c, device=self.device, dtype=torch.float64)
+
     def predict(self, s: GRUState, dt: float) -> GRUState:
         """x <- f(x, dt) for every track."""
         with self._ctx():
@@ -118,7 +126,7 @@ class GRUKFBackend:
             prior = s.x[r]
             post, hid = self.net.correct(prior, y, s.y_prev[r], s.post1[r], s.prior1[r], s.post2[r],
                                          {k: v[r] for k, v in s.hidden.items()},
-                                         self._cells(s, rows))
+                                         self._cells(s, rows), self._counts(s, rows))
 
             def put(t: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
                 out = t.clone()

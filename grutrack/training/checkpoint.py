@@ -65,3 +65,10 @@ def load_weights(net: GRUKalmanNet, ck: dict, path: str | Path) -> None:
             raise InputFormatError(f"{path}: tensor 'model.{k}' has shape {got}, expected {tuple(own[k].shape)} "
                                    f"(the architecture in 'arch')")
     net.load_state_dict(state)
+
+
+def checkpoint_matched_box(path: str | Path) -> str:
+    """The box a tracker running this checkpoint's network writes for a matched track by default: the training
+    config's ``matched_box`` ("filter" or "detection"); "detection" for checkpoints written before that key."""
+    cfg = read_checkpoint(path).get("train_config") or {}
+    return cfg.get("matched_box", "detection")

@@ -28,11 +28,15 @@ class TrainConfig:
     class_gain: bool
     age_bins: int
     gap_bins: int
+    yaw_flip: bool
+    aux_inputs: bool
     tracker_preset: str
     motion_config: str
     gt_match_distance: float
     loss_weights: tuple
     prediction_weight: float
+    resample_profiles: tuple
+    matched_box: str
     val_every: int
     checkpoint_every: int
 
@@ -56,6 +60,8 @@ _CHECKS = {
                  "an integer from 0 to 100"),
     "gap_bins": (lambda v: isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 100,
                  "an integer from 0 to 100"),
+    "yaw_flip": (lambda v: isinstance(v, bool), "true or false"),
+    "aux_inputs": (lambda v: isinstance(v, bool), "true or false"),
     "tracker_preset": (lambda v: isinstance(v, str) and v != "", "a tracker preset name or path"),
     "motion_config": (lambda v: isinstance(v, str) and v != "", "a motion config name or path"),
     "gt_match_distance": (lambda v: _real(v) and v > 0, "a positive distance in metres"),
@@ -63,6 +69,9 @@ _CHECKS = {
                                                                             for x in v), "9 non-negative numbers"),
     "prediction_weight": (lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and v >= 0,
                           "a number >= 0"),
+    "resample_profiles": (lambda v: isinstance(v, list) and all(isinstance(x, str) and x for x in v),
+                          "a list of detector profile names or YAML paths (empty: no resampling)"),
+    "matched_box": (lambda v: v in ("filter", "detection"), "'filter' or 'detection'"),
     "val_every": (lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
     "checkpoint_every": (lambda v: isinstance(v, int) and v >= 0, "an integer >= 0"),
 }
@@ -125,6 +134,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrainConfig:
             raise ConfigError(f"{source}: '{k}' must be {expected}, got {raw[k]!r}")
     vals = dict(raw)
     vals["loss_weights"] = tuple(float(x) for x in raw["loss_weights"])
+    vals["resample_profiles"] = tuple(str(x) for x in raw["resample_profiles"])
     vals["lr"], vals["weight_decay"] = float(raw["lr"]), float(raw["weight_decay"])
     vals["gt_match_distance"] = float(raw["gt_match_distance"])
     vals["prediction_weight"] = float(raw["prediction_weight"])

@@ -259,7 +259,8 @@ def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: Tra
 def _arch(cfg: TrainConfig) -> GRUKFConfig:
     """The network architecture a training config asks for."""
     return GRUKFConfig(ss_model=cfg.ss_model, four_gru=cfg.four_gru, class_gain=cfg.class_gain,
-                       age_bins=cfg.age_bins, gap_bins=cfg.gap_bins)
+                       age_bins=cfg.age_bins, gap_bins=cfg.gap_bins, yaw_flip=cfg.yaw_flip,
+                       aux_inputs=cfg.aux_inputs)
 
 
 @dataclass

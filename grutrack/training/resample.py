@@ -1,0 +1,78 @@
+"""Detection resampling: fresh simulated detections of the training scenes every epoch.
+
+A few real scenes give many distinct training sequences when every epoch draws new detections from their ground
+truth with the detector simulator (:mod:`grutrack.data.detection_sim`): epoch 0 uses the detections the
+training was given, epoch e >= 1 detections simulated with profile ``profiles[(e - 1) % len(profiles)]`` and
+seed ``RESAMPLE_SEED_BASE * (seed + 1) + e`` (deterministic, so a resumed run sees the same detections).
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+from grutrack.data.scene import BoxSet, Scene
+from grutrack.training.config import TrainConfig
+from grutrack.training.trainer import Trainer
+
+#: resampled detections of epoch e use seed RESAMPLE_SEED_BASE * (config seed + 1) + e (far from the small
+#: seeds used for evaluation sets)
+RESAMPLE_SEED_BASE = 100_000
+
+
+def resample_seed(cfg_seed: int, epoch: int) -> int:
+    """The simulator seed of the detections of ``epoch`` (>= 1) for a training config seed."""
+    return RESAMPLE_SEED_BASE * (cfg_seed + 1) + epoch
+
+
+class NuscDetectionResampler:
+    """Simulated detections (canonical, by sample token) of the samples of a nuScenes(-format) split.
+
+    ``nusc``: the loaded database; ``split``: the training split; ``tokens``: the sample tokens to return.
+    """
+
+    def __init__(self, nusc, split: str, tokens: list[str]):
+        from grutrack.data.detection_sim import nusc_gt_frames
+
+        self.frames = nusc_gt_frames(nusc, split)
+        self.tokens = tokens
+
+    def __call__(self, profile: str, seed: int) -> dict[str, BoxSet]:
+        """Detections drawn with detector ``profile`` (name or YAML path) and ``seed``."""
+        from grutrack.data.detection_sim import detection_json, load_profile, simulate, write_detection_json
+        from grutrack.data.nusc_detections import load_detections
+
+        prof = load_profile(profile)
+        sub = detection_json(simulate(self.frames, prof, seed), prof, seed)
+        with tempfile.TemporaryDirectory() as tmp:  # one reader of the detection format: load_detections
+            path = Path(tmp) / f"resampled_{prof.name}_s{seed}.json"
+            write_detection_json(path, sub)
+            return load_detections(path, self.tokens)
+
+
+class ResamplingTrainer(Trainer):
+    """:class:`Trainer` whose detections change every epoch (see the module docstring).
+
+    ``resampler``: callable(profile, seed) -> detections by sample token for every training frame.
+    The gain prior is computed on the given detections (epoch 0).
+    """
+
+    def __init__(self, cfg: TrainConfig, scenes: list[Scene], dets: dict[str, BoxSet], out_dir, resampler,
+                 validate=None, progress: bool = True, source: dict | None = None):
+        super().__init__(cfg, scenes, dets, out_dir, validate=validate, progress=progress, source=source)
+        self.resampler = resampler
+        self.given = dets
+        self._dets_epoch = 0
+
+    def detections_for(self, epoch: int) -> dict[str, BoxSet]:
+        """The detections of ``epoch``: the given ones for epoch 0, fresh simulated ones afterwards."""
+        profiles = self.cfg.resample_profiles
+        if epoch == 0 or not profiles:
+            return self.given
+        return self.resampler(profiles[(epoch - 1) % len(profiles)], resample_seed(self.cfg.seed, epoch))
+
+    def _step(self, scene: Scene) -> None:
+        if self.state.epoch != self._dets_epoch:
+            self.dets = self.detections_for(self.state.epoch)
+            self._dets_epoch = self.state.epoch
+        super()._step(scene)
