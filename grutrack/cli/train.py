@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from grutrack.data.nusc_detections import load_detections
-from grutrack.data.nuscenes import load_scenes, open_nuscenes
 from grutrack.errors import ConfigError
+
+# Only argument definitions at module level: building the parser must not import numpy or torch
+# (tests/test_cli_imports.py).
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -37,6 +38,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Train; prints the final checkpoint and the last logged figures."""
+    from grutrack.data.nusc_detections import load_detections
+    from grutrack.data.nuscenes import load_scenes, open_nuscenes
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer
     from grutrack.training.validation import make_validator

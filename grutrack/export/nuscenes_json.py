@@ -8,6 +8,7 @@ Every sample token of the split is present and no sample has more than 500 boxes
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -84,19 +85,24 @@ def _validate_box(where: str, token: str, i: int, box: dict) -> None:
     if not isinstance(box["tracking_id"], str):
         raise InputFormatError(f"{where}: sample {token} box {i}: tracking_id must be a string")
     for key, n in (("translation", 3), ("size", 3), ("rotation", 4), ("velocity", 2)):
-        v = box[key]
-        if len(v) != n or not np.all(np.isfinite(v)):
+        v = box[key]  # plain-Python checks: numpy calls on 2-4 numbers cost more than the check itself
+        if not isinstance(v, (list, tuple)) or len(v) != n or not all(_finite(x) for x in v):
             raise InputFormatError(f"{where}: sample {token} box {i}: '{key}' must be {n} finite numbers, got {v}")
     if min(box["size"]) <= 0:
         raise InputFormatError(f"{where}: sample {token} box {i}: 'size' must be positive, got {box['size']}")
-    if abs(np.linalg.norm(box["rotation"]) - 1) > 1e-6:
+    if abs(math.sqrt(sum(q * q for q in box["rotation"])) - 1) > 1e-6:
         raise InputFormatError(f"{where}: sample {token} box {i}: 'rotation' must be a unit quaternion")
     s = box["tracking_score"]
-    if not np.isfinite(s) or not 0 <= s <= 1:
+    if not _finite(s) or not 0 <= s <= 1:
         raise InputFormatError(f"{where}: sample {token} box {i}: tracking_score must be in [0, 1], got {s}")
+
+
+def _finite(x) -> bool:
+    """A finite real number (bool excluded)."""
+    return isinstance(x, (int, float, np.floating, np.integer)) and not isinstance(x, bool) and math.isfinite(x)
 
 
 def write_submission(path: str | Path, sub: dict, sample_tokens: list[str]) -> None:
     """Validate ``sub`` and write it to ``path`` atomically."""
     validate_submission(sub, sample_tokens, where=str(path))
-    write_json_atomic(path, sub)
+    write_json_atomic(path, sub, compact=True)
