@@ -53,8 +53,10 @@ def run_nuscenes(args: argparse.Namespace) -> int:
     from grutrack.data.nusc_detections import load_detections
     from grutrack.data.nuscenes import load_scenes, open_nuscenes
     from grutrack.export.nuscenes_json import build_submission, write_submission
+    from grutrack.threads import apply_thread_policy
     from grutrack.tracking.factory import build_tracker
 
+    apply_thread_policy(torch_too=args.tracker == "grukf")
     if not args.version:
         raise ConfigError("--version is required with --dataset nuscenes (e.g. v1.0-trainval, v1.0-mini)")
     nusc = open_nuscenes(args.dataroot, args.version)
@@ -80,8 +82,10 @@ def run_av2(args: argparse.Namespace) -> int:
     from grutrack.data import av2
     from grutrack.data.lt3d_detections import load_detections as load_lt3d
     from grutrack.export.av2_tracks import write_tracks
+    from grutrack.threads import apply_thread_policy
     from grutrack.tracking.factory import build_tracker
 
+    apply_thread_policy(torch_too=args.tracker == "grukf")
     vocab = av2.vocabulary(args.all_categories)
     scenes = av2.load_scenes(args.dataroot, args.split, rate_hz=args.rate, all_categories=args.all_categories)
     dets, stats = load_lt3d(args.detections, args.dataroot, args.split, scenes, vocab)
