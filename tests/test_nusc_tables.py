@@ -53,3 +53,10 @@ def test_scenes_from_tables_equal_scenes_from_the_devkit(nusc_root, nusc_mini):
             np.testing.assert_array_equal(fa.gt.boxes, fb.gt.boxes)
             np.testing.assert_array_equal(fa.gt.labels, fb.gt.labels)
             np.testing.assert_array_equal(fa.ego_translation, fb.ego_translation)
+
+
+def test_table_progress_bar_counts_every_byte(nusc_root, capsys):
+    NuScenesTables("v1.0-mini", nusc_root, progress=True)
+    err = capsys.readouterr().err
+    total = sum((nusc_root / "v1.0-mini" / f"{n}.json").stat().st_size for n in TABLE_NAMES)
+    assert "reading v1.0-mini tables" in err and "100%" in err and total > 10**6

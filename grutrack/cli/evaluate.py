@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 
 from grutrack.cli.common import add_dataset_args
@@ -78,7 +79,8 @@ def run_nuscenes(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     if args.evaluator == "devkit":
         _check_submission_tokens(nusc, args.split, args.submission)
-        summary = devkit_tracking_eval(args.dataroot, args.version, args.split, args.submission)
+        summary = devkit_tracking_eval(args.dataroot, args.version, args.split, args.submission,
+                                       progress=sys.stderr.isatty())
     else:
         from grutrack.evaluation.fast_amota import fast_tracking_eval
 
