@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -67,3 +68,40 @@ def test_command_help_lists_its_flags(name):
     out = subprocess.run([sys.executable, "-m", "grutrack", name, "--help"], capture_output=True, text=True,
                          env=env, check=True, cwd=REPO_ROOT).stdout
     assert out.startswith(f"usage: grutrack {name}") and "--out" in out
+
+
+def test_fast_evaluate_skips_the_devkit_package(nusc_root, tmp_path):
+    """The fast evaluator's command (config, loading, metrics classes) never imports the ``nuscenes`` package,
+    whose import pulls matplotlib, OpenCV and scikit-learn; its figures stay those of the devkit's config."""
+    from grutrack.data.nuscenes import load_scenes, open_nuscenes
+
+    scenes = load_scenes(open_nuscenes(nusc_root, "v1.0-mini"), "mini_val", with_gt=True)
+    results = {f.token: [] for s in scenes for f in s.frames}
+    for s in scenes:
+        for f in s.frames:
+            for b, lab, inst in zip(f.gt.boxes, f.gt.labels, f.gt.ids):
+                results[f.token].append({
+                    "sample_token": f.token, "translation": b[:3].tolist(), "size": b[3:6].tolist(),
+                    "rotation": [float(np.cos(b[6] / 2)), 0.0, 0.0, float(np.sin(b[6] / 2))],
+                    "velocity": b[7:9].tolist(), "tracking_id": inst, "tracking_score": 0.9,
+                    "tracking_name": _class_name(int(lab))})
+    sub, metrics = tmp_path / "gt_tracks.json", tmp_path / "metrics.json"
+    sub.write_text(json.dumps({"meta": {"use_camera": False, "use_lidar": True, "use_radar": False,
+                                        "use_map": False, "use_external": False}, "results": results}))
+    code = ("import contextlib, io, grutrack.cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    assert grutrack.cli.main(['evaluate', '--dataroot', {str(nusc_root)!r}, '--version', 'v1.0-mini', "
+            f"'--split', 'mini_val', '--submission', {str(sub)!r}, '--out', {str(metrics)!r}, "
+            f"'--evaluator', 'fast']) == 0\n")
+    loaded = _modules_after(code)
+    assert sorted(loaded.intersection({"torch", "nuscenes", "matplotlib", "sklearn", "cv2"})) == []
+    doc = json.loads(metrics.read_text())
+    # ground truth fed back (every annotation, zero-point ones too: those are extra predictions to the evaluator)
+    assert 0.9 < doc["overall"]["amota"] <= 1.0 and doc["overall"]["ids"] == 0
+    assert doc["devkit_summary"]["cfg"]["num_thresholds"] == 40
+
+
+def _class_name(label: int) -> str:
+    from grutrack.classes import TRACKING_CLASSES
+
+    return TRACKING_CLASSES[label]
