@@ -56,9 +56,12 @@ def reference_checkout(commit: str | None):
 
 
 def child_env(root: Path, keep_thread_vars: bool = False) -> dict:
-    """The environment of a child run on checkout ``root``: PYTHONPATH=root, thread variables removed."""
+    """The environment of a child run on checkout ``root``: ``root`` first on PYTHONPATH (other entries kept,
+    either checkout removed), thread variables removed."""
     env = {k: v for k, v in os.environ.items() if keep_thread_vars or k not in THREAD_VARS}
-    env["PYTHONPATH"] = str(root)
+    others = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep)
+              if p and Path(p).resolve() not in (REPO.resolve(), Path(root).resolve())]
+    env["PYTHONPATH"] = os.pathsep.join([str(root), *others])
     return env
 
 

@@ -53,13 +53,32 @@ print(f"training frames/s {frames / dt:.3f}")
 """
 
 
-def make_inputs(root: Path, tmp: Path) -> dict:
-    """Dense mini_val detections, simulated GRU-KF detections and a 2-step checkpoint (current checkout)."""
+def write_dense_detections(scenes, path: Path, target: int = 75, seed: int = 0) -> int:
+    """Detector-like boxes from the scenes' ground truth (``bench_tracking.noisy_detections``: noise, misses,
+    duplicates and false positives up to ``target`` per frame, CenterPoint's density) as a detection JSON."""
     import numpy as np
 
     from bench_tracking import noisy_detections
     from grutrack.boxes import quaternion_from_yaw
     from grutrack.classes import TRACKING_CLASSES
+
+    rng = np.random.default_rng(seed)
+    results, n = {}, 0
+    for f in (f for s in scenes for f in s.frames):
+        d = noisy_detections(f.gt, rng, target)
+        q = quaternion_from_yaw(d.boxes[:, 6])
+        results[f.token] = [{"sample_token": f.token, "translation": b[:3].tolist(), "size": b[3:6].tolist(),
+                             "rotation": qq.tolist(), "velocity": b[7:9].tolist(),
+                             "detection_name": TRACKING_CLASSES[int(lab)], "detection_score": float(sc),
+                             "attribute_name": ""} for b, qq, lab, sc in zip(d.boxes, q, d.labels, d.scores)]
+        n += len(d)
+    meta = {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False, "use_external": False}
+    path.write_text(json.dumps({"meta": meta, "results": results}))
+    return n
+
+
+def make_inputs(root: Path, tmp: Path) -> dict:
+    """Dense mini_val detections, simulated GRU-KF detections and a 2-step checkpoint (current checkout)."""
     from grutrack.data.detection_sim import simulate_nuscenes
     from grutrack.data.nusc_detections import load_detections
     from grutrack.data.nuscenes import load_scenes, open_nuscenes
@@ -68,18 +87,8 @@ def make_inputs(root: Path, tmp: Path) -> dict:
 
     nusc = open_nuscenes(root, "v1.0-mini")
     val = load_scenes(nusc, "mini_val", with_gt=True)
-    rng = np.random.default_rng(0)
-    results = {}
-    for f in (f for s in val for f in s.frames):
-        d = noisy_detections(f.gt, rng)
-        q = quaternion_from_yaw(d.boxes[:, 6])
-        results[f.token] = [{"sample_token": f.token, "translation": b[:3].tolist(), "size": b[3:6].tolist(),
-                             "rotation": qq.tolist(), "velocity": b[7:9].tolist(),
-                             "detection_name": TRACKING_CLASSES[int(lab)], "detection_score": float(sc),
-                             "attribute_name": ""} for b, qq, lab, sc in zip(d.boxes, q, d.labels, d.scores)]
-    meta = {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False, "use_external": False}
     paths = {"dense": tmp / "dense_mini_val.json"}
-    paths["dense"].write_text(json.dumps({"meta": meta, "results": results}))
+    write_dense_detections(val, paths["dense"])
     for split, seed in (("mini_train", 1), ("mini_val", 2)):
         paths[split] = tmp / f"sim_{split}.json"
         paths[split].write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", split, "centerpoint", seed,
