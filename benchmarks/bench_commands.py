@@ -110,6 +110,21 @@ def _fps(run, pattern: str) -> float:
     return float(m.group(1))
 
 
+def _line(label, unit, s, fig, higher) -> str:
+    cur = fig(s["current"])
+    ref_v = fig(s["reference"]) if "reference" in s else float("nan")
+    ratio = (cur / ref_v if higher else ref_v / cur) if ref_v == ref_v else float("nan")
+    return f"{label:<48}{unit:>9}{ref_v:>12.3f}{cur:>12.3f}{ratio:>9.2f}x"
+
+
+class _Rows(list):
+    """The table's rows; each is shown on stderr as soon as it is measured (a full run takes minutes)."""
+
+    def append(self, row) -> None:
+        super().append(row)
+        print("measured: " + _line(*row), file=sys.stderr, flush=True)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dataroot", default=str(DEFAULT_DATA))
@@ -139,7 +154,7 @@ def main(argv=None) -> int:
         def out(root_, name):
             return str(tmp / f"{name}_{'ref' if root_ == ref else 'cur'}.json")
 
-        rows = []  # (label, unit, series per checkout, figure, higher_is_better)
+        rows = _Rows()  # (label, unit, series per checkout, figure, higher_is_better), shown as measured
         if "help" not in args.skip:
             s = interleaved(lambda r: run_measured([py, "-m", "grutrack", "--help"], r), roots, args.repeat)
             rows.append(("grutrack --help", "s", s, lambda x: x.median("wall"), False))
@@ -187,11 +202,8 @@ def main(argv=None) -> int:
     cpu_note = f"{__import__('os').cpu_count()} cores; thread variables unset in the children"
     print(f"\nmedians; reference {args.reference or '-'} vs current checkout; {cpu_note}")
     print(f"{'measurement':<48}{'unit':>9}{'reference':>12}{'current':>12}{'speed-up':>10}")
-    for label, unit, s, fig, higher in rows:
-        cur = fig(s["current"])
-        ref_v = fig(s["reference"]) if "reference" in s else float("nan")
-        ratio = (cur / ref_v if higher else ref_v / cur) if ref_v == ref_v else float("nan")
-        print(f"{label:<48}{unit:>9}{ref_v:>12.3f}{cur:>12.3f}{ratio:>9.2f}x")
+    for row in rows:
+        print(_line(*row))
     if fast and devkit:
         for name in fast:
             print(f"fast vs devkit evaluate command ({name}): "
