@@ -117,7 +117,7 @@ BAD_SUBMISSIONS = {
                       "tracking_score must be a number in [0, 1], got '0.5'"),
     "string_translation": (lambda s, t: s["results"][t[2]].append(_box(t[2], translation=["1", "2", "3"])),
                            "'translation' must be 3 finite numbers, got ['1', '2', '3']"),
-    "other_token": (lambda s, t: s["results"][t[3]].append(_box(t[4])), f"box 1: sample_token is"),
+    "other_token": (lambda s, t: s["results"][t[3]].append(_box(t[4])), "box 1: sample_token is"),
 }
 
 

@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from grutrack.io import read_json
@@ -14,7 +13,7 @@ from grutrack.errors import InputFormatError
 
 def add_parser(subparsers) -> None:
     """Register ``demo-data``, ``simulate-detections`` and ``dataset-stats``."""
-    from grutrack.data.demo import DEFAULT_SCENES, FRAMES_PER_SCENE, VERSION
+    from grutrack.data.demo_defaults import DEFAULT_SCENES, FRAMES_PER_SCENE, VERSION
 
     p = subparsers.add_parser("demo-data", help="write the SYNTHETIC nuScenes-format demo dataset",
                               description="Generate a synthetic dataset in nuScenes table format (devkit-loadable, "

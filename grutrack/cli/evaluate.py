@@ -5,13 +5,14 @@ evaluation, HOTA)."""
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 from grutrack.cli.common import add_dataset_args
-from grutrack.data.nuscenes import open_nuscenes, split_scene_names
 from grutrack.errors import ConfigError
-from grutrack.evaluation.nuscenes_eval import (devkit_tracking_eval, format_summary, metrics_document,
-                                               write_metrics)
+
+# Only argument definitions at module level: building the parser must not import numpy or the devkit
+# (tests/test_cli_imports.py); the fast evaluator's command never imports the devkit's NuScenes class.
 
 EVALUATORS = ("devkit", "fast", "official")
 
@@ -64,6 +65,9 @@ def run_av2(args: argparse.Namespace) -> int:
 
 def run_nuscenes(args: argparse.Namespace) -> int:
     """Evaluate, write the metrics JSON, print a summary table."""
+    from grutrack.data.nuscenes import open_nuscenes, split_scene_names
+    from grutrack.evaluation.nuscenes_eval import devkit_tracking_eval, format_summary, metrics_document, write_metrics
+
     if not args.version:
         raise ConfigError("--version is required with --dataset nuscenes (e.g. v1.0-trainval, v1.0-mini)")
     args.evaluator = args.evaluator or "devkit"
@@ -74,7 +78,8 @@ def run_nuscenes(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     sub = _valid_submission(nusc, args.split, args.submission)   # the checks leaderboard-zip makes
     if args.evaluator == "devkit":
-        summary = devkit_tracking_eval(args.dataroot, args.version, args.split, args.submission)
+        summary = devkit_tracking_eval(args.dataroot, args.version, args.split, args.submission,
+                                       progress=sys.stderr.isatty())
     else:
         from grutrack.evaluation.fast_amota import fast_tracking_eval
 

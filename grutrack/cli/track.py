@@ -7,16 +7,12 @@ import argparse
 import sys
 from pathlib import Path
 
-from tqdm import tqdm
-
 from grutrack.cli.common import add_dataset_args
-from grutrack.data.nusc_detections import load_detections
-from grutrack.data.nuscenes import load_scenes, open_nuscenes
 from grutrack.errors import ConfigError
-from grutrack.export.nuscenes_json import build_submission, write_submission
-from grutrack.tracking.factory import TRACKERS, build_tracker
+from grutrack.tracking.names import TRACKERS
 
-
+# Only argument definitions at module level: building the parser must not import numpy, torch or the devkit
+# (tests/test_cli_imports.py). Each run function imports what its dataset needs.
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``grutrack track``."""
@@ -52,6 +48,15 @@ def run(args: argparse.Namespace) -> int:
 
 def run_nuscenes(args: argparse.Namespace) -> int:
     """Load, track, export; the last line reports the tracking loop's frames/s."""
+    from tqdm import tqdm
+
+    from grutrack.data.nusc_detections import load_detections
+    from grutrack.data.nuscenes import load_scenes, open_nuscenes
+    from grutrack.export.nuscenes_json import build_submission, write_submission
+    from grutrack.threads import apply_thread_policy
+    from grutrack.tracking.factory import build_tracker
+
+    apply_thread_policy(torch_too=args.tracker == "grukf")
     if not args.version:
         raise ConfigError("--version is required with --dataset nuscenes (e.g. v1.0-trainval, v1.0-mini)")
     nusc = open_nuscenes(args.dataroot, args.version)
@@ -72,10 +77,15 @@ def run_nuscenes(args: argparse.Namespace) -> int:
 
 def run_av2(args: argparse.Namespace) -> int:
     """AV2: logs at ``--rate``, LT3D detections, tracking in the city frame, pickle + feather out."""
+    from tqdm import tqdm
+
     from grutrack.data import av2
     from grutrack.data.lt3d_detections import load_detections as load_lt3d
     from grutrack.export.av2_tracks import write_tracks
+    from grutrack.threads import apply_thread_policy
+    from grutrack.tracking.factory import build_tracker
 
+    apply_thread_policy(torch_too=args.tracker == "grukf")
     vocab = av2.vocabulary(args.all_categories)
     scenes = av2.load_scenes(args.dataroot, args.split, rate_hz=args.rate, all_categories=args.all_categories)
     dets, stats = load_lt3d(args.detections, args.dataroot, args.split, scenes, vocab)

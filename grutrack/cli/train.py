@@ -7,9 +7,10 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from grutrack.data.nusc_detections import load_detections
-from grutrack.data.nuscenes import load_scenes, open_nuscenes
 from grutrack.errors import ConfigError
+
+# Only argument definitions at module level: building the parser must not import numpy or torch
+# (tests/test_cli_imports.py).
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -39,6 +40,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Train; prints the final checkpoint and the last logged figures."""
+    from grutrack.data.nusc_detections import load_detections
+    from grutrack.data.nuscenes import load_scenes, open_nuscenes
+    from grutrack.threads import apply_thread_policy
     from grutrack.tracking.config import load_tracker_config
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer, TrainingInterrupted
@@ -47,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     overrides = {k: v for k, v in (("mode", args.mode), ("epochs", args.epochs), ("val_every", args.val_every),
                                    ("seed", args.seed)) if v is not None}
     cfg = load_train_config(args.config, overrides, flags={k: "--" + k.replace("_", "-") for k in overrides})
+    apply_thread_policy()
     if (args.val_split is None) != (args.val_detections is None):
         raise ConfigError("--val-split and --val-detections go together")
     nusc = open_nuscenes(args.dataroot, args.version)

@@ -36,13 +36,11 @@ import numpy as np
 from scipy.signal import lfilter
 from scipy.spatial import cKDTree
 
+from grutrack.data.demo_defaults import DEFAULT_SCENES, FRAMES_PER_SCENE, VERSION
 from grutrack.errors import ConfigError
 
-VERSION = "v1.0-demo"
 DT = 0.5                    # s between keyframes: nuScenes keyframes are at 2 Hz (mini: 0.40-0.60 s, mean 0.50)
 SUBSTEPS = 5                # motion integrated at 10 Hz, fine enough for manoeuvres seen at 2 Hz
-FRAMES_PER_SCENE = 40       # nuScenes scenes are 20 s long: 39-41 keyframes in mini
-DEFAULT_SCENES = 10         # quick demo: 8 demo_train + 2 demo_val scenes (mini has 8 + 2)
 VAL_EVERY = 5               # every 5th scene is demo_val: 80/20 like nuScenes train/val (700/150); with fewer
                             # than 5 scenes the last one is demo_val (1 scene: demo_val is empty)
 TIME_ORIGIN_US = 1_533_000_000_000_000  # 2018-07-31, the nuScenes recording period (2018-07 .. 2018-11)

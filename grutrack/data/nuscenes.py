@@ -21,8 +21,12 @@ from grutrack.errors import DatasetError
 PREDEFINED_SPLITS = ("train", "val", "test", "mini_train", "mini_val", "train_detect", "train_track")
 
 
-def open_nuscenes(dataroot: str | Path, version: str, verbose: bool = False):
-    """Load ``NuScenes(version, dataroot)`` after checking that the folder exists and holds that version."""
+def open_nuscenes(dataroot: str | Path, version: str, verbose: bool = False, devkit: bool = False):
+    """The tables of ``<dataroot>/<version>`` after checking that the folder exists and holds that version.
+
+    Default: :class:`grutrack.data.nusc_tables.NuScenesTables` (the devkit's records, reverse indexes and
+    lookups, without importing the devkit); ``devkit=True``: ``nuscenes.NuScenes(version, dataroot)``.
+    """
     root = Path(dataroot)
     if not root.is_dir():
         raise DatasetError(f"nuScenes dataroot {root} does not exist (expected a folder holding {version}/)")
@@ -30,6 +34,10 @@ def open_nuscenes(dataroot: str | Path, version: str, verbose: bool = False):
         found = sorted(p.name for p in root.iterdir() if p.is_dir() and (p / "scene.json").exists())
         raise DatasetError(f"nuScenes dataroot {root} has no version folder {version}/ "
                            f"(found: {', '.join(found) or 'none'})")
+    if not devkit:
+        from grutrack.data.nusc_tables import NuScenesTables
+
+        return NuScenesTables(version, root)
     from nuscenes import NuScenes
 
     if verbose:
@@ -57,13 +65,13 @@ def _split_matches_version(split: str, version: str) -> bool:
 
 def split_scene_names(nusc, split: str) -> list[str]:
     """Scene names of ``split``; a predefined split, or one from ``<dataroot>/<version>/splits.json``."""
-    from nuscenes.utils.splits import create_splits_scenes
+    from grutrack.data.nusc_tables import predefined_split_scenes
 
     if split in PREDEFINED_SPLITS:
         if not _split_matches_version(split, nusc.version):
             raise DatasetError(f"split '{split}' does not belong to nuScenes version {nusc.version} "
                                f"(available: {', '.join(available_splits(nusc))})")
-        names = create_splits_scenes()[split]
+        names = predefined_split_scenes()[split]
     else:
         custom = Path(nusc.dataroot) / nusc.version / "splits.json"
         splits = json.loads(custom.read_text()) if custom.is_file() else {}
@@ -108,10 +116,22 @@ def _frame(nusc, sample: dict, with_gt: bool) -> Frame:
                  gt=_gt_boxes(nusc, sample) if with_gt else None)
 
 
+#: nuScenes category -> tracking class: the devkit's ``category_to_tracking_name`` (other categories: None)
+TRACKING_NAME_OF_CATEGORY = {
+    "vehicle.bicycle": "bicycle", "vehicle.bus.bendy": "bus", "vehicle.bus.rigid": "bus", "vehicle.car": "car",
+    "vehicle.motorcycle": "motorcycle", "human.pedestrian.adult": "pedestrian",
+    "human.pedestrian.child": "pedestrian", "human.pedestrian.construction_worker": "pedestrian",
+    "human.pedestrian.police_officer": "pedestrian", "vehicle.trailer": "trailer", "vehicle.truck": "truck",
+}
+
+
+def category_to_tracking_name(category_name: str) -> str | None:
+    """The tracking class of a nuScenes category, or None (as nuscenes-devkit's function of that name)."""
+    return TRACKING_NAME_OF_CATEGORY.get(category_name)
+
+
 def _gt_boxes(nusc, sample: dict) -> BoxSet:
     """Ground-truth boxes of one sample, 7 tracking classes only."""
-    from nuscenes.eval.tracking.utils import category_to_tracking_name
-
     rows, labels, ids, pts = [], [], [], []
     for ann_token in sample["anns"]:
         ann = nusc.get("sample_annotation", ann_token)

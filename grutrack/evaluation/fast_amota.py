@@ -26,8 +26,9 @@ much faster:
   ``motmetrics.metrics`` on the devkit's frame numbering (only frames with a box of the class count); the
   thresholds (from the scores of the MATCH events without threshold), their de-duplication, the padding of
   unachieved recalls, the worst values when none is achieved, the best-MOTA pick and the AMOTA/AMOTP averaging
-  follow ``TrackingEvaluation`` and ``TrackingEval.evaluate``; the result is a devkit ``TrackingMetrics`` /
-  ``TrackingMetricDataList``, serialised by the devkit.
+  follow ``TrackingEvaluation`` and ``TrackingEval.evaluate``; the result is a ``TrackingMetrics`` /
+  ``TrackingMetricDataList`` of :mod:`grutrack.evaluation.tracking_classes` (the devkit's classes and config,
+  serialised the same way, without importing the devkit package, whose import alone takes 2-3 s).
 
 Public entry points: :func:`fast_tracking_eval` (the ``metrics_summary.json`` dict), :func:`load_tracks`
 (loading and filtering), :func:`evaluate_tracks` (accumulation and metrics on loaded tracks) and
@@ -58,9 +59,10 @@ _MOT_METRICS = ("gt", "tp", "motar", "mota", "motp", "faf", "mt", "ml", "fp", "f
 # ----------------------------------------------------------------------------------------------------------------
 
 def _default_config():
-    from nuscenes.eval.common.config import config_factory
+    """``config_factory('tracking_nips_2019')``'s content, without importing the devkit."""
+    from grutrack.evaluation.tracking_classes import load_config
 
-    return config_factory("tracking_nips_2019")
+    return load_config("tracking_nips_2019")
 
 
 def _quiet(verbose: bool):
@@ -92,6 +94,7 @@ def load_tracks(nusc, submission: Union[dict, str, os.PathLike], eval_split: str
 
 
 def _devkit_load_tracks(nusc, submission, eval_split: str, cfg, verbose: bool):
+    from grutrack.evaluation.tracking_classes import devkit_config
     from nuscenes.eval.common.data_classes import EvalBoxes
     from nuscenes.eval.common.loaders import (add_center_dist, filter_eval_boxes, get_samples_of_custom_split,
                                               load_gt, load_gt_of_sample_tokens, load_prediction,
@@ -100,6 +103,7 @@ def _devkit_load_tracks(nusc, submission, eval_split: str, cfg, verbose: bool):
     from nuscenes.eval.tracking.loaders import create_tracks
     from nuscenes.utils.splits import is_predefined_split
 
+    cfg = devkit_config(cfg)  # also sets the devkit's TRACKING_NAMES, which TrackingBox checks
     predefined = is_predefined_split(split_name=eval_split)
     custom_tokens = None if predefined else get_samples_of_custom_split(split_name=eval_split, nusc=nusc)
 
@@ -788,7 +792,7 @@ def _compute_thresholds(scores: np.ndarray, gt_box_count: int, min_recall: float
 
 
 def _accumulate_class(ce: _ClassEval, cfg, nelem: int):
-    from nuscenes.eval.tracking.data_classes import TrackingMetricData
+    from grutrack.evaluation.tracking_classes import TrackingMetricData
 
     md = TrackingMetricData()
     if ce.n_gt == 0:
@@ -841,6 +845,9 @@ def _devkit_accumulate(tracks_gt, tracks_pred, class_name: str, cfg, nelem: int)
     """Fallback to the devkit's own accumulation for one class (inputs the fast path does not model)."""
     from nuscenes.eval.tracking.algo import TrackingEvaluation
 
+    from grutrack.evaluation.tracking_classes import devkit_config
+
+    cfg = devkit_config(cfg)  # sets the devkit's TrackingMetricData.nelem
     ev = TrackingEvaluation(tracks_gt, tracks_pred, class_name, cfg.dist_fcn_callable, cfg.dist_th_tp,
                             cfg.min_recall, num_thresholds=nelem, metric_worst=cfg.metric_worst, verbose=False)
     return ev.accumulate()
@@ -853,15 +860,16 @@ def _devkit_accumulate(tracks_gt, tracks_pred, class_name: str, cfg, nelem: int)
 def evaluate_tracks(tracks_gt, tracks_pred, config=None):
     """The fast equivalent of ``TrackingEval.evaluate`` on tracks from :func:`load_tracks`.
 
-    :return: ``(TrackingMetrics, TrackingMetricDataList)`` (devkit classes), eval_time set to this call's time.
+    :return: ``(TrackingMetrics, TrackingMetricDataList)`` (:mod:`grutrack.evaluation.tracking_classes`: the
+        devkit's classes without the devkit import, same ``serialize()``), eval_time set to this call's time.
     """
-    from nuscenes.eval.tracking.constants import AVG_METRIC_MAP, MOT_METRIC_MAP
-    from nuscenes.eval.tracking.data_classes import TrackingMetricData, TrackingMetricDataList, TrackingMetrics
+    from grutrack.evaluation.tracking_classes import (AVG_METRIC_MAP, MOT_METRIC_MAP, TrackingMetricData,
+                                                      TrackingMetricDataList, TrackingMetrics)
 
     start = time.time()
     cfg = config if config is not None else _default_config()
     assert cfg.dist_fcn == "center_distance"
-    nelem = TrackingMetricData.nelem
+    TrackingMetricData.nelem = nelem = cfg.num_thresholds
     metrics = TrackingMetrics(cfg)
     md_list = TrackingMetricDataList()
 
@@ -992,7 +1000,8 @@ def fast_tracking_eval(nusc, submission: Union[dict, str, os.PathLike], eval_spl
         or the path of its JSON file.
     :param eval_split: a predefined split name (``mini_val``, ``val``, ...) or a custom split of
         ``<dataroot>/<version>/splits.json``.
-    :param config: a devkit ``TrackingConfig``; default ``config_factory('tracking_nips_2019')``.
+    :param config: a devkit ``TrackingConfig`` (or :class:`grutrack.evaluation.tracking_classes.TrackingConfig`);
+        default: the devkit's ``tracking_nips_2019``.
     :param verbose: print the loading messages and the final metrics table.
     :param loader: ``"fast"`` (exact re-implementation of the devkit's loading, devkit fallback) or
         ``"devkit"`` (the devkit's loaders); see :func:`load_tracks`.

@@ -93,11 +93,13 @@ class _Boxes:
 
 def _split_tokens(nusc, eval_split: str) -> Tuple[List[str], bool]:
     """Sample tokens of the split in the devkit's order (``load_gt`` / ``get_samples_of_custom_split``)."""
-    from nuscenes.eval.common.loaders import get_samples_of_custom_split
-    from nuscenes.utils.splits import create_splits_scenes, is_predefined_split
+    from grutrack.data.nusc_tables import predefined_split_scenes
 
-    if not is_predefined_split(split_name=eval_split):
-        return list(get_samples_of_custom_split(split_name=eval_split, nusc=nusc)), False
+    if eval_split not in predefined_split_scenes():
+        names = _custom_split_scenes(nusc, eval_split)
+        _require(len(nusc.sample) > 0, "no samples")
+        return [s["token"] for s in nusc.sample
+                if nusc.get("scene", nusc.get("sample", s["token"])["scene_token"])["name"] in names], False
     version = nusc.version
     if eval_split in {"train", "val", "train_detect", "train_track"}:
         _require(version.endswith("trainval"), "split/version")
@@ -107,13 +109,24 @@ def _split_tokens(nusc, eval_split: str) -> Tuple[List[str], bool]:
         _require(version.endswith("test") and len(nusc.sample_annotation) > 0, "split/version")
     else:
         raise NeedsDevkitLoader("split")
-    names = create_splits_scenes()[eval_split]
+    names = predefined_split_scenes()[eval_split]
     _require(len(nusc.sample) > 0, "no samples")
     tokens = []
     for sample in nusc.sample:
         if nusc.get("scene", sample["scene_token"])["name"] in names:
             tokens.append(sample["token"])
     return tokens, True
+
+
+def _custom_split_scenes(nusc, eval_split: str) -> List[str]:
+    """Scene names of a custom split (``<dataroot>/<version>/splits.json``, as the devkit's
+    ``get_scenes_of_custom_split``); anything the devkit would reject is left to the devkit."""
+    path = os.path.join(nusc.dataroot, nusc.version, "splits.json")
+    _require(os.path.isfile(path), "no splits.json")
+    with open(path) as f:
+        splits = json.load(f)
+    _require(eval_split in splits and isinstance(splits[eval_split], list), "custom split")
+    return splits[eval_split]
 
 
 def _load_predictions(submission, split_tokens: List[str], predefined: bool, cfg, tracking_names) -> Tuple[_Boxes, Any]:
@@ -166,7 +179,7 @@ def _load_predictions(submission, split_tokens: List[str], predefined: bool, cfg
 
 
 def _load_gt(nusc, split_tokens: List[str], tracking_names) -> _Boxes:
-    from nuscenes.eval.tracking.utils import category_to_tracking_name
+    from grutrack.data.nuscenes import category_to_tracking_name
 
     counts: List[int] = []
     raw_translation: List[Any] = []
@@ -221,20 +234,45 @@ class _SampleInfo:
     def racks(self, token: str) -> list:
         boxes = self._racks.get(token)
         if boxes is None:
-            from nuscenes.utils.data_classes import Box
-            from pyquaternion import Quaternion
-
             nusc = self.nusc
             recs = [nusc.get("sample_annotation", a) for a in nusc.get("sample", token)["anns"]
                     if nusc.get("sample_annotation", a)["category_name"] == _BIKE_RACK]
-            boxes = [Box(r["translation"], r["size"], Quaternion(r["rotation"])) for r in recs]
+            boxes = [_box_corners(r["translation"], r["size"], r["rotation"]) for r in recs]
             self._racks[token] = boxes
         return boxes
 
 
-def _keep_mask(b: _Boxes, info: _SampleInfo, class_range: Dict[str, float]) -> np.ndarray:
-    from nuscenes.utils.geometry_utils import points_in_box
+def _box_corners(center, wlh, rotation) -> np.ndarray:
+    """(3, 8) corners of a box: ``nuscenes.utils.data_classes.Box(center, wlh, Quaternion(rotation)).corners()``,
+    the same operations in the same order (pyquaternion's rotation matrix)."""
+    from pyquaternion import Quaternion
 
+    w, l, h = np.array(wlh) * 1.0
+    x_corners = l / 2 * np.array([1, 1, 1, 1, -1, -1, -1, -1])
+    y_corners = w / 2 * np.array([1, -1, -1, 1, 1, -1, -1, 1])
+    z_corners = h / 2 * np.array([1, 1, -1, -1, 1, 1, -1, -1])
+    corners = np.dot(Quaternion(rotation).rotation_matrix, np.vstack((x_corners, y_corners, z_corners)))
+    x, y, z = np.array(center)
+    corners[0, :] = corners[0, :] + x
+    corners[1, :] = corners[1, :] + y
+    corners[2, :] = corners[2, :] + z
+    return corners
+
+
+def _points_in_box(corners: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(n,) bool: ``nuscenes.utils.geometry_utils.points_in_box`` for a box given by its (3, 8) corners and
+    (3, n) points (projections on the box's three edges from corner 0)."""
+    p1 = corners[:, 0]
+    i, j, k = corners[:, 4] - p1, corners[:, 1] - p1, corners[:, 3] - p1
+    v = points - p1.reshape((-1, 1))
+    iv, jv, kv = np.dot(i, v), np.dot(j, v), np.dot(k, v)
+    mask_x = np.logical_and(0 <= iv, iv <= np.dot(i, i))
+    mask_y = np.logical_and(0 <= jv, jv <= np.dot(j, j))
+    mask_z = np.logical_and(0 <= kv, kv <= np.dot(k, k))
+    return np.logical_and(np.logical_and(mask_x, mask_y), mask_z)
+
+
+def _keep_mask(b: _Boxes, info: _SampleInfo, class_range: Dict[str, float]) -> np.ndarray:
     n = len(b.names)
     _require(n > 0, "no boxes at all (the devkit's filter raises)")
     tok_of_box = np.repeat(np.arange(len(b.tokens)), b.counts)
@@ -253,7 +291,7 @@ def _keep_mask(b: _Boxes, info: _SampleInfo, class_range: Dict[str, float]) -> n
             racks = info.racks(b.tokens[tok_of_box[i]])
             point = np.expand_dims(np.array(b.raw_translation[i]), axis=1)
             for rack in racks:
-                if np.sum(points_in_box(rack, point)) > 0:
+                if np.sum(_points_in_box(rack, point)) > 0:
                     keep[i] = False
     return keep
 
@@ -263,9 +301,10 @@ def _keep_mask(b: _Boxes, info: _SampleInfo, class_range: Dict[str, float]) -> n
 # ----------------------------------------------------------------------------------------------------------------
 
 def _create_tracks(b: _Boxes, keep: np.ndarray, info: _SampleInfo, nusc, eval_split: str, gt: bool):
-    from nuscenes.utils.splits import get_scenes_of_split
+    from grutrack.data.nusc_tables import predefined_split_scenes
 
-    scenes_of_split = get_scenes_of_split(split_name=eval_split, nusc=nusc)
+    predefined = predefined_split_scenes()
+    scenes_of_split = predefined[eval_split] if eval_split in predefined else _custom_split_scenes(nusc, eval_split)
     scene_tokens = set()
     for token in b.tokens:
         scene_token = info.scene[token]
@@ -361,9 +400,7 @@ def fast_load_tracks(nusc, submission, eval_split: str, cfg):
 
     Raises :class:`NeedsDevkitLoader` for inputs it does not reproduce (the devkit then decides).
     """
-    from nuscenes.eval.tracking import data_classes
-
-    tracking_names = list(data_classes.TRACKING_NAMES)
+    tracking_names = list(cfg.tracking_names)  # what TrackingEval's config sets as the devkit's TRACKING_NAMES
     split_tokens, predefined = _split_tokens(nusc, eval_split)
     pred, meta = _load_predictions(submission, split_tokens, predefined, cfg, tracking_names)
     gt = _load_gt(nusc, split_tokens, tracking_names)

@@ -24,25 +24,87 @@ METRIC_KEYS = ("amota", "amotp", "recall", "motar", "gt", "mota", "motp", "mt", 
 
 
 def devkit_tracking_eval(dataroot: str | Path, version: str, split: str, submission: str | Path,
-                         verbose: bool = False) -> dict:
-    """Run the official ``TrackingEval`` and return the devkit's summary dict (metrics_summary.json)."""
+                         verbose: bool = False, progress: bool = False) -> dict:
+    """Run the official ``TrackingEval`` and return the devkit's summary dict (metrics_summary.json).
+
+    ``progress``: a bar on stderr through the devkit's stages (loading, filtering, one step per class), read
+    from the devkit's own messages; the evaluation itself is the devkit's, unchanged.
+    """
     from nuscenes.eval.common.config import config_factory
     from nuscenes.eval.tracking.evaluate import TrackingEval
 
     submission = Path(submission)
     if not submission.is_file():
         raise InputFormatError(f"{submission}: submission file does not exist")
-    with tempfile.TemporaryDirectory(prefix="grutrack-eval-") as out_dir:
+    cfg = config_factory("tracking_nips_2019")
+    with tempfile.TemporaryDirectory(prefix="grutrack-eval-") as out_dir, \
+            _DevkitProgress(len(cfg.class_names), enabled=progress and not verbose) as bar:
         quiet = contextlib.ExitStack()
         if not verbose:  # the devkit prints and draws progress bars (stderr) even with verbose=False
-            quiet.enter_context(contextlib.redirect_stdout(io.StringIO()))
+            quiet.enter_context(contextlib.redirect_stdout(bar.sink if progress else io.StringIO()))
             quiet.enter_context(contextlib.redirect_stderr(io.StringIO()))
         with quiet:
-            ev = TrackingEval(config=config_factory("tracking_nips_2019"), result_path=str(submission),
-                              eval_set=split, output_dir=out_dir, nusc_version=version,
-                              nusc_dataroot=str(dataroot), verbose=verbose)
+            ev = TrackingEval(config=cfg, result_path=str(submission), eval_set=split, output_dir=out_dir,
+                              nusc_version=version, nusc_dataroot=str(dataroot), verbose=verbose or progress)
             ev.main(render_curves=False)
         return json.loads((Path(out_dir) / "metrics_summary.json").read_text())
+
+
+class _DevkitProgress:
+    """A tqdm bar on the real stderr moved by the devkit's stdout messages (which are swallowed)."""
+
+    #: devkit message prefix -> stage shown on the bar (in the order TrackingEval prints them)
+    STAGES = (("Loading NuScenes tables", "loading tables"), ("Loading annotations", "loading ground truth"),
+              ("Filtering tracks", "filtering predictions"), ("Filtering ground truth", "filtering ground truth"),
+              ("Accumulating metric data", "accumulating"))
+
+    def __init__(self, n_classes: int, enabled: bool):
+        self.enabled, self.n_classes, self.bar = enabled, n_classes, None
+        self.sink = _LineSink(self._line)
+
+    def __enter__(self):
+        if self.enabled:
+            import sys
+
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=len(self.STAGES) + self.n_classes, desc="devkit evaluation", unit="step",
+                            file=sys.stderr)
+        return self
+
+    def __exit__(self, *exc):
+        if self.bar is not None:
+            self.bar.close()
+
+    def _line(self, line: str) -> None:
+        if self.bar is None:
+            return
+        for prefix, stage in self.STAGES:
+            if line.startswith(prefix):
+                self.bar.set_postfix_str(stage)
+                self.bar.update(1)
+                return
+        if line.startswith("Computing metrics for class"):
+            self.bar.set_postfix_str(line.split("class", 1)[1].strip(" .\n"))
+            self.bar.update(1)
+
+
+class _LineSink(io.TextIOBase):
+    """A text stream that hands each complete line to ``on_line`` and keeps nothing else."""
+
+    def __init__(self, on_line):
+        super().__init__()
+        self._on_line, self._buf = on_line, ""
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        self._buf += text
+        *lines, self._buf = self._buf.split("\n")
+        for line in lines:
+            self._on_line(line)
+        return len(text)
 
 
 def metrics_from_summary(summary: dict) -> tuple[dict, dict]:

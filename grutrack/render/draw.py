@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from grutrack.render.views import (GT_IGNORED, GT_MISS, TR_BELOW, TR_FP, TR_IGNORED, TR_MATCH, TR_SWITCH,
-                                   TR_UNSCORED, FrameView)
+from grutrack.render.views import (GT_IGNORED, GT_MISS, TR_FP, TR_MATCH, TR_SWITCH,
+                                   FrameView)
 
 HALF_RANGE = 55.0                       # metres from the ego to each edge of the view
 RINGS = (10.0, 20.0, 30.0, 40.0, 50.0)  # range rings, metres

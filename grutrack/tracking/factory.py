@@ -10,11 +10,9 @@ import numpy as np
 from grutrack.classes import TRACKING_CLASSES
 from grutrack.errors import ConfigError
 from grutrack.tracking.config import TrackerConfig, load_tracker_config
+from grutrack.tracking.names import TRACKERS  # noqa: F401  (re-exported: the selectable trackers)
 from grutrack.tracking.tracker import Tracker, TrackGroup
 
-#: trackers selectable with ``--tracker``; greedy and ab3dmot are the Table I baselines
-#: (grutrack/tracking/baselines.py)
-TRACKERS: tuple[str, ...] = ("ekf", "grukf", "greedy", "ab3dmot")
 #: tracker name -> preset used when --config is not given (the GRU-KF shares the EKF tracker's preset:
 #: pre-processing, association, lifecycle and output are the same, only the motion backend differs)
 DEFAULT_PRESET = {"ekf": "ekf", "grukf": "ekf", "greedy": "greedy", "ab3dmot": "ab3dmot"}

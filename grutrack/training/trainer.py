@@ -33,7 +33,7 @@ from grutrack.motion.torch_models import wrap_angle_t
 from grutrack.tracking.config import TrackerConfig, load_tracker_config
 from grutrack.tracking.ekf_backend import KalmanBackend, KFState
 from grutrack.tracking.factory import grukf_group
-from grutrack.tracking.grukf_backend import GRUKFBackend, GRUState, resolve_device
+from grutrack.tracking.grukf_backend import GRUKFBackend, resolve_device
 from grutrack.tracking.tracker import Tracker, TrackGroup, track_scenes
 from grutrack.training.checkpoint import load_weights, read_checkpoint, save_checkpoint
 from grutrack.training.config import TrainConfig
