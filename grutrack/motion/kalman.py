@@ -56,28 +56,35 @@ def wrap_yaw_residual(r_yaw: np.ndarray, yaw_flip: bool) -> np.ndarray:
     return r
 
 
+@njit(cache=True, inline="always")
+def _mm(A, B, out, a_t=False, b_t=False) -> None:
+    """``out = op(A) op(B)`` for 2-D arrays, ``op`` the transpose where ``a_t`` / ``b_t`` is set."""
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            acc = 0.0
+            for k in range(A.shape[0] if a_t else A.shape[1]):
+                acc += (A[k, i] if a_t else A[i, k]) * (B[j, k] if b_t else B[k, j])
+            out[i, j] = acc
+
+
+@njit(cache=True, inline="always")
+def _sym_into(A, out) -> None:
+    """``out = (A + A^T) / 2`` for square 2-D arrays."""
+    for i in range(A.shape[0]):
+        for j in range(A.shape[0]):
+            out[i, j] = 0.5 * (A[i, j] + A[j, i])
+
+
 @njit(cache=True)
 def _propagate_kernel(F, P, Q, out) -> None:
     """``out[n] = sym(F[n] P[n] F[n]^T + Q[n])`` for ``F, P, Q, out (N, d, d)``; ``sym(A) = (A + A^T) / 2``."""
     d = F.shape[1]
-    FP = np.empty((d, d))
-    A = np.empty((d, d))
+    FP, A = np.empty((d, d)), np.empty((d, d))
     for n in range(F.shape[0]):
-        for i in range(d):
-            for j in range(d):
-                acc = 0.0
-                for k in range(d):
-                    acc += F[n, i, k] * P[n, k, j]
-                FP[i, j] = acc
-        for i in range(d):
-            for j in range(d):
-                acc = 0.0
-                for k in range(d):
-                    acc += FP[i, k] * F[n, j, k]
-                A[i, j] = acc + Q[n, i, j]
-        for i in range(d):
-            for j in range(d):
-                out[n, i, j] = 0.5 * (A[i, j] + A[j, i])
+        _mm(F[n], P[n], FP)
+        _mm(FP, F[n], A, b_t=True)
+        A += Q[n]
+        _sym_into(A, out[n])
 
 
 @njit(cache=True)
@@ -89,60 +96,28 @@ def _joseph_kernel(x, P, H, r, R, x_out, P_out) -> None:
     ``x' = x + K r``, ``P' = sym((I - K H) P (I - K H)^T + K R K^T)``.
     """
     d, m = x.shape[1], H.shape[1]
-    HP, KT = np.empty((m, d)), np.empty((m, d))
-    S = np.empty((m, m))
-    IKH, T1, KR, A = np.empty((d, d)), np.empty((d, d)), np.empty((d, m)), np.empty((d, d))
+    HP, KT, S, S_sym = np.empty((m, d)), np.empty((m, d)), np.empty((m, m)), np.empty((m, m))
+    IKH, T1, KR, A, B = np.empty((d, d)), np.empty((d, d)), np.empty((d, m)), np.empty((d, d)), np.empty((d, d))
+    Kr = np.empty((d, 1))
     perm = np.empty(m, dtype=np.int64)
     for n in range(x.shape[0]):
-        for i in range(m):
-            for j in range(d):
-                acc = 0.0
-                for k in range(d):
-                    acc += H[n, i, k] * P[n, k, j]
-                HP[i, j] = acc
-        for i in range(m):
-            for j in range(m):
-                acc = 0.0
-                for k in range(d):
-                    acc += HP[i, k] * H[n, j, k]
-                S[i, j] = acc + R[n, i, j]
-        for i in range(m):
-            for j in range(i + 1, m):
-                S[i, j] = S[j, i] = 0.5 * (S[i, j] + S[j, i])
-        _lu_solve(S, HP, KT, perm)
+        _mm(H[n], P[n], HP)                       # H P
+        _mm(HP, H[n], S, b_t=True)                # H P H^T
+        S += R[n]
+        _sym_into(S, S_sym)
+        _lu_solve(S_sym, HP, KT, perm)            # K^T = S^-1 H P
+        _mm(KT, r[n:n + 1], Kr, a_t=True, b_t=True)   # K r
+        x_out[n] = x[n] + Kr[:, 0]
+        _mm(KT, H[n], IKH, a_t=True)              # K H
+        IKH *= -1.0
         for i in range(d):
-            acc = 0.0
-            for j in range(m):
-                acc += KT[j, i] * r[n, j]
-            x_out[n, i] = x[n, i] + acc
-        for i in range(d):
-            for k in range(d):
-                acc = 0.0
-                for j in range(m):
-                    acc += KT[j, i] * H[n, j, k]
-                IKH[i, k] = (1.0 if i == k else 0.0) - acc
-        for i in range(d):
-            for j in range(d):
-                acc = 0.0
-                for k in range(d):
-                    acc += IKH[i, k] * P[n, k, j]
-                T1[i, j] = acc
-            for j in range(m):
-                acc = 0.0
-                for k in range(m):
-                    acc += KT[k, i] * R[n, k, j]
-                KR[i, j] = acc
-        for i in range(d):
-            for j in range(d):
-                acc = 0.0
-                for k in range(d):
-                    acc += T1[i, k] * IKH[j, k]
-                for k in range(m):
-                    acc += KR[i, k] * KT[k, j]
-                A[i, j] = acc
-        for i in range(d):
-            for j in range(d):
-                P_out[n, i, j] = 0.5 * (A[i, j] + A[j, i])
+            IKH[i, i] += 1.0                      # I - K H
+        _mm(IKH, P[n], T1)
+        _mm(T1, IKH, A, b_t=True)                 # (I - K H) P (I - K H)^T
+        _mm(KT, R[n], KR, a_t=True)               # K R
+        _mm(KR, KT, B)                            # K R K^T
+        A += B
+        _sym_into(A, P_out[n])
 
 
 @njit(cache=True)
