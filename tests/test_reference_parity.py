@@ -1,10 +1,11 @@
 """Box-for-box parity of ``--tracker ekf --config polymot`` with Poly-MOT's own code (lixiaoyu2000/Poly-MOT @
-5fead68, default nuScenes config) on the four reference sets of ../shared/data/nuscenes/reference (three
+5fead68, default nuScenes config) and of ``--config fastpoly`` with Fast-Poly's (lixiaoyu2000/FastPoly @ 694dec3,
+default nuScenes config, single process) on the four reference sets of ../shared/data/nuscenes/reference (three
 SYNTHETIC detection sets kept as files, and the real PointPillars file).
 
 On every set: every reference box paired within 1e-6 m (centre and size) with a box of ours of the same class,
 score and yaw; the same box count in every sample; the same partition of boxes into tracks (ids may differ;
-Poly-MOT's restart per scene); and the devkit metrics of the reference (``*.metrics_summary.json``) equal to ours
+both trackers' restart per scene); and the devkit metrics of the reference (``*.metrics_summary.json``) equal to ours
 to 1e-9 (the fast evaluator, itself equal to the devkit to 1e-9). Each of the preset's six Poly-MOT behaviours
 (assignment rule, time step, CTRA and Bicycle forms, thresholds, measured yaw), switched back, breaks at least one
 of these sets (see the issue's analysis; measured when the preset was written).
@@ -35,7 +36,7 @@ SETS = {
     "mini_train_centerpoint_sim_s7": ("mini_train", "mini_train_centerpoint_sim_s7.json"),
 }
 #: preset -> prefix of the reference outputs (``<prefix>_<set>.json``)
-TRACKERS = {"polymot": "polymot"}
+TRACKERS = {"polymot": "polymot", "fastpoly": "fastpoly"}
 
 
 def track(nusc, preset: str, split: str, detections: Path) -> tuple[dict, dict[str, str]]:
@@ -73,7 +74,7 @@ def test_box_for_box(nusc_mini, nusc_reference, preset, name):
 
     summary = fast_tracking_eval(nusc_mini, ours, split)
     expected = json.loads(_file(nusc_reference, f"{prefix}_{name}.metrics_summary.json").read_text())
-    expected.pop("meta"), summary.pop("meta")   # use_camera differs by convention (Poly-MOT writes true)
+    expected.pop("meta"), summary.pop("meta")   # use_camera differs by convention (both trackers write true)
     diffs = entry_differences(expected, summary)
     worst = max(diffs, key=diffs.get)
     assert diffs[worst] <= 1e-9, f"{worst}: {diffs[worst]}"
