@@ -37,35 +37,42 @@ class Matches:
     unmatched_tracks: np.ndarray
 
 
-def similarity_upper_bounds(a: np.ndarray, b: np.ndarray, names) -> dict[str, np.ndarray]:
-    """Cheap upper bounds of the named similarities between aligned pairs of boxes a, b (..., 9) (any
-    broadcastable shapes, e.g. (K, 9) and (K, 9), or (D, 1, 9) and (1, T, 9)) -> {name: (...)}.
+@njit(cache=True, inline="always")
+def _similarity_bound(a, b, code: int) -> float:
+    """Upper bound of similarity ``code`` (index into ``geometry.SIMILARITIES``) of boxes ``a, b (>=7,)``.
 
-    When the BEV centre distance d exceeds the sum of circumradii the footprints are disjoint (IoU = 0) and
-    the convex hull contains the trapezoid spanned by the inscribed discs, of area >= d (rho_a + rho_b), so
-    GIoU_bev <= (area_a + area_b) / (d (rho_a + rho_b)) - 1; in 3D the enclosing volume is at least that area
-    times max(h_a, h_b). Elsewhere the bound is the trivial 1. Pairs whose bound cannot beat a threshold are
-    skipped without computing the polygon geometry; the result is identical.
+    When the BEV centre distance d exceeds the sum of circumradii the footprints are disjoint (IoU = 0), and the
+    convex hull contains that of the inscribed discs (radii rho = min(w, l) / 2): the trapezoid between their
+    diameters across the centre line and the two outer half discs, ``C >= d (rho_a + rho_b) + pi/2 (rho_a^2 +
+    rho_b^2)``. So GIoU_bev <= (A_a + A_b) / C - 1; in 3D the enclosing volume is at least C max(h_a, h_b).
+    Elsewhere the bound is the trivial 1.
     """
-    d = np.hypot(a[..., 0] - b[..., 0], a[..., 1] - b[..., 1])
-    disjoint = d > 0.5 * (np.hypot(a[..., 3], a[..., 4]) + np.hypot(b[..., 3], b[..., 4]))
-    hull = np.maximum(d * 0.5 * (np.minimum(a[..., 3], a[..., 4]) + np.minimum(b[..., 3], b[..., 4])), 1e-12)
-    out = {}
-    for name in names:
-        if name.startswith("iou"):
-            out[name] = np.where(disjoint, 0.0, 1.0)
-        elif name == "giou_3d":
-            vol = a[..., 3] * a[..., 4] * a[..., 5] + b[..., 3] * b[..., 4] * b[..., 5]
-            out[name] = np.where(disjoint, np.minimum(vol / (hull * np.maximum(a[..., 5], b[..., 5])) - 1.0, 1.0), 1.0)
-        else:
-            area = a[..., 3] * a[..., 4] + b[..., 3] * b[..., 4]
-            out[name] = np.where(disjoint, np.minimum(area / hull - 1.0, 1.0), 1.0)
-    return out
+    d = np.hypot(a[0] - b[0], a[1] - b[1])
+    if d <= 0.5 * (np.hypot(a[3], a[4]) + np.hypot(b[3], b[4])):
+        return 1.0
+    if code == geometry._IOU_BEV or code == geometry._IOU_3D:
+        return 0.0
+    ra, rb = 0.5 * min(a[3], a[4]), 0.5 * min(b[3], b[4])
+    hull = max(d * (ra + rb) + 0.5 * np.pi * (ra * ra + rb * rb), 1e-12)
+    if code == geometry._GIOU_3D:
+        return min((a[3] * a[4] * a[5] + b[3] * b[4] * b[5]) / (hull * max(a[5], b[5])) - 1.0, 1.0)
+    return min((a[3] * a[4] + b[3] * b[4]) / hull - 1.0, 1.0)
+
+
+@njit(cache=True)
+def _bound_kernel(a, b, code, out) -> None:
+    for k in range(a.shape[0]):
+        out[k] = _similarity_bound(a[k], b[k], code)
 
 
 def similarity_upper_bound(a: np.ndarray, b: np.ndarray, metric: str) -> np.ndarray:
-    """:func:`similarity_upper_bounds` for one metric -> (K,)."""
-    return similarity_upper_bounds(a, b, [metric])[metric]
+    """Upper bounds ``(K,)`` of the similarity ``metric`` of aligned pairs of boxes ``a, b (K, >=7)`` (see
+    :func:`_similarity_bound`). Pairs whose bound cannot beat a threshold are skipped by the association without
+    computing the polygon geometry; the result is identical."""
+    a, b = geometry._check_boxes(a, "a"), geometry._check_boxes(b, "b")
+    out = np.empty(a.shape[0])
+    _bound_kernel(a, b, geometry.SIMILARITIES.index(metric), out)
+    return out
 
 
 def hungarian(cost: np.ndarray, threshold: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -117,7 +124,7 @@ def _cost_kernel(det, det_labels, trk, trk_labels, ta, tb, codes, thresholds, co
     det (D, >=7), trk (T, >=7): boxes; ta, tb: their :func:`geometry._box_terms`; codes (S, C) int: the
     similarity (index into ``geometry.SIMILARITIES``) of each stage and class; thresholds (S, C): cost
     thresholds. A pair is a candidate of stage s when its labels agree and the bound of
-    :func:`similarity_upper_bounds` can beat ``thresholds[s, label]``.
+    :func:`similarity_upper_bound` can beat ``thresholds[s, label]``.
     """
     n_stages = codes.shape[0]
     out, work, flags = np.zeros((4, 1)), np.empty((12, 16)), np.empty(16, dtype=np.bool_)
@@ -125,27 +132,14 @@ def _cost_kernel(det, det_labels, trk, trk_labels, ta, tb, codes, thresholds, co
     want, need = np.zeros(4, dtype=np.bool_), np.zeros(n_stages, dtype=np.bool_)
     for i in range(det.shape[0]):
         lab = det_labels[i]
-        ra = np.hypot(det[i, 3], det[i, 4])
         for j in range(trk.shape[0]):
             if trk_labels[j] != lab:
                 continue
-            d = np.hypot(det[i, 0] - trk[j, 0], det[i, 1] - trk[j, 1])
-            disjoint = d > 0.5 * (ra + np.hypot(trk[j, 3], trk[j, 4]))
-            hull = max(d * 0.5 * (min(det[i, 3], det[i, 4]) + min(trk[j, 3], trk[j, 4])), 1e-12)
             want[:] = False
             any_need = False
             for st in range(n_stages):
                 code = codes[st, lab]
-                bound = 1.0
-                if disjoint:
-                    if code == geometry._IOU_BEV or code == geometry._IOU_3D:
-                        bound = 0.0
-                    elif code == geometry._GIOU_3D:
-                        vol = det[i, 3] * det[i, 4] * det[i, 5] + trk[j, 3] * trk[j, 4] * trk[j, 5]
-                        bound = min(vol / (hull * max(det[i, 5], trk[j, 5])) - 1.0, 1.0)
-                    else:
-                        area = det[i, 3] * det[i, 4] + trk[j, 3] * trk[j, 4]
-                        bound = min(area / hull - 1.0, 1.0)
+                bound = _similarity_bound(det[i], trk[j], code)
                 need[st] = bound > 1.0 - thresholds[st, lab]
                 if need[st]:
                     want[code] = True
@@ -163,7 +157,7 @@ def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: n
     """(D, T) cost matrices, one per stage, from ONE compiled geometry pass over the candidate pairs.
 
     stages: per stage, (metric name per class, cost threshold per class (C,)). A pair is a candidate of a
-    stage when its classes agree and the similarity bound (:func:`similarity_upper_bounds`) can beat that
+    stage when its classes agree and the similarity bound (:func:`similarity_upper_bound`) can beat that
     stage's threshold; everything else costs ``_INVALID`` (the bound never prunes a pair that could pass).
     """
     D, T = len(det_boxes), len(trk_boxes)
