@@ -116,14 +116,17 @@ def _save(path, matched_box):
 
 
 def test_default_grukf_preset_writes_what_the_checkpoint_asks(tmp_path):
+    from grutrack.tracking.config import load_tracker_config
     from grutrack.tracking.factory import build_tracker
 
     for box, expect in (("filter", "filter"), ("detection", "detection"), (None, "detection")):
         p = tmp_path / f"{box}.pt"
         _save(p, box)
         assert build_tracker("grukf", checkpoint=p, device="cpu").cfg.matched_box == expect
-        # an explicitly named preset is used as written
-        assert build_tracker("grukf", config="ekf", checkpoint=p, device="cpu").cfg.matched_box == "detection"
+        # an explicitly named preset is used as written, whatever the checkpoint asks
+        for preset in ("ekf", "greedy"):
+            written = load_tracker_config(preset).matched_box
+            assert build_tracker("grukf", config=preset, checkpoint=p, device="cpu").cfg.matched_box == written
 
 
 def test_resampling_trainer_draws_fresh_detections_after_the_first_epoch(tmp_path):

@@ -951,9 +951,7 @@ def match_decisions(tracks_gt, tracks_pred, config=None) -> Tuple[MatchDecisions
     """
     cfg = config if config is not None else _default_config()
     assert cfg.dist_fcn == "center_distance"
-    from nuscenes.eval.tracking.data_classes import TrackingMetricData
-
-    nelem = TrackingMetricData.nelem
+    nelem = cfg.num_thresholds
     flat = _flatten(tracks_gt, tracks_pred, cfg.class_names)
     g_status = np.full(len(flat.g_frame), MISS_OR_FP, dtype=np.int64)
     g_partner = np.full(len(flat.g_frame), -1, dtype=np.int64)

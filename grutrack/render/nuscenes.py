@@ -42,7 +42,7 @@ def load_evaluation(dataroot: str, version: str, split: str, submission: str | P
     try:
         tracks_gt, tracks_pred, _ = load_tracks(nusc, doc, split)
         decisions, _ = match_decisions(tracks_gt, tracks_pred)
-    except (AssertionError, KeyError, TypeError, ValueError) as exc:
+    except (AssertionError, KeyError, ValueError) as exc:
         why = str(exc) or type(exc).__name__
         raise InputFormatError(f"{submission}: the tracking evaluation rejects it ({why})") from exc
     return nusc, scenes, results, decisions
