@@ -1,5 +1,6 @@
 """The toolkit's CPU thread policy, in one place, applied by the commands that run the GRU-KF or the tracking
-loop (``grutrack track``, ``grutrack train``) so that no environment variable is needed.
+loop (``grutrack track``, ``grutrack train``) and by ``grutrack evaluate`` (BLAS only: reproducible sums), so
+that no environment variable is needed.
 
 The per-frame work is many small operations on batches of tens of tracks (GRU cells of width ~100, 10x10
 Kalman algebra): extra threads only add synchronisation, and torch's default (one intra-op thread per core,

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import os
 import signal
 import subprocess
@@ -104,7 +105,14 @@ def test_mini_val_ekf_metrics_equal_the_cli_run(mini_run):
     assert wf["split"] == cli["split"] == "mini_val" and wf["evaluator"] == cli["evaluator"] == "devkit"
     for key in EKF_KEYS:
         assert wf["overall"][key] == cli["overall"][key], key          # exact equality of the JSON numbers
-    assert wf["overall"] == cli["overall"] and wf["per_class"] == cli["per_class"]
+    assert wf["overall"] == cli["overall"]
+    # per-class numbers: equal up to the last bit of the devkit's per-class MOTP, which has been seen to differ
+    # by one ulp between two processes on the same submission
+    assert wf["per_class"].keys() == cli["per_class"].keys()
+    for cls, row in wf["per_class"].items():
+        for key, value in row.items():
+            ref = cli["per_class"][cls][key]
+            assert (value is None and ref is None) or math.isclose(value, ref, rel_tol=1e-12), (cls, key, value, ref)
     assert 0.0 < cli["overall"]["amota"] < 1.0                         # a real, non-degenerate score
 
 

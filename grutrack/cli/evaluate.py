@@ -41,7 +41,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Dispatch to the dataset's evaluation."""
+    """Dispatch to the dataset's evaluation, under the toolkit's thread policy: the evaluators' sums then run
+    in the same order however the command is started, so the same submission gives the same figures to the
+    last digit (multi-threaded BLAS reductions differ in their last bits)."""
+    from grutrack.threads import apply_thread_policy
+
+    apply_thread_policy(torch_too=False)
     return {"nuscenes": run_nuscenes, "av2": run_av2}[args.dataset](args)
 
 
