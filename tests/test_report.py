@@ -172,3 +172,19 @@ def test_av2_report_says_how_many_logs_it_scored(tmp_path):
     doc = {"logs": 150, "frames": 4700, "settings": {"rate_hz": 2.0}}
     assert _scored({"a": doc, "b": doc}) == "150 logs, 4700 frames at 2 Hz"
     assert "not in the metrics JSONs" in _scored({"a": {"settings": {}}})
+
+
+@pytest.mark.parametrize("flag, value, message", [
+    ("--row", "III-Ours=grukf", "--row expects TABLE:ROW=RUN, got 'III-Ours=grukf'"),
+    ("--extra-row", "III:Fast-Poly", "--extra-row expects TABLE:ROW=RUN, got 'III:Fast-Poly'"),
+    ("--extra-row", "III:Fast-Poly=nope", "row 'Fast-Poly' is mapped to run 'nope', which has no --run"),
+])
+def test_bad_row_arguments_exit_2_with_one_line(tmp_path, capsys, flag, value, message):
+    args = ["report", "nusc_val", "--out", str(tmp_path / "r.md"), "--paper", str(PAPER),
+            "--experiment", "nusc_val:nuscenes:val:centerpoint", "--row", "III:Ours=grukf",
+            "--run", f"grukf={nusc_metrics(tmp_path / 'g.json', 0.73, 0.5, 270)}", flag, value]
+    capsys.readouterr()
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "r.md").exists()

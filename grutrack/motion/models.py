@@ -88,6 +88,18 @@ def arc_moments(phi: np.ndarray, order: int = 2) -> list[tuple[np.ndarray, np.nd
     return [(out[n, 0], out[n, 1]) for n in range(order + 1)]
 
 
+def _arc_step(x: np.ndarray, ds: np.ndarray, psi: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """A copy of ``x (N, 10)`` moved along a circular arc: ``(x + i y) += ds exp(i psi) E_0(phi)`` and
+    ``yaw += phi`` (arc length ``ds`` m, initial direction ``psi`` rad, turned angle ``phi`` rad, all ``(N,)``)."""
+    (e0r, e0i), = arc_moments(phi, order=0)
+    cp, sp = np.cos(psi), np.sin(psi)
+    out = x.copy()
+    out[:, 0] += ds * (cp * e0r - sp * e0i)
+    out[:, 1] += ds * (sp * e0r + cp * e0i)
+    out[:, 8] = x[:, 8] + phi
+    return out
+
+
 def _as_dt(dt, n: int) -> np.ndarray:
     """``dt`` (scalar or ``(N,)`` seconds) as a ``(N,)`` float64 array."""
     return np.broadcast_to(np.asarray(dt, dtype=np.float64), (n,)).astype(np.float64)
@@ -322,13 +334,8 @@ class Bicycle(MotionModel):
         v, a, yaw = x[:, 6], x[:, 7], x[:, 8]
         beta, _, kappa, _, _ = self._curvature(x)
         ds = v * dt + 0.5 * a * dt * dt
-        (e0r, e0i), = arc_moments(kappa * ds, order=0)
-        cp, sp = np.cos(yaw + beta), np.sin(yaw + beta)
-        out = x.copy()
-        out[:, 0] += ds * (cp * e0r - sp * e0i)
-        out[:, 1] += ds * (sp * e0r + cp * e0i)
+        out = _arc_step(x, ds, yaw + beta, kappa * ds)
         out[:, 6] = v + a * dt
-        out[:, 8] = yaw + kappa * ds
         return out
 
     def F(self, x: np.ndarray, dt) -> np.ndarray:
@@ -481,14 +488,9 @@ class BicyclePiecewise(Bicycle):
         ds = np.where(turning, v * dt, v * dt + 0.5 * a * dt * dt)
         psi = np.where(turning, yaw + beta, yaw)
         phi = np.where(turning, kappa * ds, 0.0)
-        (e0r, e0i), = arc_moments(phi, order=0)
-        cp, sp = np.cos(psi), np.sin(psi)
-        out = x.copy()
-        out[:, 0] += ds * (cp * e0r - sp * e0i)
-        out[:, 1] += ds * (sp * e0r + cp * e0i)
+        out = _arc_step(x, ds, psi, phi)
         out[:, 6] = np.where(turning, v, v + a * dt)
         out[:, 7] = np.where(turning, 0.0, a)
-        out[:, 8] = yaw + phi
         return out
 
     def F(self, x: np.ndarray, dt) -> np.ndarray:
