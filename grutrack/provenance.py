@@ -1,5 +1,5 @@
-"""Provenance of generated files: content hashes, the hash of a resolved configuration, and the manifest that
-sits beside each submission (which detections, checkpoint, tracker config and package version made it)."""
+"""Provenance of generated files: content hashes and the hash of a resolved configuration (the manifest that
+sits beside each submission is :class:`grutrack.documents.Manifest`)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,6 @@ import hashlib
 import json
 from pathlib import Path
 
-from grutrack import __version__
-from grutrack.errors import InputFormatError
-from grutrack.io import write_json_atomic
 
 SHORT = 12  # hex digits shown in reports
 
@@ -28,31 +25,3 @@ def config_hash(obj) -> str:
     text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:SHORT]
 
-
-def file_record(path: str | Path | None) -> dict | None:
-    """``{"path", "sha256"}`` of an existing file, None for no file."""
-    if path is None:
-        return None
-    return {"path": str(path), "sha256": sha256_file(path)}
-
-
-def manifest_path(submission: str | Path) -> Path:
-    """The manifest beside a submission: ``x.json`` -> ``x.manifest.json``."""
-    p = Path(submission)
-    return p.with_name(p.stem + ".manifest.json")
-
-
-def write_manifest(path: str | Path, doc: dict) -> None:
-    """Write a manifest atomically, stamped with the package version."""
-    write_json_atomic(path, {"grutrack_version": __version__, **doc}, indent=2)
-
-
-def read_manifest(path: str | Path) -> dict | None:
-    """A manifest, or None when there is none."""
-    p = Path(path)
-    if not p.is_file():
-        return None
-    try:
-        return json.loads(p.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputFormatError(f"{p}: not a valid manifest JSON ({exc})") from exc

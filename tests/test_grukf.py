@@ -157,8 +157,8 @@ def test_training_is_deterministic_and_resumes_exactly(small_training_set, tmp_p
     c.run()                       # ... and continue from the checkpoint
     sa, sc = a.net.state_dict(), c.net.state_dict()
     assert all(torch.equal(sa[k], sc[k]) for k in sa)
-    assert [r["loss"] for r in a.log_rows] == [r["loss"] for r in c.log_rows]
-    assert len(a.log_rows) == 4 and a.log_rows[0]["gt_terms"] > 0 and a.log_rows[0]["pseudo_terms"] > 0
+    assert [r.loss for r in a.log.steps] == [r.loss for r in c.log.steps]
+    assert len(a.log.steps) == 4 and a.log.steps[0].gt_terms > 0 and a.log.steps[0].pseudo_terms > 0
     # training moved the weights away from the gain prior
     init = _trainer(scenes, dets, tmp_path / "d").net.state_dict()
     assert any(not torch.equal(init[k], sa[k]) for k in sa)
@@ -172,7 +172,7 @@ def uninterrupted_run(small_training_set, tmp_path_factory):
     scenes, dets = small_training_set
     a = _trainer(scenes, dets, tmp_path_factory.mktemp("ref"), epochs=3)
     a.run()
-    return a.net.state_dict(), a.log_rows
+    return a.net.state_dict(), a.log.steps
 
 
 @pytest.mark.parametrize("how,checkpoint_every,stop_at", [
@@ -220,8 +220,8 @@ def test_resume_after_interruption_equals_uninterrupted_run(small_training_set, 
     r.run()
     state = r.net.state_dict()
     assert all(torch.equal(ref_state[k], state[k]) for k in ref_state)   # bit for bit
-    assert r.state.step == 6 and [x["step"] for x in r.log_rows] == [1, 2, 3, 4, 5, 6]
-    assert [(x["scene"], x["loss"], x["lr"]) for x in r.log_rows] == [(x["scene"], x["loss"], x["lr"])
+    assert r.state.step == 6 and [x.step for x in r.log.steps] == [1, 2, 3, 4, 5, 6]
+    assert [(x.scene, x.loss, x.lr) for x in r.log.steps] == [(x.scene, x.loss, x.lr)
                                                                        for x in ref_log]
 
 
@@ -249,7 +249,7 @@ def test_supervised_mode_has_no_pseudo_labels(small_training_set, tmp_path):
     scenes, dets = small_training_set
     t = _trainer(scenes, dets, tmp_path, mode="supervised", epochs=1)
     t.run()
-    assert all(r["pseudo_terms"] == 0 for r in t.log_rows) and any(r["gt_terms"] > 0 for r in t.log_rows)
+    assert all(r.pseudo_terms == 0 for r in t.log.steps) and any(r.gt_terms > 0 for r in t.log.steps)
 
 
 def test_checkpoint_loads_without_reinitialising(small_training_set, tmp_path):
@@ -390,9 +390,9 @@ def test_prediction_terms_are_added_when_weighted(small_training_set, tmp_path):
     plain.run()
     pred = _trainer(scenes, dets, tmp_path / "b", epochs=1, prediction_weight=1.0)
     pred.run()
-    assert all(r["prediction_terms"] == 0 for r in plain.log_rows)
-    assert all(r["prediction_terms"] > 0 for r in pred.log_rows)
-    assert [r["loss"] for r in plain.log_rows] != [r["loss"] for r in pred.log_rows]
+    assert all(r.prediction_terms == 0 for r in plain.log.steps)
+    assert all(r.prediction_terms > 0 for r in pred.log.steps)
+    assert [r.loss for r in plain.log.steps] != [r.loss for r in pred.log.steps]
 
 
 def test_progress_is_written_from_the_first_step_and_training_yaml_beside_the_checkpoint(small_training_set,

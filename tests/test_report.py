@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 from grutrack.cli import main
-from grutrack.report.paper import load_paper, metric, reproduced
+from grutrack.documents import MetricsDocument
+from grutrack.report.paper import load_paper, reproduced
 
 REPO = Path(__file__).resolve().parents[1]
 PAPER = REPO / "workflow/config/paper.yaml"
@@ -18,15 +19,14 @@ CLASSES = ("bicycle", "bus", "car", "motorcycle", "pedestrian", "trailer", "truc
 
 def nusc_metrics(path: Path, amota: float, amotp: float, ids: int, per_class: dict | None = None,
                  submission: str = "submissions/x.json") -> Path:
-    """A metrics JSON shaped like `grutrack evaluate` writes it."""
+    """A metrics JSON as `grutrack evaluate` writes it (through the same document class)."""
     pc = {c: {"amota": amota, "amotp": amotp, "ids": 1} for c in CLASSES}
     for c, v in (per_class or {}).items():
         pc[c].update(v)
-    doc = {"dataset": "nuscenes", "version": "v1.0-trainval", "split": "val", "evaluator": "devkit",
-           "submission": submission, "overall": {"amota": amota, "amotp": amotp, "ids": ids, "mota": 0.6,
-                                                 "recall": 0.7, "frag": 10, "tp": 100, "fp": 5, "fn": 7},
-           "per_class": pc}
-    path.write_text(json.dumps(doc))
+    MetricsDocument(dataset="nuscenes", version="v1.0-trainval", split="val", evaluator="devkit",
+                    submission=submission, per_class=pc,
+                    overall={"amota": amota, "amotp": amotp, "ids": ids, "mota": 0.6, "recall": 0.7, "frag": 10,
+                             "tp": 100, "fp": 5, "fn": 7}).write(path)
     return path
 
 
@@ -40,8 +40,9 @@ def test_paper_numbers_are_the_design_tables():
 
 
 def test_metric_paths_and_scale(tmp_path):
-    doc = json.loads(nusc_metrics(tmp_path / "m.json", 0.732, 0.511, 267).read_text())
-    assert metric(doc, "overall.amota") == 0.732 and metric(doc, "per_class.car.nope") is None
+    doc = MetricsDocument.read(nusc_metrics(tmp_path / "m.json", 0.732, 0.511, 267))
+    assert doc.value("overall.amota") == 0.732 and doc.value("per_class.car.nope") is None
+    assert doc.class_value("car", "amotp") == 0.511 and doc.classes == list(CLASSES)
     values = reproduced(load_paper(PAPER)["tables"]["III"], doc)
     assert values == pytest.approx({"amota": 73.2, "amotp": 51.1, "ids": 267})
 
@@ -169,9 +170,13 @@ def test_reports_name_their_sources_training_data_and_scored_logs(tmp_path, monk
 def test_av2_report_says_how_many_logs_it_scored(tmp_path):
     from grutrack.report.av2_val import _scored
 
-    doc = {"logs": 150, "frames": 4700, "settings": {"rate_hz": 2.0}}
-    assert _scored({"a": doc, "b": doc}) == "150 logs, 4700 frames at 2 Hz"
-    assert "not in the metrics JSONs" in _scored({"a": {"settings": {}}})
+    def doc(**kw):
+        return MetricsDocument(dataset="av2", version="sensor", split="val", evaluator="official", submission="x",
+                               overall={}, per_class={}, **kw)
+
+    d = doc(logs=150, frames=4700, settings={"rate_hz": 2.0})
+    assert _scored({"a": d, "b": d}) == "150 logs, 4700 frames at 2 Hz"
+    assert "not in the metrics JSONs" in _scored({"a": doc(settings={})})
 
 
 @pytest.mark.parametrize("flag, value, message", [

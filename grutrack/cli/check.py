@@ -24,15 +24,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Print the comparison; 0 when every metric is within tolerance, else 1."""
     from grutrack.report.check import compare, format_comparisons
-    from grutrack.report.paper import get_table, load_metrics, load_paper
+    from grutrack.documents import MetricsDocument
+    from grutrack.report.paper import get_table, load_paper
 
     table = get_table(load_paper(args.paper), args.table)
-    doc = load_metrics(args.metrics)
+    doc = MetricsDocument.read(args.metrics)
     row, comps = compare(table, doc, args.row)
     print(f"{table['title']}; paper row '{row}'")
-    print(f"reproduced: {args.metrics} ({doc.get('dataset', '?')} {doc.get('version') or ''} "
-          f"{doc.get('split', '?')})".replace("  ", " "))
-    if (doc.get("dataset"), doc.get("split")) != (table.get("dataset"), table.get("split")):
+    print(f"reproduced: {args.metrics} ({doc.dataset or '?'} {doc.version or ''} "
+          f"{doc.split or '?'})".replace("  ", " "))
+    if (doc.dataset, doc.split) != (table.get("dataset"), table.get("split")):
         print(f"note: the paper's table is {table.get('dataset')} {table.get('split')}; the metrics are not")
     print(format_comparisons(table, comps))
     bad = [c.metric for c in comps if not c.ok]

@@ -61,17 +61,17 @@ def run_av2(args: argparse.Namespace) -> int:
     doc = av2_eval.evaluate_submission(args.dataroot, args.split, args.submission, rate_hz=args.rate,
                                        max_range_m=args.max_range, workers=args.workers,
                                        trackeval_dir=args.trackeval_dir)
-    av2_eval.write_metrics(args.out, doc)
+    doc.write(args.out)
     print(av2_eval.format_summary(doc))
-    print(f"wrote {args.out} (official AV2 evaluator, ROI {'on' if doc['settings']['drivable_area_roi'] else 'off'}"
-          f", {doc['settings']['workers']} worker(s), {doc['seconds']:.1f} s)")
+    print(f"wrote {args.out} (official AV2 evaluator, ROI {'on' if doc.settings['drivable_area_roi'] else 'off'}"
+          f", {doc.settings['workers']} worker(s), {doc.seconds:.1f} s)")
     return 0
 
 
 def run_nuscenes(args: argparse.Namespace) -> int:
     """Evaluate, write the metrics JSON, print a summary table."""
     from grutrack.data.nuscenes import open_nuscenes, split_scene_names
-    from grutrack.evaluation.nuscenes_eval import devkit_tracking_eval, format_summary, metrics_document, write_metrics
+    from grutrack.evaluation.nuscenes_eval import devkit_tracking_eval, format_summary, metrics_document
 
     if not args.version:
         raise ConfigError("--version is required with --dataset nuscenes (e.g. v1.0-trainval, v1.0-mini)")
@@ -91,10 +91,10 @@ def run_nuscenes(args: argparse.Namespace) -> int:
         summary = fast_tracking_eval(nusc, sub, args.split)
     doc = metrics_document(summary, dataset="nuscenes", version=args.version, split=args.split,
                            evaluator=args.evaluator, submission=args.submission)
-    doc["seconds"] = round(time.perf_counter() - t0, 3)
-    write_metrics(args.out, doc)
+    doc.seconds = round(time.perf_counter() - t0, 3)
+    doc.write(args.out)
     print(format_summary(doc))
-    print(f"wrote {args.out} ({args.evaluator} evaluator, {doc['seconds']:.1f} s)")
+    print(f"wrote {args.out} ({args.evaluator} evaluator, {doc.seconds:.1f} s)")
     return 0
 
 

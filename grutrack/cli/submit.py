@@ -12,7 +12,8 @@ import yaml
 
 from grutrack.errors import ConfigError, InputFormatError
 from grutrack.io import atomic_path
-from grutrack.provenance import config_hash, file_record, sha256_file, write_manifest
+from grutrack.documents import FileRecord, Manifest
+from grutrack.provenance import config_hash, sha256_file
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -84,13 +85,11 @@ def run_submit(args: argparse.Namespace) -> int:
     else:
         counts = _copy_av2(args.tracks, args.out)
     cfg = yaml.safe_load(Path(args.tracker_config).read_text())
-    manifest = args.manifest or str(Path(args.out).with_name(Path(args.out).stem + ".manifest.json"))
-    write_manifest(manifest, {
-        "code_version": args.code_version, "dataset": args.dataset, "dataroot": args.dataroot,
-        "version": args.version, "split": args.split, "submission": file_record(args.out), **counts,
-        "tracker": args.tracker,
-        "tracker_config": {**file_record(args.tracker_config), "config_hash": config_hash(cfg)},
-        "detections": file_record(args.detections), "checkpoint": file_record(args.checkpoint)})
+    manifest = args.manifest or str(Manifest.path_for(args.out))
+    Manifest(dataset=args.dataset, split=args.split, submission=FileRecord.of(args.out), tracker=args.tracker,
+             tracker_config=FileRecord.of(args.tracker_config, config_hash(cfg)), dataroot=args.dataroot,
+             version=args.version, detections=FileRecord.of(args.detections),
+             checkpoint=FileRecord.of(args.checkpoint), code_version=args.code_version, counts=counts).write(manifest)
     print(f"wrote {args.out} ({', '.join(f'{v} {k}' for k, v in counts.items())}) and {manifest}")
     return 0
 

@@ -83,9 +83,9 @@ def run(args: argparse.Namespace) -> int:
     except TrainingInterrupted as exc:
         print(f"grutrack train: {exc}", file=sys.stderr)
         return 130
-    last = trainer.log_rows[-1] if trainer.log_rows else {}
-    print(f"wrote {final} after {trainer.state.step} steps (loss {last.get('loss')}, "
-          f"val AMOTA {last.get('val_amota') or 'n/a'}); log: {Path(args.out) / 'train_log.csv'}")
+    last = trainer.log.steps[-1] if trainer.log.steps else None
+    print(f"wrote {final} after {trainer.state.step} steps (loss {last.loss if last else None}, "
+          f"val AMOTA {(last.val_amota if last else None) or 'n/a'}); log: {Path(args.out) / 'train_log.csv'}")
     return 0
 
 

@@ -471,7 +471,6 @@ def _static_objects(rng, name: str, spec: ClassSpec, road: np.ndarray, s_lo: flo
     counts = rng.integers(1, spec.cluster + 1, n_groups)
     n = int(counts.sum())
     group = np.repeat(np.arange(n_groups), counts)
-    rank = np.arange(n) - np.repeat(np.cumsum(counts) - counts, counts)
     lot = (rng.random(n_groups) < spec.lot_share)[group]
     side = rng.choice([-1.0, 1.0], n_groups)[group]
     offset = np.where(lot, rng.uniform(8.0, 30.0, n_groups)[group],

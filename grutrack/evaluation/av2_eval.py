@@ -42,7 +42,7 @@ import numpy as np
 from grutrack.data.av2 import COMPETITION_CATEGORIES, TABLE_I_CLASSES, load_scenes, split_dir, vocabulary
 from grutrack.errors import DatasetError
 from grutrack.export.av2_tracks import expected_frames, gt_sequences, read_tracks_pickle, validate_sequences
-from grutrack.io import write_json_atomic
+from grutrack.documents import MetricsDocument
 
 EVALUATOR = "av2.evaluation.tracking.eval.evaluate (HOTA objective)"
 DEFAULT_RANGE_M = 50
@@ -216,19 +216,20 @@ def metrics_from_result(out: dict) -> tuple[dict, dict]:
 
 
 def metrics_document(out: dict, *, split: str, submission: str, rate_hz: float | None, max_range_m: int,
-                     roi: bool, workers: int) -> dict:
-    """The AV2 metrics JSON document."""
+                     roi: bool, workers: int) -> MetricsDocument:
+    """The AV2 metrics document."""
     overall, per_class = metrics_from_result(out)
-    return {"dataset": "av2", "version": "sensor", "split": split, "evaluator": EVALUATOR,
-            "submission": str(submission), "overall": overall, "per_class": per_class,
-            "settings": {"rate_hz": rate_hz, "max_range_m": int(max_range_m), "drivable_area_roi": bool(roi),
-                         "objective": "HOTA", "workers": int(workers),
-                         "average": "Table I: mean over the 7 Table I classes (absent classes score 0)"}}
+    return MetricsDocument(
+        dataset="av2", version="sensor", split=split, evaluator=EVALUATOR, submission=str(submission),
+        overall=overall, per_class=per_class,
+        settings={"rate_hz": rate_hz, "max_range_m": int(max_range_m), "drivable_area_roi": bool(roi),
+                  "objective": "HOTA", "workers": int(workers),
+                  "average": "Table I: mean over the 7 Table I classes (absent classes score 0)"})
 
 
 def evaluate_submission(root: str | Path, split: str, submission: str | Path, *, rate_hz: float | None = 2.0,
                         max_range_m: int = DEFAULT_RANGE_M, workers: int | None = None, roi: bool | None = None,
-                        trackeval_dir: str | Path | None = None, verbose: bool = False) -> dict:
+                        trackeval_dir: str | Path | None = None, verbose: bool = False) -> MetricsDocument:
     """Evaluate a tracking pickle against the split's labels; returns the metrics document.
 
     ``roi`` None: on when every log has its map. Raises :class:`InputFormatError` when the pickle does not hold
@@ -248,22 +249,17 @@ def evaluate_submission(root: str | Path, split: str, submission: str | Path, *,
                              trackeval_dir=trackeval_dir, verbose=verbose)
     doc = metrics_document(out, split=split, submission=str(submission), rate_hz=rate_hz, max_range_m=max_range_m,
                            roi=use_roi, workers=workers)
-    doc["logs"], doc["frames"] = len(labels), sum(len(v) for v in labels.values())
-    doc["seconds"] = round(time.perf_counter() - t0, 3)
+    doc.logs, doc.frames = len(labels), sum(len(v) for v in labels.values())
+    doc.seconds = round(time.perf_counter() - t0, 3)
     return doc
 
 
-def write_metrics(path: str | Path, doc: dict) -> None:
-    """Write the metrics JSON atomically."""
-    write_json_atomic(path, doc, indent=2)
-
-
-def format_summary(doc: dict) -> str:
+def format_summary(doc: MetricsDocument) -> str:
     """A table of HOTA / MOTA / IDF1 for the Table I classes and their average."""
     lines = [f"{'class':<16}{'HOTA':>8}{'MOTA':>8}{'IDF1':>8}{'GT':>7}"]
     for c in TABLE_I_CLASSES:
-        m = doc["per_class"][c]
+        m = doc.per_class[c]
         lines.append(f"{c:<16}{m['hota']:>8.3f}{m['mota']:>8.3f}{m['idf1']:>8.3f}{m['gt_boxes']:>7d}")
-    o = doc["overall"]
+    o = doc.overall
     lines.append(f"{'AVERAGE (7)':<16}{o['hota']:>8.3f}{o['mota']:>8.3f}{o['idf1']:>8.3f}")
     return "\n".join(lines)

@@ -1,8 +1,8 @@
 """Official nuScenes tracking evaluation (nuscenes-devkit ``TrackingEval``, ``tracking_nips_2019``) for
 standard and custom splits, and the metrics JSON every later stage reads.
 
-Metrics JSON: ``{"dataset", "version", "split", "evaluator", "submission", "overall": {metric: value},
-"per_class": {class: {metric: value}}, "devkit_summary": <the devkit's metrics_summary.json>}``.
+The metrics JSON is a :class:`grutrack.documents.MetricsDocument` (``devkit_summary``: the devkit's
+metrics_summary.json).
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import tempfile
 from pathlib import Path
 
 from grutrack.classes import TRACKING_CLASSES
+from grutrack.documents import MetricsDocument
 from grutrack.errors import InputFormatError
-from grutrack.io import write_json_atomic
 
 #: metrics reported overall and per class, in the devkit's names
 METRIC_KEYS = ("amota", "amotp", "recall", "motar", "gt", "mota", "motp", "mt", "ml", "faf", "tp", "fp", "fn",
@@ -131,20 +131,15 @@ def _clean_tree(obj):
 
 
 def metrics_document(summary: dict, *, dataset: str, version: str, split: str, evaluator: str,
-                     submission: str) -> dict:
-    """The metrics JSON document for a devkit-format summary."""
+                     submission: str) -> MetricsDocument:
+    """The metrics document for a devkit-format summary."""
     overall, per_class = metrics_from_summary(summary)
-    return {"dataset": dataset, "version": version, "split": split, "evaluator": evaluator,
-            "submission": str(submission), "overall": overall, "per_class": per_class,
-            "devkit_summary": _clean_tree(summary)}
+    return MetricsDocument(dataset=dataset, version=version, split=split, evaluator=evaluator,
+                           submission=str(submission), overall=overall, per_class=per_class,
+                           devkit_summary=_clean_tree(summary))
 
 
-def write_metrics(path: str | Path, doc: dict) -> None:
-    """Write the metrics JSON atomically."""
-    write_json_atomic(path, doc, indent=2)
-
-
-def format_summary(doc: dict) -> str:
+def format_summary(doc: MetricsDocument) -> str:
     """A human-readable table: overall AMOTA/AMOTP/MOTA/IDS/recall and the same per class."""
     counts = {"ids", "frag", "tp", "fp", "fn", "gt", "mt", "ml"}
 
@@ -155,6 +150,6 @@ def format_summary(doc: dict) -> str:
 
     cols = ("amota", "amotp", "mota", "recall", "ids", "frag", "tp", "fp", "fn")
     lines = [f"{'class':<12}" + "".join(f"{c:>9}" for c in cols)]
-    for name, m in [*doc["per_class"].items(), ("OVERALL", doc["overall"])]:
+    for name, m in [*doc.per_class.items(), ("OVERALL", doc.overall)]:
         lines.append(f"{name:<12}" + "".join(f"{fmt(m.get(c), c):>9}" for c in cols))
     return "\n".join(lines)

@@ -3,6 +3,7 @@ GRU-KF (trained on nuScenes) on LT3D detections, paper numbers beside the reprod
 
 from __future__ import annotations
 
+from grutrack.documents import MetricsDocument
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import (AV2_OVERALL, check_section, header, image, mirror_tables, provenance,
@@ -34,9 +35,9 @@ def build(inp: ReportInputs) -> str:
     return "\n".join(parts) + "\n"
 
 
-def _scored(docs: dict[str, dict]) -> str:
+def _scored(docs: dict[str, MetricsDocument]) -> str:
     """How many logs and frames the runs were scored on (the same for every run, else each is listed)."""
-    seen = {(d.get("logs"), d.get("frames"), (d.get("settings") or {}).get("rate_hz")) for d in docs.values()}
+    seen = {(d.logs, d.frames, (d.settings or {}).get("rate_hz")) for d in docs.values()}
     if not docs or any(s[0] is None for s in seen):
         return "the split's logs (their number is not in the metrics JSONs: re-run `grutrack evaluate`)"
     return "; ".join(f"{n} logs, {f} frames at {r:g} Hz" for n, f, r in sorted(seen))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from grutrack.documents import MetricsDocument
 from grutrack.report.paper import get_row, reproduced
 
 
@@ -25,7 +26,7 @@ class Comparison:
         return self.diff is not None and abs(self.diff) <= self.tolerance + 1e-9
 
 
-def compare(table: dict, doc: dict, row: str | None = None) -> tuple[str, list[Comparison]]:
+def compare(table: dict, doc: MetricsDocument, row: str | None = None) -> tuple[str, list[Comparison]]:
     """(row name, one comparison per column the paper reports for that row)."""
     name, numbers = get_row(table, row)
     values = reproduced(table, doc)

@@ -4,7 +4,8 @@ dataset, with the paper's Table III shown separately, for reference only (real n
 from __future__ import annotations
 
 from grutrack.report import figures
-from grutrack.report.inputs import ReportInputs, read_train_log
+from grutrack.documents import TrainingLog
+from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import (header, image, per_class_table, provenance, runs_table, table, num,
                                       training_provenance, worst_scene_strips)
 from grutrack.report.paper import get_table
@@ -19,7 +20,7 @@ def build(inp: ReportInputs) -> str:
     """The markdown text (figures are written into ``inp.figures``)."""
     docs = inp.docs()
     exp = inp.experiment or {}
-    version = next(iter(docs.values())).get("version", "v1.0-demo") if docs else "v1.0-demo"
+    version = (next(iter(docs.values())).version or "v1.0-demo") if docs else "v1.0-demo"
     parts = [header(f"Demo report: GRU-KF and EKF on the SYNTHETIC demo ({exp.get('split', '')})",
                     [BANNER.format(version=version, split=exp.get("split", "?"), detector=exp.get("detector", "?"))])]
     parts += ["", "## Reproduced on the synthetic demo", "",
@@ -37,8 +38,8 @@ def build(inp: ReportInputs) -> str:
 
 
 def _amota_figure(inp: ReportInputs, docs: dict) -> str:
-    classes = list(next(iter(docs.values()))["per_class"]) if docs else []
-    series = {run: [None if d["per_class"][c].get("amota") is None else 100 * d["per_class"][c]["amota"]
+    classes = next(iter(docs.values())).classes if docs else []
+    series = {run: [None if d.per_class[c].get("amota") is None else 100 * d.per_class[c]["amota"]
                     for c in classes] for run, d in docs.items()}
     path = figures.grouped_bars(inp.figures / "amota_per_class.png", classes, series,
                                 "AMOTA per class on the SYNTHETIC demo", "AMOTA ×100")
@@ -49,17 +50,16 @@ def _training_sections(inp: ReportInputs) -> list[str]:
     """Loss (and validation AMOTA when logged) against step for each training."""
     out = []
     for label, log in inp.train_logs.items():
-        rows = read_train_log(log)
-        if not rows:
+        tl = TrainingLog.read(log)
+        if not tl.steps:
             continue
         path = figures.lines(inp.figures / f"training_{label}.png",
-                             {"loss": ([r["step"] for r in rows], [r["loss"] for r in rows])},
+                             {"loss": ([s.step for s in tl.steps], [s.loss for s in tl.steps])},
                              f"GRU-KF training '{label}' (SYNTHETIC demo)", "step", "loss per scene")
-        last = rows[-1]
-        val = [r for r in rows if r["val_amota"] is not None]
+        last, val = tl.steps[-1], tl.validated()
         out += ["", f"## Training '{label}'", "",
-                f"{last['step']} steps over {last['epoch'] + 1} epoch(s); last scene loss {last['loss']:.4g}"
-                + (f"; last validation AMOTA {val[-1]['val_amota']:.3f}" if val else "") + ".", "",
+                f"{last.step} steps over {last.epoch + 1} epoch(s); last scene loss {last.loss:.4g}"
+                + (f"; last validation AMOTA {val[-1].val_amota:.3f}" if val else "") + ".", "",
                 image(path, inp.out.parent, f"training loss of {label}")]
     return out
 

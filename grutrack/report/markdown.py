@@ -6,7 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from grutrack import __version__
-from grutrack.provenance import SHORT, manifest_path, read_manifest
+from grutrack.documents import FileRecord, Manifest, MetricsDocument, TrainingLog
+from grutrack.provenance import SHORT
 from grutrack.report.paper import reproduced
 
 DASH = "—"
@@ -77,22 +78,25 @@ def short(h: str | None) -> str:
     return h[:SHORT] if h else DASH
 
 
-def file_cell(rec: dict | None, hash_key: str = "sha256") -> str:
-    if not rec:
+def file_cell(rec: FileRecord | None) -> str:
+    """``path`` (sha256 abbreviated) of a file record, a dash for none."""
+    if rec is None:
         return DASH
-    return f"`{rec['path']}` ({hash_key} {short(rec.get(hash_key))})"
+    return f"`{rec.path}` (sha256 {short(rec.sha256)})"
 
 
-def provenance(runs: dict[str, str], docs: dict[str, dict]) -> str:
+def provenance(runs: dict[str, str], docs: dict[str, MetricsDocument]) -> str:
     """Which detections, checkpoint, tracker config (hash) and package version made each run's numbers."""
     rows = []
     for run, path in runs.items():
-        m = read_manifest(manifest_path(docs[run]["submission"])) or {}
-        cfg = m.get("tracker_config") or {}
-        config = f"`{cfg.get('path', DASH)}` (config hash {cfg.get('config_hash', DASH)})"
-        rows.append([run, f"`{path}`", m.get("tracker", DASH), file_cell(m.get("detections")),
-                     file_cell(m.get("checkpoint")), config,
-                     f"{m.get('grutrack_version', DASH)} (code {m.get('code_version') or DASH})"])
+        m = Manifest.read(Manifest.path_for(docs[run].submission))
+        if m is None:
+            rows.append([run, f"`{path}`"] + [DASH] * 5)
+            continue
+        cfg = m.tracker_config
+        config = f"`{cfg.path}` (config hash {cfg.config_hash or DASH})"
+        rows.append([run, f"`{path}`", m.tracker or DASH, file_cell(m.detections), file_cell(m.checkpoint), config,
+                     f"{m.grutrack_version or DASH} (code {m.code_version or DASH})"])
     return table(["run", "metrics JSON", "tracker", "detections", "checkpoint", "tracker config", "grutrack"],
                  rows, "l" * 7)
 
@@ -124,24 +128,24 @@ NUSC_OVERALL = (("amota", "AMOTA", 100), ("amotp", "AMOTP", 100), ("mota", "MOTA
 AV2_OVERALL = (("hota", "HOTA", 100), ("mota", "MOTA", 100), ("idf1", "IDF1", 100))
 
 
-def runs_table(docs: dict[str, dict], columns=NUSC_OVERALL) -> str:
+def runs_table(docs: dict[str, MetricsDocument], columns=NUSC_OVERALL) -> str:
     """One row per run with its overall metrics (×100 for rates, as in the paper; counts as integers)."""
     rows = []
     for run, doc in docs.items():
-        o = doc["overall"]
+        o = doc.overall
         rows.append([run] + [num(None if o.get(k) is None else o[k] * s, integer=(s == 1)) for k, _, s in columns])
     return table(["run"] + [h for _, h, _ in columns], rows)
 
 
-def per_class_table(docs: dict[str, dict], key: str = "amota", scale: float = 100) -> str:
+def per_class_table(docs: dict[str, MetricsDocument], key: str = "amota", scale: float = 100) -> str:
     """One row per class, one column per run, of one per-class metric."""
-    classes = list(next(iter(docs.values()))["per_class"]) if docs else []
-    rows = [[c] + [num(None if d["per_class"].get(c, {}).get(key) is None else d["per_class"][c][key] * scale)
+    classes = next(iter(docs.values())).classes if docs else []
+    rows = [[c] + [num(None if d.per_class.get(c, {}).get(key) is None else d.per_class[c][key] * scale)
                    for d in docs.values()] for c in classes]
     return table(["class"] + list(docs), rows)
 
 
-def check_section(tid: str, tbl: dict, row_docs: dict[str, dict]) -> str:
+def check_section(tid: str, tbl: dict, row_docs: dict[str, MetricsDocument]) -> str:
     """For each reproduced row: paper, reproduced, difference and tolerance per metric, and whether it passes
     (the same test as ``grutrack check``)."""
     from grutrack.report.check import compare
@@ -167,7 +171,6 @@ def training_provenance(train_logs: dict[str, Path]) -> str:
     import yaml
 
     from grutrack.provenance import config_hash, sha256_file
-    from grutrack.report.inputs import read_train_log
 
     rows = []
     for label, log in train_logs.items():
@@ -175,8 +178,8 @@ def training_provenance(train_logs: dict[str, Path]) -> str:
         cfg_path, model = folder / "training.yaml", folder / "model.pt"
         cfg_hash = config_hash(yaml.safe_load(cfg_path.read_text())) if cfg_path.is_file() else DASH
         model_txt = f"`{model}` (sha256 {short(sha256_file(model))})" if model.is_file() else DASH
-        steps = read_train_log(log) if Path(log).is_file() else []
-        done = f"{steps[-1]['step']} steps, {steps[-1]['epoch'] + 1} epochs" if steps else DASH
+        steps = TrainingLog.read(log).steps if Path(log).is_file() else []
+        done = f"{steps[-1].step} steps, {steps[-1].epoch + 1} epochs" if steps else DASH
         rows.append([label, training_data(cfg_path), done, f"`{log}`", f"`{cfg_path}` (config hash {cfg_hash})",
                      model_txt])
     return table(["training", "trained on", "length", "log", "training config", "checkpoint"], rows, "llllll")

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import zipfile
 
-from grutrack.provenance import manifest_path, read_manifest, sha256_file
+from grutrack.documents import Manifest
+from grutrack.provenance import sha256_file
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import DASH, file_cell, header, image, mirror_tables, short, table
@@ -35,12 +36,11 @@ def _zips(inp: ReportInputs) -> str:
         with zipfile.ZipFile(zp) as zf:
             member = zf.namelist()[0]
         sub = _submission_of(inp, det, run)
-        m = read_manifest(manifest_path(sub)) if sub else None
-        m = m or {}
-        cfg = m.get("tracker_config") or {}
-        rows.append([det, f"`{zp}`", f"sha256 {short(sha256_file(zp))}", member, str(m.get("samples", DASH)),
-                     str(m.get("boxes", DASH)), file_cell(m.get("detections")), file_cell(m.get("checkpoint")),
-                     f"config hash {cfg.get('config_hash', DASH)}", m.get("grutrack_version", DASH)])
+        m = Manifest.read(Manifest.path_for(sub)) if sub else None
+        rows.append([det, f"`{zp}`", f"sha256 {short(sha256_file(zp))}", member] + (
+            [str(m.counts.get("samples", DASH)), str(m.counts.get("boxes", DASH)), file_cell(m.detections),
+             file_cell(m.checkpoint), f"config hash {m.tracker_config.config_hash or DASH}",
+             m.grutrack_version or DASH] if m else [DASH] * 6))
     return table(["detector", "zip", "zip hash", "member", "samples", "boxes", "detections", "checkpoint",
                   "tracker config", "grutrack"], rows, "l" * 10)
 

@@ -6,13 +6,12 @@ A table has ``columns`` (name -> metric path in a metrics JSON, scale to the pap
 
 from __future__ import annotations
 
-import json
-import math
 from pathlib import Path
 
 import yaml
 
-from grutrack.errors import ConfigError, InputFormatError
+from grutrack.documents import MetricsDocument
+from grutrack.errors import ConfigError
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_PAPER = Path("workflow/config/paper.yaml")
@@ -67,34 +66,10 @@ def get_row(table: dict, row: str | None) -> tuple[str, dict]:
     return name, {k: v for k, v in table["rows"][name].items() if k not in ROW_INFO_KEYS}
 
 
-def load_metrics(path: str | Path) -> dict:
-    """A metrics JSON written by ``grutrack evaluate``."""
-    path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise InputFormatError(f"{path}: cannot read a metrics JSON ({exc})") from exc
-    if not isinstance(doc, dict) or not isinstance(doc.get("overall"), dict):
-        raise InputFormatError(f"{path}: not a metrics JSON of grutrack evaluate (no 'overall' object)")
-    return doc
-
-
-def metric(doc: dict, dotted: str) -> float | None:
-    """The value at a dotted path (``overall.amota``, ``per_class.car.amotp``); None when absent or NaN."""
-    node = doc
-    for part in dotted.split("."):
-        if not isinstance(node, dict) or part not in node:
-            return None
-        node = node[part]
-    if isinstance(node, bool) or not isinstance(node, (int, float)) or not math.isfinite(node):
-        return None
-    return float(node)
-
-
-def reproduced(table: dict, doc: dict | None) -> dict[str, float | None]:
-    """Every column of a table read from a metrics JSON, in the paper's unit (None: not available)."""
+def reproduced(table: dict, doc: MetricsDocument | None) -> dict[str, float | None]:
+    """Every column of a table read from a metrics document, in the paper's unit (None: not available)."""
     out = {}
     for col, spec in table["columns"].items():
-        v = metric(doc, spec["metric"]) if doc is not None else None
+        v = doc.value(spec["metric"]) if doc is not None else None
         out[col] = None if v is None else v * spec["scale"]
     return out

@@ -4,7 +4,8 @@ a semi-supervised and a supervised run (their train_log.csv), beside what the pa
 from __future__ import annotations
 
 from grutrack.report import figures
-from grutrack.report.inputs import ReportInputs, read_train_log
+from grutrack.documents import TrainingLog, TrainingStep
+from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import DASH, header, image, table, training_provenance
 
 
@@ -14,7 +15,7 @@ MIN_AMOTA_SPAN = 0.1
 
 def build(inp: ReportInputs) -> str:
     """The markdown text (figures are written into ``inp.figures``)."""
-    logs = {label: read_train_log(p) for label, p in inp.train_logs.items()}
+    logs = {label: TrainingLog.read(p).steps for label, p in inp.train_logs.items()}
     paper = inp.paper.get("figures", {}).get("semi_supervised", {})
     parts = [header("Semi-supervised vs supervised training of the GRU-KF",
                     ["Validation AMOTA is the one logged by `grutrack train` (`val_amota` of train_log.csv, "
@@ -29,35 +30,35 @@ def build(inp: ReportInputs) -> str:
     return "\n".join(parts) + "\n"
 
 
-def _validated(rows: list[dict]) -> list[dict]:
-    return [r for r in rows if r["val_amota"] is not None]
+def _validated(rows: list[TrainingStep]) -> list[TrainingStep]:
+    return [r for r in rows if r.val_amota is not None]
 
 
-def _figure(inp: ReportInputs, logs: dict[str, list[dict]]) -> str:
-    series = {label: ([r["step"] for r in _validated(rows)], [r["val_amota"] for r in _validated(rows)])
+def _figure(inp: ReportInputs, logs: dict[str, list[TrainingStep]]) -> str:
+    series = {label: ([r.step for r in _validated(rows)], [r.val_amota for r in _validated(rows)])
               for label, rows in logs.items()}
     path = figures.lines(inp.figures / "val_amota_vs_step.png", series, "Validation AMOTA against training step",
                          "step (one optimizer step per scene)", "validation AMOTA", min_span=MIN_AMOTA_SPAN)
     return image(path, inp.out.parent, "validation AMOTA against step")
 
 
-def first_step_within(rows: list[dict], fraction: float = 0.99) -> int | None:
+def first_step_within(rows: list[TrainingStep], fraction: float = 0.99) -> int | None:
     """First logged step whose validation AMOTA reaches ``fraction`` of the best logged one."""
     val = _validated(rows)
     if not val:
         return None
-    best = max(r["val_amota"] for r in val)
-    return next(r["step"] for r in val if r["val_amota"] >= fraction * best)
+    best = max(r.val_amota for r in val)
+    return next(r.step for r in val if r.val_amota >= fraction * best)
 
 
-def _summary(logs: dict[str, list[dict]]) -> str:
+def _summary(logs: dict[str, list[TrainingStep]]) -> str:
     rows = []
     for label, log in logs.items():
         val = _validated(log)
-        best = max(val, key=lambda r: r["val_amota"]) if val else None
-        rows.append([label, str(log[-1]["step"]) if log else DASH, str(log[-1]["epoch"] + 1) if log else DASH,
-                     f"{val[-1]['val_amota']:.3f}" if val else DASH,
-                     f"{best['val_amota']:.3f} (step {best['step']})" if best else DASH,
+        best = max(val, key=lambda r: r.val_amota) if val else None
+        rows.append([label, str(log[-1].step) if log else DASH, str(log[-1].epoch + 1) if log else DASH,
+                     f"{val[-1].val_amota:.3f}" if val else DASH,
+                     f"{best.val_amota:.3f} (step {best.step})" if best else DASH,
                      str(first_step_within(log) or DASH)])
     return table(["training", "steps", "epochs", "last val AMOTA", "best val AMOTA", "first step ≥ 99 % of best"],
                  rows)

@@ -11,9 +11,7 @@ AdamW step per scene; cosine annealing over all steps.
 
 from __future__ import annotations
 
-import csv
 import hashlib
-import io
 import random
 import signal
 import sys
@@ -26,8 +24,8 @@ import numpy as np
 import torch
 
 from grutrack.data.scene import BoxSet, Scene
+from grutrack.documents import TrainingLog, TrainingStep
 from grutrack.errors import ConfigError, GrutrackError, InputFormatError
-from grutrack.io import atomic_path
 from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig, MEAS_PLANAR, STATE_PLANAR
 from grutrack.motion.torch_models import wrap_angle_t
 from grutrack.tracking.config import TrackerConfig, load_tracker_config
@@ -45,8 +43,6 @@ MAX_ABS_GAIN = 1e3
 #: between periodic checkpoints, train_log.csv is rewritten after the first step and then at most this often (s)
 LOG_EVERY_S = 30.0
 
-LOG_FIELDS = ("step", "epoch", "scene", "loss", "gt_terms", "pseudo_terms", "prediction_terms", "lr", "val_amota",
-              "seconds")
 
 
 def ekf_backend(cfg: TrainConfig) -> KalmanBackend:
@@ -315,7 +311,7 @@ class Trainer:
         self.total_steps = cfg.epochs * len(scenes)
         self.sched = torch.optim.lr_scheduler.CosineAnnealingLR(self.opt, T_max=max(self.total_steps, 1))
         self.state = TrainState()
-        self.log_rows: list[dict] = []
+        self.log = TrainingLog()
 
     # -- checkpoints ------------------------------------------------------------------------------------
     def save(self, name: str = "last.pt") -> Path:
@@ -324,7 +320,7 @@ class Trainer:
         save_checkpoint(path, self.net, {
             "optimizer": self.opt.state_dict(), "scheduler": self.sched.state_dict(),
             "rng": _rng_state(self.np_rng), "train_state": asdict(self.state), "train_config": asdict(self.cfg),
-            "log": self.log_rows, "data_fingerprint": self.fingerprint, "data_source": self.source})
+            "log": [s.to_row() for s in self.log.steps], "data_fingerprint": self.fingerprint, "data_source": self.source})
         self._write_log()
         return path
 
@@ -338,7 +334,7 @@ class Trainer:
         self.sched.load_state_dict(ck["scheduler"])
         _set_rng_state(self.np_rng, ck["rng"])
         self.state = TrainState(**ck["train_state"])
-        self.log_rows = list(ck["log"])
+        self.log = TrainingLog([TrainingStep.from_row(r, str(path)) for r in ck["log"]])
 
     def _check_resumable(self, path: str | Path, ck: dict) -> None:
         """Refuse to resume ``ck`` unless it was written by a run of the same data and settings."""
@@ -362,12 +358,7 @@ class Trainer:
 
     def _write_log(self) -> None:
         self._log_written = time.monotonic()
-        buf = io.StringIO()
-        w = csv.DictWriter(buf, fieldnames=LOG_FIELDS)
-        w.writeheader()
-        w.writerows(self.log_rows)
-        with atomic_path(self.out / "train_log.csv") as tmp:
-            tmp.write_text(buf.getvalue())
+        self.log.write(self.out / "train_log.csv")
 
     # -- the loop --------------------------------------------------------------------------------------
     def run(self, max_steps: int | None = None) -> Path:
@@ -399,8 +390,8 @@ class Trainer:
                     self.save()
         bar.close()
         if self.state.epoch >= self.cfg.epochs and self.validate is not None and \
-                (not self.log_rows or self.log_rows[-1]["val_amota"] == ""):
-            self.log_rows[-1]["val_amota"] = round(float(self.validate(self.net)), 6)
+                self.log.steps and self.log.steps[-1].val_amota is None:
+            self.log.steps[-1].val_amota = round(float(self.validate(self.net)), 6)
         self.save()
         final = self.save("model.pt") if self.state.epoch >= self.cfg.epochs else self.out / "last.pt"
         return final
@@ -467,13 +458,13 @@ class Trainer:
         lr = self.opt.param_groups[0]["lr"]
         self.sched.step()
         self.state.step += 1
-        row = {"step": self.state.step, "epoch": self.state.epoch, "scene": scene.name,
-               "loss": round(float(value.detach()), 8), "gt_terms": loss.gt_terms,
-               "pseudo_terms": loss.pseudo_terms, "prediction_terms": loss.prediction_terms, "lr": lr, "val_amota": "",
-               "seconds": round(time.perf_counter() - t0, 4)}
+        row = TrainingStep(step=self.state.step, epoch=self.state.epoch, scene=scene.name,
+                           loss=round(float(value.detach()), 8), gt_terms=loss.gt_terms,
+                           pseudo_terms=loss.pseudo_terms, prediction_terms=loss.prediction_terms, lr=lr,
+                           seconds=round(time.perf_counter() - t0, 4))
         if self.validate is not None and self.cfg.val_every and self.state.step % self.cfg.val_every == 0:
             self.net.eval()
-            row["val_amota"] = round(float(self.validate(self.net)), 6)
-        self.log_rows.append(row)
+            row.val_amota = round(float(self.validate(self.net)), 6)
+        self.log.steps.append(row)
         if self.state.step == 1 or time.monotonic() - self._log_written >= LOG_EVERY_S:
             self._write_log()   # progress shows in train_log.csv from the first step on

@@ -1,0 +1,271 @@
+"""The documents that pass between stages, as typed records with their file format (the contract between the
+stage that writes a file and every stage or tool that reads it, as the nuScenes devkit's ``DetectionMetrics``
+is between its evaluation and rendering).
+
+- :class:`MetricsDocument`: what ``grutrack evaluate`` writes (``reports/metrics/...json``); read by the reports,
+  ``grutrack check`` and ``grutrack render``. Layout (kept stable; other tools read it)::
+
+      {"dataset", "version", "split", "evaluator", "submission",
+       "overall": {metric: value}, "per_class": {class: {metric: value}},
+       ["seconds"], ["settings"], ["logs"], ["frames"], ["devkit_summary"]}
+
+- :class:`Manifest`: the provenance record ``grutrack submit`` writes beside a submission
+  (``x.json`` -> ``x.manifest.json``).
+- :class:`TrainingLog`: ``train_log.csv`` of ``grutrack train``, one :class:`TrainingStep` per optimiser step.
+
+Readers raise :class:`~grutrack.errors.InputFormatError` naming the file and what was expected.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from grutrack import __version__
+from grutrack.errors import InputFormatError
+from grutrack.io import read_json, write_json_atomic, write_text_atomic
+from grutrack.provenance import sha256_file
+
+
+# -- metrics -----------------------------------------------------------------------------------------------
+
+@dataclass
+class MetricsDocument:
+    """Official metrics of one submission: overall and per class (metric names as the evaluator gives them,
+    lower case: ``amota``, ``amotp`` (m), ``ids``, ... for nuScenes; ``hota``, ``mota``, ``idf1`` for AV2)."""
+
+    dataset: str
+    version: str | None
+    split: str
+    evaluator: str
+    submission: str
+    overall: dict[str, Any]
+    per_class: dict[str, dict[str, Any]]
+    seconds: float | None = None
+    settings: dict[str, Any] | None = None       # AV2: rate, range, ROI, workers, how the average is taken
+    logs: int | None = None                      # AV2: logs and frames evaluated
+    frames: int | None = None
+    devkit_summary: dict[str, Any] | None = None  # nuScenes: the devkit's metrics_summary.json, NaN as null
+
+    OPTIONAL = ("seconds", "settings", "logs", "frames", "devkit_summary")
+
+    @property
+    def classes(self) -> list[str]:
+        """Class names in the evaluator's order."""
+        return list(self.per_class)
+
+    def value(self, dotted: str) -> float | None:
+        """The number at a dotted path (``overall.amota``, ``per_class.car.amotp``); None when absent, not a
+        number or not finite (the devkit reports a class without ground truth as NaN)."""
+        node: Any = self.to_dict()
+        for part in dotted.split("."):
+            if not isinstance(node, dict) or part not in node:
+                return None
+            node = node[part]
+        if isinstance(node, bool) or not isinstance(node, (int, float)) or not math.isfinite(node):
+            return None
+        return float(node)
+
+    def class_value(self, cls: str, key: str) -> float | None:
+        """``per_class[cls][key]`` as a finite float, or None."""
+        return self.value(f"per_class.{cls}.{key}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON object; optional fields that are unset are left out."""
+        d = asdict(self)
+        return {k: v for k, v in d.items() if not (k in self.OPTIONAL and v is None)}
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str = "metrics JSON") -> MetricsDocument:
+        """Parse and check the layout; unknown top-level keys are ignored (newer writers may add some)."""
+        if not isinstance(d, dict):
+            raise InputFormatError(f"{where}: not a metrics JSON of grutrack evaluate (expected a JSON object)")
+        for key in ("overall", "per_class"):
+            if not isinstance(d.get(key), dict):
+                raise InputFormatError(f"{where}: not a metrics JSON of grutrack evaluate (no '{key}' object)")
+        bad = next((c for c, m in d["per_class"].items() if not isinstance(m, dict)), None)
+        if bad is not None:
+            raise InputFormatError(f"{where}: per_class.{bad} must be an object of metric values")
+        names = {f.name for f in fields(cls)}
+        kw = {k: v for k, v in d.items() if k in names}
+        for key in ("dataset", "split", "evaluator", "submission"):
+            kw.setdefault(key, "")
+        kw.setdefault("version", None)
+        return cls(**kw)
+
+    def write(self, path: str | Path) -> None:
+        """Write the JSON atomically (indented: a small file people read)."""
+        write_json_atomic(path, self.to_dict(), indent=2)
+
+    @classmethod
+    def read(cls, path: str | Path) -> MetricsDocument:
+        """Read a metrics JSON written by :meth:`write`."""
+        return cls.from_dict(read_json(path, "metrics JSON"), where=str(path))
+
+
+# -- submission manifest -----------------------------------------------------------------------------------
+
+@dataclass
+class FileRecord:
+    """A file an output was made from: its path and content hash (sha256, hex)."""
+
+    path: str
+    sha256: str | None = None
+    config_hash: str | None = None   # tracker configs: the hash of the resolved configuration
+
+    @classmethod
+    def of(cls, path: str | Path | None, config_hash: str | None = None) -> FileRecord | None:
+        """The record of an existing file (its sha256 read now); None for no file."""
+        if path is None:
+            return None
+        return cls(path=str(path), sha256=sha256_file(path), config_hash=config_hash)
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str) -> FileRecord | None:
+        if d is None:
+            return None
+        if not isinstance(d, dict) or not isinstance(d.get("path"), str):
+            raise InputFormatError(f"{where}: expected {{\"path\": ..., \"sha256\": ...}} or null")
+        return cls(path=d["path"], sha256=d.get("sha256"), config_hash=d.get("config_hash"))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: v for k, v in asdict(self).items() if not (k == "config_hash" and v is None)}
+
+
+@dataclass
+class Manifest:
+    """What produced a submission: dataset and split, the submission's hash and counts, the tracker, its
+    configuration (hash of the resolved config), the detections and the checkpoint, package and code version."""
+
+    dataset: str
+    split: str
+    submission: FileRecord
+    tracker: str
+    tracker_config: FileRecord
+    dataroot: str | None = None
+    version: str | None = None
+    detections: FileRecord | None = None
+    checkpoint: FileRecord | None = None
+    code_version: str | None = None
+    counts: dict[str, int] = field(default_factory=dict)   # samples/boxes (nuScenes), logs/frames/boxes (AV2)
+    grutrack_version: str = __version__
+
+    RECORDS = ("submission", "tracker_config", "detections", "checkpoint")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON object (counts flattened to the top level, as readers have always found them)."""
+        d: dict[str, Any] = {"grutrack_version": self.grutrack_version, "code_version": self.code_version,
+                             "dataset": self.dataset, "dataroot": self.dataroot, "version": self.version,
+                             "split": self.split, **self.counts, "tracker": self.tracker}
+        for key in self.RECORDS:
+            rec = getattr(self, key)
+            d[key] = rec.to_dict() if rec is not None else None
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str = "manifest") -> Manifest:
+        if not isinstance(d, dict):
+            raise InputFormatError(f"{where}: not a manifest of grutrack submit (expected a JSON object)")
+        recs = {k: FileRecord.from_dict(d.get(k), f"{where}: {k}") for k in cls.RECORDS}
+        for key in ("submission", "tracker_config"):
+            if recs[key] is None:
+                raise InputFormatError(f"{where}: not a manifest of grutrack submit (no '{key}' record)")
+        plain = {"dataset", "split", "tracker", "dataroot", "version", "code_version", "grutrack_version"}
+        counts = {k: v for k, v in d.items() if k not in plain | set(cls.RECORDS) and isinstance(v, int)}
+        return cls(dataset=str(d.get("dataset", "")), split=str(d.get("split", "")), tracker=str(d.get("tracker", "")),
+                   dataroot=d.get("dataroot"), version=d.get("version"), code_version=d.get("code_version"),
+                   grutrack_version=str(d.get("grutrack_version", "")), counts=counts, **recs)
+
+    @staticmethod
+    def path_for(submission: str | Path) -> Path:
+        """The manifest beside a submission: ``x.json`` -> ``x.manifest.json``."""
+        p = Path(submission)
+        return p.with_name(p.stem + ".manifest.json")
+
+    def write(self, path: str | Path) -> None:
+        write_json_atomic(path, self.to_dict(), indent=2)
+
+    @classmethod
+    def read(cls, path: str | Path) -> Manifest | None:
+        """The manifest at ``path``, or None when there is none."""
+        if not Path(path).is_file():
+            return None
+        return cls.from_dict(read_json(path, "manifest"), where=str(path))
+
+
+# -- training log ------------------------------------------------------------------------------------------
+
+@dataclass
+class TrainingStep:
+    """One optimiser step of ``grutrack train``: its loss and how many terms of each kind made it, the learning
+    rate it ran with, the validation AMOTA when validated after it (else None), wall seconds of the step."""
+
+    step: int
+    epoch: int
+    scene: str
+    loss: float
+    gt_terms: int = 0
+    pseudo_terms: int = 0
+    prediction_terms: int = 0
+    lr: float = math.nan
+    val_amota: float | None = None
+    seconds: float = math.nan
+
+    @classmethod
+    def from_row(cls, row: dict[str, str], where: str) -> TrainingStep:
+        try:
+            return cls(step=int(row["step"]), epoch=int(row["epoch"]), scene=row.get("scene") or "",
+                       loss=float(row["loss"]), gt_terms=int(row.get("gt_terms") or 0),
+                       pseudo_terms=int(row.get("pseudo_terms") or 0),
+                       prediction_terms=int(row.get("prediction_terms") or 0),
+                       lr=float(row.get("lr") or "nan"),
+                       val_amota=float(row["val_amota"]) if row.get("val_amota") not in ("", None) else None,
+                       seconds=float(row.get("seconds") or "nan"))
+        except (TypeError, ValueError) as exc:
+            raise InputFormatError(f"{where}: step {row.get('step')!r}: not a number where one is expected "
+                                   f"({exc})") from exc
+
+    def to_row(self) -> dict[str, Any]:
+        row = asdict(self)
+        row["val_amota"] = "" if self.val_amota is None else self.val_amota
+        return row
+
+
+@dataclass
+class TrainingLog:
+    """``train_log.csv``: the steps of one training run, in order."""
+
+    steps: list[TrainingStep] = field(default_factory=list)
+
+    FIELDS = tuple(f.name for f in fields(TrainingStep))
+    REQUIRED = ("step", "epoch", "loss", "val_amota")
+
+    def to_csv(self) -> str:
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, fieldnames=self.FIELDS)
+        w.writeheader()
+        w.writerows(s.to_row() for s in self.steps)
+        return buf.getvalue()
+
+    def write(self, path: str | Path) -> None:
+        write_text_atomic(path, self.to_csv())
+
+    @classmethod
+    def read(cls, path: str | Path) -> TrainingLog:
+        path = Path(path)
+        try:
+            with open(path, newline="") as f:
+                rows = list(csv.DictReader(f))
+        except OSError as exc:
+            raise InputFormatError(f"{path}: cannot read the training log ({exc})") from exc
+        if rows and any(k not in rows[0] for k in cls.REQUIRED):
+            raise InputFormatError(f"{path}: a training log needs the columns {', '.join(cls.REQUIRED)}")
+        return cls([TrainingStep.from_row(r, str(path)) for r in rows])
+
+    def validated(self) -> list[TrainingStep]:
+        """The steps after which validation ran."""
+        return [s for s in self.steps if s.val_amota is not None]
