@@ -30,6 +30,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "tests"))   # support.fast_synth / support.compare: test helpers, not the package
 
 
 class _Timing:
@@ -56,7 +57,7 @@ def _median_time(fn, repeat: int):
 
 def _max_diff(a: dict, b: dict) -> float:
     """Largest entry difference of two summaries (inf when their entries differ)."""
-    from grutrack.evaluation.compare import entry_differences
+    from support.compare import entry_differences
 
     try:
         return max(entry_differences(a, b).values(), default=0.0)
@@ -95,7 +96,7 @@ def main(argv=None) -> int:
             sub_path = args.submission
             what = sub_path
         else:
-            from grutrack.evaluation.fast_synth import corrupt_submission
+            from support.fast_synth import corrupt_submission
 
             sub_path = os.path.join(tmp, "submission.json")
             with open(sub_path, "w") as f:

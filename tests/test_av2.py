@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 from grutrack.cli import main
 from grutrack.data import av2
 from grutrack.data.lt3d_detections import load_detections
-from grutrack.data.scene import BoxSet, Frame, Scene
+from grutrack.data.scene import BoxSet, Frame, Scene, Vocabulary
 from grutrack.errors import DatasetError, InputFormatError
 from grutrack.evaluation.av2_eval import default_workers, evaluate_sequences, metrics_from_result
 from grutrack.export.av2_tracks import (build_sequences, expected_frames, gt_sequences, read_tracks_pickle,
@@ -46,7 +46,7 @@ def scenes(av2_root):
     return av2.load_scenes(av2_root, "val", with_gt=True)
 
 
-def lt3d_table(scenes: list[Scene], boxsets: dict[str, BoxSet], vocab: av2.Vocabulary) -> pd.DataFrame:
+def lt3d_table(scenes: list[Scene], boxsets: dict[str, BoxSet], vocab: Vocabulary) -> pd.DataFrame:
     """City-frame canonical boxes written back as an LT3D detection table (ego frame of each sweep)."""
     parts = []
     for s in scenes:
@@ -68,7 +68,7 @@ def lt3d_table(scenes: list[Scene], boxsets: dict[str, BoxSet], vocab: av2.Vocab
     return pd.concat(parts, ignore_index=True)
 
 
-def simulated_boxsets(scenes: list[Scene], vocab: av2.Vocabulary, seed: int = 0) -> dict[str, BoxSet]:
+def simulated_boxsets(scenes: list[Scene], vocab: Vocabulary, seed: int = 0) -> dict[str, BoxSet]:
     """SIMULATED detections of every frame from its ground truth (grutrack.data.detection_sim, centerpoint)."""
     from grutrack.data.detection_sim import GTFrame, load_profile, simulate
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from grutrack.evaluation.compare import entry_differences, flatten, value_difference
+from support.compare import entry_differences, flatten, value_difference
 
 
 def test_flatten_uses_dotted_keys():

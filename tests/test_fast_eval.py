@@ -20,10 +20,10 @@ from typing import Any, Dict, Optional, Tuple
 import numpy as np
 import pytest
 
-from grutrack.evaluation.compare import entry_differences, flatten
+from support.compare import entry_differences, flatten
 from grutrack.evaluation.fast_amota import (evaluate_tracks, exact_center_distances, fast_tracking_eval,
                                             load_tracks)
-from grutrack.evaluation.fast_synth import corrupt_submission, gt_submission
+from support.fast_synth import corrupt_submission, gt_submission
 
 TOL = 1e-9
 

@@ -21,7 +21,7 @@ import pytest
 
 from grutrack.data.nusc_detections import load_detections
 from grutrack.data.nuscenes import load_scenes
-from grutrack.evaluation.compare import entry_differences
+from support.compare import entry_differences
 from grutrack.evaluation.fast_amota import fast_tracking_eval
 from grutrack.evaluation.track_parity import compare_tracks
 from grutrack.export.nuscenes_json import build_submission

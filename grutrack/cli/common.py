@@ -1,16 +1,32 @@
-"""Arguments shared by the sub-commands that read a dataset split."""
+"""Arguments shared by the sub-commands that read a dataset split, and the one place a command turns them into
+a dataset (:func:`dataset_of`)."""
 
 from __future__ import annotations
 
 import argparse
 
-DATASETS = ("nuscenes", "av2")
+DATASETS = ("nuscenes", "av2")   # the names of grutrack.datasets.DATASETS (kept here: no import at parse time)
 
 
 def add_dataset_args(p: argparse.ArgumentParser, split_help: str) -> None:
-    """--dataset, --dataroot, --version and --split, as every dataset-reading command takes them."""
+    """--dataset, --dataroot, --version, --split and the AV2 reading options, as every dataset-reading command
+    takes them."""
     p.add_argument("--dataset", default="nuscenes", choices=DATASETS, help="dataset (default: nuscenes)")
     p.add_argument("--dataroot", required=True,
                    help="nuScenes dataroot (holds <version>/) or AV2 sensor root (holds <split>/<log_id>/)")
     p.add_argument("--version", default=None, help="nuScenes version, e.g. v1.0-trainval, v1.0-mini (nuScenes only)")
     p.add_argument("--split", required=True, help=split_help)
+    g = p.add_argument_group("av2 only")
+    g.add_argument("--rate", type=float, default=2.0,
+                   help="frames per second tracked and evaluated: annotation sweeps sub-sampled to this rate "
+                        "(default 2)")
+    g.add_argument("--all-categories", action="store_true",
+                   help="all 26 AV2 competition categories (default: the 7 classes of Table I)")
+
+
+def dataset_of(args: argparse.Namespace):
+    """The :class:`grutrack.datasets.Dataset` the arguments name."""
+    from grutrack.datasets import DatasetOptions, open_dataset
+
+    return open_dataset(args.dataset, DatasetOptions(dataroot=args.dataroot, version=args.version,
+                                                     rate_hz=args.rate, all_categories=args.all_categories))

@@ -4,14 +4,11 @@ with a provenance manifest) and ``grutrack leaderboard-zip`` (the nuScenes leade
 from __future__ import annotations
 
 import argparse
-import pickle
-import shutil
 from pathlib import Path
 
 import yaml
 
-from grutrack.errors import ConfigError, InputFormatError
-from grutrack.io import atomic_path
+from grutrack.cli.common import add_dataset_args, dataset_of
 from grutrack.documents import FileRecord, Manifest
 from grutrack.provenance import config_hash, sha256_file
 
@@ -21,14 +18,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("submit", help="validate a tracker output and write the submission with a manifest",
                        description="Validate a tracker output against the official format (nuScenes: every sample "
                                    "of the split, field by field, and nuscenes-devkit's loader; AV2: the "
-                                   "tracking-challenge pickle layout), write it to --out atomically and write a "
+                                   "tracking-challenge pickle layout, exactly the split's frames at --rate), write it to --out atomically and write a "
                                    "manifest naming the detections, checkpoint, tracker config (with its hash) "
                                    "and package version that produced it.")
-    p.add_argument("--dataset", default="nuscenes", choices=("nuscenes", "av2"), help="dataset (default nuscenes)")
+    add_dataset_args(p, "split the tracks are for")
     p.add_argument("--tracks", required=True, help="tracker output (grutrack track --out)")
-    p.add_argument("--dataroot", required=True, help="nuScenes dataroot or AV2 sensor root")
-    p.add_argument("--version", default=None, help="nuScenes version")
-    p.add_argument("--split", required=True, help="split")
     p.add_argument("--out", required=True, help="submission file to write")
     p.add_argument("--manifest", default=None, help="manifest JSON (default: <out stem>.manifest.json)")
     p.add_argument("--detections", required=True, help="detections the tracks were made from")
@@ -50,40 +44,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_zip)
 
 
-def _split_tokens(dataroot: str, version: str | None, split: str) -> list[str]:
-    """Sample tokens of a nuScenes split."""
-    from grutrack.data.nuscenes import load_scenes, open_nuscenes
-
-    if not version:
-        raise ConfigError("--version is required for nuScenes")
-    return [f.token for s in load_scenes(open_nuscenes(dataroot, version), split) for f in s.frames]
-
-
-def _copy_av2(tracks: str, out: str) -> dict:
-    """Check the AV2 pickle's layout ({log_id: [frame dict, ...]}) and copy it atomically."""
-    try:
-        with open(tracks, "rb") as f:
-            seqs = pickle.load(f)
-    except (OSError, pickle.UnpicklingError, EOFError) as exc:
-        raise InputFormatError(f"{tracks}: cannot read the tracking pickle ({exc})") from exc
-    if not isinstance(seqs, dict) or not all(isinstance(v, list) and all(isinstance(f, dict) for f in v)
-                                             for v in seqs.values()):
-        raise InputFormatError(f"{tracks}: expected {{log_id: [frame dict, ...]}} (AV2 tracking-challenge pickle)")
-    with atomic_path(out) as tmp:
-        shutil.copyfile(tracks, tmp)
-    frames = sum(len(v) for v in seqs.values())
-    boxes = sum(len(f.get("track_id", ())) for v in seqs.values() for f in v)
-    return {"logs": len(seqs), "frames": frames, "boxes": boxes}
-
-
 def run_submit(args: argparse.Namespace) -> int:
     """Validate, write, manifest."""
-    if args.dataset == "nuscenes":
-        from grutrack.export.leaderboard import write_validated
-
-        counts = write_validated(args.tracks, _split_tokens(args.dataroot, args.version, args.split), args.out)
-    else:
-        counts = _copy_av2(args.tracks, args.out)
+    counts = dataset_of(args).write_submission(args.tracks, args.split, args.out)
     cfg = yaml.safe_load(Path(args.tracker_config).read_text())
     manifest = args.manifest or str(Manifest.path_for(args.out))
     Manifest(dataset=args.dataset, split=args.split, submission=FileRecord.of(args.out), tracker=args.tracker,
@@ -98,7 +61,11 @@ def run_zip(args: argparse.Namespace) -> int:
     """Validate and zip."""
     from grutrack.export.leaderboard import build_zip
 
-    info = build_zip(args.submission, _split_tokens(args.dataroot, args.version, args.split), args.out)
+    from grutrack.datasets import DatasetOptions
+    from grutrack.datasets.nuscenes import NuScenesDataset
+
+    tokens = NuScenesDataset(DatasetOptions(args.dataroot, args.version)).sample_tokens(args.split)
+    info = build_zip(args.submission, tokens, args.out)
     print(f"wrote {args.out}: {info['member']} ({info['samples']} samples, {info['boxes']} boxes; validated), "
           f"sha256 {sha256_file(args.out)}")
     return 0

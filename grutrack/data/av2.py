@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from grutrack.boxes import wrap_angle
-from grutrack.data.scene import BoxSet, Frame, Scene
+from grutrack.data.scene import BoxSet, Frame, Scene, Vocabulary
 from grutrack.errors import ConfigError, DatasetError, InputFormatError
 
 #: Table I classes, in the paper's column order.
@@ -62,23 +62,6 @@ DEFAULT_RATE_HZ = 2.0
 ANNOTATION_COLUMNS = ("timestamp_ns", "track_uuid", "category", "length_m", "width_m", "height_m",
                       "qw", "qx", "qy", "qz", "tx_m", "ty_m", "tz_m")
 POSE_COLUMNS = ("timestamp_ns", "qw", "qx", "qy", "qz", "tx_m", "ty_m", "tz_m")
-
-
-@dataclass(frozen=True)
-class Vocabulary:
-    """The label vocabulary of AV2 boxes: ``names[label]`` is the AV2 category, ``param_classes[label]`` the
-    nuScenes tracking class whose tracker parameters it uses."""
-
-    names: tuple[str, ...]
-    param_classes: tuple[str, ...]
-
-    def __len__(self) -> int:
-        return len(self.names)
-
-    def labels(self, categories: np.ndarray) -> np.ndarray:
-        """(N,) int64 label of each category name; -1 for a name outside the vocabulary."""
-        lut = {n: i for i, n in enumerate(self.names)}
-        return np.array([lut.get(c, -1) for c in categories], dtype=np.int64)
 
 
 def vocabulary(all_categories: bool = False) -> Vocabulary:
@@ -308,7 +291,7 @@ def load_log(root: str | Path, split: str, log_id: str, *, rate_hz: float | None
     frames = [Frame(token=frame_token(log_id, t), timestamp=int(t) // 1000,
                     ego_translation=poses.translation[r].copy(), ego_rotation=poses.quaternion[r].copy(), gt=g)
               for t, r, g in zip(frame_ts, rows, gts)]
-    return Scene(name=log_id, token=log_id, frames=frames)
+    return Scene(name=log_id, token=log_id, frames=frames, vocabulary=vocab)
 
 
 def load_scenes(root: str | Path, split: str, *, rate_hz: float | None = DEFAULT_RATE_HZ, with_gt: bool = False,

@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from grutrack.data.av2 import (COMPETITION_CATEGORIES, OTHER_ANNOTATION_CATEGORIES, Vocabulary, ego_to_city,
+from grutrack.data.av2 import (COMPETITION_CATEGORIES, OTHER_ANNOTATION_CATEGORIES, ego_to_city,
                                read_poses, split_dir, token_timestamp_ns)
-from grutrack.data.scene import BoxSet, Scene
+from grutrack.data.scene import BoxSet, Scene, Vocabulary
 from grutrack.errors import InputFormatError
 
 REQUIRED_COLUMNS = ("tx_m", "ty_m", "tz_m", "length_m", "width_m", "height_m", "qw", "qx", "qy", "qz", "score",

@@ -11,6 +11,28 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from grutrack.boxes import BOX_DIM, empty_boxes
+from grutrack.classes import TRACKING_CLASSES
+
+
+@dataclass(frozen=True)
+class Vocabulary:
+    """What box labels mean: ``names[label]`` is the dataset's class name, ``param_classes[label]`` the
+    nuScenes tracking class whose tracker parameters (thresholds, motion model, noise) it uses."""
+
+    names: tuple[str, ...]
+    param_classes: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def labels(self, categories: np.ndarray) -> np.ndarray:
+        """(N,) int64 label of each class name; -1 for a name outside the vocabulary."""
+        lut = {n: i for i, n in enumerate(self.names)}
+        return np.array([lut.get(c, -1) for c in categories], dtype=np.int64)
+
+
+#: nuScenes (and the synthetic demo): the 7 tracking classes, each its own parameter class
+NUSCENES_VOCABULARY = Vocabulary(TRACKING_CLASSES, TRACKING_CLASSES)
 
 
 @dataclass
@@ -73,11 +95,12 @@ class Frame:
 
 @dataclass
 class Scene:
-    """A sequence of frames in time order (nuScenes scene / AV2 log)."""
+    """A sequence of frames in time order (nuScenes scene / AV2 log); box labels index ``vocabulary``."""
 
     name: str
     token: str
     frames: list[Frame]
+    vocabulary: Vocabulary = NUSCENES_VOCABULARY
 
     def __len__(self) -> int:
         return len(self.frames)

@@ -37,8 +37,8 @@ import numpy as np
 import pandas as pd
 
 from grutrack.boxes import quaternion_from_yaw, yaw_from_quaternion
-from grutrack.data.av2 import COMPETITION_CATEGORIES, Vocabulary, token_timestamp_ns
-from grutrack.data.scene import BoxSet, Scene
+from grutrack.data.av2 import COMPETITION_CATEGORIES, token_timestamp_ns
+from grutrack.data.scene import BoxSet, Scene, Vocabulary
 from grutrack.errors import InputFormatError
 from grutrack.io import atomic_path
 

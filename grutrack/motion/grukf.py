@@ -3,7 +3,7 @@
 Prediction uses the SS transition f (CTRA by default, Bicycle selectable) for every class. The update is
 ``x = x^- + K (y - h(x^-))`` with the yaw residual wrapped, where the gain K comes from a network with
 separate GRUs tracking the process noise Q, the prior state covariance Sigma and the innovation covariance
-S, fully connected layers between them, and dedicated input and output layers (DESIGN §1):
+S, fully connected layers between them, and dedicated input and output layers (ARCHITECTURE.md, "The method"):
 
     Q-GRU   <- FC(forward-update difference  x_{n-1|n-1} - x_{n-1|n-2})
     Σ-GRU   <- [h_Q, FC(forward-evolution difference  x_{n-1|n-1} - x_{n-2|n-2})]

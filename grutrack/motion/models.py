@@ -115,7 +115,6 @@ class MotionModel:
 
     name: str = ""
     dim_x: int = 0
-    dim_z: int = BOX_DIM
     yaw_index: int = -1
     state_names: tuple[str, ...] = ()
     linear: bool = False

@@ -30,7 +30,6 @@ class TorchCTRA:
     name = "CTRA"
     dim_x = 10
     yaw_index = 8
-    speed_index = 6
 
     def init_state(self, z: torch.Tensor) -> torch.Tensor:
         """(N, 9) canonical boxes -> (N, 10): v = |(vx, vy)|, a = omega = 0."""
@@ -65,7 +64,6 @@ class TorchBicycle:
     name = "Bicycle"
     dim_x = 10
     yaw_index = 8
-    speed_index = 6
 
     def __init__(self, wheelbase_ratio: float = 0.8, front_ratio: float = 0.5):
         self.wheelbase_ratio, self.front_ratio = wheelbase_ratio, front_ratio

@@ -19,6 +19,8 @@ PACKAGE = Path(__file__).resolve().parents[1]
 _COMMON = ("errors.py", "io.py", "provenance.py", "boxes.py", "classes.py", "geometry.py", "data/scene.py")
 _TRACKING = ("tracking", "motion", "geometry.py", "boxes.py", "classes.py", "data/scene.py", "configs/trackers",
              "configs/motion", "training/checkpoint.py", "pipeline/presets.py", "cli/common.py")
+#: the dataset interface and the stage documents, read by every stage that goes through a dataset
+_DATASETS = ("datasets", "documents.py", "cli/common.py")
 
 #: stage -> package paths (files or folders) whose content defines the stage's code version
 STAGE_SOURCES: dict[str, tuple[str, ...]] = {
@@ -28,20 +30,22 @@ STAGE_SOURCES: dict[str, tuple[str, ...]] = {
     "convert": ("data/registry.py", "data/nusc_convert.py", "data/lt3d_convert.py", "data/nusc_detections.py",
                 "data/lt3d_detections.py", "data/nuscenes.py", "data/av2.py", "configs/detections.yaml",
                 "cli/detections.py"),
-    "train": ("training", "data/nuscenes.py", "data/nusc_detections.py", "evaluation/fast_amota.py",
+    "train": ("training", "documents.py", "data/nuscenes.py", "data/nusc_detections.py", "evaluation/fast_amota.py",
               "evaluation/fast_loading.py",
               "export/nuscenes_json.py", "configs/training", "cli/train.py", *_TRACKING),
     "track": ("data/nuscenes.py", "data/nusc_detections.py", "export/nuscenes_json.py", "cli/track.py",
-              *_TRACKING),
-    "track_av2": ("data/av2.py", "data/lt3d_detections.py", "export/av2_tracks.py", "cli/track.py", *_TRACKING),
-    "submit": ("export/nuscenes_json.py", "export/leaderboard.py", "data/nuscenes.py", "cli/submit.py"),
+              *_TRACKING, *_DATASETS),
+    "track_av2": ("data/av2.py", "data/lt3d_detections.py", "export/av2_tracks.py", "cli/track.py", *_TRACKING,
+                  *_DATASETS),
+    "submit": ("export/nuscenes_json.py", "export/leaderboard.py", "export/av2_tracks.py", "data/nuscenes.py",
+               "data/av2.py", "cli/submit.py", *_DATASETS),
     "evaluate": ("evaluation/nuscenes_eval.py", "evaluation/fast_amota.py", "evaluation/fast_loading.py",
-                 "data/nuscenes.py", "cli/evaluate.py", "cli/common.py"),
+                 "data/nuscenes.py", "cli/evaluate.py", *_DATASETS),
     "evaluate_av2": ("evaluation/av2_eval.py", "data/av2.py", "export/av2_tracks.py", "cli/evaluate.py",
-                     "cli/common.py"),
+                     *_DATASETS),
     "render": ("render", "evaluation/fast_amota.py", "evaluation/fast_loading.py", "data/nuscenes.py",
                "data/nusc_detections.py", "cli/render.py", "cli/common.py"),
-    "report": ("report", "render", "cli/report.py"),
+    "report": ("report", "render", "documents.py", "cli/report.py"),
 }
 
 

@@ -88,7 +88,6 @@ class TrackerConfig:
     bicycle_form: str
     matched_box: str
     max_boxes_per_sample: int
-    raw: dict
     # Fast-Poly options (defaults: the Poly-MOT pipeline)
     score_filter: str = "at_least"
     nms_method: str = "blend"
@@ -151,7 +150,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         motion_config=v["motion.config"], model_override=v["motion.model_override"],
         yaw_flip=v["motion.yaw_flip"], time_step=v["motion.time_step"], ctra_form=v["motion.ctra_form"],
         bicycle_form=v["motion.bicycle_form"], matched_box=v["output.matched_box"],
-        max_boxes_per_sample=v["output.max_boxes_per_sample"], raw=raw,
+        max_boxes_per_sample=v["output.max_boxes_per_sample"],
         score_filter=v["preprocessing.score_filter"], nms_method=v["preprocessing.nms_method"], nms_metric=v["preprocessing.nms_metric"],
         nms_scale=v["preprocessing.nms_scale"], nms_distance_gate=v["preprocessing.nms_distance_gate"],
         distance_gate=v["association.distance_gate"], score_update=v["lifecycle.score_update"],

@@ -1,4 +1,4 @@
-"""The tracking-by-detection loop (DESIGN §1): predict, pre-process, associate, update, lifecycle, output.
+"""The tracking-by-detection loop (ARCHITECTURE.md, "The method"): predict, pre-process, associate, update, lifecycle, output.
 
 Tracks are kept in a few :class:`TrackGroup` s, one per motion backend (e.g. one per state-space model for
 the EKF tracker, one for the GRU-Kalman filter). Within a group every per-track quantity is an array and
@@ -91,7 +91,7 @@ AssociateFn = Callable[[BoxSet, np.ndarray, np.ndarray, float], Matches]
 
 
 def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
-    """The default association: per-class similarity, Hungarian, optional second stage (DESIGN section 1)."""
+    """The default association: per-class similarity, Hungarian, optional second stage (ARCHITECTURE.md, "The method")."""
     if gated_association_needed(cfg):
         return gated_association(cfg)
 

@@ -20,10 +20,6 @@ class StickyGTAssociation:
         self.max_distance = max_distance
         self.held: dict[int, str] = {}   # track id -> GT instance id
 
-    def reset(self) -> None:
-        """Start of a scene."""
-        self.held.clear()
-
     def _held(self, track_ids: np.ndarray) -> np.ndarray:
         """(K,) object: the instance each track holds, "" where it holds none."""
         return np.array([self.held.get(int(t), "") for t in track_ids], dtype=object)

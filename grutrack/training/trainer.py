@@ -1,4 +1,4 @@
-"""Semi-supervised training of the GRU-Kalman filter (DESIGN §1).
+"""Semi-supervised training of the GRU-Kalman filter (ARCHITECTURE.md, "The method").
 
 The tracker runs online over each training scene with the GRU-KF as its motion backend. An EKF with the
 same SS model runs in parallel on every track (same births, deaths and matched detections) and its

@@ -55,6 +55,7 @@ rule submit_av2:
     params:
         dataroot=lambda w: dataroot(experiment(w)["dataset"]),
         split=lambda w: experiment(w)["split"],
+        rate=lambda w: config["datasets"][experiment(w)["dataset"]]["rate_hz"],
         provenance=_provenance_args,
         track_code=code_version("track_av2"),
         code=code_version("submit"),
@@ -62,8 +63,8 @@ rule submit_av2:
     benchmark: "logs/benchmarks/submit/{experiment}/{detector}/{run}.tsv"
     shell:
         "{GRUTRACK} submit --dataset av2 --tracks {input.tracks} --dataroot {params.dataroot:q} "
-        "--split {params.split} --out {output.submission} --manifest {output.manifest} {params.provenance} "
-        "--code-version {params.track_code} > {log} 2>&1 " + ON_FAIL
+        "--split {params.split} --rate {params.rate} --out {output.submission} --manifest {output.manifest} "
+        "{params.provenance} --code-version {params.track_code} > {log} 2>&1 " + ON_FAIL
 
 
 rule leaderboard_zip:

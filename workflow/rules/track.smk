@@ -81,5 +81,5 @@ rule track_av2:
         "--out {output.preset} && "
         "{GRUTRACK} track --dataset av2 --dataroot {params.dataroot:q} --split {params.split} --rate {params.rate} "
         "--detections {input.detections} --tracker {params.tracker} --config {output.preset} "
-        "{params.checkpoint} --device {params.device} --out {output.tracks} --feather {output.feather} "
+        "{params.checkpoint} --device {params.device} --out {output.tracks} "
         "--no-progress ) > {log} 2>&1 " + ON_FAIL

@@ -1,0 +1,91 @@
+"""Argoverse 2 (sensor dataset layout, ``<root>/<split>/<log_id>/``): logs as scenes at ``rate_hz``, boxes in the
+city frame, LT3D detections (ego frame, .feather/.csv/pickled DataFrame), the tracking-challenge pickle as the
+submission (with the same tracks as a feather table beside it), and the official AV2 tracking evaluation (HOTA,
+TrackEval)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from grutrack.data.scene import BoxSet, Scene, Vocabulary
+from grutrack.datasets.base import DatasetOptions, Detections
+from grutrack.documents import MetricsDocument
+from grutrack.errors import ConfigError
+
+
+class AV2Dataset:
+    """The AV2 sensor data at ``options.dataroot``, tracked at ``options.rate_hz``."""
+
+    name = "av2"
+    submission_suffix = ".pkl"
+    evaluators = ("official",)
+
+    def __init__(self, options: DatasetOptions):
+        self.options = options
+
+    @property
+    def vocabulary(self) -> Vocabulary:
+        from grutrack.data.av2 import vocabulary
+
+        return vocabulary(self.options.all_categories)
+
+    def scenes(self, split: str, with_gt: bool = False) -> list[Scene]:
+        from grutrack.data.av2 import load_scenes
+
+        return load_scenes(self.options.dataroot, split, rate_hz=self.options.rate_hz, with_gt=with_gt,
+                           all_categories=self.options.all_categories)
+
+    def load_detections(self, path: str | Path, split: str, scenes: list[Scene],
+                        measured_yaw: str = "euler_z") -> Detections:
+        """LT3D rows at the tracked frames, moved to the city frame; rows of other categories or of sweeps
+        that are not tracked frames are counted and dropped (``measured_yaw`` does not apply: LT3D rows carry
+        a yaw-only quaternion)."""
+        from grutrack.data.lt3d_detections import load_detections
+
+        boxes, stats = load_detections(path, self.options.dataroot, split, scenes, self.vocabulary)
+        warnings = []
+        if stats.empty_logs:
+            warnings.append(f"{path}: {len(stats.empty_logs)} of {len(scenes)} logs have no detection of a "
+                            f"tracked category (first: {stats.empty_logs[0]}); their tracks are empty (is this "
+                            f"the detection file of split '{split}'?)")
+        summary = (f"detections: {stats.rows} rows, {stats.kept} tracked, {stats.other_category} of untracked "
+                   f"categories, {stats.off_frame} at sweeps that are not tracked frames (dropped)")
+        return Detections(boxes, summary, warnings)
+
+    def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
+                     max_boxes: int) -> dict[str, int]:
+        """The challenge pickle at ``path`` and a feather table of the same tracks beside it (``.feather``)."""
+        from grutrack.export.av2_tracks import write_tracks
+
+        seqs = write_tracks(path, Path(path).with_suffix(".feather"), scenes, results, self.vocabulary)
+        return {"logs": len(scenes), "frames": sum(len(s) for s in scenes),
+                "boxes": sum(len(f["track_id"]) for fs in seqs.values() for f in fs)}
+
+    def write_submission(self, tracks: str | Path, split: str, out: str | Path) -> dict[str, int]:
+        """The pickle checked against the official layout for exactly the split's frames at ``rate_hz`` (as the
+        evaluation checks it), then copied to ``out`` atomically."""
+        from grutrack.export.av2_tracks import expected_frames, read_tracks_pickle, write_tracks_pickle
+
+        seqs = read_tracks_pickle(tracks)
+        write_tracks_pickle(out, seqs, expected_frames(self.scenes(split)))   # validates first
+        return {"logs": len(seqs), "frames": sum(len(v) for v in seqs.values()),
+                "boxes": sum(len(f["track_id"]) for v in seqs.values() for f in v)}
+
+    def evaluate(self, submission: str | Path, split: str, evaluator: str | None = None,
+                 max_range_m: int | None = None, workers: int | None = None,
+                 trackeval_dir: str | Path | None = None, **_ignored) -> MetricsDocument:
+        """The official AV2 tracking evaluation (HOTA, drivable-area ROI when the maps are there)."""
+        from grutrack.evaluation import av2_eval
+
+        if evaluator not in (None, *self.evaluators):
+            raise ConfigError(f"--evaluator {evaluator} is for nuScenes; AV2 has the official evaluator only")
+        if workers is not None and workers < 1:
+            raise ConfigError("--workers must be at least 1")
+        return av2_eval.evaluate_submission(self.options.dataroot, split, submission, rate_hz=self.options.rate_hz,
+                                            max_range_m=max_range_m or av2_eval.DEFAULT_RANGE_M, workers=workers,
+                                            trackeval_dir=trackeval_dir)
+
+    def format_summary(self, doc: MetricsDocument) -> str:
+        from grutrack.evaluation.av2_eval import format_summary
+
+        return format_summary(doc)

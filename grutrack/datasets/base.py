@@ -1,0 +1,78 @@
+"""The dataset interface: what every stage needs from a dataset, in the canonical types of
+:mod:`grutrack.data.scene` and :mod:`grutrack.documents`.
+
+A dataset gives its splits as :class:`~grutrack.data.scene.Scene` lists (frames in time order, ego poses,
+optionally ground truth; labels index the scene's :class:`~grutrack.data.scene.Vocabulary`), reads detection
+files into per-frame :class:`~grutrack.data.scene.BoxSet` (global / city frame, metres, radians), writes and
+validates its official tracking submission, and evaluates one with its official evaluator into a
+:class:`~grutrack.documents.MetricsDocument`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol, runtime_checkable
+
+from grutrack.data.scene import BoxSet, Scene, Vocabulary
+from grutrack.documents import MetricsDocument
+
+
+@dataclass(frozen=True)
+class DatasetOptions:
+    """Where a dataset is and how it is read. ``version``: nuScenes table version (v1.0-trainval, v1.0-mini,
+    v1.0-demo); ``rate_hz``: AV2 frames per second tracked (annotations are at 10 Hz); ``all_categories``: AV2's
+    26 competition categories instead of the 7 classes of Table I."""
+
+    dataroot: str | Path
+    version: str | None = None
+    rate_hz: float = 2.0
+    all_categories: bool = False
+
+
+@dataclass
+class Detections:
+    """Detections of a split read for tracking: ``boxes[frame token]`` (global frame) and what reading them
+    found worth telling (``summary``: one line; ``warnings``: lines for stderr)."""
+
+    boxes: dict[str, BoxSet]
+    summary: str = ""
+    warnings: list[str] = field(default_factory=list)
+
+
+@runtime_checkable
+class Dataset(Protocol):
+    """One dataset. ``name`` as on the command line; ``submission_suffix``: the file type of its submission
+    (``.json``, ``.pkl``); ``evaluators``: its evaluators, the default first."""
+
+    name: str
+    submission_suffix: str
+    evaluators: tuple[str, ...]
+    options: DatasetOptions
+
+    @property
+    def vocabulary(self) -> Vocabulary:
+        """What the labels of its boxes mean (tracked classes and their parameter classes)."""
+
+    def scenes(self, split: str, with_gt: bool = False) -> list[Scene]:
+        """The split's scenes in order; ground-truth boxes on each frame when ``with_gt``."""
+
+    def load_detections(self, path: str | Path, split: str, scenes: list[Scene],
+                        measured_yaw: str = "euler_z") -> Detections:
+        """A detection file of the split, per frame of ``scenes`` (tracked classes only)."""
+
+    def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
+                     max_boxes: int) -> dict[str, int]:
+        """The tracker's output written as the official submission (validated, atomically); returns counts
+        (samples/logs, frames, boxes)."""
+
+    def write_submission(self, tracks: str | Path, split: str, out: str | Path) -> dict[str, int]:
+        """A tracker output checked against the official format for exactly the split's frames and written to
+        ``out`` atomically; returns counts."""
+
+    def evaluate(self, submission: str | Path, split: str, evaluator: str | None = None,
+                 **options) -> MetricsDocument:
+        """Official metrics of a submission (``evaluator`` one of :attr:`evaluators`, None: the default)."""
+
+    def format_summary(self, doc: MetricsDocument) -> str:
+        """A table of the document's headline metrics for the terminal."""
