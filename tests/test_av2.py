@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from grutrack.cli import main
 from grutrack.data import av2
-from grutrack.data.lt3d_detections import load_detections
+from grutrack.data.lt3d_detections import detection_table, load_detections
 from grutrack.data.scene import BoxSet, Frame, Scene, Vocabulary
 from grutrack.errors import DatasetError, InputFormatError
 from grutrack.evaluation.av2_eval import default_workers, evaluate_sequences, metrics_from_result
@@ -31,10 +31,6 @@ from grutrack.tracking.tracker import track_scenes
 
 LOG_A = "7fab2350-7eaf-3b7e-a39d-6937a4c1bede"
 LOG_B = "adcf7d18-0510-35b0-a2fa-b4cea13a6d76"
-#: detection-simulator class standing in for each Table I class (one-to-one, so the class comes back exactly)
-SIM_CLASS = {"REGULAR_VEHICLE": "car", "PEDESTRIAN": "pedestrian", "BICYCLE": "bicycle",
-             "LARGE_VEHICLE": "construction_vehicle", "BUS": "bus", "BOX_TRUCK": "truck", "TRUCK": "trailer"}
-
 
 # ------------------------------------------------------------------------------------------------------------
 # helpers
@@ -46,44 +42,17 @@ def scenes(av2_root):
     return av2.load_scenes(av2_root, "val", with_gt=True)
 
 
-def lt3d_table(scenes: list[Scene], boxsets: dict[str, BoxSet], vocab: Vocabulary) -> pd.DataFrame:
+def lt3d_table(scenes: list[Scene], boxsets: dict[str, BoxSet]) -> pd.DataFrame:
     """City-frame canonical boxes written back as an LT3D detection table (ego frame of each sweep)."""
-    parts = []
-    for s in scenes:
-        for f in s.frames:
-            b = boxsets.get(f.token)
-            if b is None or len(b) == 0:
-                continue
-            R = av2.quat_to_matrix(f.ego_rotation)[0]
-            centre = (b.boxes[:, 0:3] - f.ego_translation) @ R
-            rz = Rotation.from_euler("z", b.boxes[:, 6, None]).as_matrix()
-            q = Rotation.from_matrix(R.T[None] @ rz).as_quat()  # x, y, z, w
-            v = np.column_stack([b.boxes[:, 7:9], np.zeros(len(b))]) @ R
-            parts.append(pd.DataFrame({
-                "tx_m": centre[:, 0], "ty_m": centre[:, 1], "tz_m": centre[:, 2],
-                "length_m": b.boxes[:, 4], "width_m": b.boxes[:, 3], "height_m": b.boxes[:, 5],
-                "qw": q[:, 3], "qx": q[:, 0], "qy": q[:, 1], "qz": q[:, 2], "vx": v[:, 0], "vy": v[:, 1],
-                "score": b.scores, "log_id": s.name, "timestamp_ns": av2.token_timestamp_ns(f.token),
-                "category": np.asarray(vocab.names, dtype=object)[b.labels]}))
-    return pd.concat(parts, ignore_index=True)
+    return detection_table(scenes, boxsets)
 
 
 def simulated_boxsets(scenes: list[Scene], vocab: Vocabulary, seed: int = 0) -> dict[str, BoxSet]:
     """SIMULATED detections of every frame from its ground truth (grutrack.data.detection_sim, centerpoint)."""
-    from grutrack.data.detection_sim import GTFrame, load_profile, simulate
+    from grutrack.data.detection_sim import load_profile, simulate_scenes
 
-    to_sim = np.array([SIM_CLASS[n] for n in vocab.names], dtype=object)
-    back = {v: vocab.names.index(k) for k, v in SIM_CLASS.items()}
-    frames = [GTFrame(token=f.token, scene=s.name, timestamp=f.timestamp, ego_translation=f.ego_translation,
-                      boxes=f.gt.boxes, names=to_sim[f.gt.labels], num_lidar_pts=f.gt.extra["num_pts"],
-                      num_radar_pts=np.zeros(len(f.gt), np.int64), instance_ids=f.gt.ids)
-              for s in scenes for f in s.frames]
-    out = {}
-    for det in simulate(frames, load_profile("centerpoint"), seed):
-        lab = np.array([back.get(n, -1) for n in det.names], dtype=np.int64)
-        keep = lab >= 0
-        out[det.token] = BoxSet(det.boxes[keep], det.scores[keep], lab[keep])
-    return out
+    return simulate_scenes(scenes, tuple(av2.SIMULATOR_CLASS[n] for n in vocab.names), load_profile("centerpoint"),
+                           seed)
 
 
 def _track(root, dets, out, tracker="ekf", *extra) -> None:
@@ -163,7 +132,7 @@ def test_empty_and_missing_logs(av2_root, tmp_path):
 
 @pytest.fixture(scope="module")
 def oracle_table(scenes):
-    return lt3d_table(scenes, {f.token: f.gt for s in scenes for f in s.frames}, av2.vocabulary())
+    return lt3d_table(scenes, {f.token: f.gt for s in scenes for f in s.frames})
 
 
 def test_lt3d_roundtrip_and_drop_policy(av2_root, scenes, oracle_table, tmp_path):
@@ -247,7 +216,7 @@ def test_pickle_layout_and_validation(scenes):
 def test_all_categories_track_and_export(av2_root, tmp_path):
     vocab = av2.vocabulary(all_categories=True)
     scenes = av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True)
-    lt3d_table(scenes, {f.token: f.gt for s in scenes for f in s.frames}, vocab).to_feather(tmp_path / "d.feather")
+    lt3d_table(scenes, {f.token: f.gt for s in scenes for f in s.frames}).to_feather(tmp_path / "d.feather")
     dets, stats = load_detections(tmp_path / "d.feather", av2_root, "val", scenes, vocab)
     assert stats.kept == stats.rows == sum(len(f.gt) for s in scenes for f in s.frames)
     for name in ("ekf", "greedy", "ab3dmot"):
@@ -385,7 +354,7 @@ def test_oracle_without_the_doubly_annotated_car(av2_root, scenes):
 
 def test_simulated_detections_table(av2_root, scenes, tmp_path, capsys):
     vocab = av2.vocabulary()
-    table = lt3d_table(scenes, simulated_boxsets(scenes, vocab, seed=0), vocab)
+    table = lt3d_table(scenes, simulated_boxsets(scenes, vocab, seed=0))
     table.to_feather(tmp_path / "sim.feather")
     results = {}
     for tracker in ("greedy", "ab3dmot", "ekf"):

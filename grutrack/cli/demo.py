@@ -7,8 +7,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from grutrack.io import read_json
+from grutrack.cli.common import add_dataset_args, dataset_of
 from grutrack.errors import InputFormatError
+from grutrack.io import read_json
 
 
 def add_parser(subparsers) -> None:
@@ -27,11 +28,12 @@ def add_parser(subparsers) -> None:
     p.set_defaults(func=run_demo_data)
 
     p = subparsers.add_parser("simulate-detections", help="simulate detector output from ground truth",
-                              description="Sample detections (official nuScenes detection-submission JSON) from the "
-                                          "ground truth of a split with a detector profile.")
-    p.add_argument("--dataroot", required=True, help="nuScenes(-format) dataroot")
-    p.add_argument("--version", default=VERSION, help=f"dataset version (default {VERSION})")
-    p.add_argument("--split", required=True, help="split name (predefined or from <version>/splits.json)")
+                              description="Sample SYNTHETIC detections from the ground truth of a split with a "
+                                          "detector profile, in the format the dataset's detections come in: "
+                                          "nuScenes, the official detection-submission JSON; av2, an LT3D "
+                                          "detection table (feather, ego frame) at the tracked frames (--rate).")
+    add_dataset_args(p, "split name (predefined, or from <version>/splits.json for nuScenes)")
+    p.set_defaults(version=VERSION)
     p.add_argument("--profile", default="centerpoint",
                    help="detector profile: a shipped name (centerpoint, pointpillars) or a YAML path")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -64,13 +66,14 @@ def run_demo_data(args: argparse.Namespace) -> int:
 
 def run_simulate(args: argparse.Namespace) -> int:
     """``grutrack simulate-detections``."""
-    from grutrack.data.detection_sim import load_profile, simulate_nuscenes
+    from grutrack.data.detection_sim import load_profile
 
     profile = load_profile(args.profile)
-    sub = simulate_nuscenes(args.dataroot, args.version, args.split, profile, args.seed, args.out)
-    n = sum(len(v) for v in sub["results"].values())
-    print(f"wrote {args.out}: {n} SYNTHETIC detections ({profile.name}, seed {args.seed}) on "
-          f"{len(sub['results'])} samples of {args.version}/{args.split}")
+    ds = dataset_of(args)
+    counts = ds.simulate_detections(args.split, profile, args.seed, args.out)
+    where = f"{args.version}/{args.split}" if args.dataset == "nuscenes" else f"av2 {args.split}"
+    print(f"wrote {args.out}: {counts.pop('detections')} SYNTHETIC detections ({profile.name}, seed {args.seed}) "
+          f"on {', '.join(f'{v} {k}' for k, v in counts.items())} of {where}")
     return 0
 
 

@@ -58,6 +58,14 @@ PARAM_CLASS: dict[str, str] = {
     "SIGN": "pedestrian", "STOP_SIGN": "pedestrian", "MOBILE_PEDESTRIAN_CROSSING_SIGN": "pedestrian",
     "WHEELCHAIR": "pedestrian", "STROLLER": "pedestrian", "DOG": "pedestrian",
 }
+#: The nuScenes detection class whose detector-profile statistics simulate each Table I class
+#: (``grutrack simulate-detections --dataset av2``): distinct, so a simulated box's class maps back to exactly
+#: one AV2 category; the two AV2 truck-like classes take the two large nuScenes classes nearest in size and
+#: motion (LARGE_VEHICLE: construction_vehicle; TRUCK, the tractor units: trailer).
+SIMULATOR_CLASS: dict[str, str] = {
+    "REGULAR_VEHICLE": "car", "PEDESTRIAN": "pedestrian", "BICYCLE": "bicycle", "LARGE_VEHICLE": "construction_vehicle",
+    "BUS": "bus", "BOX_TRUCK": "truck", "TRUCK": "trailer",
+}
 DEFAULT_RATE_HZ = 2.0
 ANNOTATION_COLUMNS = ("timestamp_ns", "track_uuid", "category", "length_m", "width_m", "height_m",
                       "qw", "qx", "qy", "qz", "tx_m", "ty_m", "tz_m")

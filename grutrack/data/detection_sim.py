@@ -36,6 +36,7 @@ import yaml
 
 from grutrack.boxes import BOX_DIM, VX, VY, W, H, YAW, quaternion_from_yaw, wrap_angle, yaw_from_quaternion
 from grutrack.classes import DETECTION_CLASSES
+from grutrack.data.scene import BoxSet
 from grutrack.errors import ConfigError
 from grutrack.io import atomic_path
 
@@ -432,6 +433,44 @@ def simulate(frames: Iterable[GTFrame], profile: DetectorProfile, seed: int) -> 
     """Simulate every frame with its own stream (see :func:`frame_rng`)."""
     tab = _Tables(profile)
     return [simulate_frame(f, profile, frame_rng(seed, profile.name, f.token), tab) for f in frames]
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# any dataset: canonical scenes in, canonical detections out
+# ----------------------------------------------------------------------------------------------------------------
+
+def scene_gt_frames(scenes: Iterable, sim_class: tuple[str, ...]) -> list[GTFrame]:
+    """GT frames of canonical scenes with ground truth (any dataset). ``sim_class[label]``: the detection
+    class (:data:`DETECTION_CLASSES`) whose profile statistics a box of that label is simulated with; lidar
+    points from ``gt.extra['num_pts']`` (0 where the dataset has none)."""
+    to_sim = np.asarray(sim_class, dtype=object)
+    frames = []
+    for s in scenes:
+        for f in s.frames:
+            gt = f.gt
+            pts = gt.extra.get("num_pts", np.zeros(len(gt), np.int64))
+            frames.append(GTFrame(token=f.token, scene=s.name, timestamp=f.timestamp,
+                                  ego_translation=f.ego_translation, boxes=gt.boxes, names=to_sim[gt.labels],
+                                  num_lidar_pts=np.asarray(pts, np.int64), num_radar_pts=np.zeros(len(gt), np.int64),
+                                  instance_ids=gt.ids if gt.ids is not None else np.arange(len(gt)).astype(object)))
+    return frames
+
+
+def simulate_scenes(scenes: list, sim_class: tuple[str, ...], profile: DetectorProfile, seed: int) -> dict:
+    """SYNTHETIC detections of every frame of ``scenes`` as canonical box sets ``{frame token: BoxSet}``
+    (global / city frame) whose labels index the scenes' vocabulary. ``sim_class`` maps each label to a
+    distinct detection class, so a simulated box's class maps back to exactly one label; boxes the simulator
+    gives a class no label maps to (class confusion, ghosts of other classes) are dropped."""
+    if len(set(sim_class)) != len(sim_class) or not set(sim_class) <= set(DETECTION_CLASSES):
+        raise ConfigError(f"simulator classes {sim_class} must be distinct detection classes "
+                          f"({', '.join(DETECTION_CLASSES)})")
+    back = {c: i for i, c in enumerate(sim_class)}
+    out = {}
+    for det in simulate(scene_gt_frames(scenes, sim_class), profile, seed):
+        lab = np.array([back.get(n, -1) for n in det.names], dtype=np.int64)
+        keep = lab >= 0
+        out[det.token] = BoxSet(det.boxes[keep], det.scores[keep], lab[keep])
+    return out
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -26,10 +26,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from grutrack.data.av2 import (COMPETITION_CATEGORIES, OTHER_ANNOTATION_CATEGORIES, ego_to_city,
+from grutrack.data.av2 import (COMPETITION_CATEGORIES, OTHER_ANNOTATION_CATEGORIES, ego_to_city, quat_to_matrix,
                                read_poses, split_dir, token_timestamp_ns)
 from grutrack.data.scene import BoxSet, Scene, Vocabulary
 from grutrack.errors import InputFormatError
+from grutrack.io import atomic_path
 
 REQUIRED_COLUMNS = ("tx_m", "ty_m", "tz_m", "length_m", "width_m", "height_m", "qw", "qx", "qy", "qz", "score",
                     "log_id", "timestamp_ns", "category")
@@ -207,3 +208,58 @@ def _log_boxes(path: Path, log_dir: Path, scene: Scene, rows: np.ndarray, ts: np
     stops = np.searchsorted(f[order], np.arange(len(frame_ts)), side="right")
     return {fr.token: BoxSet(boxes[order[a:b]], num[r[order[a:b]], 10], labels[r[order[a:b]]])
             for fr, a, b in zip(scene.frames, starts, stops)}
+
+
+# ------------------------------------------------------------------------------------------------------------
+# writing
+# ------------------------------------------------------------------------------------------------------------
+
+def detection_table(scenes: list[Scene], boxsets: dict[str, BoxSet]) -> pd.DataFrame:
+    """Canonical city-frame detections of ``scenes`` as an LT3D table (the ego frame of each frame's sweep):
+    the inverse of :func:`load_detections` for the frames given. Labels index each scene's vocabulary."""
+    parts = []
+    for s in scenes:
+        names = np.asarray(s.vocabulary.names, dtype=object)
+        for f in s.frames:
+            b = boxsets.get(f.token)
+            if b is None or len(b) == 0:
+                continue
+            R = quat_to_matrix(f.ego_rotation)[0]                       # ego -> city
+            centre = (b.boxes[:, 0:3] - f.ego_translation) @ R          # R^T (c - t), row-wise
+            box_to_city = _yaw_matrices(b.boxes[:, 6])
+            q = _matrix_to_quat(np.einsum("ji,njk->nik", R, box_to_city))   # box -> ego
+            # (vx, vy) in ego axes that the reader maps back to the city-frame (vx, vy) exactly: it rotates
+            # [vx, vy, 0] by R and keeps x, y, so solve with R's upper-left 2x2 block
+            v = np.linalg.solve(R[:2, :2], b.boxes[:, 7:9].T).T
+            parts.append(pd.DataFrame({
+                "tx_m": centre[:, 0], "ty_m": centre[:, 1], "tz_m": centre[:, 2],
+                "length_m": b.boxes[:, 4], "width_m": b.boxes[:, 3], "height_m": b.boxes[:, 5],
+                "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3], "vx": v[:, 0], "vy": v[:, 1],
+                "score": b.scores, "log_id": s.name, "timestamp_ns": token_timestamp_ns(f.token),
+                "category": names[b.labels]}))
+    if not parts:
+        return pd.DataFrame({c: pd.Series(dtype=object if c in ("log_id", "category") else float)
+                             for c in (*REQUIRED_COLUMNS, *VELOCITY_COLUMNS)})
+    return pd.concat(parts, ignore_index=True)
+
+
+def write_detection_table(path: str | Path, table: pd.DataFrame) -> None:
+    """Write an LT3D detection table atomically as feather."""
+    with atomic_path(path) as tmp:
+        table.reset_index(drop=True).to_feather(tmp)
+
+
+def _yaw_matrices(yaw: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) rotations about +z by ``yaw`` (N,) radians."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    m = np.zeros((len(yaw), 3, 3))
+    m[:, 0, 0], m[:, 0, 1], m[:, 1, 0], m[:, 1, 1], m[:, 2, 2] = c, -s, s, c, 1.0
+    return m
+
+
+def _matrix_to_quat(m: np.ndarray) -> np.ndarray:
+    """(N, 4) unit quaternions [w, x, y, z] of rotation matrices (N, 3, 3)."""
+    from scipy.spatial.transform import Rotation
+
+    xyzw = Rotation.from_matrix(m).as_quat()
+    return np.column_stack([xyzw[:, 3], xyzw[:, :3]])

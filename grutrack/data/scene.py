@@ -41,7 +41,7 @@ class BoxSet:
 
     boxes:  (N, 9) float64 ``[x, y, z, w, l, h, yaw, vx, vy]``, global/city frame, metres, radians, m/s.
     scores: (N,) float64 confidence in [0, 1] (1 for ground truth).
-    labels: (N,) int64 index into :data:`grutrack.classes.TRACKING_CLASSES`.
+    labels: (N,) int64 index into the scene's :class:`Vocabulary` (nuScenes: the 7 tracking classes).
     ids:    (N,) object array of identity strings (GT instance tokens / track ids) or None.
     extra:  optional per-box arrays (e.g. ``num_pts`` for GT), each of length N.
     """

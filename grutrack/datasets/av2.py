@@ -52,6 +52,24 @@ class AV2Dataset:
                    f"categories, {stats.off_frame} at sweeps that are not tracked frames (dropped)")
         return Detections(boxes, summary, warnings)
 
+    def simulate_detections(self, split: str, profile, seed: int, out: str | Path) -> dict[str, int]:
+        """SYNTHETIC LT3D detections of the split's frames at ``rate_hz``, sampled from its ground truth with a
+        detector profile (each Table I class simulated as its :data:`~grutrack.data.av2.SIMULATOR_CLASS`),
+        written as a feather table in each sweep's ego frame."""
+        from grutrack.data.av2 import SIMULATOR_CLASS
+        from grutrack.data.detection_sim import simulate_scenes
+        from grutrack.data.lt3d_detections import detection_table, write_detection_table
+
+        if self.options.all_categories:
+            raise ConfigError("--all-categories: simulated AV2 detections cover the 7 classes of Table I (the "
+                              "detector profiles describe 10 nuScenes classes); drop --all-categories")
+        scenes = self.scenes(split, with_gt=True)
+        sim_class = tuple(SIMULATOR_CLASS[n] for n in self.vocabulary.names)
+        boxes = simulate_scenes(scenes, sim_class, profile, seed)
+        table = detection_table(scenes, boxes)
+        write_detection_table(out, table)
+        return {"detections": len(table), "frames": sum(len(s) for s in scenes), "logs": len(scenes)}
+
     def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
                      max_boxes: int) -> dict[str, int]:
         """The challenge pickle at ``path`` and a feather table of the same tracks beside it (``.feather``)."""

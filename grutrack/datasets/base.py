@@ -61,6 +61,11 @@ class Dataset(Protocol):
                         measured_yaw: str = "euler_z") -> Detections:
         """A detection file of the split, per frame of ``scenes`` (tracked classes only)."""
 
+    def simulate_detections(self, split: str, profile, seed: int, out: str | Path) -> dict[str, int]:
+        """SYNTHETIC detections of the split sampled from its ground truth with a detector profile
+        (:class:`~grutrack.data.detection_sim.DetectorProfile`), written to ``out`` in the format
+        :meth:`load_detections` reads; returns counts."""
+
     def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
                      max_boxes: int) -> dict[str, int]:
         """The tracker's output written as the official submission (validated, atomically); returns counts

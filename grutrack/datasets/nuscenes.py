@@ -57,6 +57,15 @@ class NuScenesDataset:
         tokens = [f.token for s in scenes for f in s.frames]
         return Detections(load_detections(path, tokens, measured_yaw))
 
+    def simulate_detections(self, split: str, profile, seed: int, out: str | Path) -> dict[str, int]:
+        """SYNTHETIC detections of the split's samples (the 10 detection classes), sampled from its ground truth
+        with a detector profile, as an official detection-submission JSON."""
+        from grutrack.data.detection_sim import simulate_nuscenes
+
+        sub = simulate_nuscenes(self.options.dataroot, self.options.version, split, profile, seed, out,
+                                nusc=self.tables)
+        return {"detections": sum(len(v) for v in sub["results"].values()), "samples": len(sub["results"])}
+
     def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
                      max_boxes: int) -> dict[str, int]:
         from grutrack.export.nuscenes_json import build_submission, write_submission
