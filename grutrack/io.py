@@ -62,6 +62,23 @@ def read_json(path: str | os.PathLike, what: str = "JSON file"):
         raise InputFormatError(f"{path}: not valid JSON ({exc})") from exc
 
 
+def read_yaml(path: str | os.PathLike, what: str = "YAML file"):
+    """Parse a YAML file; a missing file or invalid YAML raises InputFormatError naming the file."""
+    import yaml
+
+    from grutrack.errors import InputFormatError
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputFormatError(f"{path}: {what} does not exist")
+    try:
+        return yaml.safe_load(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise InputFormatError(f"{path}: {what} must be YAML text, but this file is binary") from exc
+    except yaml.YAMLError as exc:
+        raise InputFormatError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from exc
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)

@@ -73,7 +73,7 @@ def test_code_version_changes_only_for_the_stages_that_run_the_file(tmp_path, mo
     assert [s for s in before if before[s] != after[s]] == ["report"]
     (tmp_path / "tracking/tracker.py").write_text("a2")
     again = {s: codever.code_version(s, tmp_path) for s in codever.STAGE_SOURCES}
-    assert {s for s in after if after[s] != again[s]} == {"train", "track", "track_av2"}
+    assert {s for s in after if after[s] != again[s]} == {"train", "track"}
     monkeypatch.setenv("GRUTRACK_CODE_VERSION", "pinned")
     assert codever.code_version("track", tmp_path) == "pinned"
     assert codever.code_version("report").startswith("0.") or codever.code_version("report") == "pinned"
@@ -120,7 +120,7 @@ def test_core_geometry_and_box_code_re_run_tracking():
     """Geometry, the box layout and the canonical scene form feed every tracker: they version the track stages."""
     from grutrack.pipeline.codever import STAGE_SOURCES
 
-    for stage in ("track", "track_av2", "train"):
+    for stage in ("track", "train"):
         for path in ("geometry.py", "boxes.py", "data/scene.py", "tracking", "motion"):
             assert path in STAGE_SOURCES[stage], (stage, path)
     assert "evaluation/fast_loading.py" in STAGE_SOURCES["evaluate"]

@@ -117,7 +117,8 @@ def test_tracker_threshold_change_reruns_track_submit_evaluate_render_report(dem
     proc = snakemake(demo_run, "reports/demo_val.md", options=("-n", "--quiet", "rules"),
                      configs=("tiny.yaml", "thr.yaml"))
     # only the run whose preset is `ekf` reruns; the GRU-KF run has its own preset entry (`grukf`)
-    assert planned(proc) == {"track": 1, "submit": 1, "evaluate": 1, "render": 1, "report": 1}, proc.stdout[-2000:]
+    assert planned(proc) == {"resolve_tracker": 1, "track": 1, "submit": 1, "manifest": 1, "evaluate": 1,
+                             "render": 1, "report": 1}, proc.stdout[-2000:]
 
 
 def test_training_change_reruns_train_and_its_dependents_only(demo_run):
@@ -125,7 +126,30 @@ def test_training_change_reruns_train_and_its_dependents_only(demo_run):
     proc = snakemake(demo_run, "reports/demo_val.md", options=("-n", "--quiet", "rules"),
                      configs=("tiny.yaml", "lr.yaml"))
     # only the GRU-KF run depends on the training; the EKF run is untouched
-    assert planned(proc) == {"train": 1, "track": 1, "submit": 1, "evaluate": 1, "render": 1, "report": 1}
+    assert planned(proc) == {"train": 1, "track": 1, "submit": 1, "manifest": 1, "evaluate": 1, "render": 1,
+                             "report": 1}
+
+
+def test_av2_report_through_the_same_rules_with_simulated_detections(demo_run, av2_root):
+    """reports/av2_val.md on the AV2 logs of ../shared/data with simulated detections chosen in the config:
+    the same simulate, track, submit, evaluate and report rules as nuScenes; the GRU-KF trained on the
+    nuScenes-format demo tracks AV2 (Table I's setting)."""
+    (demo_run / "av2.yaml").write_text(
+        f"datasets:\n  av2: {{dataroot: {av2_root}}}\n"
+        "experiments:\n  av2_val:\n    detectors: [centerpoint_sim]\n"
+        "    runs: {greedy: {tracker: greedy, preset: greedy, training: null},\n"
+        "           ab3dmot: {tracker: ab3dmot, preset: ab3dmot, training: null},\n"
+        "           grukf: {tracker: grukf, preset: grukf, training: demo_grukf}}\n")
+    proc = snakemake(demo_run, "reports/av2_val.md", configs=("tiny.yaml", "av2.yaml"))
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert (demo_run / "detections/simulated/av2/val/centerpoint_sim.feather").is_file()
+    text = (demo_run / "reports/av2_val.md").read_text()
+    assert "SYNTHETIC DETECTIONS" in text and "centerpoint_sim" in text
+    for run in ("greedy", "ab3dmot", "grukf"):
+        doc = json.loads((demo_run / f"reports/metrics/av2_val/centerpoint_sim/{run}.json").read_text())
+        assert doc["dataset"] == "av2" and doc["logs"] == 2 and 0.2 < doc["overall"]["hota"] < 1.0
+        assert f"{100 * doc['overall']['hota']:.1f}" in text
+        assert (demo_run / f"submissions/av2_val/centerpoint_sim/{run}.manifest.json").is_file()
 
 
 def test_paper_numbers_change_reruns_only_the_report(demo_run):

@@ -26,7 +26,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--figures", default=None, help="folder for the PNG figures (default: <out dir>/figures/<name>)")
     p.add_argument("--paper", default=None, help="paper numbers (default: workflow/config/paper.yaml)")
     p.add_argument("--name", default=None, help="report name (default: the --out file name without suffix)")
-    p.add_argument("--experiment", default=None, help="NAME:DATASET:SPLIT:DETECTOR the runs belong to")
+    p.add_argument("--experiment", default=None, help="NAME:DATASET:SPLIT:DETECTOR[:simulated] the runs belong to (simulated: the "
+                        "detections are SYNTHETIC, simulated from the ground truth; the report says so)")
     p.add_argument("--run", action="append", default=[], metavar="RUN=METRICS_JSON", help="a run's metrics JSON")
     p.add_argument("--row", action="append", default=[], metavar="TABLE:ROW=RUN",
                    help="paper row reproduced by a run, e.g. III:Ours=grukf")
@@ -67,9 +68,11 @@ def _experiment(value: str | None) -> dict | None:
     if value is None:
         return None
     parts = value.split(":")
-    if len(parts) != 4:
-        raise ConfigError(f"--experiment expects NAME:DATASET:SPLIT:DETECTOR, got '{value}'")
-    return dict(zip(("name", "dataset", "split", "detector"), parts))
+    if len(parts) not in (4, 5) or (len(parts) == 5 and parts[4] != "simulated"):
+        raise ConfigError(f"--experiment expects NAME:DATASET:SPLIT:DETECTOR[:simulated], got '{value}'")
+    exp = dict(zip(("name", "dataset", "split", "detector"), parts))
+    exp["simulated"] = len(parts) == 5
+    return exp
 
 
 def run(args: argparse.Namespace) -> int:

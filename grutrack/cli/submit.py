@@ -4,11 +4,8 @@ with a provenance manifest) and ``grutrack leaderboard-zip`` (the nuScenes leade
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
-
-import yaml
-
 from grutrack.cli.common import add_dataset_args, dataset_of
+from grutrack.errors import ConfigError
 from grutrack.documents import FileRecord, Manifest
 from grutrack.provenance import config_hash, sha256_file
 
@@ -24,13 +21,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_dataset_args(p, "split the tracks are for")
     p.add_argument("--tracks", required=True, help="tracker output (grutrack track --out)")
     p.add_argument("--out", required=True, help="submission file to write")
-    p.add_argument("--manifest", default=None, help="manifest JSON (default: <out stem>.manifest.json)")
-    p.add_argument("--detections", required=True, help="detections the tracks were made from")
-    p.add_argument("--tracker-config", required=True, help="resolved tracker preset YAML used")
-    p.add_argument("--tracker", required=True, help="tracker name (ekf, grukf, greedy, ab3dmot)")
-    p.add_argument("--checkpoint", default=None, help="GRU-KF model used (grukf)")
-    p.add_argument("--code-version", default=None, help="code version of the tracking stage (from the workflow)")
+    p.add_argument("--manifest", default=None,
+                   help="manifest JSON (default: <out stem>.manifest.json; 'none': write no manifest, and the "
+                        "provenance arguments below are not needed)")
+    _provenance_args(p, required=False)
     p.set_defaults(func=run_submit)
+
+    p = sub.add_parser("manifest", help="write the provenance manifest of a submission (checked first)",
+                       description="Check a submission against the official format for the split and write the "
+                                   "manifest naming its hash and counts and the detections, checkpoint, tracker "
+                                   "config (with its hash) and package version that produced it (what `grutrack "
+                                   "submit` writes beside the submission).")
+    add_dataset_args(p, "split of the submission")
+    p.add_argument("--submission", required=True, help="the submission (grutrack submit --out)")
+    p.add_argument("--out", default=None, help="manifest JSON (default: <submission stem>.manifest.json)")
+    _provenance_args(p, required=True)
+    p.set_defaults(func=run_manifest)
 
     p = sub.add_parser("leaderboard-zip", help="zip a nuScenes submission for the leaderboard (validated first)",
                        description="Validate a nuScenes tracking submission against the official format for the "
@@ -44,16 +50,48 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_zip)
 
 
-def run_submit(args: argparse.Namespace) -> int:
-    """Validate, write, manifest."""
-    counts = dataset_of(args).write_submission(args.tracks, args.split, args.out)
-    cfg = yaml.safe_load(Path(args.tracker_config).read_text())
-    manifest = args.manifest or str(Manifest.path_for(args.out))
-    Manifest(dataset=args.dataset, split=args.split, submission=FileRecord.of(args.out), tracker=args.tracker,
+def _provenance_args(p: argparse.ArgumentParser, required: bool) -> None:
+    """What produced the tracks: detections, tracker and its resolved config, checkpoint, code version."""
+    p.add_argument("--detections", required=required, help="detections the tracks were made from")
+    p.add_argument("--tracker-config", required=required, help="resolved tracker preset YAML used")
+    p.add_argument("--tracker", required=required, help="tracker name (ekf, grukf, greedy, ab3dmot)")
+    p.add_argument("--checkpoint", default=None, help="GRU-KF model used (grukf)")
+    p.add_argument("--code-version", default=None, help="code version of the tracking stage (from the workflow)")
+
+
+def _write_manifest(args: argparse.Namespace, submission: str, counts: dict[str, int], out: str) -> None:
+    """The manifest of ``submission`` from the provenance arguments, written atomically."""
+    from grutrack.io import read_yaml
+
+    cfg = read_yaml(args.tracker_config, "tracker config")
+    Manifest(dataset=args.dataset, split=args.split, submission=FileRecord.of(submission), tracker=args.tracker,
              tracker_config=FileRecord.of(args.tracker_config, config_hash(cfg)), dataroot=args.dataroot,
              version=args.version, detections=FileRecord.of(args.detections),
-             checkpoint=FileRecord.of(args.checkpoint), code_version=args.code_version, counts=counts).write(manifest)
-    print(f"wrote {args.out} ({', '.join(f'{v} {k}' for k, v in counts.items())}) and {manifest}")
+             checkpoint=FileRecord.of(args.checkpoint), code_version=args.code_version, counts=counts).write(out)
+
+
+def run_submit(args: argparse.Namespace) -> int:
+    """Validate, write, manifest."""
+    missing = [f for f, v in (("--detections", args.detections), ("--tracker-config", args.tracker_config),
+                              ("--tracker", args.tracker)) if v is None]
+    if args.manifest != "none" and missing:
+        raise ConfigError(f"{', '.join(missing)}: needed for the manifest (or give --manifest none)")
+    counts = dataset_of(args).write_submission(args.tracks, args.split, args.out)
+    wrote = f"wrote {args.out} ({', '.join(f'{v} {k}' for k, v in counts.items())})"
+    if args.manifest != "none":
+        manifest = args.manifest or str(Manifest.path_for(args.out))
+        _write_manifest(args, args.out, counts, manifest)
+        wrote += f" and {manifest}"
+    print(wrote)
+    return 0
+
+
+def run_manifest(args: argparse.Namespace) -> int:
+    """Check the submission, write its manifest."""
+    counts = dataset_of(args).check_submission(args.submission, args.split)
+    out = args.out or str(Manifest.path_for(args.submission))
+    _write_manifest(args, args.submission, counts, out)
+    print(f"wrote {out} ({args.submission}: {', '.join(f'{v} {k}' for k, v in counts.items())})")
     return 0
 
 

@@ -19,12 +19,17 @@ DATASETS: dict[str, str] = {
 }
 
 
-def open_dataset(name: str, options: DatasetOptions) -> Dataset:
-    """The dataset ``name`` at ``options.dataroot`` (nothing is read until a method needs it)."""
+def dataset_class(name: str) -> type:
+    """The class of dataset ``name`` (its module imported now)."""
     if name not in DATASETS:
         raise ConfigError(f"--dataset: unknown dataset '{name}' (available: {', '.join(DATASETS)})")
     module, cls = DATASETS[name].split(":")
-    return getattr(importlib.import_module(module), cls)(options)
+    return getattr(importlib.import_module(module), cls)
 
 
-__all__ = ["DATASETS", "Dataset", "DatasetOptions", "open_dataset"]
+def open_dataset(name: str, options: DatasetOptions) -> Dataset:
+    """The dataset ``name`` at ``options.dataroot`` (nothing is read until a method needs it)."""
+    return dataset_class(name)(options)
+
+
+__all__ = ["DATASETS", "Dataset", "DatasetOptions", "dataset_class", "open_dataset"]

@@ -18,7 +18,9 @@ class AV2Dataset:
 
     name = "av2"
     submission_suffix = ".pkl"
+    detections_suffix = ".feather"
     evaluators = ("official",)
+    parallel_evaluation = True
 
     def __init__(self, options: DatasetOptions):
         self.options = options
@@ -86,6 +88,15 @@ class AV2Dataset:
 
         seqs = read_tracks_pickle(tracks)
         write_tracks_pickle(out, seqs, expected_frames(self.scenes(split)))   # validates first
+        return {"logs": len(seqs), "frames": sum(len(v) for v in seqs.values()),
+                "boxes": sum(len(f["track_id"]) for v in seqs.values() for f in v)}
+
+    def check_submission(self, path: str | Path, split: str) -> dict[str, int]:
+        """The official layout, for exactly the split's frames at ``rate_hz``."""
+        from grutrack.export.av2_tracks import expected_frames, read_tracks_pickle, validate_sequences
+
+        seqs = read_tracks_pickle(path)
+        validate_sequences(seqs, expected_frames(self.scenes(split)), where=str(path))
         return {"logs": len(seqs), "frames": sum(len(v) for v in seqs.values()),
                 "boxes": sum(len(f["track_id"]) for v in seqs.values() for f in v)}
 

@@ -42,12 +42,16 @@ class Detections:
 
 @runtime_checkable
 class Dataset(Protocol):
-    """One dataset. ``name`` as on the command line; ``submission_suffix``: the file type of its submission
-    (``.json``, ``.pkl``); ``evaluators``: its evaluators, the default first."""
+    """One dataset. ``name`` as on the command line; ``submission_suffix`` / ``detections_suffix``: the file
+    types of its submission (``.json``, ``.pkl``) and of the detections it reads and simulates (``.json``,
+    ``.feather``); ``evaluators``: its evaluators, the default first; ``parallel_evaluation``: whether its
+    evaluation runs worker processes (``--workers``)."""
 
     name: str
     submission_suffix: str
+    detections_suffix: str
     evaluators: tuple[str, ...]
+    parallel_evaluation: bool
     options: DatasetOptions
 
     @property
@@ -74,6 +78,10 @@ class Dataset(Protocol):
     def write_submission(self, tracks: str | Path, split: str, out: str | Path) -> dict[str, int]:
         """A tracker output checked against the official format for exactly the split's frames and written to
         ``out`` atomically; returns counts."""
+
+    def check_submission(self, path: str | Path, split: str) -> dict[str, int]:
+        """A submission checked against the official format for exactly the split's frames (one-line
+        :class:`~grutrack.errors.InputFormatError` otherwise); returns counts as :meth:`write_submission`."""
 
     def evaluate(self, submission: str | Path, split: str, evaluator: str | None = None,
                  **options) -> MetricsDocument:

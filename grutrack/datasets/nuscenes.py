@@ -20,7 +20,9 @@ class NuScenesDataset:
 
     name = "nuscenes"
     submission_suffix = ".json"
+    detections_suffix = ".json"
     evaluators = ("devkit", "fast")
+    parallel_evaluation = False
 
     def __init__(self, options: DatasetOptions):
         if not options.version:
@@ -80,6 +82,14 @@ class NuScenesDataset:
         from grutrack.export.leaderboard import write_validated
 
         return write_validated(tracks, self.sample_tokens(split), out)
+
+    def check_submission(self, path: str | Path, split: str) -> dict[str, int]:
+        """grutrack's field-by-field checks for exactly the split's samples, then the devkit's loader."""
+        from grutrack.export.leaderboard import counts, devkit_check, load_valid_submission
+
+        sub = load_valid_submission(path, self.sample_tokens(split))
+        devkit_check(path)
+        return counts(sub)
 
     def evaluate(self, submission: str | Path, split: str, evaluator: str | None = None,
                  progress: bool | None = None, **_ignored) -> MetricsDocument:

@@ -21,11 +21,16 @@ _TRACKING = ("tracking", "motion", "geometry.py", "boxes.py", "classes.py", "dat
              "configs/motion", "training/checkpoint.py", "pipeline/presets.py", "cli/common.py")
 #: the dataset interface and the stage documents, read by every stage that goes through a dataset
 _DATASETS = ("datasets", "documents.py", "cli/common.py")
+#: the datasets' scene and detection readers, and their submission writers
+_READERS = ("data/nuscenes.py", "data/nusc_tables.py", "data/nusc_detections.py", "data/av2.py",
+            "data/lt3d_detections.py")
+_WRITERS = ("export/nuscenes_json.py", "export/av2_tracks.py")
 
 #: stage -> package paths (files or folders) whose content defines the stage's code version
 STAGE_SOURCES: dict[str, tuple[str, ...]] = {
     "data": ("data/demo.py", "cli/demo.py"),
-    "simulate": ("data/detection_sim.py", "data/nuscenes.py", "configs/detector_profiles", "cli/demo.py"),
+    "simulate": ("data/detection_sim.py", "data/nuscenes.py", "data/av2.py", "data/lt3d_detections.py",
+                 "configs/detector_profiles", "cli/demo.py", *_DATASETS),
     "fetch": ("data/registry.py", "data/download.py", "configs/detections.yaml", "cli/detections.py"),
     "convert": ("data/registry.py", "data/nusc_convert.py", "data/lt3d_convert.py", "data/nusc_detections.py",
                 "data/lt3d_detections.py", "data/nuscenes.py", "data/av2.py", "configs/detections.yaml",
@@ -33,16 +38,13 @@ STAGE_SOURCES: dict[str, tuple[str, ...]] = {
     "train": ("training", "documents.py", "data/nuscenes.py", "data/nusc_detections.py", "evaluation/fast_amota.py",
               "evaluation/fast_loading.py",
               "export/nuscenes_json.py", "configs/training", "cli/train.py", *_TRACKING),
-    "track": ("data/nuscenes.py", "data/nusc_detections.py", "export/nuscenes_json.py", "cli/track.py",
-              *_TRACKING, *_DATASETS),
-    "track_av2": ("data/av2.py", "data/lt3d_detections.py", "export/av2_tracks.py", "cli/track.py", *_TRACKING,
-                  *_DATASETS),
-    "submit": ("export/nuscenes_json.py", "export/leaderboard.py", "export/av2_tracks.py", "data/nuscenes.py",
-               "data/av2.py", "cli/submit.py", *_DATASETS),
+    "resolve": ("pipeline/presets.py", "tracking/config.py", "motion/defaults.py", "configs/trackers",
+                "configs/motion", "cli/resolve.py"),
+    "track": (*_READERS, *_WRITERS, "cli/track.py", *_TRACKING, *_DATASETS),
+    "submit": (*_WRITERS, "export/leaderboard.py", "data/nuscenes.py", "data/av2.py", "cli/submit.py", *_DATASETS),
     "evaluate": ("evaluation/nuscenes_eval.py", "evaluation/fast_amota.py", "evaluation/fast_loading.py",
-                 "data/nuscenes.py", "cli/evaluate.py", *_DATASETS),
-    "evaluate_av2": ("evaluation/av2_eval.py", "data/av2.py", "export/av2_tracks.py", "cli/evaluate.py",
-                     *_DATASETS),
+                 "evaluation/av2_eval.py", "evaluation/tracking_classes.py", "data/nuscenes.py", "data/av2.py",
+                 "export/av2_tracks.py", "export/leaderboard.py", "cli/evaluate.py", *_DATASETS),
     "render": ("render", "evaluation/fast_amota.py", "evaluation/fast_loading.py", "data/nuscenes.py",
                "data/nusc_detections.py", "cli/render.py", "cli/common.py"),
     "report": ("report", "render", "documents.py", "cli/report.py"),

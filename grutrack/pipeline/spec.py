@@ -163,9 +163,6 @@ def _check_experiment(cfg: dict, registry: dict, name: str, exp: dict) -> None:
     kind = cfg["datasets"][exp["dataset"]]["kind"]
     for det in exp["detectors"]:
         _need(cfg["detectors"], det, f"{key}.detectors", "detectors")
-        if kind == "av2" and cfg["detectors"][det]["kind"] == "simulated":
-            raise ConfigError(f"config key {key}.detectors: simulated detections need nuScenes-format ground "
-                              f"truth; '{det}' cannot be used on av2")
         _detector_covers(cfg, registry, det, exp["split"], f"{key}.detectors")
     for run_name, run in exp["runs"].items():
         rkey = f"{key}.runs.{run_name}"
@@ -265,6 +262,38 @@ def dataset_kind(cfg: dict, dataset: str) -> str:
     return cfg["datasets"][dataset]["kind"]
 
 
+#: config dataset kind -> the dataset (grutrack.datasets) that reads it: the demo is nuScenes-format
+KIND_DATASET = {"demo": "nuscenes", "nuscenes": "nuscenes", "av2": "av2"}
+
+
+def dataset_class(cfg: dict, dataset: str) -> type:
+    """The :mod:`grutrack.datasets` class of a config dataset."""
+    from grutrack.datasets import dataset_class as cls
+
+    return cls(KIND_DATASET[dataset_kind(cfg, dataset)])
+
+
+def evaluation_threads(cfg: dict, dataset: str) -> int:
+    """Threads an evaluation job of the dataset asks for (Snakemake caps them at --cores): several when its
+    evaluator runs worker processes, else one."""
+    return 8 if dataset_class(cfg, dataset).parallel_evaluation else 1
+
+
+def dataset_args(cfg: dict, dataset: str, split: str) -> str:
+    """The command-line arguments that name a config dataset and split for any ``grutrack`` command
+    (``--dataset``, ``--dataroot``, ``--version`` or ``--rate``, ``--split``), shell-quoted."""
+    import shlex
+
+    ds = cfg["datasets"][dataset]
+    args = ["--dataset", KIND_DATASET[ds["kind"]], "--dataroot", str(ds["dataroot"]), "--split", split]
+    version = version_for(cfg, dataset, split)
+    if version:
+        args += ["--version", version]
+    if ds.get("rate_hz") is not None:
+        args += ["--rate", str(ds["rate_hz"])]
+    return " ".join(shlex.quote(a) for a in args)
+
+
 def demo_sentinel(cfg: dict, dataset: str) -> str:
     """The demo dataset's folder, which the demo-data rule writes and later rules depend on."""
     return cfg["datasets"][dataset]["dataroot"]
@@ -272,10 +301,8 @@ def demo_sentinel(cfg: dict, dataset: str) -> str:
 
 def detections_file(cfg: dict, dataset: str, split: str, detector: str) -> str:
     """Detections of one split, simulated or converted from a registry source."""
-    if cfg["detectors"][detector]["kind"] == "simulated":
-        return f"detections/simulated/{dataset}/{split}/{detector}.json"
-    ext = "feather" if dataset_kind(cfg, dataset) == "av2" else "json"
-    return f"detections/converted/{dataset}/{split}/{detector}.{ext}"
+    how = "simulated" if cfg["detectors"][detector]["kind"] == "simulated" else "converted"
+    return f"detections/{how}/{dataset}/{split}/{detector}{dataset_class(cfg, dataset).detections_suffix}"
 
 
 def raw_source_file(registry: dict, source: str) -> str:
@@ -285,14 +312,14 @@ def raw_source_file(registry: dict, source: str) -> str:
 
 def tracks_file(cfg: dict, experiment: str, detector: str, run: str) -> str:
     """The tracker's output of one run."""
-    ext = "pkl" if dataset_kind(cfg, cfg["experiments"][experiment]["dataset"]) == "av2" else "json"
-    return f"results/{experiment}/{detector}/{run}/tracks.{ext}"
+    suffix = dataset_class(cfg, cfg["experiments"][experiment]["dataset"]).submission_suffix
+    return f"results/{experiment}/{detector}/{run}/tracks{suffix}"
 
 
 def submission_file(cfg: dict, experiment: str, detector: str, run: str) -> str:
     """The validated submission of one run (its manifest sits beside it)."""
-    ext = "pkl" if dataset_kind(cfg, cfg["experiments"][experiment]["dataset"]) == "av2" else "json"
-    return f"submissions/{experiment}/{detector}/{run}.{ext}"
+    suffix = dataset_class(cfg, cfg["experiments"][experiment]["dataset"]).submission_suffix
+    return f"submissions/{experiment}/{detector}/{run}{suffix}"
 
 
 def metrics_file(experiment: str, detector: str, run: str) -> str:

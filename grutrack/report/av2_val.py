@@ -1,13 +1,14 @@
 """Report of Argoverse 2 val (``reports/av2_val.md``): Table I, HOTA per class for Greedy, AB3DMOT and the
-GRU-KF (trained on nuScenes) on LT3D detections, paper numbers beside the reproduced ones."""
+GRU-KF (trained on nuScenes-format data) on the experiment's detections (LT3D, or SYNTHETIC ones simulated from the
+ground truth), paper numbers beside the reproduced ones."""
 
 from __future__ import annotations
 
 from grutrack.documents import MetricsDocument
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
-from grutrack.report.markdown import (AV2_OVERALL, check_section, header, image, mirror_tables, provenance,
-                                      runs_table, setting_note, training_provenance)
+from grutrack.report.markdown import (AV2_OVERALL, check_section, detections_line, header, image, mirror_tables,
+                                      provenance, runs_table, setting_note, training_provenance)
 from grutrack.report.paper import get_table, reproduced
 
 AVERAGE_NOTE = ("Note: the paper's average for Ours (47.3) is not the mean of its seven per-class values (54.1) "
@@ -21,7 +22,7 @@ def build(inp: ReportInputs) -> str:
     exp = inp.experiment or {}
     tbl = get_table(inp.paper, "I")
     parts = [header(f"Argoverse 2 {exp.get('split', 'val')}: Table I",
-                    [f"Detections: {exp.get('detector', '?')}. Official AV2 tracking evaluation (HOTA) of "
+                    [f"{detections_line(exp)} Official AV2 tracking evaluation (HOTA) of "
                      f"{_scored(docs)}. Paper numbers are labelled **Paper numbers**."])]
     note = setting_note(tbl, exp, exp.get("detector"))
     parts += ["", f"## {tbl['title']}", "", *([note, ""] if note else []), mirror_tables(tbl, inp.row_docs("I")),

@@ -74,6 +74,17 @@ def setting_note(tbl: dict, experiment: dict | None, detections: str | None = No
             f"differences below mostly measure that, not the method.")
 
 
+def detections_line(experiment: dict | None) -> str:
+    """What the runs tracked: the detector, and a SYNTHETIC banner when its detections were simulated."""
+    exp = experiment or {}
+    line = f"Detections: {exp.get('detector', '?')}."
+    if exp.get("simulated"):
+        line = (f"> **SYNTHETIC DETECTIONS.** The detections ({exp.get('detector')}) were simulated from the ground "
+                f"truth by `grutrack simulate-detections` (a detector model, not a real detector): the reproduced "
+                f"numbers measure the trackers on them, not on a real detector's output.\n\n{line}")
+    return line
+
+
 def short(h: str | None) -> str:
     return h[:SHORT] if h else DASH
 

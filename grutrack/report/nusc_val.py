@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
-from grutrack.report.markdown import (check_section, header, image, mirror_tables, provenance, runs_table,
-                                      setting_note, training_provenance, worst_scene_strips)
+from grutrack.report.markdown import (check_section, detections_line, header, image, mirror_tables, provenance,
+                                      runs_table, setting_note, training_provenance, worst_scene_strips)
 from grutrack.report.paper import get_table, reproduced
 
 
@@ -15,7 +15,7 @@ def build(inp: ReportInputs) -> str:
     docs = inp.docs()
     exp = inp.experiment or {}
     parts = [header(f"nuScenes {exp.get('split', 'val')}: Tables III and IV",
-                    [f"Detections: {exp.get('detector', '?')}. Paper numbers are labelled **Paper numbers**; "
+                    [f"{detections_line(exp)} Paper numbers are labelled **Paper numbers**; "
                      "reproduced numbers come from the metrics JSONs under Provenance."])]
     for tid in ("III", "IV"):
         if tid in inp.rows:

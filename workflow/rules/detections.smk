@@ -1,4 +1,4 @@
-# Stage "detections": simulated detections (demo or any nuScenes-format split with ground truth); published
+# Stage "detections": simulated detections (any dataset split with ground truth); published
 # detections from the registry (grutrack/configs/detections.yaml), downloaded or put in place by hand where
 # the host needs a browser; and the user's own detection files (detector kind local). Published and local
 # files are converted to one split's detections (validated against the split).
@@ -23,19 +23,19 @@ def _format_args(w):
 rule simulate_detections:
     input:
         data=lambda w: dataset_input(w.dataset, w.split),
-    output: "detections/simulated/{dataset}/{split}/{detector}.json"
+    output: "detections/simulated/{dataset}/{split}/{detector}.{ext}"
+    wildcard_constraints:
+        ext="json|feather",
     params:
-        dataroot=lambda w: dataroot(w.dataset),
-        version=lambda w: S.version_for(config, w.dataset, w.split),
+        data=lambda w: S.dataset_args(config, w.dataset, w.split),
         profile=lambda w: config["detectors"][w.detector]["profile"],
         seed=lambda w: config["detectors"][w.detector]["seeds"][w.split],
         code=code_version("simulate"),
-    log: "logs/detections/simulate/{dataset}/{split}/{detector}.log"
-    benchmark: "logs/benchmarks/detections/simulate/{dataset}/{split}/{detector}.tsv"
+    log: "logs/detections/simulate/{dataset}/{split}/{detector}.{ext}.log"
+    benchmark: "logs/benchmarks/detections/simulate/{dataset}/{split}/{detector}.{ext}.tsv"
     shell:
-        "{GRUTRACK} simulate-detections --dataroot {params.dataroot:q} --version {params.version} "
-        "--split {wildcards.split} --profile {params.profile} --seed {params.seed} --out {output} > {log} 2>&1 "
-        + ON_FAIL
+        "{GRUTRACK} simulate-detections {params.data} --profile {params.profile} --seed {params.seed} "
+        "--out {output} > {log} 2>&1 " + ON_FAIL
 
 
 rule fetch_detections:

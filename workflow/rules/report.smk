@@ -68,8 +68,10 @@ def _report_args(w):
     args = [f"--paper {PAPER_PATH}", f"--name {w.report}"]
     if rep["experiment"]:
         exp = config["experiments"][rep["experiment"]]
+        det = exp["detectors"][0]
+        simulated = ":simulated" if config["detectors"][det]["kind"] == "simulated" else ""
         args.append(f"--experiment {rep['experiment']}:{S.dataset_kind(config, exp['dataset'])}:{exp['split']}:"
-                    f"{exp['detectors'][0]}")
+                    f"{det}{simulated}")
     args += [f"--run {run}={metrics}" for run, metrics, _ in _report_runs(rep)]
     args += [f"--train-log {label}={log_csv}" for label, log_csv, _ in _report_trainings(rep)]
     args += [f"--zip {det}={zp}" for det, zp, _ in _report_zips(rep)]

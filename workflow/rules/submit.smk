@@ -1,6 +1,7 @@
-# Stage "submit": the tracker's output validated against the official format and written to submissions/ with
-# a manifest (detections, checkpoint, tracker config hash, package and code version); leaderboard zips for
-# experiments with a leaderboard_run (nuScenes test: submissions/nusc_test_<detector>.zip).
+# Stage "submit": the tracker's output validated against the dataset's official format and written to
+# submissions/ (the dataset's submission file type), its manifest (detections, checkpoint, tracker config hash,
+# package and code version) beside it; leaderboard zips for experiments with a leaderboard_run (nuScenes test:
+# submissions/nusc_test_<detector>.zip).
 
 
 def _submit_inputs(w):
@@ -24,47 +25,37 @@ def _leaderboard_experiments():
 
 
 rule submit:
-    input: unpack(_submit_inputs)
-    output:
-        submission="submissions/{experiment}/{detector}/{run}.json",
-        manifest="submissions/{experiment}/{detector}/{run}.manifest.json",
+    input:
+        tracks=lambda w: S.tracks_file(config, w.experiment, w.detector, w.run),
+        data=lambda w: dataset_input(experiment(w)["dataset"], experiment(w)["split"]),
+    output: "submissions/{experiment}/{detector}/{run}.{ext}"
     wildcard_constraints:
-        experiment=NUSC_EXPERIMENTS,
+        ext="json|pkl",
     params:
-        dataroot=lambda w: dataroot(experiment(w)["dataset"]),
-        version=lambda w: S.version_for(config, experiment(w)["dataset"], experiment(w)["split"]),
-        split=lambda w: experiment(w)["split"],
+        data=lambda w: S.dataset_args(config, experiment(w)["dataset"], experiment(w)["split"]),
+        code=code_version("submit"),
+    log: "logs/submit/{experiment}/{detector}/{run}.{ext}.log"
+    benchmark: "logs/benchmarks/submit/{experiment}/{detector}/{run}.{ext}.tsv"
+    shell:
+        "{GRUTRACK} submit {params.data} --tracks {input.tracks} --out {output} --manifest none > {log} 2>&1 "
+        + ON_FAIL
+
+
+rule manifest:
+    input:
+        unpack(_submit_inputs),
+        submission=lambda w: S.submission_file(config, w.experiment, w.detector, w.run),
+    output: "submissions/{experiment}/{detector}/{run}.manifest.json"
+    params:
+        data=lambda w: S.dataset_args(config, experiment(w)["dataset"], experiment(w)["split"]),
         provenance=_provenance_args,
         track_code=code_version("track"),
         code=code_version("submit"),
-    log: "logs/submit/{experiment}/{detector}/{run}.log"
-    benchmark: "logs/benchmarks/submit/{experiment}/{detector}/{run}.tsv"
+    log: "logs/submit/{experiment}/{detector}/{run}.manifest.log"
+    benchmark: "logs/benchmarks/submit/{experiment}/{detector}/{run}.manifest.tsv"
     shell:
-        "{GRUTRACK} submit --tracks {input.tracks} --dataroot {params.dataroot:q} --version {params.version} "
-        "--split {params.split} --out {output.submission} --manifest {output.manifest} {params.provenance} "
+        "{GRUTRACK} manifest {params.data} --submission {input.submission} --out {output} {params.provenance} "
         "--code-version {params.track_code} > {log} 2>&1 " + ON_FAIL
-
-
-rule submit_av2:
-    input: unpack(_submit_inputs)
-    output:
-        submission="submissions/{experiment}/{detector}/{run}.pkl",
-        manifest="submissions/{experiment}/{detector}/{run}.manifest.json",
-    wildcard_constraints:
-        experiment=AV2_EXPERIMENTS,
-    params:
-        dataroot=lambda w: dataroot(experiment(w)["dataset"]),
-        split=lambda w: experiment(w)["split"],
-        rate=lambda w: config["datasets"][experiment(w)["dataset"]]["rate_hz"],
-        provenance=_provenance_args,
-        track_code=code_version("track_av2"),
-        code=code_version("submit"),
-    log: "logs/submit/{experiment}/{detector}/{run}.log"
-    benchmark: "logs/benchmarks/submit/{experiment}/{detector}/{run}.tsv"
-    shell:
-        "{GRUTRACK} submit --dataset av2 --tracks {input.tracks} --dataroot {params.dataroot:q} "
-        "--split {params.split} --rate {params.rate} --out {output.submission} --manifest {output.manifest} "
-        "{params.provenance} --code-version {params.track_code} > {log} 2>&1 " + ON_FAIL
 
 
 rule leaderboard_zip:
