@@ -16,7 +16,7 @@ from pathlib import Path
 
 from grutrack.errors import ConfigError, DatasetError, InputFormatError
 from grutrack.io import read_json, write_json_atomic
-from grutrack.render.views import COUNT_KEYS, FrameView, build_views, scene_errors
+from grutrack.render.views import COUNT_KEYS, FrameView, build_views, frame_record, scene_errors
 
 
 def load_evaluation(dataroot: str, version: str, split: str, submission: str | Path):
@@ -79,15 +79,6 @@ def sum_counts(views: list[FrameView], thresholds: dict, gt_classes: set) -> dic
             tot["fp"] = tot["ids"] = None
         out[c] = tot
     return out
-
-
-def frame_record(v: FrameView, png: Path, out: Path) -> dict:
-    """The counts.json entry of one frame."""
-    return {"index": v.index, "frame": v.index + 1, "sample_token": v.sample_token, "timestamp": v.timestamp,
-            "png": str(png.relative_to(out)),
-            "ego": {"xy": [round(float(x), 4) for x in v.ego_xy], "yaw": round(v.ego_yaw, 6)},
-            "totals": v.totals(), "per_class": v.counts,
-            "false_positives": v.false_positives, "missed": v.missed, "id_switches": v.id_switches}
 
 
 def render_nuscenes(dataroot: str, version: str, split: str, submission: str, out: str | Path,

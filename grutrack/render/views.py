@@ -9,6 +9,7 @@ into the ego frame.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -58,6 +59,7 @@ class FrameView:
     false_positives: list = field(default_factory=list)
     missed: list = field(default_factory=list)
     id_switches: list = field(default_factory=list)
+    caption: str = ""           # what names the frame under the title (default: its sample token)
 
     def totals(self) -> dict:
         """TP, FP, FN and IDS of the frame summed over classes."""
@@ -78,6 +80,18 @@ def _sub_boxes(records: list) -> tuple[np.ndarray, list, list, np.ndarray]:
     yaw = yaw_from_quaternion(np.array([b["rotation"] for b in records], dtype=np.float64))
     return (np.column_stack([xy, wl, yaw]), [b["tracking_name"] for b in records],
             [b["tracking_id"] for b in records], np.array([b["tracking_score"] for b in records], dtype=np.float64))
+
+
+def update_trails(history: dict, index: int, ids: list, boxes: np.ndarray, trail_frames: int) -> list[np.ndarray]:
+    """Add frame ``index``'s track centres to ``history`` ({track id: [(frame, x, y), ...]}) and return, per
+    track of ``ids`` (boxes ``(N, >=2)``, global metres), its ``(K, 2)`` centres of the last ``trail_frames``
+    frames, oldest first."""
+    trails = []
+    for k, tid in enumerate(ids):
+        h = history.setdefault(tid, [])
+        h.append((index, boxes[k, 0], boxes[k, 1]))
+        trails.append(np.array([(x, y) for j, x, y in h if j > index - trail_frames]))
+    return trails
 
 
 def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detections: dict | None = None,
@@ -165,12 +179,7 @@ def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detectio
                 false_positives.append({"track_id": decisions.p_id[p], "class": cls,
                                         "xy": [round(float(v), 3) for v in decisions.p_xy[p]]})
 
-        trails = []
-        for k, tid in enumerate(tr_ids):
-            h = history.setdefault(tid, [])
-            h.append((i, tr_boxes[k, 0], tr_boxes[k, 1]))
-            pts = np.array([(x, y) for j, x, y in h if j > i - trail_frames])
-            trails.append(pts)
+        trails = update_trails(history, i, tr_ids, tr_boxes, trail_frames)
 
         det = detections.get(token) if detections is not None else None
         det_boxes = det.boxes[:, [0, 1, 3, 4, 6]] if det is not None and len(det) else np.zeros((0, 5))
@@ -196,3 +205,12 @@ def scene_errors(decisions: MatchDecisions) -> dict:
     for f in range(len(tokens)):
         out[tokens[f]] = out.get(tokens[f], 0) + int(per_frame[f])
     return out
+
+
+def frame_record(v: FrameView, png: Path, out: Path) -> dict:
+    """The counts.json entry of one frame."""
+    return {"index": v.index, "frame": v.index + 1, "sample_token": v.sample_token, "timestamp": v.timestamp,
+            "png": str(png.relative_to(out)),
+            "ego": {"xy": [round(float(x), 4) for x in v.ego_xy], "yaw": round(v.ego_yaw, 6)},
+            "totals": v.totals(), "per_class": v.counts,
+            "false_positives": v.false_positives, "missed": v.missed, "id_switches": v.id_switches}
