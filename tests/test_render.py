@@ -161,7 +161,7 @@ def test_bad_inputs_exit_2_with_one_line(case, rendered, nusc_root, tmp_path, ca
     args = ["render", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
             "--submission", str(out.parent / "ekf.json"), "--out", str(tmp_path / "r")]
     expect = {"unknown_scene": "--scene scene-9999", "other_split": "from other splits",
-              "missing_file": "does not exist", "worst_zero": "--worst", "av2": "--dataset av2",
+              "missing_file": "does not exist", "worst_zero": "--worst", "av2": "has no split folder 'mini_val'",
               "detections_other_split": "sample tokens of the split are missing"}[case]
     if case == "unknown_scene":
         args += ["--scene", "scene-9999"]

@@ -258,6 +258,13 @@ def render_av2(root: str | Path, split: str, submission: str | Path, out: str | 
     from grutrack.render.draw import BevCanvas, TRAIL_FRAMES, render_scene
 
     t_start = time.perf_counter()
+    if scene_names:         # before the evaluation: a wrong name fails at once
+        from grutrack.data.av2 import list_logs
+
+        logs = list_logs(root, split)
+        unknown = [n for n in scene_names if n not in logs]
+        if unknown:
+            raise DatasetError(f"--scene {unknown[0]}: not a log of split '{split}' (logs: {', '.join(logs)})")
     ev = load_evaluation(root, split, submission, rate_hz=rate_hz, max_range_m=max_range_m, workers=workers)
     chosen = select_scenes(ev, scene_names, worst)
     det = None
