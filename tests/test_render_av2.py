@@ -263,3 +263,50 @@ def test_bad_inputs_exit_2_with_one_line(case, rendered, av2_root, tmp_path, cap
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("grutrack render: error:") and expect in err[0], err
     assert not (tmp_path / "r" / "counts.json").exists()
+
+
+def test_av2_report_embeds_key_frames_of_the_worst_log(rendered, tmp_path):
+    """An av2_val report given the run's render folder shows a strip of the worst log's id-switch frames."""
+    import re
+
+    from PIL import Image
+
+    from grutrack.render.draw import LAYOUT, key_frames
+
+    out, metrics, _, _ = rendered
+    doc = _doc(out)
+    worst = max(doc["scenes"], key=lambda s: s["errors"])
+    shown = [f["frame"] for f in key_frames(worst["frames"], 4)]
+    assert {f["frame"] for f in worst["frames"] if f["id_switches"]} <= set(shown)
+    metrics_path = tmp_path / "ekf_metrics.json"
+    metrics_path.write_text(json.dumps(metrics))
+    paper = Path(__file__).resolve().parents[1] / "workflow/config/paper.yaml"
+    md = tmp_path / "rep" / "r.md"
+    assert main(["report", "av2_val", "--out", str(md), "--paper", str(paper), "--experiment",
+                 "sim:av2:val:simulated", "--run", f"ekf={metrics_path}", "--row", "I:Ours=ekf",
+                 "--render", f"ekf={out / 'counts.json'}"]) == 0
+    text = md.read_text()
+    assert "## Worst log per run (key frames)" in text and "CLEAR matching" in text
+    assert f"**ekf**: {worst['name']}, frames {', '.join(map(str, shown))}" in text
+    link = re.search(rf"!\[ekf: key frames of {worst['name']}\]\(([^)]+)\)", text).group(1)
+    with Image.open(md.parent / link) as im:
+        side = int(LAYOUT.panel * 0.45)
+        assert im.size == (4 * side + 3 * 6, side + 24)
+        strip = np.asarray(im.convert("RGB")).astype(int)
+    assert _near(strip, IDS_RGB, 60).sum() > 100          # the id-switch rings are in the strip
+
+
+def test_nusc_test_report_says_it_has_no_key_frames(tmp_path, capsys):
+    """nuScenes test has no ground truth: its report states that it has no key frames, and refuses --render."""
+    paper = Path(__file__).resolve().parents[1] / "workflow/config/paper.yaml"
+    md = tmp_path / "t.md"
+    assert main(["report", "nusc_test", "--out", str(md), "--paper", str(paper)]) == 0
+    text = md.read_text()
+    assert "## Worst scene per run (key frames)\n\nNone: nuScenes test has no public ground truth" in text
+    (tmp_path / "counts.json").write_text("{}")
+    capsys.readouterr()
+    assert main(["report", "nusc_test", "--out", str(tmp_path / "u.md"), "--paper", str(paper),
+                 "--render", f"grukf={tmp_path / 'counts.json'}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--render" in err[0] and "no public ground truth" in err[0]
+    assert not (tmp_path / "u.md").exists()

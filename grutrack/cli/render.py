@@ -33,6 +33,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g = p.add_argument_group("av2 only (as grutrack evaluate --dataset av2)")
     g.add_argument("--rate", type=float, default=2.0, help="evaluated frame rate of the labels (default 2 Hz)")
     g.add_argument("--max-range", type=int, default=50, help="evaluation range around the ego, metres (default 50)")
+    g.add_argument("--workers", type=int, default=1,
+                   help="worker processes of the evaluator's threshold tuning (default 1; same counts)")
     p.set_defaults(func=run)
 
 
@@ -43,13 +45,15 @@ def run(args: argparse.Namespace) -> int:
     if args.dataset == "av2":
         if args.max_range < 1:
             raise ConfigError(f"--max-range must be a positive number of metres, got {args.max_range}")
+        if args.workers < 1:
+            raise ConfigError("--workers must be at least 1")
         from grutrack.render.av2 import render_av2
         from grutrack.threads import apply_thread_policy
 
         apply_thread_policy(torch_too=False)     # the evaluation's sums as `grutrack evaluate` makes them
         doc = render_av2(args.dataroot, args.split, args.submission, args.out, scene_names=args.scene,
                          worst=args.worst, detections=args.detections, animation=not args.no_animation,
-                         rate_hz=args.rate, max_range_m=args.max_range)
+                         rate_hz=args.rate, max_range_m=args.max_range, workers=args.workers)
     else:
         if not args.version:
             raise ConfigError("--version is required with --dataset nuscenes (e.g. v1.0-trainval, v1.0-mini)")

@@ -41,6 +41,8 @@ STAGE_SOURCES: dict[str, tuple[str, ...]] = {
                      "cli/common.py"),
     "render": ("render", "evaluation/fast_amota.py", "evaluation/fast_loading.py", "data/nuscenes.py",
                "data/nusc_detections.py", "cli/render.py", "cli/common.py"),
+    "render_av2": ("render", "evaluation/av2_eval.py", "evaluation/clear_frames.py", "data/av2.py",
+                   "data/lt3d_detections.py", "export/av2_tracks.py", "threads.py", "cli/render.py", "cli/common.py"),
     "report": ("report", "render", "cli/report.py"),
 }
 

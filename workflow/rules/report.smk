@@ -29,9 +29,9 @@ def _report_trainings(rep):
 
 
 def _report_renders(rep):
-    """(run, render folder) of a report that shows each run's worst scene (nuScenes experiments with ground
-    truth)."""
-    if rep["kind"] not in ("demo", "nusc_val"):
+    """(run, render folder) of a report that shows each run's worst scene (experiments with ground truth: not
+    nuScenes test)."""
+    if rep["kind"] not in ("demo", "nusc_val", "av2_val"):
         return []
     exp_name = rep["experiment"]
     det = config["experiments"][exp_name]["detectors"][0]
@@ -97,6 +97,26 @@ rule render:
     shell:
         "{GRUTRACK} render --dataroot {params.dataroot:q} --version {params.version} --split {params.split} "
         "--submission {input.submission} --worst 1 --no-animation --out {output} > {log} 2>&1 " + ON_FAIL
+
+
+rule render_av2:
+    """Bird's-eye frames of an AV2 run's worst log with the official evaluator's CLEAR decisions."""
+    input: unpack(_eval_inputs)
+    output: directory("reports/renders/{experiment}/{detector}/{run}")
+    wildcard_constraints:
+        experiment=AV2_EXPERIMENTS,
+    params:
+        dataroot=lambda w: dataroot(experiment(w)["dataset"]),
+        split=lambda w: experiment(w)["split"],
+        rate=lambda w: config["datasets"][experiment(w)["dataset"]]["rate_hz"],
+        code=code_version("render_av2"),
+    threads: 2
+    log: "logs/render/{experiment}/{detector}/{run}.log"
+    benchmark: "logs/benchmarks/render/{experiment}/{detector}/{run}.tsv"
+    shell:
+        "{GRUTRACK} render --dataset av2 --dataroot {params.dataroot:q} --split {params.split} --rate {params.rate} "
+        "--workers {threads} --submission {input.submission} --worst 1 --no-animation --out {output} > {log} 2>&1 "
+        + ON_FAIL
 
 
 rule report:
