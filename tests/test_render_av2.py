@@ -310,3 +310,88 @@ def test_nusc_test_report_says_it_has_no_key_frames(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--render" in err[0] and "no public ground truth" in err[0]
     assert not (tmp_path / "u.md").exists()
+
+
+# ------------------------------------------------------------------------------------------------------------
+# --rerun (rerun-sdk is an optional extra: the recording test skips when it is not installed; the rest runs)
+# ------------------------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def views_b(rendered, av2_root):
+    """The frames of log B with the official decisions, as render draws them (with the detections)."""
+    from grutrack.data.lt3d_detections import load_detections
+    from grutrack.render.av2 import build_views, load_evaluation
+
+    _, _, sub, dets = rendered
+    ev = load_evaluation(av2_root, "val", sub)
+    det, _ = load_detections(dets, av2_root, "val", ev.scenes, av2.vocabulary(all_categories=True))
+    return build_views(ev, next(s for s in ev.scenes if s.name == LOG_B), det)
+
+
+def test_rerun_layers_carry_the_frame_in_3d(rendered, views_b):
+    """The 3D layers of a frame: every box of the frame with its height from the pickle / annotations, FP tracks
+    in the FP colour, id switches where the switched ground truth is, relative to the first ego position."""
+    from grutrack.export.av2_tracks import read_tracks_pickle
+    from grutrack.render.rerun_log import frame_layers, scene_origin
+
+    _, _, sub, _ = rendered
+    origin = scene_origin(views_b)
+    first = frame_layers(views_b[0], origin)
+    assert np.allclose(first["world/ego"]["centers"][0, :2], 0) and abs(first["world/ego"]["centers"][0, 2] - 0.85) < 1e-4
+    v = next(v for v in views_b if v.id_switches and v.false_positives)
+    lay = frame_layers(v, origin)
+    frame = next(f for f in read_tracks_pickle(sub)[LOG_B] if f["timestamp_ns"] == int(v.sample_token.split(":")[1]))
+    tr = lay["world/tracks"]
+    assert len(tr["centers"]) == len(frame["track_id"]) == len(v.tr_ids)
+    np.testing.assert_allclose(tr["centers"] + origin, frame["translation_m"], atol=1e-3)
+    np.testing.assert_allclose(tr["half_sizes"] * 2, frame["size"], atol=1e-5)   # [l, w, h]
+    fp = {f["track_id"] for f in v.false_positives}
+    for tid, col, label in zip(v.tr_ids, tr["colors"], tr["labels"]):
+        assert (tuple(col[:3]) == tuple(FP_RGB)) == (tid in fp) and label.endswith(" FP") == (tid in fp)
+    assert len(lay["world/ground_truth"]["centers"]) == len(v.gt_ids)
+    assert len(lay["world/detections"]["centers"]) == len(v.det_boxes) > 0
+    sw = lay["world/id_switches"]
+    assert len(sw["positions"]) == len(v.id_switches)
+    k = v.gt_ids.index(v.id_switches[0]["instance"])
+    np.testing.assert_allclose(sw["positions"][0], lay["world/ground_truth"]["centers"][k], atol=1e-2)
+    assert "| REGULAR_VEHICLE |" in lay["counts"]["text"]
+
+
+def test_rerun_recording_written(rendered, av2_root, tmp_path):
+    """--rerun writes <log>.rrd: 32 frames on the 'frame' timeline, each with the frame's tracks in their colours."""
+    pytest.importorskip("rerun", reason="rerun-sdk is optional (pip install grutrack[rerun])")
+    import rerun.dataframe as rdf
+
+    import warnings
+
+    from rerun.error_utils import RerunWarning
+
+    out, _, sub, _ = rendered
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert main(["render", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--submission",
+                     str(sub), "--scene", LOG_A, "--no-animation", "--rerun", "--out", str(tmp_path / "r")]) == 0
+    assert not [w for w in caught if issubclass(w.category, RerunWarning)]    # rerun drops what it warns about
+    doc = _doc(tmp_path / "r")
+    assert doc["scenes"][0]["rerun"] == f"{LOG_A}.rrd"
+    rec = rdf.load_recording(tmp_path / "r" / f"{LOG_A}.rrd")
+    table = rec.view(index="frame", contents="/world/tracks").select().read_all()
+    assert table.column("frame").to_pylist() == list(range(1, 33))
+    colors = table.column("/world/tracks:Color").to_pylist()
+    fp_packed = (int(FP_RGB[0]) << 24) | (int(FP_RGB[1]) << 16) | (int(FP_RGB[2]) << 8) | 0xFF
+    ref = _doc(out)["scenes"][0]["frames"]
+    for f, c in zip(ref, colors):
+        assert sum(x == fp_packed for x in (c or [])) == len(f["false_positives"]), f["frame"]
+
+
+def test_rerun_without_the_package_exits_2(rendered, av2_root, tmp_path, monkeypatch, capsys):
+    import sys
+
+    _, _, sub, _ = rendered
+    monkeypatch.setitem(sys.modules, "rerun", None)     # import rerun raises ImportError
+    capsys.readouterr()
+    assert main(["render", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--submission",
+                 str(sub), "--worst", "1", "--rerun", "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pip install grutrack[rerun]" in err[0], err
+    assert not (tmp_path / "r").exists()

@@ -29,6 +29,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     which.add_argument("--worst", type=int, metavar="K",
                        help="the K scenes with the most id switches + false positives + misses")
     p.add_argument("--no-animation", action="store_true", help="PNG frames only, no GIF")
+    p.add_argument("--rerun", action="store_true",
+                   help="also write DIR/<scene>.rrd, a Rerun recording for interactive 3D viewing "
+                        "(optional: pip install grutrack[rerun])")
     p.add_argument("--out", required=True, help="output folder")
     g = p.add_argument_group("av2 only (as grutrack evaluate --dataset av2)")
     g.add_argument("--rate", type=float, default=2.0, help="evaluated frame rate of the labels (default 2 Hz)")
@@ -42,6 +45,10 @@ def run(args: argparse.Namespace) -> int:
     """Render and print where the files went."""
     if args.worst is not None and args.worst < 1:
         raise ConfigError("--worst must be at least 1")
+    if args.rerun:          # before any work: the optional package may be missing
+        from grutrack.render.rerun_log import import_rerun
+
+        import_rerun()
     if args.dataset == "av2":
         if args.max_range < 1:
             raise ConfigError(f"--max-range must be a positive number of metres, got {args.max_range}")
@@ -53,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
         apply_thread_policy(torch_too=False)     # the evaluation's sums as `grutrack evaluate` makes them
         doc = render_av2(args.dataroot, args.split, args.submission, args.out, scene_names=args.scene,
                          worst=args.worst, detections=args.detections, animation=not args.no_animation,
-                         rate_hz=args.rate, max_range_m=args.max_range, workers=args.workers)
+                         rerun=args.rerun, rate_hz=args.rate, max_range_m=args.max_range, workers=args.workers)
     else:
         if not args.version:
             raise ConfigError("--version is required with --dataset nuscenes (e.g. v1.0-trainval, v1.0-mini)")
@@ -61,9 +68,9 @@ def run(args: argparse.Namespace) -> int:
 
         doc = render_nuscenes(args.dataroot, args.version, args.split, args.submission, args.out,
                               scene_names=args.scene, worst=args.worst, detections=args.detections,
-                              animation=not args.no_animation)
+                              animation=not args.no_animation, rerun=args.rerun)
     for s in doc["scenes"]:
         print(f"{s['name']}: {len(s['frames'])} frames, {s['errors']} IDS + FP + FN"
-              + (f", {s['animation']}" if s["animation"] else ""))
+              + (f", {s['animation']}" if s["animation"] else "") + (f", {s['rerun']}" if s.get("rerun") else ""))
     print(f"wrote {args.out}/counts.json ({doc['seconds']:.1f} s)")
     return 0

@@ -138,6 +138,12 @@ def _boxes(frame: dict) -> np.ndarray:
     return np.column_stack([t[:, :2], size[:, 1], size[:, 0], np.asarray(frame["yaw"], dtype=np.float64)])
 
 
+def _zh(frame: dict) -> np.ndarray:
+    """A label / track frame dict -> ``(N, 2) [z of the centre, height]`` metres."""
+    t = np.asarray(frame["translation_m"], dtype=np.float64).reshape(-1, 3)
+    return np.column_stack([t[:, 2], np.asarray(frame["size"], dtype=np.float64).reshape(-1, 3)[:, 2]])
+
+
 def _plain(x):
     """A track id as JSON holds it (numpy scalars -> int / str)."""
     return x.item() if isinstance(x, np.generic) else x
@@ -246,13 +252,15 @@ def build_views(ev: Av2Evaluation, scene, detections: dict | None = None, trail_
             gt_boxes=gt_boxes, gt_state=gt_state, gt_cls=gt_cls, gt_ids=gt_ids,
             tr_boxes=tr_boxes, tr_state=tr_state, tr_cls=tr_cls, tr_ids=tr_ids, det_boxes=det_boxes,
             trails=trails, counts=counts, false_positives=false_positives, missed=missed, id_switches=switches,
-            caption=f"ts {ts_ns}\nlog {log}"))
+            caption=f"ts {ts_ns}\nlog {log}", gt_zh=_zh(lab_all), tr_zh=_zh(prd_all),
+            det_zh=det.boxes[:, [2, 5]] if det is not None and len(det) else np.zeros((0, 2)),
+            ego_z=float(frame.ego_translation[2])))
     return views
 
 
 def render_av2(root: str | Path, split: str, submission: str | Path, out: str | Path,
                scene_names: list[str] | None = None, worst: int | None = None, detections: str | None = None,
-               animation: bool = True, rate_hz: float | None = 2.0, max_range_m: int = 50,
+               animation: bool = True, rerun: bool = False, rate_hz: float | None = 2.0, max_range_m: int = 50,
                workers: int = 1) -> dict:
     """Render the chosen logs into ``out`` and write ``out/counts.json``; returns that document."""
     from grutrack.render.draw import BevCanvas, TRAIL_FRAMES, render_scene
@@ -283,6 +291,7 @@ def render_av2(root: str | Path, split: str, submission: str | Path, out: str | 
         pngs, gif = render_scene(views, out, ev.thresholds, canvas, animation=animation)
         scene_docs.append({"name": scene.name, "token": scene.token, "errors": errors.get(scene.name, 0),
                            "animation": str(gif.relative_to(out)) if gif else None,
+                           "rerun": _recording(out, views) if rerun else None,
                            "frames": [frame_record(v, p, out) for v, p in zip(views, pngs)]})
     doc = {"dataset": "av2", "version": "sensor", "split": split, "submission": str(submission),
            "detections": str(detections) if detections else None, "thresholds": ev.thresholds,
@@ -291,3 +300,12 @@ def render_av2(root: str | Path, split: str, submission: str | Path, out: str | 
            "seconds": round(time.perf_counter() - t_start, 3)}
     write_json_atomic(out / "counts.json", doc, indent=1)
     return doc
+
+
+def _recording(out: Path, views: list) -> str:
+    """Write ``out/<scene>.rrd`` (:mod:`grutrack.render.rerun_log`); returns its path relative to ``out``."""
+    from grutrack.render.rerun_log import write_recording
+
+    path = out / f"{views[0].scene}.rrd"
+    write_recording(path, views)
+    return str(path.relative_to(out))

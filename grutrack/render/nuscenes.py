@@ -83,7 +83,7 @@ def sum_counts(views: list[FrameView], thresholds: dict, gt_classes: set) -> dic
 
 def render_nuscenes(dataroot: str, version: str, split: str, submission: str, out: str | Path,
                     scene_names: list[str] | None = None, worst: int | None = None,
-                    detections: str | None = None, animation: bool = True) -> dict:
+                    detections: str | None = None, animation: bool = True, rerun: bool = False) -> dict:
     """Render the chosen scenes into ``out`` and write ``out/counts.json``; returns that document."""
     from grutrack.render.draw import BevCanvas, TRAIL_FRAMES, render_scene
 
@@ -106,6 +106,7 @@ def render_nuscenes(dataroot: str, version: str, split: str, submission: str, ou
         all_views += views
         scene_docs.append({"name": scene.name, "token": scene.token, "errors": errors.get(scene.token, 0),
                            "animation": str(gif.relative_to(out)) if gif else None,
+                           "rerun": _recording(out, views) if rerun else None,
                            "frames": [frame_record(v, p, out) for v, p in zip(views, pngs)]})
     gt_classes = {decisions.class_names[c] for c in set(decisions.g_cls.tolist())}
     doc = {"dataset": "nuscenes", "version": version, "split": split, "submission": str(submission),
@@ -116,3 +117,12 @@ def render_nuscenes(dataroot: str, version: str, split: str, submission: str, ou
            "seconds": round(time.perf_counter() - t_start, 3)}
     write_json_atomic(out / "counts.json", doc, indent=1)
     return doc
+
+
+def _recording(out: Path, views: list) -> str:
+    """Write ``out/<scene>.rrd`` (:mod:`grutrack.render.rerun_log`); returns its path relative to ``out``."""
+    from grutrack.render.rerun_log import write_recording
+
+    path = out / f"{views[0].scene}.rrd"
+    write_recording(path, views)
+    return str(path.relative_to(out))

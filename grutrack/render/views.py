@@ -60,6 +60,12 @@ class FrameView:
     missed: list = field(default_factory=list)
     id_switches: list = field(default_factory=list)
     caption: str = ""           # what names the frame under the title (default: its sample token)
+    #: heights for the 3D view (:mod:`grutrack.render.rerun_log`): ``(N, 2) [z of the centre, height]`` metres
+    #: of gt / tracks / detections, and the ego's z; None: not known (drawn on the ground, 1.5 m high)
+    gt_zh: np.ndarray | None = None
+    tr_zh: np.ndarray | None = None
+    det_zh: np.ndarray | None = None
+    ego_z: float = 0.0
 
     def totals(self) -> dict:
         """TP, FP, FN and IDS of the frame summed over classes."""
@@ -92,6 +98,11 @@ def update_trails(history: dict, index: int, ids: list, boxes: np.ndarray, trail
         h.append((index, boxes[k, 0], boxes[k, 1]))
         trails.append(np.array([(x, y) for j, x, y in h if j > index - trail_frames]))
     return trails
+
+
+def _sub_zh(records: list) -> np.ndarray:
+    """Submission box dicts -> ``(N, 2) [z of the centre, height]`` metres."""
+    return np.array([[b["translation"][2], b["size"][2]] for b in records], dtype=np.float64).reshape(-1, 2)
 
 
 def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detections: dict | None = None,
@@ -157,17 +168,19 @@ def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detectio
         # Tracks: the submitted boxes plus the evaluator's interpolated ones (track gaps).
         token = frame.token
         tr_boxes, tr_cls, tr_ids, _ = _sub_boxes(results.get(token, []))
+        tr_zh = _sub_zh(results.get(token, []))
         p_eval = {decisions.p_id[p]: p for p in range(p0, p1)}
         tr_state = np.full(len(tr_ids), TR_IGNORED, dtype=np.int64)
         for k, tid in enumerate(tr_ids):
             p = p_eval.pop(tid, None)
             if p is not None:
                 tr_state[k] = _TR_STATE[int(decisions.p_status[p])]
-            last_box[tid] = tr_boxes[k]
+            last_box[tid] = np.r_[tr_boxes[k], tr_zh[k]]
         extra = [(tid, p) for tid, p in p_eval.items() if tid in last_box]   # interpolated by the evaluator
         if extra:
             add = np.array([np.r_[decisions.p_xy[p], last_box[tid][2:]] for tid, p in extra])
-            tr_boxes = np.vstack([tr_boxes, add])
+            tr_boxes = np.vstack([tr_boxes, add[:, :5]])
+            tr_zh = np.vstack([tr_zh, add[:, 5:]])
             tr_ids = tr_ids + [tid for tid, _ in extra]
             tr_cls = tr_cls + [classes[int(decisions.p_cls[p])] for _, p in extra]
             tr_state = np.r_[tr_state, [_TR_STATE[int(decisions.p_status[p])] for _, p in extra]]
@@ -190,7 +203,10 @@ def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detectio
             gt_boxes=np.asarray(gt_boxes, dtype=np.float64).reshape(-1, 5), gt_state=gt_state, gt_cls=gt_cls,
             gt_ids=gt_ids, tr_boxes=np.asarray(tr_boxes, dtype=np.float64).reshape(-1, 5), tr_state=tr_state,
             tr_cls=tr_cls, tr_ids=tr_ids, det_boxes=det_boxes, trails=trails, counts=counts,
-            false_positives=false_positives, missed=missed, id_switches=switches))
+            false_positives=false_positives, missed=missed, id_switches=switches,
+            gt_zh=gt.boxes[:, [2, 5]] if gt is not None else np.zeros((0, 2)), tr_zh=tr_zh,
+            det_zh=det.boxes[:, [2, 5]] if det is not None and len(det) else np.zeros((0, 2)),
+            ego_z=float(frame.ego_translation[2])))
     return views
 
 
