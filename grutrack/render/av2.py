@@ -252,7 +252,7 @@ def build_views(ev: Av2Evaluation, scene, detections: dict | None = None, trail_
             gt_boxes=gt_boxes, gt_state=gt_state, gt_cls=gt_cls, gt_ids=gt_ids,
             tr_boxes=tr_boxes, tr_state=tr_state, tr_cls=tr_cls, tr_ids=tr_ids, det_boxes=det_boxes,
             trails=trails, counts=counts, false_positives=false_positives, missed=missed, id_switches=switches,
-            caption=f"ts {ts_ns}\nlog {log}", gt_zh=_zh(lab_all), tr_zh=_zh(prd_all),
+            caption=f"ts {ts_ns}\n{log}", gt_zh=_zh(lab_all), tr_zh=_zh(prd_all),
             det_zh=det.boxes[:, [2, 5]] if det is not None and len(det) else np.zeros((0, 2)),
             ego_z=float(frame.ego_translation[2])))
     return views
