@@ -7,9 +7,11 @@ to a known pixel (:meth:`Layout.pixel`). matplotlib and Pillow are imported insi
 
 Drawing code (one colour per meaning; track colours avoid them):
 ground truth: thin dark outline; missed ground truth (FN): thick orange dashed outline; ground truth the
-evaluator drops (outside the class range, no points): light grey. Tracks: filled in their id's colour
-with a trail of their last centres and a heading mark; false-positive tracks: filled red; tracks that are not
-scored (below their class's best-MOTA threshold, class without a threshold, outside the range): grey outline.
+evaluator drops (nuScenes: outside the class range, no points; AV2: beyond the range, off the drivable area):
+light grey. Tracks: filled in their id's colour with a trail of their last centres and a heading mark;
+false-positive tracks: filled red; tracks that are not scored (nuScenes: below their class's best-MOTA threshold,
+class without a threshold, outside the range; AV2: below the tuned threshold, beyond the range, off the drivable
+area): grey outline.
 Id switch: magenta ring on the ground truth, labelled with the old and new track. Raw detections: dotted
 dark outline over the tracks.
 """

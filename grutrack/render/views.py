@@ -1,9 +1,10 @@
 """What one rendered frame shows: ground truth, tracks and detections joined with the evaluator's decisions.
 
-The decisions come from :func:`grutrack.evaluation.fast_amota.match_decisions` (the fast exact evaluator's own
-matching at each class's best-MOTA threshold), so the counts of a frame summed over frames and scenes are the
-metrics JSON's TP / FP / FN / IDS. Boxes keep the global frame here; :mod:`grutrack.render.draw` moves them
-into the ego frame.
+:class:`FrameView` is the drawn frame of either dataset. For nuScenes, :func:`build_views` takes the decisions
+from :func:`grutrack.evaluation.fast_amota.match_decisions` (the fast exact evaluator's own matching at each
+class's best-MOTA threshold), so the counts of a frame summed over frames and scenes are the metrics JSON's
+TP / FP / FN / IDS; AV2 frames are built by :mod:`grutrack.render.av2`. Boxes keep the global frame here;
+:mod:`grutrack.render.draw` moves them into the ego frame.
 """
 
 from __future__ import annotations
