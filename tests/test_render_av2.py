@@ -395,3 +395,16 @@ def test_rerun_without_the_package_exits_2(rendered, av2_root, tmp_path, monkeyp
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "pip install grutrack[rerun]" in err[0], err
     assert not (tmp_path / "r").exists()
+
+
+def test_relative_dataroot_evaluates_with_the_roi(rendered, av2_root, tmp_path, monkeypatch):
+    """A dataroot relative to the working directory reaches the drivable-area ROI (the official evaluation runs
+    in another folder): same counts as with the absolute path."""
+    _, metrics, sub, _ = rendered
+    monkeypatch.chdir(av2_root.parent)
+    assert main(["evaluate", "--dataset", "av2", "--dataroot", av2_root.name, "--split", "val", "--submission",
+                 str(sub), "--out", str(tmp_path / "m.json")]) == 0
+    again = json.loads((tmp_path / "m.json").read_text())
+    assert again["settings"]["drivable_area_roi"] is True
+    assert {c: (m["tp"], m["fp"], m["fn"], m["ids"]) for c, m in again["per_class"].items()} == \
+        {c: (m["tp"], m["fp"], m["fn"], m["ids"]) for c, m in metrics["per_class"].items()}
