@@ -161,7 +161,7 @@ def test_bad_inputs_exit_2_with_one_line(case, rendered, nusc_root, tmp_path, ca
     args = ["render", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
             "--submission", str(out.parent / "ekf.json"), "--out", str(tmp_path / "r")]
     expect = {"unknown_scene": "--scene scene-9999", "other_split": "from other splits",
-              "missing_file": "does not exist", "worst_zero": "--worst", "av2": "--dataset av2",
+              "missing_file": "does not exist", "worst_zero": "--worst", "av2": "has no split folder 'mini_val'",
               "detections_other_split": "sample tokens of the split are missing"}[case]
     if case == "unknown_scene":
         args += ["--scene", "scene-9999"]
@@ -221,3 +221,24 @@ def test_report_rejects_a_folder_that_is_not_a_render(tmp_path, capsys):
                  "--run", f"ekf={m}", "--render", f"ekf={bad}"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "counts.json" in err[0]
+
+
+def test_rerun_layers_carry_the_submission_heights(rendered, nusc_root):
+    """The 3D layers (grutrack render --rerun) of a nuScenes frame: each submitted track box at its own centre
+    height and size, relative to the scene's first ego position."""
+    from grutrack.render.nuscenes import load_evaluation
+    from grutrack.render.rerun_log import frame_layers, scene_origin
+    from grutrack.render.views import build_views
+
+    out, _, sub = rendered
+    _, scenes, results, decisions = load_evaluation(nusc_root, "v1.0-mini", "mini_val", out.parent / "ekf.json")
+    views = build_views(scenes[0], results, decisions)
+    origin = scene_origin(views)
+    v = views[6]
+    lay = frame_layers(v, origin)["world/tracks"]
+    boxes = sub["results"][v.sample_token]
+    n = len(boxes)
+    assert n > 0 and len(lay["centers"]) == len(v.tr_ids) >= n
+    np.testing.assert_allclose(lay["centers"][:n] + origin, [b["translation"] for b in boxes], atol=1e-3)
+    np.testing.assert_allclose(lay["half_sizes"][:n] * 2, [[b["size"][1], b["size"][0], b["size"][2]] for b in boxes],
+                               atol=1e-5)

@@ -14,12 +14,16 @@ What the wrapper adds around the official function, without changing its numbers
   e.g. a log without tracks; an empty frame has nothing to filter);
 - the map / pose loader is remembered for the second of its two identical calls (labels, then tracks);
 - IDF1 (TrackEval's Identity metric) is computed on exactly the labels and score-filtered tracks that the
-  official final evaluation scores (the official function computes HOTA and CLEAR only).
+  official final evaluation scores (the official function computes HOTA and CLEAR only);
+- on request (``keep_inputs``), those labels and score-filtered tracks and the tuned per-class score thresholds
+  are handed back, so that the final CLEAR matching can be replayed frame by frame
+  (:mod:`grutrack.evaluation.clear_frames`).
 
 Metrics JSON (same top level as the nuScenes one): ``{"dataset": "av2", "version", "split", "evaluator",
 "submission", "overall", "per_class", ...}``. ``per_class[category]`` holds ``hota``, ``mota``, ``idf1`` (final
 evaluation at the tuned per-class score threshold), ``hota_tuned`` / ``hota_mean`` (the official function's
-tuned and recall-averaged values), ``gt_boxes`` and ``present``. ``overall`` holds the Table I average over the
+tuned and recall-averaged values), the final CLEAR counts ``tp`` / ``fp`` / ``fn`` / ``ids`` (CLR_TP, CLR_FP,
+CLR_FN, IDSW; ``idsw`` repeats ``ids``), ``gt_boxes`` and ``present``. ``overall`` holds the Table I average over the
 7 classes of Table I (absent classes count as 0, as the official evaluator scores them), never over 26, and the
 average over the Table I classes present in the ground truth.
 """
@@ -81,13 +85,17 @@ def has_maps(dataset_dir: Path, log_ids: list[str]) -> bool:
     return all(ok(lg) for lg in log_ids)
 
 
-def _identity_tap(original, idf1_out: dict):
-    """``evaluate_tracking`` that also computes TrackEval's Identity metric (IDF1) on the same inputs."""
+def _identity_tap(original, idf1_out: dict, inputs_out: dict | None = None):
+    """``evaluate_tracking`` that also computes TrackEval's Identity metric (IDF1) on the same inputs, and keeps
+    those inputs (labels, score-filtered tracks) in ``inputs_out`` when given."""
     import trackeval
 
     from av2.evaluation.tracking.eval import TrackEvalDataset
 
     def tapped(labels, track_predictions, classes, tracker_name, output_dir, iou_threshold=0.5):
+        if inputs_out is not None:
+            inputs_out.update(labels=labels, predictions=track_predictions, classes=list(classes),
+                              similarity_threshold=float(iou_threshold))
         res = original(labels, track_predictions, classes, tracker_name, output_dir, iou_threshold)
         cfg = {**TrackEvalDataset.get_default_dataset_config(), "GT_TRACKS": {tracker_name: labels},
                "PREDICTED_TRACKS": {tracker_name: track_predictions}, "SEQ_IDS_TO_EVAL": list(labels.keys()),
@@ -141,9 +149,19 @@ def _skip_empty_frames(filter_roi):
     return filtered
 
 
+def _threshold_tap(original, inputs_out: dict):
+    """The official score-threshold tuning, its per-class thresholds kept in ``inputs_out["thresholds"]``."""
+    def tapped(*args, **kwargs):
+        out = original(*args, **kwargs)
+        inputs_out["thresholds"] = {c: float(t) for c, t in out[0].items()}
+        return out
+
+    return tapped
+
+
 @contextlib.contextmanager
-def _official_settings(workers: int, quiet: bool, idf1_out: dict):
-    """Patches scoped to one call: worker count, TrackEval side outputs, the IDF1 tap."""
+def _official_settings(workers: int, quiet: bool, idf1_out: dict, inputs_out: dict | None = None):
+    """Patches scoped to one call: worker count, TrackEval side outputs, the IDF1 tap, the input taps."""
     import trackeval
 
     import av2.evaluation.tracking.eval as official
@@ -153,7 +171,10 @@ def _official_settings(workers: int, quiet: bool, idf1_out: dict):
     with contextlib.ExitStack() as stack:
         stack.enter_context(mock.patch.object(official, "mp", shim))
         stack.enter_context(mock.patch.object(official, "evaluate_tracking",
-                                              _identity_tap(official.evaluate_tracking, idf1_out)))
+                                              _identity_tap(official.evaluate_tracking, idf1_out, inputs_out)))
+        if inputs_out is not None:
+            stack.enter_context(mock.patch.object(official, "_tune_score_thresholds",
+                                                  _threshold_tap(official._tune_score_thresholds, inputs_out)))
         stack.enter_context(mock.patch.object(official, "load_mapped_avm_and_egoposes",
                                               _memoised(official.load_mapped_avm_and_egoposes)))
         stack.enter_context(mock.patch.object(official, "filter_drivable_area",
@@ -167,12 +188,16 @@ def _official_settings(workers: int, quiet: bool, idf1_out: dict):
 
 def evaluate_sequences(predictions: dict, labels: dict, dataset_dir: str | Path | None, *,
                        max_range_m: int = DEFAULT_RANGE_M, workers: int | None = None,
-                       trackeval_dir: str | Path | None = None, verbose: bool = False) -> dict:
+                       trackeval_dir: str | Path | None = None, verbose: bool = False,
+                       keep_inputs: bool = False) -> dict:
     """Run the official evaluation on in-memory sequences.
 
     predictions / labels: ``{log_id: [frame, ...]}`` (the pickle layout), same frames. dataset_dir: the split
     folder (enables the ROI filter) or None. Returns ``{"result": TrackEval's result tree, "tuned": {class: HOTA},
-    "mean": {class: HOTA}, "idf1": {class: IDF1}}``.
+    "mean": {class: HOTA}, "idf1": {class: IDF1}}``; with ``keep_inputs`` also ``"final"``: ``{"labels",
+    "predictions"}`` (what the final HOTA / CLEAR evaluation scored: range- and ROI-filtered labels, tracks also
+    filtered by the tuned thresholds), ``"classes"``, ``"similarity_threshold"`` and ``"thresholds"``
+    ({class: tuned score threshold}).
     """
     # the official function regroups the labels by first timestamp (a stable sort) and then pairs prediction and
     # label frames by position: give both in that order
@@ -180,19 +205,25 @@ def evaluate_sequences(predictions: dict, labels: dict, dataset_dir: str | Path 
     labels = copy.deepcopy({lg: labels[lg] for lg in order})
     predictions = copy.deepcopy({lg: predictions[lg] for lg in order})
     workers = max(1, int(workers or default_workers()))
+    if dataset_dir is not None:
+        dataset_dir = Path(dataset_dir).resolve()      # the evaluation runs in another working directory
     idf1: dict = {}
+    final: dict | None = {} if keep_inputs else None
     with tempfile.TemporaryDirectory(prefix="grutrack-av2-eval-") as tmp:
         out_root = Path(trackeval_dir).resolve() if trackeval_dir else Path(tmp)
         out_root.mkdir(parents=True, exist_ok=True)
         sink = contextlib.nullcontext() if verbose else contextlib.redirect_stdout(io.StringIO())
         errsink = contextlib.nullcontext() if verbose else contextlib.redirect_stderr(io.StringIO())
-        with _official_settings(workers, quiet=trackeval_dir is None, idf1_out=idf1) as official, \
+        with _official_settings(workers, quiet=trackeval_dir is None, idf1_out=idf1, inputs_out=final) as official, \
                 contextlib.chdir(out_root), sink, errsink:
             # the official function writes under ".".join(out.split("/")[:-1]), relative to the working dir
             res, tuned, mean = official.evaluate(predictions, labels, "HOTA", int(max_range_m),
                                                  None if dataset_dir is None else str(dataset_dir),
                                                  "trackeval/metrics.json")
-    return {"result": res, "tuned": tuned, "mean": mean, "idf1": idf1}
+    out = {"result": res, "tuned": tuned, "mean": mean, "idf1": idf1}
+    if final is not None:
+        out["final"] = final
+    return out
 
 
 def metrics_from_result(out: dict) -> tuple[dict, dict]:
@@ -206,6 +237,8 @@ def metrics_from_result(out: dict) -> tuple[dict, dict]:
                         "idf1": float(out["idf1"].get(c, 0.0)), "hota_tuned": float(out["tuned"][c]),
                         "hota_mean": float(out["mean"][c]), "detA": float(np.mean(m["HOTA"]["DetA"])),
                         "assA": float(np.mean(m["HOTA"]["AssA"])), "idsw": int(m["CLEAR"]["IDSW"]),
+                        "tp": int(m["CLEAR"]["CLR_TP"]), "fp": int(m["CLEAR"]["CLR_FP"]),
+                        "fn": int(m["CLEAR"]["CLR_FN"]), "ids": int(m["CLEAR"]["IDSW"]),
                         "gt_boxes": gt, "present": gt > 0}
     present = [c for c in TABLE_I_CLASSES if per_class[c]["present"]]
     overall = {f"{k}": float(np.mean([per_class[c][k] for c in TABLE_I_CLASSES])) for k in ("hota", "mota", "idf1")}
@@ -227,6 +260,25 @@ def metrics_document(out: dict, *, split: str, submission: str, rate_hz: float |
                   "average": "Table I: mean over the 7 Table I classes (absent classes score 0)"})
 
 
+def load_submission(root: str | Path, split: str, submission: str | Path, *, rate_hz: float | None = 2.0,
+                    roi: bool | None = None) -> tuple[list, dict, dict, Path, bool]:
+    """What the evaluation of a tracking pickle reads: (scenes with ground truth of all 26 categories, labels,
+    the checked submission, split folder, whether the drivable-area ROI applies).
+
+    ``roi`` None: on when every log has its map. Raises :class:`InputFormatError` when the pickle does not hold
+    exactly the label frames of the split at ``rate_hz``.
+    """
+    scenes = load_scenes(root, split, rate_hz=rate_hz, with_gt=True, all_categories=True)
+    labels = gt_sequences(scenes, vocabulary(all_categories=True))
+    preds = read_tracks_pickle(submission)
+    validate_sequences(preds, expected_frames(scenes), where=str(submission))
+    ddir = split_dir(root, split)
+    use_roi = has_maps(ddir, list(labels)) if roi is None else bool(roi)
+    if use_roi and not has_maps(ddir, list(labels)):
+        raise DatasetError(f"{ddir}: the drivable-area ROI needs every log's map/ folder")
+    return scenes, labels, preds, ddir, use_roi
+
+
 def evaluate_submission(root: str | Path, split: str, submission: str | Path, *, rate_hz: float | None = 2.0,
                         max_range_m: int = DEFAULT_RANGE_M, workers: int | None = None, roi: bool | None = None,
                         trackeval_dir: str | Path | None = None, verbose: bool = False) -> MetricsDocument:
@@ -236,14 +288,7 @@ def evaluate_submission(root: str | Path, split: str, submission: str | Path, *,
     exactly the label frames of the split at ``rate_hz``.
     """
     t0 = time.perf_counter()
-    scenes = load_scenes(root, split, rate_hz=rate_hz, with_gt=True, all_categories=True)
-    labels = gt_sequences(scenes, vocabulary(all_categories=True))
-    preds = read_tracks_pickle(submission)
-    validate_sequences(preds, expected_frames(scenes), where=str(submission))
-    ddir = split_dir(root, split)
-    use_roi = has_maps(ddir, list(labels)) if roi is None else bool(roi)
-    if use_roi and not has_maps(ddir, list(labels)):
-        raise DatasetError(f"{ddir}: the drivable-area ROI needs every log's map/ folder")
+    _, labels, preds, ddir, use_roi = load_submission(root, split, submission, rate_hz=rate_hz, roi=roi)
     workers = max(1, int(workers or default_workers()))
     out = evaluate_sequences(preds, labels, ddir if use_roi else None, max_range_m=max_range_m, workers=workers,
                              trackeval_dir=trackeval_dir, verbose=verbose)

@@ -45,8 +45,9 @@ STAGE_SOURCES: dict[str, tuple[str, ...]] = {
     "evaluate": ("evaluation/nuscenes_eval.py", "evaluation/fast_amota.py", "evaluation/fast_loading.py",
                  "evaluation/av2_eval.py", "evaluation/tracking_classes.py", "data/nuscenes.py", "data/av2.py",
                  "export/av2_tracks.py", "export/leaderboard.py", "cli/evaluate.py", *_DATASETS),
-    "render": ("render", "evaluation/fast_amota.py", "evaluation/fast_loading.py", "data/nuscenes.py",
-               "data/nusc_detections.py", "cli/render.py", "cli/common.py"),
+    "render": ("render", "evaluation/fast_amota.py", "evaluation/fast_loading.py", "evaluation/av2_eval.py",
+               "evaluation/clear_frames.py", *_READERS, "export/av2_tracks.py", "threads.py", "cli/render.py",
+               *_DATASETS),
     "report": ("report", "render", "documents.py", "cli/report.py"),
 }
 

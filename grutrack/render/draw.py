@@ -7,9 +7,11 @@ to a known pixel (:meth:`Layout.pixel`). matplotlib and Pillow are imported insi
 
 Drawing code (one colour per meaning; track colours avoid them):
 ground truth: thin dark outline; missed ground truth (FN): thick orange dashed outline; ground truth the
-evaluator drops (outside the class range, no points): light grey. Tracks: filled in their id's colour
-with a trail of their last centres and a heading mark; false-positive tracks: filled red; tracks that are not
-scored (below their class's best-MOTA threshold, class without a threshold, outside the range): grey outline.
+evaluator drops (nuScenes: outside the class range, no points; AV2: beyond the range, off the drivable area):
+light grey. Tracks: filled in their id's colour with a trail of their last centres and a heading mark;
+false-positive tracks: filled red; tracks that are not scored (nuScenes: below their class's best-MOTA threshold,
+class without a threshold, outside the range; AV2: below the tuned threshold, beyond the range, off the drivable
+area): grey outline.
 Id switch: magenta ring on the ground truth, labelled with the old and new track. Raw detections: dotted
 dark outline over the tracks.
 """
@@ -28,6 +30,12 @@ from grutrack.render.views import (GT_IGNORED, GT_MISS, TR_FP, TR_MATCH, TR_SWIT
 HALF_RANGE = 55.0                       # metres from the ego to each edge of the view
 RINGS = (10.0, 20.0, 30.0, 40.0, 50.0)  # range rings, metres
 TRAIL_FRAMES = 6
+CLASS_CHARS = 15                        # class names longer than this are cut in the text panel
+
+#: what the text panel says about the matching (nuScenes: the devkit's; AV2: TrackEval's CLEAR, see render.av2)
+NUSC_NOTES = ("- : class without an achieved", "    threshold (only misses count)",
+              "thr: track-score threshold of the", "     class (best MOTA); match within",
+              "     2 m centre distance")
 
 FP_COLOR = "#e6194b"        # false-positive track (fill and edge)
 MISS_COLOR = "#ff8c00"      # missed ground truth (FN)
@@ -98,7 +106,7 @@ def track_color(track_id) -> str:
 class BevCanvas:
     """One reusable figure: static parts (rings, ego, legend) drawn once, the frame's artists replaced per frame."""
 
-    def __init__(self, layout: Layout = LAYOUT, thresholds: dict | None = None):
+    def __init__(self, layout: Layout = LAYOUT, thresholds: dict | None = None, notes: tuple[str, ...] = NUSC_NOTES):
         import matplotlib
 
         matplotlib.use("Agg", force=False)
@@ -137,6 +145,7 @@ class BevCanvas:
         self.fig.legend(handles=handles, loc="lower left", bbox_to_anchor=(x0 - 0.005, 10 / L.height),
                         fontsize=8, frameon=False, handlelength=1.6)
         self.thresholds = thresholds or {}
+        self.notes = tuple(notes)
         self._dynamic: list = []
         # Static parts are drawn once; each frame restores them and draws only its own artists (blitting). The
         # frame's text panel is drawn with Pillow (matplotlib's text rendering would dominate the frame time).
@@ -218,7 +227,8 @@ class BevCanvas:
         im = Image.fromarray(np.asarray(self.canvas.buffer_rgba())[:, :, :3])
         d = ImageDraw.Draw(im)
         x = 2 * self.layout.margin + self.layout.panel
-        d.text((x, 12), f"{v.scene}   frame {v.index + 1}/{n_frames}", fill="black", font=self._font_title)
+        name = v.scene if len(v.scene) <= 16 else v.scene[:8] + "\u2026"     # an AV2 log id: in full below
+        d.text((x, 12), f"{name}   frame {v.index + 1}/{n_frames}", fill="black", font=self._font_title)
         d.multiline_text((x, 40), self._info(v, t0), fill="black", font=self._font, spacing=3)
         return np.asarray(im)
 
@@ -228,19 +238,18 @@ class BevCanvas:
 
     def _info(self, v: FrameView, t0: int) -> str:
         tot = v.totals()
-        lines = [f"t = {(v.timestamp - t0) / 1e6:5.1f} s   sample {v.sample_token[:8]}", "",
+        shown = [(c, k) for c, k in v.counts.items() if any(k[x] for x in k)]
+        w = max([11] + [min(len(c), CLASS_CHARS) + 1 for c, _ in shown])
+        lines = [f"t = {(v.timestamp - t0) / 1e6:5.1f} s   {v.caption or 'sample ' + v.sample_token[:8]}", "",
                  "this frame (evaluator's decisions)", f"  TP {tot['tp']:3d}   FP {tot['fp']:3d}",
                  f"  FN {tot['fn']:3d}   IDS {tot['ids']:2d}", "",
-                 f"{'class':<11}{'TP':>4}{'FP':>4}{'FN':>4}{'IDS':>4}  thr"]
-        for c, k in v.counts.items():
-            if not any(k[x] for x in k):
-                continue
+                 f"{'class':<{w}}{'TP':>4}{'FP':>4}{'FN':>4}{'IDS':>4}  thr"]
+        for c, k in shown:
             thr = self.thresholds.get(c)
-            lines.append(f"{c:<11}{k['tp']:>4}{_n(k['fp']):>4}{k['fn']:>4}{_n(k['ids']):>4}  "
+            name = c if len(c) <= CLASS_CHARS else c[:CLASS_CHARS - 1] + "\u2026"
+            lines.append(f"{name:<{w}}{k['tp']:>4}{_n(k['fp']):>4}{k['fn']:>4}{_n(k['ids']):>4}  "
                          + (f"{thr:.2f}" if thr is not None else "none"))
-        lines += ["", "- : class without an achieved", "    threshold (only misses count)",
-                  "thr: track-score threshold of the", "     class (best MOTA); match within",
-                  "     2 m centre distance", "", "ego heading up, rings every 10 m",
+        lines += ["", *self.notes, "", "ego heading up, rings every 10 m",
                   f"trail: last {TRAIL_FRAMES} frames", "IDS old \u2192 new track (dashed: old",
                   "     track's position)"]
         return "\n".join(lines)

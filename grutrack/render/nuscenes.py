@@ -16,7 +16,7 @@ from pathlib import Path
 
 from grutrack.errors import ConfigError, DatasetError, InputFormatError
 from grutrack.io import read_json, write_json_atomic
-from grutrack.render.views import COUNT_KEYS, FrameView, build_views, scene_errors
+from grutrack.render.views import COUNT_KEYS, FrameView, build_views, frame_record, scene_errors
 
 
 def load_evaluation(dataroot: str, version: str, split: str, submission: str | Path):
@@ -81,18 +81,9 @@ def sum_counts(views: list[FrameView], thresholds: dict, gt_classes: set) -> dic
     return out
 
 
-def frame_record(v: FrameView, png: Path, out: Path) -> dict:
-    """The counts.json entry of one frame."""
-    return {"index": v.index, "frame": v.index + 1, "sample_token": v.sample_token, "timestamp": v.timestamp,
-            "png": str(png.relative_to(out)),
-            "ego": {"xy": [round(float(x), 4) for x in v.ego_xy], "yaw": round(v.ego_yaw, 6)},
-            "totals": v.totals(), "per_class": v.counts,
-            "false_positives": v.false_positives, "missed": v.missed, "id_switches": v.id_switches}
-
-
 def render_nuscenes(dataroot: str, version: str, split: str, submission: str, out: str | Path,
                     scene_names: list[str] | None = None, worst: int | None = None,
-                    detections: str | None = None, animation: bool = True) -> dict:
+                    detections: str | None = None, animation: bool = True, rerun: bool = False) -> dict:
     """Render the chosen scenes into ``out`` and write ``out/counts.json``; returns that document."""
     from grutrack.render.draw import BevCanvas, TRAIL_FRAMES, render_scene
 
@@ -115,6 +106,7 @@ def render_nuscenes(dataroot: str, version: str, split: str, submission: str, ou
         all_views += views
         scene_docs.append({"name": scene.name, "token": scene.token, "errors": errors.get(scene.token, 0),
                            "animation": str(gif.relative_to(out)) if gif else None,
+                           "rerun": _recording(out, views) if rerun else None,
                            "frames": [frame_record(v, p, out) for v, p in zip(views, pngs)]})
     gt_classes = {decisions.class_names[c] for c in set(decisions.g_cls.tolist())}
     doc = {"dataset": "nuscenes", "version": version, "split": split, "submission": str(submission),
@@ -125,3 +117,20 @@ def render_nuscenes(dataroot: str, version: str, split: str, submission: str, ou
            "seconds": round(time.perf_counter() - t_start, 3)}
     write_json_atomic(out / "counts.json", doc, indent=1)
     return doc
+
+
+def _recording(out: Path, views: list) -> str:
+    """Write ``out/<scene>.rrd`` (:mod:`grutrack.render.rerun_log`); returns its path relative to ``out``."""
+    from grutrack.render.rerun_log import write_recording
+
+    path = out / f"{views[0].scene}.rrd"
+    write_recording(path, views)
+    return str(path.relative_to(out))
+
+
+def render_dataset(dataset, split: str, submission: str | Path, out: str | Path, **options) -> dict:
+    """:func:`render_nuscenes` for a :class:`grutrack.datasets.nuscenes.NuScenesDataset` (evaluator settings
+    of other datasets, e.g. ``workers``, do not apply and are ignored)."""
+    keep = ("scene_names", "worst", "detections", "animation", "rerun")
+    return render_nuscenes(dataset.options.dataroot, dataset.options.version, split, submission, out,
+                           **{k: v for k, v in options.items() if k in keep})

@@ -1,14 +1,16 @@
 """What one rendered frame shows: ground truth, tracks and detections joined with the evaluator's decisions.
 
-The decisions come from :func:`grutrack.evaluation.fast_amota.match_decisions` (the fast exact evaluator's own
-matching at each class's best-MOTA threshold), so the counts of a frame summed over frames and scenes are the
-metrics JSON's TP / FP / FN / IDS. Boxes keep the global frame here; :mod:`grutrack.render.draw` moves them
-into the ego frame.
+:class:`FrameView` is the drawn frame of either dataset. For nuScenes, :func:`build_views` takes the decisions
+from :func:`grutrack.evaluation.fast_amota.match_decisions` (the fast exact evaluator's own matching at each
+class's best-MOTA threshold), so the counts of a frame summed over frames and scenes are the metrics JSON's
+TP / FP / FN / IDS; AV2 frames are built by :mod:`grutrack.render.av2`. Boxes keep the global frame here;
+:mod:`grutrack.render.draw` moves them into the ego frame.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -58,6 +60,13 @@ class FrameView:
     false_positives: list = field(default_factory=list)
     missed: list = field(default_factory=list)
     id_switches: list = field(default_factory=list)
+    caption: str = ""           # what names the frame under the title (default: its sample token)
+    #: heights for the 3D view (:mod:`grutrack.render.rerun_log`): ``(N, 2) [z of the centre, height]`` metres
+    #: of gt / tracks / detections, and the ego's z; None: not known (drawn on the ground, 1.5 m high)
+    gt_zh: np.ndarray | None = None
+    tr_zh: np.ndarray | None = None
+    det_zh: np.ndarray | None = None
+    ego_z: float = 0.0
 
     def totals(self) -> dict:
         """TP, FP, FN and IDS of the frame summed over classes."""
@@ -78,6 +87,23 @@ def _sub_boxes(records: list) -> tuple[np.ndarray, list, list, np.ndarray]:
     yaw = yaw_from_quaternion(np.array([b["rotation"] for b in records], dtype=np.float64))
     return (np.column_stack([xy, wl, yaw]), [b["tracking_name"] for b in records],
             [b["tracking_id"] for b in records], np.array([b["tracking_score"] for b in records], dtype=np.float64))
+
+
+def update_trails(history: dict, index: int, ids: list, boxes: np.ndarray, trail_frames: int) -> list[np.ndarray]:
+    """Add frame ``index``'s track centres to ``history`` ({track id: [(frame, x, y), ...]}) and return, per
+    track of ``ids`` (boxes ``(N, >=2)``, global metres), its ``(K, 2)`` centres of the last ``trail_frames``
+    frames, oldest first."""
+    trails = []
+    for k, tid in enumerate(ids):
+        h = history.setdefault(tid, [])
+        h.append((index, boxes[k, 0], boxes[k, 1]))
+        trails.append(np.array([(x, y) for j, x, y in h if j > index - trail_frames]))
+    return trails
+
+
+def _sub_zh(records: list) -> np.ndarray:
+    """Submission box dicts -> ``(N, 2) [z of the centre, height]`` metres."""
+    return np.array([[b["translation"][2], b["size"][2]] for b in records], dtype=np.float64).reshape(-1, 2)
 
 
 def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detections: dict | None = None,
@@ -143,17 +169,19 @@ def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detectio
         # Tracks: the submitted boxes plus the evaluator's interpolated ones (track gaps).
         token = frame.token
         tr_boxes, tr_cls, tr_ids, _ = _sub_boxes(results.get(token, []))
+        tr_zh = _sub_zh(results.get(token, []))
         p_eval = {decisions.p_id[p]: p for p in range(p0, p1)}
         tr_state = np.full(len(tr_ids), TR_IGNORED, dtype=np.int64)
         for k, tid in enumerate(tr_ids):
             p = p_eval.pop(tid, None)
             if p is not None:
                 tr_state[k] = _TR_STATE[int(decisions.p_status[p])]
-            last_box[tid] = tr_boxes[k]
+            last_box[tid] = np.r_[tr_boxes[k], tr_zh[k]]
         extra = [(tid, p) for tid, p in p_eval.items() if tid in last_box]   # interpolated by the evaluator
         if extra:
             add = np.array([np.r_[decisions.p_xy[p], last_box[tid][2:]] for tid, p in extra])
-            tr_boxes = np.vstack([tr_boxes, add])
+            tr_boxes = np.vstack([tr_boxes, add[:, :5]])
+            tr_zh = np.vstack([tr_zh, add[:, 5:]])
             tr_ids = tr_ids + [tid for tid, _ in extra]
             tr_cls = tr_cls + [classes[int(decisions.p_cls[p])] for _, p in extra]
             tr_state = np.r_[tr_state, [_TR_STATE[int(decisions.p_status[p])] for _, p in extra]]
@@ -165,12 +193,7 @@ def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detectio
                 false_positives.append({"track_id": decisions.p_id[p], "class": cls,
                                         "xy": [round(float(v), 3) for v in decisions.p_xy[p]]})
 
-        trails = []
-        for k, tid in enumerate(tr_ids):
-            h = history.setdefault(tid, [])
-            h.append((i, tr_boxes[k, 0], tr_boxes[k, 1]))
-            pts = np.array([(x, y) for j, x, y in h if j > i - trail_frames])
-            trails.append(pts)
+        trails = update_trails(history, i, tr_ids, tr_boxes, trail_frames)
 
         det = detections.get(token) if detections is not None else None
         det_boxes = det.boxes[:, [0, 1, 3, 4, 6]] if det is not None and len(det) else np.zeros((0, 5))
@@ -181,7 +204,10 @@ def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detectio
             gt_boxes=np.asarray(gt_boxes, dtype=np.float64).reshape(-1, 5), gt_state=gt_state, gt_cls=gt_cls,
             gt_ids=gt_ids, tr_boxes=np.asarray(tr_boxes, dtype=np.float64).reshape(-1, 5), tr_state=tr_state,
             tr_cls=tr_cls, tr_ids=tr_ids, det_boxes=det_boxes, trails=trails, counts=counts,
-            false_positives=false_positives, missed=missed, id_switches=switches))
+            false_positives=false_positives, missed=missed, id_switches=switches,
+            gt_zh=gt.boxes[:, [2, 5]] if gt is not None else np.zeros((0, 2)), tr_zh=tr_zh,
+            det_zh=det.boxes[:, [2, 5]] if det is not None and len(det) else np.zeros((0, 2)),
+            ego_z=float(frame.ego_translation[2])))
     return views
 
 
@@ -196,3 +222,12 @@ def scene_errors(decisions: MatchDecisions) -> dict:
     for f in range(len(tokens)):
         out[tokens[f]] = out.get(tokens[f], 0) + int(per_frame[f])
     return out
+
+
+def frame_record(v: FrameView, png: Path, out: Path) -> dict:
+    """The counts.json entry of one frame."""
+    return {"index": v.index, "frame": v.index + 1, "sample_token": v.sample_token, "timestamp": v.timestamp,
+            "png": str(png.relative_to(out)),
+            "ego": {"xy": [round(float(x), 4) for x in v.ego_xy], "yaw": round(v.ego_yaw, 6)},
+            "totals": v.totals(), "per_class": v.counts,
+            "false_positives": v.false_positives, "missed": v.missed, "id_switches": v.id_switches}

@@ -8,7 +8,7 @@ from grutrack.documents import MetricsDocument
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import (AV2_OVERALL, check_section, detections_line, header, image, mirror_tables,
-                                      provenance, runs_table, setting_note, training_provenance)
+                                      provenance, runs_table, setting_note, training_provenance, worst_scene_strips)
 from grutrack.report.paper import get_table, reproduced
 
 AVERAGE_NOTE = ("Note: the paper's average for Ours (47.3) is not the mean of its seven per-class values (54.1) "
@@ -29,6 +29,8 @@ def build(inp: ReportInputs) -> str:
               "", AVERAGE_NOTE, "",
               _figure(inp, tbl)]
     parts += ["", "## Every run (Table I average over 7 classes, ×100)", "", runs_table(docs, AV2_OVERALL)]
+    strips = worst_scene_strips(inp, scene_word="log")
+    parts += ["", strips] if strips else []
     parts += ["", "## Check against the tolerances of paper.yaml", "", check_section("I", tbl, inp.row_docs("I"))]
     parts += ["", "## Provenance", "", provenance(inp.runs, docs)]
     if inp.train_logs:

@@ -213,17 +213,22 @@ def training_data(cfg_path: Path) -> str:
     return DASH
 
 
-def worst_scene_strips(inp) -> str:
-    """A section with, per rendered run, a strip of key frames of its worst scene (id-switch moments first),
-    from the run's ``grutrack render`` folder; empty when the report has no renders."""
+WORST_SCENE_TITLE = "## Worst scene per run (key frames)"
+
+
+def worst_scene_strips(inp, scene_word: str = "scene") -> str:
+    """A section with, per rendered run, a strip of key frames of its worst scene (AV2: log; id-switch moments
+    first), from the run's ``grutrack render`` folder; empty when the report has no renders."""
     if not inp.renders:
         return ""
     from grutrack.render.draw import strip_from_counts
 
-    parts = ["## Worst scene per run (key frames)", "",
-             "Bird's-eye frames of each run's scene with the most id switches + false positives + misses "
+    matching = ("the official AV2 evaluator's own CLEAR matching (an id-switch match is also a TP)"
+                if scene_word == "log" else "the evaluator's own matching")
+    parts = [WORST_SCENE_TITLE.replace("scene", scene_word), "",
+             f"Bird's-eye frames of each run's {scene_word} with the most id switches + false positives + misses "
              "(`grutrack render --worst 1`): tracks coloured by id, false-positive tracks red, missed ground truth "
-             "orange dashed, id switches ringed in magenta (old \u2192 new track); the evaluator's own matching."]
+             f"orange dashed, id switches ringed in magenta (old \u2192 new track); {matching}."]
     for run, counts in inp.renders.items():
         info = strip_from_counts(counts, inp.figures / f"worst_scene_{run}.png")
         t = info["totals"]

@@ -9,7 +9,7 @@ from grutrack.documents import Manifest
 from grutrack.provenance import sha256_file
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
-from grutrack.report.markdown import DASH, file_cell, header, image, mirror_tables, short, table
+from grutrack.report.markdown import DASH, WORST_SCENE_TITLE, file_cell, header, image, mirror_tables, short, table
 from grutrack.report.paper import get_table
 
 INSTRUCTIONS = ("Upload each zip to the nuScenes tracking leaderboard (EvalAI, lidar track). The test split has "
@@ -18,6 +18,10 @@ INSTRUCTIONS = ("Upload each zip to the nuScenes tracking leaderboard (EvalAI, l
                 "\"amotp\": ..., \"ids\": ...}}`) and run `grutrack check that.json --table II --row "
                 "\"Ours (CenterPoint)\"`.")
 
+NO_GT_FRAMES = ("None: nuScenes test has no public ground truth, so no frame can show false positives, misses or "
+                "id switches (the other reports embed key frames of each run's worst scene; `grutrack render` "
+                "needs a split with ground truth).")
+
 
 def build(inp: ReportInputs) -> str:
     """The markdown text (figures are written into ``inp.figures``)."""
@@ -25,6 +29,7 @@ def build(inp: ReportInputs) -> str:
     parts = [header("nuScenes test: Table II and the leaderboard zips", [INSTRUCTIONS])]
     parts += ["", f"## {tbl['title']}", "", mirror_tables(tbl, {}), "", _figure(inp, tbl)]
     parts += ["", "## Leaderboard zips (validated against the official format before zipping)", "", _zips(inp)]
+    parts += ["", WORST_SCENE_TITLE, "", NO_GT_FRAMES]
     return "\n".join(parts) + "\n"
 
 

@@ -32,13 +32,6 @@ def _alternation(names):
     return "|".join(re.escape(n) for n in names) if names else "(?!x)x"
 
 
-def _experiments_of(kinds):
-    return [n for n, e in config["experiments"].items() if S.dataset_kind(config, e["dataset"]) in kinds]
-
-
-NUSC_EXPERIMENTS = _alternation(_experiments_of(("demo", "nuscenes")))
-AV2_EXPERIMENTS = _alternation(_experiments_of(("av2",)))
-
 wildcard_constraints:
     dataset=_alternation(config["datasets"]),
     detector=_alternation(config["detectors"]),

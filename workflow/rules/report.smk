@@ -29,9 +29,9 @@ def _report_trainings(rep):
 
 
 def _report_renders(rep):
-    """(run, render folder) of a report that shows each run's worst scene (nuScenes experiments with ground
-    truth)."""
-    if rep["kind"] not in ("demo", "nusc_val"):
+    """(run, render folder) of a report that shows each run's worst scene (experiments with ground truth: not
+    nuScenes test)."""
+    if rep["kind"] not in ("demo", "nusc_val", "av2_val"):
         return []
     exp_name = rep["experiment"]
     det = config["experiments"][exp_name]["detectors"][0]
@@ -84,21 +84,19 @@ def _report_args(w):
 
 
 rule render:
-    """Bird's-eye frames of a run's worst scene with the evaluator's decisions (the reports' key-frame strips)."""
+    """Bird's-eye frames of a run's worst scene (AV2: log) with its evaluator's own decisions (the reports'
+    key-frame strips)."""
     input: unpack(_eval_inputs)
     output: directory("reports/renders/{experiment}/{detector}/{run}")
-    wildcard_constraints:
-        experiment=NUSC_EXPERIMENTS,
     params:
-        dataroot=lambda w: dataroot(experiment(w)["dataset"]),
-        version=lambda w: S.version_for(config, experiment(w)["dataset"], experiment(w)["split"]),
-        split=lambda w: experiment(w)["split"],
+        data=lambda w: S.dataset_args(config, experiment(w)["dataset"], experiment(w)["split"]),
         code=code_version("render"),
+    threads: lambda w: S.evaluation_threads(config, experiment(w)["dataset"])
     log: "logs/render/{experiment}/{detector}/{run}.log"
     benchmark: "logs/benchmarks/render/{experiment}/{detector}/{run}.tsv"
     shell:
-        "{GRUTRACK} render --dataroot {params.dataroot:q} --version {params.version} --split {params.split} "
-        "--submission {input.submission} --worst 1 --no-animation --out {output} > {log} 2>&1 " + ON_FAIL
+        "{GRUTRACK} render {params.data} --workers {threads} --submission {input.submission} --worst 1 "
+        "--no-animation --out {output} > {log} 2>&1 " + ON_FAIL
 
 
 rule report:
