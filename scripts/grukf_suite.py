@@ -81,7 +81,9 @@ def main() -> None:
     from grutrack.data.nuscenes import load_scenes, open_nuscenes
     from grutrack.tracking.factory import build_tracker
     from grutrack.training.config import load_train_config
-    from grutrack.training.resample import NuscDetectionResampler, ResamplingTrainer
+    from grutrack.datasets import DatasetOptions
+    from grutrack.datasets.nuscenes import NuScenesDataset
+    from grutrack.training.resample import DetectionResampler, ResamplingTrainer
 
     out = Path(args.out)
     (out / "detections").mkdir(parents=True, exist_ok=True)
@@ -96,7 +98,8 @@ def main() -> None:
                                                 va_tokens)
 
     models: list[tuple[str, dict, object]] = [("ekf", {}, None)]
-    resampler = NuscDetectionResampler(nusc, "mini_train", tr_tokens)
+    resampler = DetectionResampler(NuScenesDataset(DatasetOptions(args.dataroot, "v1.0-mini")), "mini_train",
+                                   tr_scenes)
     if args.constant_gain:
         cfg = load_train_config("grukf", {"device": "cpu", "gap_bins": 0, "class_gain": False, "age_bins": 0})
         t = ResamplingTrainer(cfg, tr_scenes, tr_dets, out / args.constant_gain, resampler, progress=False)

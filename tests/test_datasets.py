@@ -119,3 +119,35 @@ def test_av2_through_the_same_commands_as_nuscenes(av2_root, tmp_path, capsys):
     assert Manifest.read(Manifest.path_for(sub)).counts["logs"] == 2
     assert main(["simulate-detections", *common, "--all-categories", "--out", str(tmp_path / "x.feather")]) == 2
     assert "drop --all-categories" in capsys.readouterr().err
+
+
+def test_train_on_av2_then_track_av2_with_the_model(av2_root, tmp_path, capsys):
+    """`grutrack train --dataset av2` (simulated detections, resampled every epoch through the AV2 simulator);
+    the model tracks AV2 and the per-label parameters come from each AV2 class's tracking class."""
+    from grutrack.cli import main
+    from grutrack.training.config import load_train_config
+    from grutrack.training.trainer import Trainer
+
+    common = ["--dataset", "av2", "--dataroot", str(av2_root), "--split", "val"]
+    dets, ck = tmp_path / "dets.feather", tmp_path / "ck"
+    assert main(["simulate-detections", *common, "--seed", "4", "--out", str(dets)]) == 0
+    cfg = tmp_path / "train.yaml"
+    assert main(["resolve-config", "training", "--base", "grukf", "--overrides",
+                 '{"epochs": 2, "device": "cpu", "resample_profiles": ["pointpillars"]}', "--out", str(cfg)]) == 0
+    assert main(["train", *common, "--detections", str(dets), "--config", str(cfg), "--out", str(ck),
+                 "--no-progress"]) == 0
+    assert "after 4 steps" in capsys.readouterr().out            # 2 logs x 2 epochs
+    assert main(["track", *common, "--detections", str(dets), "--tracker", "grukf", "--checkpoint",
+                 str(ck / "model.pt"), "--out", str(tmp_path / "t.pkl"), "--no-progress"]) == 0
+    assert main(["train", *common, "--detections", str(dets), "--out", str(tmp_path / "ck2"), "--val-split",
+                 "val", "--val-detections", str(dets)]) == 2
+    assert "--val-split: validation AMOTA is scored on nuScenes-format data" in capsys.readouterr().err
+
+    ds = open_dataset("av2", DatasetOptions(av2_root))
+    scenes = ds.scenes("val", with_gt=True)
+    t = Trainer(load_train_config("grukf", {"device": "cpu"}), scenes, ds.load_detections(dets, "val", scenes).boxes,
+                tmp_path / "ck3", progress=False)
+    # REGULAR_VEHICLE, PEDESTRIAN, BICYCLE, LARGE_VEHICLE, BUS, BOX_TRUCK, TRUCK -> car, pedestrian, bicycle,
+    # truck, bus, truck, truck (indices of the 7 nuScenes tracking classes)
+    assert t.index.tolist() == [2, 4, 0, 6, 1, 6, 6]
+    assert t.tracker_cfg.first_threshold[3] == t.tracker_cfg.first_threshold[6]   # LARGE_VEHICLE as TRUCK

@@ -376,7 +376,7 @@ def test_ekf_gain_table_grows_after_missed_frames(small_training_set):
 
     scenes, dets = small_training_set
     cfg = load_train_config("grukf", {"gap_bins": 3, "age_bins": 0, "class_gain": False})
-    shared, table = mean_ekf_gain(scenes, dets, load_tracker_config(cfg.tracker_preset), cfg)
+    shared, table = mean_ekf_gain(scenes, dets, load_tracker_config(cfg.tracker_preset), cfg, np.arange(7))
     assert table.shape == (1, 1, 3, 10, 9) and np.isfinite(table[0, 0, :2]).all()
     # the covariance grows while a track coasts, so the next detection is trusted more
     assert table[0, 0, 1, 0, 0] > table[0, 0, 0, 0, 0]

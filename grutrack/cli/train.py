@@ -7,6 +7,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from grutrack.cli.common import add_dataset_args
 from grutrack.errors import ConfigError
 
 # Only argument definitions at module level: building the parser must not import numpy or torch
@@ -20,13 +21,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                    "tracks with ground truth, use a parallel EKF's posterior as pseudo-label "
                                    "where a track has none, one AdamW step per scene. Writes model.pt, last.pt "
                                    "(resumable) and train_log.csv into --out.")
-    p.add_argument("--dataroot", required=True, help="nuScenes(-format) dataroot")
-    p.add_argument("--version", required=True, help="dataset version, e.g. v1.0-trainval, v1.0-mini")
-    p.add_argument("--split", required=True, help="training split with ground truth (train, mini_train, ...)")
-    p.add_argument("--detections", required=True, help="detection JSON of the training split (real or simulated)")
+    add_dataset_args(p, "training split with ground truth (train, mini_train, ...; AV2: train, val, ...)")
+    p.add_argument("--detections", required=True,
+                   help="detections of the training split (real or simulated): nuScenes detection JSON, or an "
+                        "LT3D table for AV2")
     p.add_argument("--config", default="grukf", help="training config name or YAML path (default: grukf)")
     p.add_argument("--out", required=True, help="output folder for checkpoints and the CSV log")
-    p.add_argument("--val-split", default=None, help="validation split for AMOTA every val_every steps")
+    p.add_argument("--val-split", default=None,
+                   help="validation split for AMOTA every val_every steps (nuScenes-format data)")
     p.add_argument("--val-detections", default=None, help="detection JSON of the validation split")
     p.add_argument("--mode", choices=("semi_supervised", "supervised"), default=None,
                    help="override the config's mode")
@@ -40,8 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Train; prints the final checkpoint and the last logged figures."""
-    from grutrack.data.nusc_detections import load_detections
-    from grutrack.data.nuscenes import load_scenes, open_nuscenes
+    from grutrack.cli.common import dataset_of
     from grutrack.threads import apply_thread_policy
     from grutrack.tracking.config import load_tracker_config
     from grutrack.training.config import load_train_config
@@ -54,25 +55,30 @@ def run(args: argparse.Namespace) -> int:
     apply_thread_policy()
     if (args.val_split is None) != (args.val_detections is None):
         raise ConfigError("--val-split and --val-detections go together")
-    nusc = open_nuscenes(args.dataroot, args.version)
-    scenes = load_scenes(nusc, args.split, with_gt=True)
+    ds = dataset_of(args)
+    if args.val_split and ds.name != "nuscenes":
+        raise ConfigError(f"--val-split: validation AMOTA is scored on nuScenes-format data; train on {ds.name} "
+                          f"without it (or validate a checkpoint with grutrack track + evaluate)")
+    scenes = ds.scenes(args.split, with_gt=True)
     yaw = load_tracker_config(cfg.tracker_preset).measured_yaw  # the preset's measured-yaw definition
-    dets = load_detections(args.detections, [f.token for s in scenes for f in s.frames], yaw)
+    dets = ds.load_detections(args.detections, args.split, scenes, yaw).boxes
     validate = None
-    source = {"dataroot": str(Path(args.dataroot).resolve()), "version": args.version, "split": args.split,
-              "detections": str(Path(args.detections).resolve())}
+    source = {"dataset": ds.name, "dataroot": str(Path(args.dataroot).resolve()), "version": args.version,
+              "split": args.split, "detections": str(Path(args.detections).resolve())}
+    if ds.name != "nuscenes":
+        source["rate_hz"] = args.rate
     if cfg.resample_profiles:
-        from grutrack.training.resample import NuscDetectionResampler, ResamplingTrainer
+        from grutrack.training.resample import DetectionResampler, ResamplingTrainer
 
-        resampler = NuscDetectionResampler(nusc, args.split, [f.token for s in scenes for f in s.frames])
+        resampler = DetectionResampler(ds, args.split, scenes, yaw)
         trainer = ResamplingTrainer(cfg, scenes, dets, args.out, resampler, progress=not args.no_progress,
                                     source=source)
     else:
         trainer = Trainer(cfg, scenes, dets, args.out, progress=not args.no_progress, source=source)
     if args.val_split:
-        val_scenes = load_scenes(nusc, args.val_split)
-        val_dets = load_detections(args.val_detections, [f.token for s in val_scenes for f in s.frames], yaw)
-        validate = make_validator(nusc, args.val_split, val_scenes, val_dets,
+        val_scenes = ds.scenes(args.val_split)
+        val_dets = ds.load_detections(args.val_detections, args.val_split, val_scenes, yaw).boxes
+        validate = make_validator(ds.tables, args.val_split, val_scenes, val_dets,
                                   replace(trainer.tracker_cfg, matched_box=cfg.matched_box), cfg.device)
     trainer.validate = validate
     if args.resume:

@@ -35,7 +35,7 @@ def build_tracker(name: str = "ekf", config: str | Path | None = None,
         raise ConfigError(f"--checkpoint is for --tracker grukf; --tracker {name} has no learned model (drop "
                           f"--checkpoint, or use --tracker grukf)")
     cfg = load_tracker_config(config or DEFAULT_PRESET[name])
-    index = _param_index(param_classes)
+    index = param_index(param_classes)
     cfg = remap_config(cfg, index)
     if name == "grukf":
         if checkpoint is None:
@@ -79,7 +79,7 @@ def grukf_group(net, n_labels: int, device: str = "auto", train: bool = False,
                       np.ones(n_labels, dtype=bool))
 
 
-def _param_index(param_classes: tuple[str, ...] | None) -> np.ndarray:
+def param_index(param_classes: tuple[str, ...] | None) -> np.ndarray:
     """(n_labels,) int: the tracking-class row each dataset label takes its parameters from."""
     if param_classes is None:
         return np.arange(len(TRACKING_CLASSES))

@@ -25,29 +25,24 @@ def resample_seed(cfg_seed: int, epoch: int) -> int:
     return RESAMPLE_SEED_BASE * (cfg_seed + 1) + epoch
 
 
-class NuscDetectionResampler:
-    """Simulated detections (canonical, by sample token) of the samples of a nuScenes(-format) split.
+class DetectionResampler:
+    """Simulated detections (canonical, by frame token) of the training scenes of any dataset: the dataset's
+    own simulator writes them in its detection format and its own reader reads them back (one reader per
+    format). ``dataset``: a :class:`grutrack.datasets.Dataset`; ``split``/``scenes``: the training split and
+    its scenes; ``measured_yaw``: the tracker preset's yaw definition."""
 
-    ``nusc``: the loaded database; ``split``: the training split; ``tokens``: the sample tokens to return.
-    """
-
-    def __init__(self, nusc, split: str, tokens: list[str]):
-        from grutrack.data.detection_sim import nusc_gt_frames
-
-        self.frames = nusc_gt_frames(nusc, split)
-        self.tokens = tokens
+    def __init__(self, dataset, split: str, scenes: list[Scene], measured_yaw: str = "euler_z"):
+        self.dataset, self.split, self.scenes, self.measured_yaw = dataset, split, scenes, measured_yaw
 
     def __call__(self, profile: str, seed: int) -> dict[str, BoxSet]:
         """Detections drawn with detector ``profile`` (name or YAML path) and ``seed``."""
-        from grutrack.data.detection_sim import detection_json, load_profile, simulate, write_detection_json
-        from grutrack.data.nusc_detections import load_detections
+        from grutrack.data.detection_sim import load_profile
 
         prof = load_profile(profile)
-        sub = detection_json(simulate(self.frames, prof, seed), prof, seed)
-        with tempfile.TemporaryDirectory() as tmp:  # one reader of the detection format: load_detections
-            path = Path(tmp) / f"resampled_{prof.name}_s{seed}.json"
-            write_detection_json(path, sub)
-            return load_detections(path, self.tokens)
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / f"resampled_{prof.name}_s{seed}{self.dataset.detections_suffix}"
+            self.dataset.simulate_detections(self.split, prof, seed, path)
+            return self.dataset.load_detections(path, self.split, self.scenes, self.measured_yaw).boxes
 
 
 class ResamplingTrainer(Trainer):

@@ -23,14 +23,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from grutrack.data.scene import BoxSet, Scene
+from grutrack.data.scene import NUSCENES_VOCABULARY, BoxSet, Scene
 from grutrack.documents import TrainingLog, TrainingStep
 from grutrack.errors import ConfigError, GrutrackError, InputFormatError
 from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig, MEAS_PLANAR, STATE_PLANAR
 from grutrack.motion.torch_models import wrap_angle_t
 from grutrack.tracking.config import TrackerConfig, load_tracker_config
 from grutrack.tracking.ekf_backend import KalmanBackend, KFState
-from grutrack.tracking.factory import grukf_group
+from grutrack.tracking.factory import grukf_group, param_index, remap_config
 from grutrack.tracking.grukf_backend import GRUKFBackend, resolve_device
 from grutrack.tracking.tracker import Tracker, TrackGroup, track_scenes
 from grutrack.training.checkpoint import load_weights, read_checkpoint, save_checkpoint
@@ -45,15 +45,16 @@ LOG_EVERY_S = 30.0
 
 
 
-def ekf_backend(cfg: TrainConfig) -> KalmanBackend:
-    """The parallel EKF: the training SS model for every class, with the motion config's Q, R, P0 for it."""
+def ekf_backend(cfg: TrainConfig, index: np.ndarray) -> KalmanBackend:
+    """The parallel EKF: the training SS model for every label, with the motion config's Q, R, P0 of the
+    tracking class each label takes its parameters from (``index`` (n_labels,), :func:`param_index`)."""
     from grutrack.classes import TRACKING_CLASSES
     from grutrack.motion.defaults import load_motion_config
     from grutrack.motion.models import make_model
 
     motion = load_motion_config(cfg.motion_config, cfg.ss_model)
     first = motion[TRACKING_CLASSES[0]]
-    tables = {k: np.stack([motion[c][k] for c in TRACKING_CLASSES]) for k in ("Q", "R", "P0")}
+    tables = {k: np.stack([motion[TRACKING_CLASSES[c]][k] for c in index]) for k in ("Q", "R", "P0")}
     return KalmanBackend(make_model(first["model"], **first["params"]), tables["Q"], tables["R"], tables["P0"])
 
 
@@ -188,10 +189,11 @@ class SceneLoss:
 
 
 def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
-              cfg: TrainConfig, device: torch.device) -> SceneLoss:
-    """Track one scene with gradients on; returns its collected loss."""
-    gru = grukf_group(net, 7, device, train=True).backend
-    group = TrackGroup(PairedBackend(gru, ekf_backend(cfg)), np.ones(7, dtype=bool))
+              cfg: TrainConfig, device: torch.device, index: np.ndarray) -> SceneLoss:
+    """Track one scene with gradients on; returns its collected loss. ``index`` (n_labels,): the tracking
+    class each label of the scene's vocabulary takes its parameters (and the network its class gain) from."""
+    gru = grukf_group(net, len(index), device, train=True, class_index=index).backend
+    group = TrackGroup(PairedBackend(gru, ekf_backend(cfg, index)), np.ones(len(index), dtype=bool))
     tracker = Tracker(tracker_cfg, [group])
     loss = SceneLoss(cfg, device)
     tracker.update_hook = loss.hook
@@ -224,12 +226,13 @@ def _rotate_gain(K: np.ndarray, yaw: np.ndarray) -> np.ndarray:
 
 
 def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
-                  cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray]:
+                  cfg: TrainConfig, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The EKF's mean heading-frame gain over all updates on the training scenes, (m, 9), and per cell of the
     gain table (*table_shape, m, 9): by class (``class_gain``), by update count 1..age_bins and by frames
     since the last update 1..gap_bins (the last bin takes the larger values too); NaN in cells without an
-    update, zeros overall when there was none."""
-    base = ekf_backend(cfg)
+    update, zeros overall when there was none. ``index``: as for :func:`run_scene` (the class axis is the
+    tracking class)."""
+    base = ekf_backend(cfg, index)
     rec = GainRecorder(base.model, base.Q, base.R, base.P0)
     shape = _arch(cfg).table_shape
     total = np.zeros((*shape, base.model.dim_x, 9))
@@ -237,13 +240,13 @@ def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: Tra
 
     def hook(group: TrackGroup, rows: np.ndarray, det_rows: np.ndarray) -> None:
         if len(rows):
-            c = group.labels[rows] if cfg.class_gain else np.zeros(len(rows), dtype=np.int64)
+            c = index[group.labels[rows]] if cfg.class_gain else np.zeros(len(rows), dtype=np.int64)
             a = np.minimum(group.hits[rows], shape[1]) - 1   # hits = 1 + the updates before this one
             g = np.minimum(group.misses[rows], shape[2]) - 1  # misses = frames since the last update
             np.add.at(total, (c, a, g), rec.last)
             np.add.at(count, (c, a, g), 1)
 
-    tracker = Tracker(tracker_cfg, [TrackGroup(rec, np.ones(7, dtype=bool))])
+    tracker = Tracker(tracker_cfg, [TrackGroup(rec, np.ones(len(index), dtype=bool))])
     tracker.update_hook = hook
     track_scenes(tracker, scenes, dets)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -299,12 +302,14 @@ class Trainer:
         self.validate = validate            # callable(net) -> AMOTA, or None
         self.progress = progress
         self.device = resolve_device(cfg.device, "training config 'device'")
-        self.tracker_cfg = load_tracker_config(cfg.tracker_preset)
+        vocab = scenes[0].vocabulary if scenes else NUSCENES_VOCABULARY
+        self.index = param_index(vocab.param_classes)    # dataset label -> tracking class of its parameters
+        self.tracker_cfg = remap_config(load_tracker_config(cfg.tracker_preset), self.index)
         torch.manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
         random.seed(cfg.seed)
         self.net = GRUKalmanNet(_arch(cfg))
-        shared, table = mean_ekf_gain(scenes, dets, self.tracker_cfg, cfg)
+        shared, table = mean_ekf_gain(scenes, dets, self.tracker_cfg, cfg, self.index)
         self.net.set_gain_prior(torch.as_tensor(shared), torch.as_tensor(table))
         self.net.to(self.device)
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
@@ -442,7 +447,7 @@ class Trainer:
         t0 = time.perf_counter()
         self.net.train()
         self.net.max_abs_gain = 0.0
-        loss = run_scene(self.net, scene, self.dets, self.tracker_cfg, self.cfg, self.device)
+        loss = run_scene(self.net, scene, self.dets, self.tracker_cfg, self.cfg, self.device, self.index)
         value = loss.value()
         if not torch.isfinite(value):
             self._diverged(scene, f"the loss is {value.item()}")

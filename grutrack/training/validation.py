@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import io
 
+from grutrack.classes import TRACKING_CLASSES
 from grutrack.data.scene import BoxSet, Scene
 from grutrack.export.nuscenes_json import build_submission
 from grutrack.tracking.config import TrackerConfig
@@ -14,8 +15,8 @@ from grutrack.tracking.tracker import Tracker, track_scenes
 
 def make_validator(nusc, split: str, scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
                    device: str = "auto"):
-    """A callable(net) -> overall AMOTA of the GRU-KF tracker on ``split`` (official semantics, computed by
-    grutrack's exact fast evaluator)."""
+    """A callable(net) -> overall AMOTA of the GRU-KF tracker on nuScenes(-format) ``split`` (official
+    semantics, computed by grutrack's exact fast evaluator); labels are the 7 tracking classes."""
     from grutrack.evaluation.fast_amota import fast_tracking_eval
 
     tokens = [f.token for s in scenes for f in s.frames]
@@ -23,7 +24,7 @@ def make_validator(nusc, split: str, scenes: list[Scene], dets: dict[str, BoxSet
     def validate(net) -> float:
         was_training = net.training
         net.eval()
-        run = track_scenes(Tracker(tracker_cfg, [grukf_group(net, 7, device)]), scenes, dets)
+        run = track_scenes(Tracker(tracker_cfg, [grukf_group(net, len(TRACKING_CLASSES), device)]), scenes, dets)
         net.train(was_training)
         sub = build_submission(run.results, tokens, tracker_cfg.max_boxes_per_sample)
         with contextlib.redirect_stdout(io.StringIO()):
