@@ -151,3 +151,24 @@ def test_train_on_av2_then_track_av2_with_the_model(av2_root, tmp_path, capsys):
     # truck, bus, truck, truck (indices of the 7 nuScenes tracking classes)
     assert t.index.tolist() == [2, 4, 0, 6, 1, 6, 6]
     assert t.tracker_cfg.first_threshold[3] == t.tracker_cfg.first_threshold[6]   # LARGE_VEHICLE as TRUCK
+
+
+def test_dataset_stats_of_av2_per_category(av2_root, tmp_path, capsys):
+    """`grutrack dataset-stats --dataset av2`: the ground truth of the tracked frames per Table I class."""
+    from grutrack.cli import main
+
+    out = tmp_path / "s.json"
+    assert main(["dataset-stats", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--json",
+                 str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "REGULAR_VEHICLE" in text and "7 classes" in text
+    import json
+
+    stats = json.loads(out.read_text())
+    ds = open_dataset("av2", DatasetOptions(av2_root))
+    scenes = ds.scenes("val", with_gt=True)
+    n = sum(len(f.gt) for s in scenes for f in s.frames)
+    assert stats["classes"]["all"]["boxes"] == n and stats["meta"]["dataset"] == "av2"
+    assert sum(stats["classes"][c]["boxes"] for c in ds.vocabulary.names) == n
+    car = stats["classes"]["REGULAR_VEHICLE"]
+    assert 3.5 < car["l"] < 6.0 and 1.5 < car["w"] < 2.5       # metres: a car's length and width

@@ -8,14 +8,14 @@ import argparse
 DATASETS = ("nuscenes", "av2")   # the names of grutrack.datasets.DATASETS (kept here: no import at parse time)
 
 
-def add_dataset_args(p: argparse.ArgumentParser, split_help: str) -> None:
-    """--dataset, --dataroot, --version, --split and the AV2 reading options, as every dataset-reading command
-    takes them."""
+def add_dataset_args(p: argparse.ArgumentParser, split_help: str, repeat: bool = False) -> None:
+    """--dataset, --dataroot, --version, --split (``repeat``: once or more, a list) and the AV2 reading options,
+    as every dataset-reading command takes them."""
     p.add_argument("--dataset", default="nuscenes", choices=DATASETS, help="dataset (default: nuscenes)")
     p.add_argument("--dataroot", required=True,
                    help="nuScenes dataroot (holds <version>/) or AV2 sensor root (holds <split>/<log_id>/)")
     p.add_argument("--version", default=None, help="nuScenes version, e.g. v1.0-trainval, v1.0-mini (nuScenes only)")
-    p.add_argument("--split", required=True, help=split_help)
+    p.add_argument("--split", required=True, help=split_help, **({"action": "append"} if repeat else {}))
     g = p.add_argument_group("av2 only")
     g.add_argument("--rate", type=float, default=2.0,
                    help="frames per second tracked and evaluated: annotation sweeps sub-sampled to this rate "

@@ -43,9 +43,8 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("dataset-stats", help="per-class statistics of a dataset's ground truth",
                               description="Box share, mean size, speed, moving share, |yaw rate|, 0-point share per "
                                           "tracking class, over the union of the given splits.")
-    p.add_argument("--dataroot", required=True, help="nuScenes(-format) dataroot")
-    p.add_argument("--version", default=VERSION, help=f"dataset version (default {VERSION})")
-    p.add_argument("--split", action="append", required=True, help="split name; repeat for a union")
+    add_dataset_args(p, "split name; repeat for a union", repeat=True)
+    p.set_defaults(version=VERSION)
     p.add_argument("--json", dest="json_out", help="also write the statistics to this JSON file")
     p.add_argument("--compare", help="statistics JSON (from --json) to print side by side")
     p.set_defaults(func=run_stats)
@@ -79,14 +78,16 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 def run_stats(args: argparse.Namespace) -> int:
     """``grutrack dataset-stats``."""
-    from grutrack.data.nusc_stats import format_comparison, format_table, nuscenes_statistics, write_stats_json
+    from grutrack.data.nusc_stats import format_comparison, format_table, write_stats_json
 
-    stats = nuscenes_statistics(args.dataroot, args.version, args.split)
-    label = f"{Path(args.dataroot).name}/{args.version} {'+'.join(args.split)}"
-    print(format_table(stats, title=f"ground truth of {label}, 7 tracking classes, all annotations"))
+    ds = dataset_of(args)
+    stats = ds.gt_statistics(args.split)
+    where = args.version if ds.name == "nuscenes" else f"{ds.name} at {args.rate:g} Hz"
+    label = f"{Path(args.dataroot).name}/{where} {'+'.join(args.split)}"
+    print(format_table(stats, title=f"ground truth of {label}, {len(stats) - 1} classes"))
     if args.json_out:
-        write_stats_json(args.json_out, stats, {"dataroot": str(args.dataroot), "version": args.version,
-                                                "splits": args.split})
+        write_stats_json(args.json_out, stats, {"dataset": ds.name, "dataroot": str(args.dataroot),
+                                                "version": args.version, "splits": args.split})
         print(f"wrote {args.json_out}")
     if args.compare:
         ref = _read_stats(Path(args.compare))

@@ -1,7 +1,8 @@
 """Per-class statistics of a dataset's ground truth: what the synthetic demo is checked against.
 
-Works on canonical GT frames (:class:`grutrack.data.detection_sim.GTFrame`), so it serves nuScenes, the demo
-(which is nuScenes-format) and, through an adapter, AV2. For each of the 7 tracking classes: box count and
+Works on canonical GT frames (:class:`grutrack.data.detection_sim.GTFrame`: nuScenes and the nuScenes-format
+demo, the 10 detection classes mapped to the 7 tracking classes) or on canonical scenes of any dataset
+(:func:`scene_statistics`, per class of the scenes' vocabulary). For each class: box count and
 share, mean size (w, l, h), mean speed, share of moving boxes, mean |yaw rate| from consecutive annotations of
 the same instance, share of boxes without lidar points, instances and mean annotations per instance.
 """
@@ -33,6 +34,33 @@ COLUMNS = (  # (key, header, format)
     ("instances", "inst", "{:>5d}"),
     ("track_len", "anns/inst", "{:>9.1f}"),
 )
+
+
+def _flatten_scenes(scenes: Iterable) -> tuple[dict[str, np.ndarray], tuple[str, ...]]:
+    """The ground-truth boxes of canonical scenes (any dataset) as the flat arrays of :func:`_flatten`, class
+    names from each scene's vocabulary; returns the arrays and the vocabulary's names in order."""
+    parts = {"boxes": [], "cls": [], "inst": [], "t": [], "pts": []}
+    names: tuple[str, ...] = ()
+    for s in scenes:
+        names = names or s.vocabulary.names
+        vocab = np.asarray(s.vocabulary.names, dtype=object)
+        for f in s.frames:
+            gt = f.gt
+            parts["boxes"].append(gt.boxes)
+            parts["cls"].append(vocab[gt.labels])
+            parts["inst"].append(np.asarray(gt.ids if gt.ids is not None else np.arange(len(gt)), dtype=object))
+            parts["t"].append(np.full(len(gt), f.timestamp * 1e-6))
+            parts["pts"].append(np.asarray(gt.extra.get("num_pts", np.zeros(len(gt), np.int64))))
+    if not parts["boxes"]:
+        return _flatten(()), names
+    return {k: np.concatenate(v) for k, v in parts.items()}, names
+
+
+def scene_statistics(scenes: list) -> dict[str, dict]:
+    """:func:`class_statistics` of the ground truth of canonical scenes (any dataset; ``with_gt``), per class
+    of their vocabulary (AV2: its categories; lidar points from the dataset's own count)."""
+    flat, names = _flatten_scenes(scenes)
+    return _statistics(flat, names)
 
 
 def _flatten(frames: Iterable) -> dict[str, np.ndarray]:
@@ -74,12 +102,16 @@ def yaw_rates(inst: np.ndarray, t: np.ndarray, yaw: np.ndarray) -> tuple[np.ndar
 def class_statistics(frames: Iterable) -> dict[str, dict]:
     """Statistics per tracking class (keys of :data:`COLUMNS`) plus an ``all`` row; classes without boxes
     get count 0 and NaN means."""
-    flat = _flatten(frames)
+    return _statistics(_flatten(frames), TRACKING_CLASSES)
+
+
+def _statistics(flat: dict[str, np.ndarray], classes: tuple[str, ...]) -> dict[str, dict]:
+    """The statistics of flat box arrays (see :func:`_flatten`) per class name in ``classes`` and ``all``."""
     total = len(flat["cls"])
     rates, rate_idx = yaw_rates(flat["inst"], flat["t"], flat["boxes"][:, YAW])
     speed = np.hypot(flat["boxes"][:, VX], flat["boxes"][:, VY])
     stats = {}
-    for name in (*TRACKING_CLASSES, "all"):
+    for name in (*classes, "all"):
         mask = np.ones(total, bool) if name == "all" else flat["cls"] == name
         n = int(mask.sum())
         r = rates[mask[rate_idx]] if len(rates) else np.zeros(0)

@@ -72,6 +72,12 @@ class AV2Dataset:
         write_detection_table(out, table)
         return {"detections": len(table), "frames": sum(len(s) for s in scenes), "logs": len(scenes)}
 
+    def gt_statistics(self, splits: list[str]) -> dict[str, dict]:
+        """Over the vocabulary's classes, from the annotations at the tracked frames (``rate_hz``)."""
+        from grutrack.data.nusc_stats import scene_statistics
+
+        return scene_statistics([s for split in splits for s in self.scenes(split, with_gt=True)])
+
     def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
                      max_boxes: int) -> dict[str, int]:
         """The challenge pickle at ``path`` and a feather table of the same tracks beside it (``.feather``)."""

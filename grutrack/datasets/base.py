@@ -70,6 +70,10 @@ class Dataset(Protocol):
         (:class:`~grutrack.data.detection_sim.DetectorProfile`), written to ``out`` in the format
         :meth:`load_detections` reads; returns counts."""
 
+    def gt_statistics(self, splits: list[str]) -> dict[str, dict]:
+        """Per-class statistics of the ground truth of the union of ``splits``
+        (:mod:`grutrack.data.nusc_stats`: share, size, speed, moving share, |yaw rate|, 0-point share)."""
+
     def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
                      max_boxes: int) -> dict[str, int]:
         """The tracker's output written as the official submission (validated, atomically); returns counts

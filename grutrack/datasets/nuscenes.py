@@ -68,6 +68,12 @@ class NuScenesDataset:
                                 nusc=self.tables)
         return {"detections": sum(len(v) for v in sub["results"].values()), "samples": len(sub["results"])}
 
+    def gt_statistics(self, splits: list[str]) -> dict[str, dict]:
+        """Over the 7 tracking classes, from every annotation of the 10 detection classes (lidar points)."""
+        from grutrack.data.nusc_stats import nuscenes_statistics
+
+        return nuscenes_statistics(self.options.dataroot, self.options.version, splits, nusc=self.tables)
+
     def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
                      max_boxes: int) -> dict[str, int]:
         from grutrack.export.nuscenes_json import build_submission, write_submission
