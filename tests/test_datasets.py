@@ -9,14 +9,17 @@ import pickle
 import numpy as np
 import pytest
 
-from grutrack.cli.common import DATASETS as CLI_DATASETS
 from grutrack.data.scene import NUSCENES_VOCABULARY, BoxSet
 from grutrack.datasets import DATASETS, Dataset, DatasetOptions, open_dataset
 from grutrack.errors import ConfigError, InputFormatError
 
 
-def test_every_registered_dataset_implements_the_protocol_and_is_on_the_command_line(tmp_path):
-    assert tuple(DATASETS) == CLI_DATASETS
+def test_every_registered_dataset_implements_the_protocol_and_is_on_the_command_line(tmp_path, capsys):
+    from grutrack.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["track", "--help"])
+    assert "{" + ",".join(DATASETS) + "}" in capsys.readouterr().out
     for name in DATASETS:
         ds = open_dataset(name, DatasetOptions(tmp_path, version="v1.0-mini"))
         assert isinstance(ds, Dataset) and ds.name == name

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import argparse
 
-DATASETS = ("nuscenes", "av2")   # the names of grutrack.datasets.DATASETS (kept here: no import at parse time)
+from grutrack.datasets import DATASETS   # names only: the dataset modules are imported when one is opened
 
 
 def add_dataset_args(p: argparse.ArgumentParser, split_help: str, repeat: bool = False) -> None:
     """--dataset, --dataroot, --version, --split (``repeat``: once or more, a list) and the AV2 reading options,
     as every dataset-reading command takes them."""
-    p.add_argument("--dataset", default="nuscenes", choices=DATASETS, help="dataset (default: nuscenes)")
+    p.add_argument("--dataset", default="nuscenes", choices=tuple(DATASETS), help="dataset (default: nuscenes)")
     p.add_argument("--dataroot", required=True,
                    help="nuScenes dataroot (holds <version>/) or AV2 sensor root (holds <split>/<log_id>/)")
     p.add_argument("--version", default=None, help="nuScenes version, e.g. v1.0-trainval, v1.0-mini (nuScenes only)")

@@ -8,11 +8,15 @@ Adding a dataset: a module in this package with a class implementing the protoco
 from __future__ import annotations
 
 import importlib
+from typing import TYPE_CHECKING
 
-from grutrack.datasets.base import Dataset, DatasetOptions
 from grutrack.errors import ConfigError
 
-#: dataset name -> "module:class"; modules are imported only when their dataset is opened
+if TYPE_CHECKING:
+    from grutrack.datasets.base import Dataset, DatasetOptions
+
+#: dataset name -> "module:class"; modules are imported only when their dataset is opened (so the command line
+#: lists the names without importing numpy)
 DATASETS: dict[str, str] = {
     "nuscenes": "grutrack.datasets.nuscenes:NuScenesDataset",
     "av2": "grutrack.datasets.av2:AV2Dataset",
@@ -30,6 +34,15 @@ def dataset_class(name: str) -> type:
 def open_dataset(name: str, options: DatasetOptions) -> Dataset:
     """The dataset ``name`` at ``options.dataroot`` (nothing is read until a method needs it)."""
     return dataset_class(name)(options)
+
+
+def __getattr__(name: str):
+    """``Dataset`` and ``DatasetOptions`` from :mod:`grutrack.datasets.base`, imported on first use."""
+    if name in ("Dataset", "DatasetOptions", "Detections"):
+        from grutrack.datasets import base
+
+        return getattr(base, name)
+    raise AttributeError(f"module 'grutrack.datasets' has no attribute {name!r}")
 
 
 __all__ = ["DATASETS", "Dataset", "DatasetOptions", "dataset_class", "open_dataset"]
