@@ -237,9 +237,10 @@ def test_yaml_exponent_without_a_point_is_a_number(tmp_path):
     import yaml
 
     from grutrack.errors import ConfigError
-    from grutrack.training.config import CONFIG_DIR, load_train_config
+    from grutrack.config_loader import config_path
+    from grutrack.training.config import load_train_config
 
-    text = (CONFIG_DIR / "grukf.yaml").read_text()
+    text = config_path("training", "grukf").read_text()
     cfg_text = "\n".join("lr: 1e-5" if ln.startswith("lr:") else ln for ln in text.splitlines())
     assert yaml.safe_load(cfg_text)["lr"] == "1e-5"          # what PyYAML makes of it
     (tmp_path / "t.yaml").write_text(cfg_text)

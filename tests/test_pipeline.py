@@ -13,7 +13,8 @@ from grutrack.cli import main
 from grutrack.data.registry import load_registry
 from grutrack.errors import ConfigError
 from grutrack.pipeline import codever, spec
-from grutrack.pipeline.presets import deep_merge, resolve_tracker, resolve_training
+from grutrack.config_loader import merge
+from grutrack.pipeline.presets import resolve_tracker, resolve_training
 from grutrack.provenance import config_hash
 from grutrack.tracking.config import load_tracker_config
 
@@ -30,9 +31,9 @@ def paper():
     return yaml.safe_load((REPO / "workflow/config/paper.yaml").read_text())
 
 
-def test_deep_merge_keeps_the_rest():
+def test_merge_keeps_the_rest():
     base = {"a": {"x": 1, "y": 2}, "b": 3}
-    assert deep_merge(base, {"a": {"y": 5}}) == {"a": {"x": 1, "y": 5}, "b": 3}
+    assert merge(base, {"a": {"y": 5}}) == {"a": {"x": 1, "y": 5}, "b": 3}
     assert base == {"a": {"x": 1, "y": 2}, "b": 3}
 
 

@@ -3,13 +3,13 @@ config, validated by the same code that reads presets, written as a YAML file th
 
 from __future__ import annotations
 
-import copy
 import json
 from pathlib import Path
 
 import yaml
 
 from grutrack import __version__
+from grutrack.config_loader import merge, read_config
 from grutrack.errors import ConfigError
 from grutrack.io import write_text_atomic
 from grutrack.provenance import config_hash
@@ -17,41 +17,20 @@ from grutrack.provenance import config_hash
 KINDS = ("tracker", "training")
 
 
-def deep_merge(base: dict, overrides: dict) -> dict:
-    """A copy of ``base`` with ``overrides`` merged in: mappings merge key by key, other values replace."""
-    out = copy.deepcopy(base)
-    for key, val in (overrides or {}).items():
-        if isinstance(val, dict) and isinstance(out.get(key), dict):
-            out[key] = deep_merge(out[key], val)
-        else:
-            out[key] = copy.deepcopy(val)
-    return out
-
-
-def _read_yaml(path: Path) -> dict:
-    try:
-        return yaml.safe_load(path.read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f"{path}: cannot read ({exc})") from exc
-
-
 def resolve_tracker(base: str, overrides: dict | None = None) -> dict:
     """Tracker preset ``base`` (name or path) with ``overrides``, validated; raises naming the key."""
-    from grutrack.tracking.config import config_from_dict, preset_path
+    from grutrack.tracking.config import config_from_dict
 
-    raw = deep_merge(_read_yaml(preset_path(base)), overrides or {})
+    raw = merge(read_config("tracker", base)[0], overrides or {})
     config_from_dict(raw, f"tracker preset '{base}' with overrides {json.dumps(overrides or {})}")
     return raw
 
 
 def resolve_training(base: str, overrides: dict | None = None) -> dict:
     """Training config ``base`` (name or path) with ``overrides`` (top-level keys), validated."""
-    from grutrack.training.config import CONFIG_DIR, config_from_dict
+    from grutrack.training.config import config_from_dict
 
-    path = Path(base) if Path(base).suffix else CONFIG_DIR / f"{base}.yaml"
-    if not path.is_file():
-        raise ConfigError(f"training config {path} does not exist")
-    raw = deep_merge(_read_yaml(path), overrides or {})
+    raw = merge(read_config("training", base)[0], overrides or {})
     config_from_dict(raw, f"training config '{base}' with overrides {json.dumps(overrides or {})}")
     return raw
 

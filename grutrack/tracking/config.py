@@ -1,4 +1,5 @@
-"""Tracker presets: YAML files under ``grutrack/configs/trackers/`` validated against a fixed schema.
+"""Tracker presets: YAML files under ``grutrack/configs/trackers/`` validated against
+``grutrack/configs/schemas/tracker.schema.yaml`` by the one config loader (:mod:`grutrack.config_loader`).
 
 A preset is named (``ekf``) or given as a path. Every key is required, unknown keys are rejected, and
 per-class maps must list all 7 tracking classes: a misspelt key fails with the file and the key path.
@@ -11,51 +12,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from grutrack.classes import TRACKING_CLASSES
+from grutrack.config_loader import config_path, read_config, schema, validate
 from grutrack.errors import ConfigError
 
 PRESET_DIR = Path(__file__).resolve().parents[1] / "configs" / "trackers"
-METRICS = ("giou_3d", "giou_bev", "iou_3d", "iou_bev", "a_giou_3d", "a_giou_bev")
-NMS_METHODS = ("blend", "scale")
-SCORE_FILTERS = ("at_least", "above")
-NMS_METRICS = ("iou_bev", "a_giou_bev")
-SCORE_UPDATES = ("detection", "multiply")
-TERMINATIONS = ("age", "average_score")
-GEOMETRY_FILTERS = ("none", "median", "mean")
-MOTION_MODELS = ("CTRA", "BICYCLE", "CA", "CV")
-ALGORITHMS = ("hungarian", "greedy")
-#: association.assignment: which assignment the Hungarian stages solve (see grutrack/tracking/association.py)
-ASSIGNMENTS = ("most_pairs", "threshold_margin")
-#: motion.ctra_form / motion.bicycle_form: "arc" (grutrack/motion/models.py CTRA, Bicycle) or "piecewise"
-#: (CTRAPiecewise, BicyclePiecewise: Poly-MOT's forms)
-MODEL_FORMS = ("arc", "piecewise")
-#: preprocessing.measured_yaw: how a detection's quaternion becomes its yaw (grutrack/boxes.py)
-MEASURED_YAWS = ("euler_z", "rotation_angle")
-
-# schema: section -> key -> kind; "per_class_float" etc. are maps over the 7 tracking classes
-SCHEMA: dict[str, dict[str, str]] = {
-    "preprocessing": {"score_threshold": "per_class_unit", "nms_threshold": "unit", "nms_class_aware": "bool",
-                      "measured_yaw": "measured_yaw", "score_filter": "score_filter", "nms_method": "nms_method",
-                      "nms_metric": "per_class_nms_metric", "nms_scale": "per_class_scale",
-                      "nms_distance_gate": "per_class_gate"},
-    "association": {"algorithm": "algorithm", "assignment": "assignment", "first_metric": "per_class_metric",
-                    "first_threshold": "per_class_cost", "two_stage": "bool", "second_metric": "metric",
-                    "second_threshold": "per_class_cost", "max_distance": "per_class_metres",
-                    "distance_gate": "per_class_gate"},
-    "lifecycle": {"max_age": "per_class_posint", "min_hits": "per_class_posint", "decay_rate": "per_class_unit",
-                  "punish_num": "nonnegint", "score_update": "score_update", "termination": "termination",
-                  "delete_threshold": "per_class_unit"},
-    "motion": {"config": "str", "model_override": "class_model_map", "yaw_flip": "bool", "time_step": "time_step",
-               "ctra_form": "model_form", "bicycle_form": "model_form",
-               "geometry_filter": "per_class_geometry_filter", "geometry_window": "per_class_posint"},
-    "output": {"matched_box": "matched_box", "max_boxes_per_sample": "posint"},
-}
-
-
-_CHOICES = {"metric": METRICS, "score_filter": SCORE_FILTERS, "nms_method": NMS_METHODS, "nms_metric": NMS_METRICS, "score_update": SCORE_UPDATES,
-            "termination": TERMINATIONS, "geometry_filter": GEOMETRY_FILTERS}
+SECTIONS = ("preprocessing", "association", "lifecycle", "motion", "output")
+#: per-class settings that are names (kept as tuples; the numeric ones become (7,) arrays)
 _NAMED_PER_CLASS = ("per_class_metric", "per_class_nms_metric", "per_class_geometry_filter")
 
 
@@ -103,37 +67,23 @@ class TrackerConfig:
 
 
 def preset_path(name_or_path: str | Path) -> Path:
-    """Resolve a preset name (``ekf``) or a path to a YAML file."""
-    p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml") or p.exists():
-        if not p.is_file():
-            raise ConfigError(f"tracker config {p} does not exist")
-        return p
-    cand = PRESET_DIR / f"{name_or_path}.yaml"
-    if not cand.is_file():
-        names = sorted(q.stem for q in PRESET_DIR.glob("*.yaml"))
-        raise ConfigError(f"unknown tracker preset '{name_or_path}' (available: {', '.join(names)}; "
-                          f"or give a path to a YAML file)")
-    return cand
+    """Resolve a preset name (``ekf``) or a path to a YAML file (the one name-or-path rule)."""
+    return config_path("tracker", name_or_path)
 
 
 def load_tracker_config(name_or_path: str | Path = "ekf") -> TrackerConfig:
     """Load and validate a tracker preset; raises :class:`ConfigError` naming the file and key."""
-    path = preset_path(name_or_path)
-    try:
-        raw = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML ({exc})") from exc
-    return config_from_dict(raw, str(path))
+    raw, source = read_config("tracker", name_or_path)
+    return config_from_dict(raw, source)
 
 
 def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
-    """Validate a preset given as a dict (see :data:`SCHEMA`)."""
+    """Validate a preset given as a dict against ``grutrack/configs/schemas/tracker.schema.yaml``."""
     if not isinstance(raw, dict):
-        raise ConfigError(f"{source}: expected a mapping of sections {', '.join(SCHEMA)}")
-    _check_keys(source, "", raw, SCHEMA)
-    v = {f"{sec}.{key}": _value(source, f"{sec}.{key}", raw[sec][key], kind)
-         for sec, keys in SCHEMA.items() for key, kind in keys.items()}
+        raise ConfigError(f"{source}: expected a mapping of sections {', '.join(SECTIONS)}")
+    validate("tracker", raw, source)
+    v = {f"{sec}.{key}": _convert(raw[sec][key], ref) for sec, keys in _section_refs().items()
+         for key, ref in keys.items()}
     if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
         raise ConfigError(f"{source}: 'association.two_stage' must be false with 'association.algorithm' greedy "
                           f"(greedy matching is one stage)")
@@ -158,77 +108,24 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         geometry_filter=v["motion.geometry_filter"], geometry_window=v["motion.geometry_window"])
 
 
-def _check_keys(source: str, prefix: str, given: dict, expected: dict) -> None:
-    unknown = [k for k in given if k not in expected]
-    missing = [k for k in expected if k not in given]
-    if unknown:
-        raise ConfigError(f"{source}: unknown key '{prefix}{unknown[0]}' (expected one of: "
-                          f"{', '.join(prefix + k for k in expected)})")
-    if missing:
-        raise ConfigError(f"{source}: missing key '{prefix}{missing[0]}'")
-    for k, sub in expected.items():
-        if isinstance(sub, dict):
-            if not isinstance(given[k], dict):
-                raise ConfigError(f"{source}: '{prefix}{k}' must be a mapping with keys {', '.join(sub)}")
-            _check_keys(source, f"{prefix}{k}.", given[k], sub)
+def _section_refs() -> dict[str, dict[str, str]]:
+    """Section -> key -> the schema definition its value follows (``per_class_unit``, ``bool``, ...)."""
+    return {sec: {k: node["$ref"].rsplit("/", 1)[1] for k, node in spec["properties"].items()}
+            for sec, spec in schema("tracker")["properties"].items()}
 
 
-def _value(source: str, key: str, val: Any, kind: str) -> Any:
-    """Check and convert one value of the given kind."""
-    def fail(expected: str):
-        raise ConfigError(f"{source}: '{key}' must be {expected}, got {val!r}")
-
-    if kind.startswith("per_class_"):
-        if not isinstance(val, dict):
-            fail(f"a mapping over the tracking classes {', '.join(TRACKING_CLASSES)}")
-        _check_keys(source, f"{key}.", val, {c: None for c in TRACKING_CLASSES})
-        items = [_value(source, f"{key}.{c}", val[c], kind[len("per_class_"):]) for c in TRACKING_CLASSES]
-        return tuple(items) if kind in _NAMED_PER_CLASS else np.asarray(items)
-    if kind == "class_model_map":
-        if not isinstance(val, dict):
-            fail("a mapping {class: model}")
-        for c, m in val.items():
-            if c not in TRACKING_CLASSES:
-                raise ConfigError(f"{source}: '{key}' has unknown class '{c}' (expected one of "
-                                  f"{', '.join(TRACKING_CLASSES)})")
-            if str(m).upper() not in MOTION_MODELS:
-                raise ConfigError(f"{source}: '{key}.{c}' must be one of {', '.join(MOTION_MODELS)}, got {m!r}")
+def _convert(val: Any, ref: str) -> Any:
+    """A validated value in the form the tracker uses: per-class maps as (7,) arrays (tuples of names),
+    model overrides upper-case, ``time_step: timestamps`` as None."""
+    if ref.startswith("per_class_"):
+        items = [val[c] for c in TRACKING_CLASSES]
+        return tuple(items) if ref in _NAMED_PER_CLASS else np.asarray(items)
+    if ref == "class_model_map":
         return {c: str(m).upper() for c, m in val.items()}
-    if kind == "bool":
-        return val if isinstance(val, bool) else fail("true or false")
-    if kind == "str":
-        return val if isinstance(val, str) and val else fail("a non-empty string")
-    if kind == "matched_box":
-        return val if val in ("filter", "detection") else fail("'filter' or 'detection'")
-    if kind in _CHOICES:
-        return val if val in _CHOICES[kind] else fail(f"one of {', '.join(_CHOICES[kind])}")
-    if kind == "algorithm":
-        return val if val in ALGORITHMS else fail(f"one of {', '.join(ALGORITHMS)}")
-    if kind == "assignment":
-        return val if val in ASSIGNMENTS else fail(f"one of {', '.join(ASSIGNMENTS)}")
-    if kind == "model_form":
-        return val if val in MODEL_FORMS else fail(f"one of {', '.join(MODEL_FORMS)}")
-    if kind == "measured_yaw":
-        return val if val in MEASURED_YAWS else fail(f"one of {', '.join(MEASURED_YAWS)}")
-    if kind == "time_step":
-        if val == "timestamps":
-            return None
-        if isinstance(val, bool) or not isinstance(val, (int, float)) or not np.isfinite(val) or val <= 0:
-            fail("'timestamps' or a positive number of seconds")
+    if ref == "time_step":
+        return None if val == "timestamps" else float(val)
+    if ref in ("unit", "scale", "gate", "metres", "cost"):
         return float(val)
-    if isinstance(val, bool) or not isinstance(val, (int, float)) or not np.isfinite(val):
-        fail("a number")
-    if kind == "unit":
-        return float(val) if 0 <= val <= 1 else fail("a number in [0, 1]")
-    if kind == "scale":
-        return float(val) if val > 0 else fail("a positive scale factor")
-    if kind == "gate":
-        return float(val) if val >= 0 else fail("a distance in metres >= 0 (0: no gate)")
-    if kind == "metres":
-        return float(val) if val > 0 else fail("a positive distance in metres")
-    if kind == "cost":
-        return float(val) if 0 <= val <= 2 else fail("a cost threshold in [0, 2] (cost = 1 - similarity)")
-    if kind in ("posint", "nonnegint"):
-        lo = 1 if kind == "posint" else 0
-        return int(val) if float(val).is_integer() and val >= lo else fail(f"an integer >= {lo}")
-    raise AssertionError(kind)
+    if ref in ("posint", "nonnegint"):
+        return int(val)
+    return val
