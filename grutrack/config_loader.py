@@ -34,6 +34,7 @@ KINDS: dict[str, ConfigKind] = {
     "tracker": ConfigKind("trackers", "tracker.schema.yaml", "tracker preset",
                           "sections preprocessing, association, lifecycle, motion, output"),
     "training": ConfigKind("training", "training.schema.yaml", "training config", "training settings"),
+    "motion": ConfigKind("motion", "motion.schema.yaml", "motion config", "sections models, classes"),
 }
 
 

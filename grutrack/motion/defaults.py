@@ -12,56 +12,34 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from grutrack.boxes import BOX_DIM
 from grutrack.classes import TRACKING_CLASSES
+from grutrack.config_loader import config_path, load_config
 from grutrack.errors import ConfigError
 from grutrack.motion.models import MODELS, MotionModel, make_model
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs" / "motion"
 DEFAULT_CONFIG = CONFIG_DIR / "polymot_nusc.yaml"
 
-_TOP_KEYS = ("models", "classes")
-_MODEL_KEYS = ("P0", "Q", "R", "params")
-_CLASS_KEYS = ("model", "P0", "Q", "R")
 # minimum eigenvalue requirement per matrix: R and P0 positive definite, Q positive semi-definite
 _STRICT = {"P0": True, "R": True, "Q": False}
 
 
 def resolve_config_path(path: str | Path | None = None) -> Path:
-    """A config file path: None -> the default, a bare name (``polymot_nusc``) -> ``configs/motion/<name>.yaml``."""
-    if path is None:
-        return DEFAULT_CONFIG
-    p = Path(path)
-    if not p.exists() and p.suffix == "" and len(p.parts) == 1:
-        return CONFIG_DIR / f"{p.name}.yaml"
-    return p
+    """A config file path: None -> the default, a bare name (``polymot_nusc``) -> ``configs/motion/<name>.yaml``
+    (the one name-or-path rule, :func:`grutrack.config_loader.config_path`)."""
+    return DEFAULT_CONFIG if path is None else config_path("motion", path)
 
 
 def _fail(path: Path, key: str, msg: str) -> ConfigError:
     return ConfigError(f"{path}: key '{key}': {msg}")
 
 
-def _check_keys(path: Path, where: str, node, expected: tuple[str, ...]) -> None:
-    """Raise unless ``node`` is a mapping with exactly the keys ``expected``."""
-    if not isinstance(node, Mapping):
-        raise _fail(path, where or "<top level>", f"expected a mapping with keys {list(expected)}")
-    prefix = f"{where}." if where else ""
-    for key in node:
-        if key not in expected:
-            raise _fail(path, f"{prefix}{key}", f"unknown key (expected one of {list(expected)})")
-    for key in expected:
-        if key not in node:
-            raise _fail(path, f"{prefix}{key}", "missing")
-
-
-def _canonical_model(path: Path, key: str, name) -> str:
-    """The canonical model name (``CTRA``, ``Bicycle``, ``CA``, ``CV``) for a case-insensitive spelling."""
-    lookup = {k.lower(): k for k in MODELS}
-    if not isinstance(name, str) or name.lower() not in lookup:
-        raise _fail(path, key, f"unknown motion model {name!r} (expected one of {sorted(MODELS)})")
-    return lookup[name.lower()]
+def _canonical_model(name: str) -> str:
+    """The canonical model name (``CTRA``, ``Bicycle``, ``CA``, ``CV``) of a case-insensitive spelling the
+    schema accepted."""
+    return {k.lower(): k for k in MODELS}[name.lower()]
 
 
 def _is_number(v) -> bool:
@@ -101,16 +79,12 @@ def _noise(path: Path, where: str, node: Mapping, model: str) -> dict[str, np.nd
 
 
 def _model_defaults(path: Path, models_node) -> dict[str, dict]:
-    """Validated ``models`` section -> ``{model: {"Q", "R", "P0", "params"}}``."""
-    _check_keys(path, "models", models_node, tuple(MODELS))
+    """Schema-checked ``models`` section -> ``{model: {"Q", "R", "P0", "params"}}``."""
     out = {}
     for name in MODELS:
         where = f"models.{name}"
         node = models_node[name]
-        _check_keys(path, where, node, _MODEL_KEYS)
         params = node["params"] if node["params"] is not None else {}
-        if not isinstance(params, Mapping):
-            raise _fail(path, f"{where}.params", "expected a mapping of constructor parameters")
         try:
             make_model(name, **params)
         except (TypeError, ValueError) as exc:
@@ -123,15 +97,21 @@ def _overrides(path: Path, model_override) -> dict[str, str]:
     """``model_override`` (None, a model name for all classes, or ``{class: model}``) -> ``{class: model}``."""
     if model_override is None:
         return {}
+    lookup = {k.lower(): k for k in MODELS}
+
+    def model(key: str, name) -> str:
+        if not isinstance(name, str) or name.lower() not in lookup:
+            raise _fail(path, key, f"unknown motion model {name!r} (expected one of {sorted(MODELS)})")
+        return lookup[name.lower()]
+
     if isinstance(model_override, str):
-        name = _canonical_model(path, "model_override", model_override)
-        return {cls: name for cls in TRACKING_CLASSES}
+        return {cls: model("model_override", model_override) for cls in TRACKING_CLASSES}
     out = {}
     for cls, name in dict(model_override).items():
         if cls not in TRACKING_CLASSES:
             expected = list(TRACKING_CLASSES)
             raise _fail(path, f"model_override.{cls}", f"unknown tracking class (expected one of {expected})")
-        out[cls] = _canonical_model(path, f"model_override.{cls}", name)
+        out[cls] = model(f"model_override.{cls}", name)
     return out
 
 
@@ -152,23 +132,14 @@ def load_motion_config(path: str | Path | None = None, model_override=None) -> d
             non-symmetric or non-positive matrix; the message names the file and the key.
     """
     path = resolve_config_path(path)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            raw = yaml.safe_load(fh)
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read motion config ({exc.strerror or exc})") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: invalid YAML ({exc})") from None
-    _check_keys(path, "", raw, _TOP_KEYS)
+    raw, _ = load_config("motion", path)       # layout and value types (grutrack/configs/schemas/motion.schema.yaml)
     defaults = _model_defaults(path, raw["models"])
-    _check_keys(path, "classes", raw["classes"], TRACKING_CLASSES)
     override = _overrides(path, model_override)
     out = {}
     for cls in TRACKING_CLASSES:
         where = f"classes.{cls}"
         node = raw["classes"][cls]
-        _check_keys(path, where, node, _CLASS_KEYS)
-        own = _canonical_model(path, f"{where}.model", node["model"])
+        own = _canonical_model(node["model"])
         noise = _noise(path, where, node, own)
         model = override.get(cls, own)
         if model != own:
