@@ -21,10 +21,10 @@ CONFIG_ROOT = Path(__file__).resolve().parent / "configs"
 
 @dataclass(frozen=True)
 class ConfigKind:
-    """A kind of configuration: its folder of shipped files under ``grutrack/configs/``, its schema, and
-    what a user calls one (for messages)."""
+    """A kind of configuration: its folder of shipped files under ``grutrack/configs/`` (None: given by path
+    only), its schema, and what a user calls one (for messages)."""
 
-    folder: str
+    folder: str | None
     schema: str
     what: str
     holds: str      # what the file's top-level mapping holds, for "expected a mapping of ..."
@@ -35,12 +35,14 @@ KINDS: dict[str, ConfigKind] = {
                           "sections preprocessing, association, lifecycle, motion, output"),
     "training": ConfigKind("training", "training.schema.yaml", "training config", "training settings"),
     "motion": ConfigKind("motion", "motion.schema.yaml", "motion config", "sections models, classes"),
+    "paper": ConfigKind(None, "paper.schema.yaml", "paper numbers file", "sections tables, figures"),
 }
 
 
 def shipped_names(kind: str) -> list[str]:
-    """Names of the shipped configurations of a kind."""
-    return sorted(p.stem for p in (CONFIG_ROOT / KINDS[kind].folder).glob("*.yaml"))
+    """Names of the shipped configurations of a kind (none for a kind given by path only)."""
+    folder = KINDS[kind].folder
+    return sorted(p.stem for p in (CONFIG_ROOT / folder).glob("*.yaml")) if folder else []
 
 
 def config_path(kind: str, name_or_path: str | Path) -> Path:
@@ -48,7 +50,7 @@ def config_path(kind: str, name_or_path: str | Path) -> Path:
     path; anything else is the name of a shipped configuration (``grutrack/configs/<folder>/<name>.yaml``)."""
     k = KINDS[kind]
     p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml") or p.is_file() or len(p.parts) > 1:
+    if p.suffix in (".yaml", ".yml") or p.is_file() or len(p.parts) > 1 or k.folder is None:
         if not p.is_file():
             raise ConfigError(f"{k.what} {p} does not exist")
         return p
@@ -161,11 +163,22 @@ def _described(root: dict, path: list) -> tuple[int, str | None]:
 
 def _expectation(err) -> str:
     """A readable expectation for a schema node without a description."""
+    v = err.validator_value
     if err.validator == "enum":
-        return "one of " + ", ".join(str(v) for v in err.validator_value)
+        return "one of " + ", ".join(str(x) for x in v)
     if err.validator == "type":
-        return {"object": "a mapping", "array": "a list", "boolean": "true or false"}.get(err.validator_value,
-                                                                                         f"a {err.validator_value}")
+        names = {"object": "a mapping", "array": "a list", "boolean": "true or false", "integer": "an integer",
+                 "number": "a finite number", "string": "a string", "null": "null"}
+        return " or ".join(names.get(t, t) for t in (v if isinstance(v, list) else [v]))
+    bounds = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=", "exclusiveMaximum": "<"}
+    if err.validator in bounds:
+        return f"a number {bounds[err.validator]} {v}"
+    if err.validator == "pattern":
+        return f"text matching {v}"
+    if err.validator in ("minItems", "minProperties", "minLength"):
+        return f"at least {v} {'characters' if err.validator == 'minLength' else 'entries'}"
+    if err.validator == "const":
+        return repr(v)
     return err.message
 
 

@@ -12,12 +12,24 @@ from grutrack.config_loader import KINDS, config_path, load_config, merge, shipp
 from grutrack.errors import ConfigError
 
 
-@pytest.mark.parametrize("kind", sorted(KINDS))
+@pytest.mark.parametrize("kind", sorted(k for k in KINDS if KINDS[k].folder))
 def test_every_shipped_config_is_valid_under_its_schema(kind):
     assert shipped_names(kind)
     for name in shipped_names(kind):
         raw, source = load_config(kind, name)
         assert source.endswith(f"{name}.yaml") and isinstance(raw, dict)
+
+
+def test_the_papers_numbers_are_valid_and_given_by_path_only(tmp_path):
+    from grutrack.report.paper import default_paper_path, load_paper
+
+    assert set(load_paper()["tables"]) == {"I", "II", "III", "IV"}
+    with pytest.raises(ConfigError, match="paper numbers file paper does not exist"):
+        config_path("paper", "paper")                   # no shipped names: a path only
+    bad = tmp_path / "paper.yaml"
+    bad.write_text(default_paper_path().read_text().replace("tolerance: ", "tolerance: -", 1))
+    with pytest.raises(ConfigError, match=r"paper.yaml: 'tables\.[IV]+\.columns\.\w+\.tolerance' must be a number >= 0, got -"):
+        load_paper(bad)
 
 
 def test_name_or_path_rule(tmp_path):

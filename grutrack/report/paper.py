@@ -8,8 +8,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
-
 from grutrack.documents import MetricsDocument
 from grutrack.errors import ConfigError
 
@@ -27,23 +25,18 @@ def default_paper_path() -> Path:
 
 
 def load_paper(path: str | Path | None = None) -> dict:
-    """Read and structurally check paper.yaml (the workflow also validates it against its JSON schema)."""
-    path = Path(path) if path else default_paper_path()
-    try:
-        paper = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f"{path}: cannot read the paper numbers ({exc})") from exc
-    if not isinstance(paper, dict) or not isinstance(paper.get("tables"), dict):
-        raise ConfigError(f"{path}: expected a 'tables' mapping")
+    """Read paper.yaml and check it against ``grutrack/configs/schemas/paper.schema.yaml`` (the one config
+    loader), then that every row's numbers are columns of its table."""
+    from grutrack.config_loader import load_config
+
+    paper, source = load_config("paper", Path(path) if path else default_paper_path())
     for tid, table in paper["tables"].items():
-        _check_table(path, tid, table)
+        _check_table(source, tid, table)
     return paper
 
 
-def _check_table(path: Path, tid: str, table: dict) -> None:
-    for key in ("title", "columns", "rows", "default_row"):
-        if key not in table:
-            raise ConfigError(f"{path}: tables.{tid} has no '{key}'")
+def _check_table(path: str, tid: str, table: dict) -> None:
+    """Every column a row gives is a column of the table (what the schema cannot state)."""
     for row, values in table["rows"].items():
         for col in values:
             if col not in table["columns"] and col not in ROW_INFO_KEYS:

@@ -12,6 +12,7 @@ from grutrack.data.registry import load_registry
 from grutrack.errors import ConfigError
 from grutrack.pipeline import spec as S
 from grutrack.pipeline.codever import code_version
+from grutrack.report.paper import load_paper
 
 PY = sys.executable                      # the environment's interpreter (the one running snakemake)
 GRUTRACK = f"{PY} -m grutrack"
@@ -19,9 +20,10 @@ GRUTRACK = f"{PY} -m grutrack"
 ON_FAIL = "|| {{ tail -n 25 {log} >&2; exit 1; }}"
 
 PAPER_PATH = str(Path(workflow.basedir) / config["paper"]) if not os.path.isabs(config["paper"]) else config["paper"]
-with open(PAPER_PATH) as _f:
-    PAPER = yaml.safe_load(_f)
-validate(PAPER, "../schemas/paper.schema.yaml", set_default=False)
+try:
+    PAPER = load_paper(PAPER_PATH)        # the one config loader: schema grutrack/configs/schemas/paper.schema.yaml
+except ConfigError as _exc:
+    raise WorkflowError(str(_exc))
 REGISTRY = load_registry()
 S.check_config(config, PAPER, REGISTRY)
 
