@@ -33,6 +33,40 @@ def test_torch_ss_models_match_numpy():
     assert np.abs(diff[ok]).max() < 1e-6 and ok.mean() > 0.5
 
 
+@pytest.mark.parametrize("wheelbase_ratio, front_ratio", [(0.8, 0.5), (0.6, 0.3), (0.95, 0.7)])
+def test_torch_bicycle_matches_numpy_at_any_parameters(wheelbase_ratio, front_ratio):
+    """f, h and the initial state of the torch Bicycle equal the numpy model's at non-default parameters too
+    (reference point off the box centre when front_ratio != 0.5)."""
+    x = _states(2000, seed=3)
+    ref, tm = Bicycle(wheelbase_ratio, front_ratio), TorchBicycle(wheelbase_ratio, front_ratio)
+    assert np.abs(ref.h(x) - tm.h(torch.tensor(x)).numpy()).max() < 1e-12
+    z = ref.h(x)
+    assert np.abs(ref.init_state(z) - tm.init_state(torch.tensor(z)).numpy()).max() < 1e-9
+    beta = np.arctan2((1 - front_ratio) * np.sin(x[:, 9]), np.cos(x[:, 9]))
+    ds = x[:, 6] * 0.5 + 0.125 * x[:, 7]
+    ok = np.abs(np.sin(beta) / ((1 - front_ratio) * wheelbase_ratio * x[:, 4]) * ds) < 1.0
+    diff = ref.f(x, 0.5) - tm.f(torch.tensor(x), 0.5).numpy()
+    assert np.abs(diff[ok]).max() < 1e-6 and ok.mean() > 0.4
+
+
+def test_the_network_takes_the_motion_configs_model_parameters(tmp_path):
+    """The trained network's SS model is built with the training motion config's parameters, stored in the
+    checkpoint's architecture."""
+    import yaml
+
+    from grutrack.motion.defaults import resolve_config_path
+    from grutrack.training.config import load_train_config
+    from grutrack.training.trainer import _arch
+
+    raw = yaml.safe_load(resolve_config_path("polymot_nusc").read_text())
+    raw["models"]["Bicycle"]["params"] = {"wheelbase_ratio": 0.6, "front_ratio": 0.3}
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump(raw))
+    arch = _arch(load_train_config("grukf", {"ss_model": "Bicycle", "motion_config": str(tmp_path / "m.yaml")}))
+    net = GRUKalmanNet(arch)
+    assert arch.ss_params == {"wheelbase_ratio": 0.6, "front_ratio": 0.3}
+    assert (net.ss.wheelbase_ratio, net.ss.front_ratio) == (0.6, 0.3)
+
+
 def _net(seed=0, **kw):
     torch.manual_seed(seed)
     net = GRUKalmanNet(GRUKFConfig(**kw))

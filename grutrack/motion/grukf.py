@@ -24,7 +24,7 @@ output layer's bias starts at a given gain (the EKF's mean gain on the training 
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import math
 
@@ -57,6 +57,8 @@ class GRUKFConfig:
     aux_inputs: the magnitudes the L2 normalisation removes, ``log(1 + |f|)`` of each of the four features
     (metres-like units), and ``log(n_updates)``, ``log(gap)`` of the track (see :func:`aux_features`), as AUX_DIM
     extra inputs of the S-GRU's input layer and of the output layer (a grutrack addition).
+    ss_params: constructor parameters of the SS model (Bicycle: wheelbase_ratio, front_ratio), the training
+    motion config's, so that the network's f and h are the parallel EKF's.
     """
 
     ss_model: str = "CTRA"
@@ -69,6 +71,7 @@ class GRUKFConfig:
     n_classes: int = 7
     yaw_flip: bool = False
     aux_inputs: bool = False
+    ss_params: dict = field(default_factory=dict)   # the SS model's constructor parameters (motion config)
 
     @property
     def table_shape(self) -> tuple[int, int, int]:
@@ -115,7 +118,7 @@ class GRUKalmanNet(nn.Module):
     def __init__(self, cfg: GRUKFConfig = GRUKFConfig()):
         super().__init__()
         self.cfg = cfg
-        self.ss = make_torch_model(cfg.ss_model)
+        self.ss = make_torch_model(cfg.ss_model, **cfg.ss_params)
         m, n = self.ss.dim_x, MEAS_DIM
         self.m, self.n = m, n
         self.h_q, self.h_sigma, self.h_s = m * m, m * m, n * n

@@ -57,8 +57,11 @@ class TorchCTRA:
 
 
 class TorchBicycle:
-    """Kinematic bicycle, state ``[x, y, z, w, l, h, v, a, yaw, delta]`` with the reference point at the box
-    centre; slip ``beta = atan2(lr tan(delta), L)`` with ``lr = (1 - front_ratio) L``, ``L = wheelbase_ratio * l``.
+    """Kinematic bicycle, state ``[x, y, z, w, l, h, v, a, yaw, delta]`` (see
+    :class:`grutrack.motion.models.Bicycle`): (x, y) is the reference point ``d = l * wheelbase_ratio *
+    (0.5 - front_ratio)`` ahead of the box centre along the heading (0 with the defaults); slip
+    ``beta = atan2((1 - front_ratio) sin(delta), cos(delta))``, curvature ``sin(beta) / lr`` with
+    ``lr = (1 - front_ratio) L``, ``L = wheelbase_ratio * l``.
     """
 
     name = "Bicycle"
@@ -68,9 +71,15 @@ class TorchBicycle:
     def __init__(self, wheelbase_ratio: float = 0.8, front_ratio: float = 0.5):
         self.wheelbase_ratio, self.front_ratio = wheelbase_ratio, front_ratio
 
+    def _offset(self, x: torch.Tensor) -> torch.Tensor:
+        """(N, 1) metres from the box centre to the reference point, along the heading."""
+        return self.wheelbase_ratio * (0.5 - self.front_ratio) * x[:, 4:5]
+
     def init_state(self, z: torch.Tensor) -> torch.Tensor:
-        """(N, 9) canonical boxes -> (N, 10): v = |(vx, vy)|, a = delta = 0."""
-        return TorchCTRA.init_state(self, z)  # same layout, delta in the omega slot
+        """(N, 9) canonical boxes -> (N, 10): the reference point, v = |(vx, vy)|, a = delta = 0."""
+        x = TorchCTRA.init_state(self, z)  # same layout, delta in the omega slot
+        d, yaw = self._offset(x), x[:, 8:9]
+        return torch.cat([x[:, 0:1] + d * torch.cos(yaw), x[:, 1:2] + d * torch.sin(yaw), x[:, 2:]], dim=1)
 
     def _beta(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         lr = (1 - self.front_ratio) * self.wheelbase_ratio * x[:, 4:5].clamp_min(1e-3)
@@ -92,10 +101,11 @@ class TorchBicycle:
                           yaw + k * ds, x[:, 9:10]], dim=1)
 
     def h(self, x: torch.Tensor) -> torch.Tensor:
-        """Measurement (N, 10) -> (N, 9), velocity along yaw + beta."""
+        """Measurement (N, 10) -> (N, 9): the box centre, size, yaw, velocity along yaw + beta."""
         beta, _ = self._beta(x)
-        yaw, v = x[:, 8:9], x[:, 6:7]
-        return torch.cat([x[:, 0:6], yaw, v * torch.cos(yaw + beta), v * torch.sin(yaw + beta)], dim=1)
+        yaw, v, d = x[:, 8:9], x[:, 6:7], self._offset(x)
+        return torch.cat([x[:, 0:1] - d * torch.cos(yaw), x[:, 1:2] - d * torch.sin(yaw), x[:, 2:6], yaw,
+                          v * torch.cos(yaw + beta), v * torch.sin(yaw + beta)], dim=1)
 
 
 TORCH_MODELS = {"CTRA": TorchCTRA, "BICYCLE": TorchBicycle}

@@ -257,9 +257,13 @@ def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: Tra
 
 def _arch(cfg: TrainConfig) -> GRUKFConfig:
     """The network architecture a training config asks for."""
-    return GRUKFConfig(ss_model=cfg.ss_model, four_gru=cfg.four_gru, class_gain=cfg.class_gain,
-                       age_bins=cfg.age_bins, gap_bins=cfg.gap_bins, yaw_flip=cfg.yaw_flip,
-                       aux_inputs=cfg.aux_inputs)
+    from grutrack.classes import TRACKING_CLASSES
+    from grutrack.motion.defaults import load_motion_config
+
+    params = load_motion_config(cfg.motion_config, cfg.ss_model)[TRACKING_CLASSES[0]]["params"]
+    return GRUKFConfig(ss_model=cfg.ss_model, ss_params=dict(params), four_gru=cfg.four_gru,
+                       class_gain=cfg.class_gain, age_bins=cfg.age_bins, gap_bins=cfg.gap_bins,
+                       yaw_flip=cfg.yaw_flip, aux_inputs=cfg.aux_inputs)
 
 
 @dataclass
