@@ -31,7 +31,7 @@ def mini_track(nusc_root, pointpillars_mini_val, tmp_path):
 
 def _checkpoint(path, mutate=None):
     from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
-    from grutrack.training.checkpoint import save_checkpoint
+    from grutrack.motion.checkpoint import save_checkpoint
 
     net = GRUKalmanNet(GRUKFConfig())
     save_checkpoint(path, net)
@@ -61,7 +61,7 @@ def test_checkpoint_with_another_tracker_is_refused(mini_track, tmp_path, capsys
 
 def test_checkpoint_with_a_mis_shaped_tensor(mini_track, tmp_path, capsys):
     from grutrack.errors import InputFormatError
-    from grutrack.training.checkpoint import load_network
+    from grutrack.motion.checkpoint import load_network
 
     def shrink(ck):
         k = next(iter(ck["model"]))

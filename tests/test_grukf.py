@@ -222,7 +222,7 @@ def test_resume_after_interruption_equals_uninterrupted_run(small_training_set, 
     import signal
 
     from grutrack.training import trainer as tr
-    from grutrack.training.checkpoint import read_checkpoint
+    from grutrack.motion.checkpoint import read_checkpoint
 
     scenes, dets = small_training_set
     ref_state, ref_log = uninterrupted_run
@@ -304,7 +304,7 @@ def test_checkpoint_loads_without_reinitialising(small_training_set, tmp_path):
 
 def test_nan_loss_stops_training_and_keeps_last_good_checkpoint(small_training_set, tmp_path, monkeypatch):
     from grutrack.training import trainer as tr
-    from grutrack.training.checkpoint import read_checkpoint
+    from grutrack.motion.checkpoint import read_checkpoint
 
     scenes, dets = small_training_set
     t = _trainer(scenes, dets, tmp_path, epochs=2)
@@ -468,7 +468,7 @@ def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(nusc_min
     from grutrack.cli import main
     from grutrack.data.detection_sim import simulate_nuscenes
     from grutrack.training import trainer as tr
-    from grutrack.training.checkpoint import read_checkpoint
+    from grutrack.motion.checkpoint import read_checkpoint
 
     dets = tmp_path / "d.json"
     dets.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5,

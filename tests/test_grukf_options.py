@@ -109,7 +109,7 @@ def test_new_training_keys_are_validated():
 
 
 def _save(path, matched_box):
-    from grutrack.training.checkpoint import save_checkpoint
+    from grutrack.motion.checkpoint import save_checkpoint
 
     extra = {} if matched_box is None else {"train_config": {"matched_box": matched_box}}
     save_checkpoint(path, _net(gap_bins=0).float(), extra)

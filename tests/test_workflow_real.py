@@ -224,7 +224,7 @@ def test_killed_rule_is_incomplete_and_a_rerun_finishes_it(tmp_path):
     rerun = subprocess.run(_snakemake_cmd(), cwd=tmp_path, env=env, capture_output=True,
                            text=True, timeout=600)
     assert rerun.returncode == 0, rerun.stdout[-3000:] + rerun.stderr[-3000:]
-    from grutrack.training.checkpoint import read_checkpoint
+    from grutrack.motion.checkpoint import read_checkpoint
 
     ck = read_checkpoint(tmp_path / TRAIN_OUTPUTS[0], map_location="cpu")
     assert ck["train_state"]["epoch"] == 25

@@ -18,7 +18,7 @@ PACKAGE = Path(__file__).resolve().parents[1]
 #: files every stage runs (the package version itself is part of every code version)
 _COMMON = ("errors.py", "io.py", "provenance.py", "boxes.py", "classes.py", "geometry.py", "data/scene.py")
 _TRACKING = ("tracking", "motion", "geometry.py", "boxes.py", "classes.py", "data/scene.py", "configs/trackers",
-             "configs/motion", "training/checkpoint.py", "pipeline/presets.py", "cli/common.py")
+             "configs/motion", "motion/checkpoint.py", "pipeline/presets.py", "cli/common.py")
 #: the dataset interface and the stage documents, read by every stage that goes through a dataset
 _DATASETS = ("datasets", "documents.py", "cli/common.py")
 #: the datasets' scene and detection readers, and their submission writers

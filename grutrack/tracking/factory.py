@@ -41,7 +41,7 @@ def build_tracker(name: str = "ekf", config: str | Path | None = None,
         if checkpoint is None:
             raise ConfigError("--tracker grukf needs --checkpoint CKPT (a model written by `grutrack train`)")
         from grutrack.tracking.grukf_backend import resolve_device
-        from grutrack.training.checkpoint import checkpoint_matched_box, load_network
+        from grutrack.motion.checkpoint import checkpoint_matched_box, load_network
 
         device = resolve_device(device)   # a device this machine lacks is refused before the model is read
         if config is None:  # the default preset writes what the network was trained to give (see grukf.yaml)

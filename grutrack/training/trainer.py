@@ -33,7 +33,7 @@ from grutrack.tracking.ekf_backend import KalmanBackend, KFState
 from grutrack.tracking.factory import grukf_group, param_index, remap_config
 from grutrack.tracking.grukf_backend import GRUKFBackend, resolve_device
 from grutrack.tracking.tracker import Tracker, TrackGroup, track_scenes
-from grutrack.training.checkpoint import load_weights, read_checkpoint, save_checkpoint
+from grutrack.motion.checkpoint import load_weights, read_checkpoint, save_checkpoint
 from grutrack.training.config import TrainConfig
 from grutrack.training.gt_association import StickyGTAssociation
 
