@@ -48,17 +48,12 @@ def _check_output(path: Path) -> None:
 
 def read_json(path: str | os.PathLike, what: str = "JSON file"):
     """Parse a JSON file; a missing file or invalid JSON raises InputFormatError naming the file."""
-    from grutrack.errors import InputFormatError
-
-    path = Path(path)
-    if not path.is_file():
-        raise InputFormatError(f"{path}: {what} does not exist")
+    path, text = _read_text(path, what, "JSON")
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError as exc:
-        raise InputFormatError(f"{path}: {what} must be JSON text, but this file is binary (not UTF-8 at byte "
-                               f"{exc.start}; a feather or pickle file?)") from exc
+        return json.loads(text)
     except json.JSONDecodeError as exc:
+        from grutrack.errors import InputFormatError
+
         raise InputFormatError(f"{path}: not valid JSON ({exc})") from exc
 
 
@@ -66,17 +61,27 @@ def read_yaml(path: str | os.PathLike, what: str = "YAML file"):
     """Parse a YAML file; a missing file or invalid YAML raises InputFormatError naming the file."""
     import yaml
 
+    path, text = _read_text(path, what, "YAML")
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        from grutrack.errors import InputFormatError
+
+        raise InputFormatError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from exc
+
+
+def _read_text(path: str | os.PathLike, what: str, fmt: str) -> tuple[Path, str]:
+    """(path, its UTF-8 text); a missing or binary file raises InputFormatError naming it."""
     from grutrack.errors import InputFormatError
 
     path = Path(path)
     if not path.is_file():
         raise InputFormatError(f"{path}: {what} does not exist")
     try:
-        return yaml.safe_load(path.read_text(encoding="utf-8"))
+        return path, path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
-        raise InputFormatError(f"{path}: {what} must be YAML text, but this file is binary") from exc
-    except yaml.YAMLError as exc:
-        raise InputFormatError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from exc
+        raise InputFormatError(f"{path}: {what} must be {fmt} text, but this file is binary (not UTF-8 at byte "
+                               f"{exc.start}; a feather or pickle file?)") from exc
 
 
 def _umask() -> int:

@@ -26,7 +26,7 @@ import numpy as np
 from grutrack.errors import ConfigError, DatasetError
 from grutrack.io import write_json_atomic
 from grutrack.render.views import (COUNT_KEYS, GT_IGNORED, GT_MATCH, GT_MISS, GT_SWITCH, TR_BELOW, TR_FP,
-                                   TR_IGNORED, TR_MATCH, TR_SWITCH, FrameView, frame_record, update_trails)
+                                   TR_IGNORED, TR_MATCH, TR_SWITCH, FrameView, scene_record, update_trails)
 
 MATCHING = ("official AV2 tracking evaluation (av2.evaluation.tracking.eval.evaluate, HOTA objective): per class "
             "at its tuned score threshold, TrackEval CLEAR on centre distance (similarity 1 - d/2 m >= 0.5, i.e. "
@@ -289,10 +289,7 @@ def render_av2(root: str | Path, split: str, submission: str | Path, out: str | 
     for scene in chosen:
         views = build_views(ev, scene, det, trail_frames=TRAIL_FRAMES)
         pngs, gif = render_scene(views, out, ev.thresholds, canvas, animation=animation)
-        scene_docs.append({"name": scene.name, "token": scene.token, "errors": errors.get(scene.name, 0),
-                           "animation": str(gif.relative_to(out)) if gif else None,
-                           "rerun": _recording(out, views) if rerun else None,
-                           "frames": [frame_record(v, p, out) for v, p in zip(views, pngs)]})
+        scene_docs.append(scene_record(scene, errors.get(scene.name, 0), views, pngs, gif, out, rerun))
     doc = {"dataset": "av2", "version": "sensor", "split": split, "submission": str(submission),
            "detections": str(detections) if detections else None, "thresholds": ev.thresholds,
            "rate_hz": rate_hz, "max_range_m": int(max_range_m), "drivable_area_roi": ev.roi, "matching": MATCHING,
@@ -300,15 +297,6 @@ def render_av2(root: str | Path, split: str, submission: str | Path, out: str | 
            "seconds": round(time.perf_counter() - t_start, 3)}
     write_json_atomic(out / "counts.json", doc, indent=1)
     return doc
-
-
-def _recording(out: Path, views: list) -> str:
-    """Write ``out/<scene>.rrd`` (:mod:`grutrack.render.rerun_log`); returns its path relative to ``out``."""
-    from grutrack.render.rerun_log import write_recording
-
-    path = out / f"{views[0].scene}.rrd"
-    write_recording(path, views)
-    return str(path.relative_to(out))
 
 
 def render_dataset(dataset, split: str, submission: str | Path, out: str | Path, **options) -> dict:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from grutrack.errors import ConfigError, DatasetError, InputFormatError
 from grutrack.io import read_json, write_json_atomic
-from grutrack.render.views import COUNT_KEYS, FrameView, build_views, frame_record, scene_errors
+from grutrack.render.views import COUNT_KEYS, FrameView, build_views, scene_record, scene_errors
 
 
 def load_evaluation(dataroot: str, version: str, split: str, submission: str | Path):
@@ -104,10 +104,7 @@ def render_nuscenes(dataroot: str, version: str, split: str, submission: str, ou
         views = build_views(scene, results, decisions, det, trail_frames=TRAIL_FRAMES)
         pngs, gif = render_scene(views, out, decisions.thresholds, canvas, animation=animation)
         all_views += views
-        scene_docs.append({"name": scene.name, "token": scene.token, "errors": errors.get(scene.token, 0),
-                           "animation": str(gif.relative_to(out)) if gif else None,
-                           "rerun": _recording(out, views) if rerun else None,
-                           "frames": [frame_record(v, p, out) for v, p in zip(views, pngs)]})
+        scene_docs.append(scene_record(scene, errors.get(scene.token, 0), views, pngs, gif, out, rerun))
     gt_classes = {decisions.class_names[c] for c in set(decisions.g_cls.tolist())}
     doc = {"dataset": "nuscenes", "version": version, "split": split, "submission": str(submission),
            "detections": str(detections) if detections else None, "thresholds": decisions.thresholds,
@@ -117,15 +114,6 @@ def render_nuscenes(dataroot: str, version: str, split: str, submission: str, ou
            "seconds": round(time.perf_counter() - t_start, 3)}
     write_json_atomic(out / "counts.json", doc, indent=1)
     return doc
-
-
-def _recording(out: Path, views: list) -> str:
-    """Write ``out/<scene>.rrd`` (:mod:`grutrack.render.rerun_log`); returns its path relative to ``out``."""
-    from grutrack.render.rerun_log import write_recording
-
-    path = out / f"{views[0].scene}.rrd"
-    write_recording(path, views)
-    return str(path.relative_to(out))
 
 
 def render_dataset(dataset, split: str, submission: str | Path, out: str | Path, **options) -> dict:
