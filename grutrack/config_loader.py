@@ -36,6 +36,7 @@ KINDS: dict[str, ConfigKind] = {
     "training": ConfigKind("training", "training.schema.yaml", "training config", "training settings"),
     "motion": ConfigKind("motion", "motion.schema.yaml", "motion config", "sections models, classes"),
     "paper": ConfigKind(None, "paper.schema.yaml", "paper numbers file", "sections tables, figures"),
+    "registry": ConfigKind(None, "registry.schema.yaml", "detection registry", "one key 'sources'"),
 }
 
 
@@ -128,9 +129,11 @@ def _message(err, raw: dict, kind: str, source: str, flags: dict[str, str]) -> s
         allowed = list(err.schema.get("properties", {}))
         extra = next(k for k in err.instance if k not in allowed)
         return f"{source}: unknown key '{prefix}{extra}' (expected one of: {', '.join(prefix + a for a in allowed)})"
-    depth, expected = _described(schema(kind), list(err.absolute_path))
-    if expected is None:
-        depth, expected = len(path), _expectation(err)
+    at = list(err.absolute_path)
+    depth, expected = _described(schema(kind), at)
+    if expected is None or (depth < len(at) and not any(isinstance(p, int) for p in at[depth:])):
+        depth, expected = len(at), _expectation(err)   # described above only when inside a list: the list
+
     value = raw
     for part in list(err.absolute_path)[:depth]:
         value = value[part]
@@ -140,8 +143,8 @@ def _message(err, raw: dict, kind: str, source: str, flags: dict[str, str]) -> s
 
 
 def _described(root: dict, path: list) -> tuple[int, str | None]:
-    """(depth, description) of the deepest node along ``path`` whose schema has a ``description``: an
-    error inside a list or a per-class map is stated for the whole value when only that has one."""
+    """(depth, description) of the deepest node along ``path`` whose schema has a ``description`` (an error
+    inside a list whose items have none is stated for the whole list)."""
     def resolve(node: dict) -> dict:
         while isinstance(node, dict) and "$ref" in node:
             node = root["$defs"][node["$ref"].rsplit("/", 1)[1]]

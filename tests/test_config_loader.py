@@ -81,3 +81,16 @@ def test_merge_is_key_by_key_and_copies():
     out = merge(base, {"a": {"y": 2}})
     out["a"]["x"].append(2)
     assert base == {"a": {"x": [1]}, "b": 1} and out == {"a": {"x": [1, 2], "y": 2}, "b": 1}
+
+
+def test_registry_formats_on_the_command_line_are_the_schemas(tmp_path):
+    from grutrack.config_loader import schema
+    from grutrack.data.registry import FORMATS, REGISTRY_PATH, load_registry
+
+    entry = schema("registry")["properties"]["sources"]["additionalProperties"]["properties"]["format"]
+    assert tuple(entry["enum"]) == FORMATS
+    text = REGISTRY_PATH.read_text()
+    bad = tmp_path / "reg.yaml"
+    bad.write_text(text.replace("host: browser", "host: ftp", 1))
+    with pytest.raises(ConfigError, match=r"reg.yaml: 'sources\.\w+\.host' must be one of direct, browser, got 'ftp'"):
+        load_registry(bad)

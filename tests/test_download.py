@@ -135,7 +135,7 @@ def test_registry_entries_and_validation(tmp_path):
     assert reg["lt3d_val"].dataset == "av2" and reg["centerpoint_test"].split == "test"
     bad = tmp_path / "reg.yaml"
     bad.write_text("sources:\n  x: {dataset: nuscenes, detecter: cp}\n")
-    with pytest.raises(ConfigError, match="unknown key 'detecter'"):
+    with pytest.raises(ConfigError, match="unknown key 'sources.x.detecter'"):
         load_registry(bad)
 
 

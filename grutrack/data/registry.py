@@ -7,21 +7,15 @@ The registry only describes files; downloading is :mod:`grutrack.data.download`,
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
-
-import yaml
 
 from grutrack.errors import ConfigError
 
 REGISTRY_PATH = Path(__file__).resolve().parents[1] / "configs" / "detections.yaml"
 KEYS = ("dataset", "detector", "split", "description", "page", "url", "host", "filename", "sha256", "format",
         "member")
-DATASETS = ("nuscenes", "av2")
-HOSTS = ("direct", "browser")
 FORMATS = ("nuscenes_json", "nuscenes_json_zip", "lt3d")
-_SHA256 = re.compile(r"^[0-9a-f]{64}$")
 
 
 @dataclass(frozen=True)
@@ -47,15 +41,12 @@ class DetectionSource:
 
 
 def load_registry(path: str | Path = REGISTRY_PATH) -> dict[str, DetectionSource]:
-    """All sources of a registry YAML, validated; raises :class:`ConfigError` naming the file and key."""
-    path = Path(path)
-    try:
-        raw = yaml.safe_load(path.read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f"{path}: cannot read the detection registry ({exc})") from exc
-    if not isinstance(raw, dict) or set(raw) != {"sources"} or not isinstance(raw["sources"], dict):
-        raise ConfigError(f"{path}: expected one top-level key 'sources' mapping names to entries")
-    return {name: _entry(path, name, entry) for name, entry in raw["sources"].items()}
+    """All sources of a registry YAML, checked against ``grutrack/configs/schemas/registry.schema.yaml`` (the
+    one config loader); raises :class:`ConfigError` naming the file and key."""
+    from grutrack.config_loader import load_config
+
+    raw, source = load_config("registry", path)
+    return {name: _entry(source, name, entry) for name, entry in raw["sources"].items()}
 
 
 def get_source(name: str, path: str | Path = REGISTRY_PATH) -> DetectionSource:
@@ -66,30 +57,9 @@ def get_source(name: str, path: str | Path = REGISTRY_PATH) -> DetectionSource:
     return reg[name]
 
 
-def _entry(path: Path, name: str, entry) -> DetectionSource:
-    """Validate one entry."""
-    where = f"{path}: sources.{name}"
-    if not isinstance(entry, dict):
-        raise ConfigError(f"{where} must be a mapping with keys {', '.join(KEYS)}")
-    unknown = [k for k in entry if k not in KEYS]
-    if unknown:
-        raise ConfigError(f"{where}: unknown key '{unknown[0]}' (expected: {', '.join(KEYS)})")
-    missing = [k for k in KEYS if k not in entry]
-    if missing:
-        raise ConfigError(f"{where}: missing key '{missing[0]}'")
-    for key, allowed in (("dataset", DATASETS), ("host", HOSTS), ("format", FORMATS)):
-        if entry[key] not in allowed:
-            raise ConfigError(f"{where}.{key} must be one of {', '.join(allowed)}, got {entry[key]!r}")
-    for key in ("detector", "split", "description", "page", "filename"):
-        if not isinstance(entry[key], str) or not entry[key]:
-            raise ConfigError(f"{where}.{key} must be a non-empty string")
-    if "/" in entry["filename"] or entry["filename"].startswith("."):
-        raise ConfigError(f"{where}.filename must be a plain file name, got {entry['filename']!r}")
-    if entry["url"] is not None and not re.match(r"^https?://", str(entry["url"])):
-        raise ConfigError(f"{where}.url must be an http(s) URL or null, got {entry['url']!r}")
-    if entry["sha256"] is not None and not _SHA256.match(str(entry["sha256"])):
-        raise ConfigError(f"{where}.sha256 must be 64 lower-case hex digits or null")
+def _entry(path: str, name: str, entry: dict) -> DetectionSource:
+    """One schema-checked entry; a zip source must name its member, a plain file must not."""
     if (entry["format"] == "nuscenes_json_zip") != (entry["member"] is not None):
-        raise ConfigError(f"{where}.member names the file inside the archive: required with format "
+        raise ConfigError(f"{path}: sources.{name}.member names the file inside the archive: required with format "
                           f"nuscenes_json_zip, null otherwise")
     return DetectionSource(name=name, **{k: entry[k] for k in KEYS})
