@@ -10,6 +10,7 @@ integer >= 1, got 0``.
 from __future__ import annotations
 
 import copy
+import difflib
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -37,6 +38,8 @@ KINDS: dict[str, ConfigKind] = {
     "motion": ConfigKind("motion", "motion.schema.yaml", "motion config", "sections models, classes"),
     "paper": ConfigKind(None, "paper.schema.yaml", "paper numbers file", "sections tables, figures"),
     "registry": ConfigKind(None, "registry.schema.yaml", "detection registry", "one key 'sources'"),
+    "detector_profile": ConfigKind("detector_profiles", "detector_profile.schema.yaml", "detector profile",
+                                   "profile settings"),
 }
 
 
@@ -128,7 +131,10 @@ def _message(err, raw: dict, kind: str, source: str, flags: dict[str, str]) -> s
     if err.validator == "additionalProperties":
         allowed = list(err.schema.get("properties", {}))
         extra = next(k for k in err.instance if k not in allowed)
-        return f"{source}: unknown key '{prefix}{extra}' (expected one of: {', '.join(prefix + a for a in allowed)})"
+        close = difflib.get_close_matches(str(extra), allowed, n=1)
+        hint = f"; did you mean '{prefix}{close[0]}'?" if close else ""
+        return (f"{source}: unknown key '{prefix}{extra}' (expected one of: {', '.join(prefix + a for a in allowed)})"
+                f"{hint}")
     at = list(err.absolute_path)
     depth, expected = _described(schema(kind), at)
     if expected is None or (depth < len(at) and not any(isinstance(p, int) for p in at[depth:])):

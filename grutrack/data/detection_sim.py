@@ -23,16 +23,14 @@ identical for a seed and independent of the order or the subset of frames proces
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import hashlib
 import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Iterable
 
 import numpy as np
-import yaml
 
 from grutrack.boxes import BOX_DIM, VX, VY, W, H, YAW, quaternion_from_yaw, wrap_angle, yaw_from_quaternion
 from grutrack.classes import DETECTION_CLASSES
@@ -134,9 +132,6 @@ class ClassProfile:
 
 
 CLASS_KEYS = tuple(f.name for f in dataclasses.fields(ClassProfile))
-TOP_KEYS = ("name", "description", "reference", "detection_range_m", "score_threshold", "max_boxes_per_sample",
-            "defaults", "classes")
-
 
 @dataclass(frozen=True)
 class DetectorProfile:
@@ -154,111 +149,46 @@ class DetectorProfile:
 
 def available_profiles() -> list[str]:
     """Names of the profiles shipped in ``grutrack/configs/detector_profiles``."""
-    return sorted(p.stem for p in PROFILE_DIR.glob("*.yaml"))
+    from grutrack.config_loader import shipped_names
+
+    return shipped_names("detector_profile")
 
 
 def load_profile(name_or_path: str | os.PathLike) -> DetectorProfile:
-    """Load a profile by shipped name (``centerpoint``) or YAML path; every key is checked (typos are errors)."""
-    path = Path(name_or_path)
-    if path.suffix not in (".yaml", ".yml"):
-        path = PROFILE_DIR / f"{name_or_path}.yaml"
-        if not path.is_file():
-            raise ConfigError(f"unknown detector profile '{name_or_path}' (available: "
-                              f"{', '.join(available_profiles())}; or give the path of a profile YAML)")
-    if not path.is_file():
-        raise ConfigError(f"detector profile file {path} does not exist")
-    try:
-        raw = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML ({exc})") from exc
-    return _parse_profile(raw, path)
+    """Load a profile by shipped name (``centerpoint``) or YAML path, checked against
+    ``grutrack/configs/schemas/detector_profile.schema.yaml`` by the one config loader (a misspelt key is an
+    error naming it, with the closest allowed key)."""
+    from grutrack.config_loader import read_config, validate
+
+    raw, source = read_config("detector_profile", name_or_path)
+    for key in ("defaults", "classes"):          # an empty YAML section reads as None
+        if raw.get(key) is None and key in raw:
+            raw[key] = {}
+    if isinstance(raw.get("classes"), dict):
+        raw["classes"] = {c: ({} if v is None else v) for c, v in raw["classes"].items()}
+    validate("detector_profile", raw, source)
+    return _parse_profile(raw, source)
 
 
-def _unknown_key(path: Path, where: str, key: Any, allowed: Iterable[str]) -> ConfigError:
-    """A ConfigError for a misspelt key, with the closest allowed key as a hint."""
-    close = difflib.get_close_matches(str(key), list(allowed), n=1)
-    hint = f"; did you mean '{close[0]}'?" if close else f"; allowed: {', '.join(allowed)}"
-    return ConfigError(f"{path}: unknown key '{key}' in {where}{hint}")
-
-
-def _parse_profile(raw: Any, path: Path) -> DetectorProfile:
-    """Validate the YAML mapping of a profile and build the dataclasses."""
-    if not isinstance(raw, dict):
-        raise ConfigError(f"{path}: expected a mapping with keys {', '.join(TOP_KEYS)}")
-    for key in raw:
-        if key not in TOP_KEYS:
-            raise _unknown_key(path, "the top level", key, TOP_KEYS)
-    for key in ("name", "detection_range_m", "score_threshold", "max_boxes_per_sample", "classes"):
-        if key not in raw:
-            raise ConfigError(f"{path}: missing key '{key}'")
-    defaults = _check_class_mapping(raw.get("defaults") or {}, path, "defaults")
-    classes_raw = raw["classes"]
-    if not isinstance(classes_raw, dict):
-        raise ConfigError(f"{path}: 'classes' must map detection class names to settings")
-    classes = {}
-    for name, values in classes_raw.items():
-        if name not in DET_INDEX:
-            raise _unknown_key(path, "'classes' (detection class names)", name, DETECTION_CLASSES)
-        merged = {**defaults, **_check_class_mapping(values or {}, path, f"classes.{name}")}
-        classes[name] = _class_profile(merged, path, name)
-    missing = [c for c in DETECTION_CLASSES if c not in classes]
-    if missing:
-        raise ConfigError(f"{path}: 'classes' lacks {', '.join(missing)} (all 10 detection classes are needed)")
-    try:
-        rng_m, thr, max_boxes = (float(raw["detection_range_m"]), float(raw["score_threshold"]),
-                                 int(raw["max_boxes_per_sample"]))
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{path}: detection_range_m, score_threshold and max_boxes_per_sample must be "
-                          f"numbers ({exc})") from exc
-    if rng_m <= 0 or not 0 <= thr < 1 or not 0 < max_boxes <= 500:
-        raise ConfigError(f"{path}: need detection_range_m > 0, 0 <= score_threshold < 1 and "
-                          f"0 < max_boxes_per_sample <= 500 (nuScenes limit)")
+def _parse_profile(raw: dict, path: str) -> DetectorProfile:
+    """Build the dataclasses of a schema-checked profile."""
+    defaults = raw.get("defaults") or {}
+    classes = {name: _class_profile({**defaults, **values}, path, name) for name, values in raw["classes"].items()}
     return DetectorProfile(name=str(raw["name"]), description=str(raw.get("description", "")),
-                           reference=dict(raw.get("reference") or {}), detection_range_m=rng_m,
-                           score_threshold=thr, max_boxes_per_sample=max_boxes, classes=classes, path=str(path))
+                           reference=dict(raw.get("reference") or {}), detection_range_m=float(raw["detection_range_m"]),
+                           score_threshold=float(raw["score_threshold"]),
+                           max_boxes_per_sample=int(raw["max_boxes_per_sample"]), classes=classes, path=path)
 
 
-def _check_class_mapping(values: Any, path: Path, where: str) -> dict:
-    """Check that ``values`` is a mapping whose keys are ClassProfile fields."""
-    if not isinstance(values, dict):
-        raise ConfigError(f"{path}: '{where}' must be a mapping of class settings")
-    for key in values:
-        if key not in CLASS_KEYS:
-            raise _unknown_key(path, f"'{where}'", key, CLASS_KEYS)
-    return values
-
-
-def _class_profile(values: dict, path: Path, name: str) -> ClassProfile:
-    """Build and range-check one ClassProfile."""
-    conv = {}
-    for key, val in values.items():
-        try:
-            if key == "confusion":
-                conv[key] = {str(k): float(v) for k, v in (val or {}).items()}
-            elif key == "mean_size":
-                conv[key] = tuple(float(v) for v in val)
-                if len(conv[key]) != 3:
-                    raise ValueError("needs 3 values [w, l, h]")
-            else:
-                conv[key] = float(val)
-        except (TypeError, ValueError, AttributeError) as exc:
-            raise ConfigError(f"{path}: classes.{name}.{key} has a bad value {val!r} ({exc})") from exc
+def _class_profile(values: dict, path: str, name: str) -> ClassProfile:
+    """One ClassProfile; checks what the schema cannot: no class confused with itself, confusions sum <= 1."""
+    conv = {k: ({str(c): float(p) for c, p in (v or {}).items()} if k == "confusion"
+                else tuple(float(x) for x in v) if k == "mean_size" else float(v)) for k, v in values.items()}
     prof = ClassProfile(**conv)
-    for other, prob in prof.confusion.items():
-        if other not in DET_INDEX or other == name:
-            raise ConfigError(f"{path}: classes.{name}.confusion has '{other}', expected another detection class "
-                              f"({', '.join(DETECTION_CLASSES)})")
-        if prob < 0:
-            raise ConfigError(f"{path}: classes.{name}.confusion.{other} must be >= 0")
-    probs = ("recall_max", "recall_zero_points", "pos_tail_prob", "yaw_flip_prob", "vel_tail_prob",
-             "duplicate_prob", "duplicate_other_class_prob")
-    for key in probs:
-        if not 0.0 <= getattr(prof, key) <= 1.0:
-            raise ConfigError(f"{path}: classes.{name}.{key} must be a probability in [0, 1]")
+    if name in prof.confusion:
+        raise ConfigError(f"{path}: classes.{name}.confusion has '{name}', expected another detection class")
     if sum(prof.confusion.values()) > 1.0:
         raise ConfigError(f"{path}: classes.{name}.confusion probabilities sum to more than 1")
-    if prof.points_half <= 0 or min(prof.mean_size) <= 0:
-        raise ConfigError(f"{path}: classes.{name}: points_half and mean_size must be positive")
     return prof
 
 
