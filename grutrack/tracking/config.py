@@ -45,7 +45,7 @@ SCHEMA: dict[str, dict[str, str]] = {
                     "second_threshold": "per_class_cost", "max_distance": "per_class_metres",
                     "distance_gate": "per_class_gate"},
     "lifecycle": {"max_age": "per_class_posint", "min_hits": "per_class_posint", "decay_rate": "per_class_unit",
-                  "punish_num": "nonnegint", "score_update": "score_update", "termination": "termination",
+                  "punish_num": "punish", "score_update": "score_update", "termination": "termination",
                   "delete_threshold": "per_class_unit"},
     "motion": {"config": "str", "model_override": "class_model_map", "yaw_flip": "bool", "time_step": "time_step",
                "ctra_form": "model_form", "bicycle_form": "model_form",
@@ -79,7 +79,7 @@ class TrackerConfig:
     max_age: np.ndarray
     min_hits: np.ndarray
     decay_rate: np.ndarray
-    punish_num: int
+    punish_num: np.ndarray      # (7,) int64: predicted boxes written for at most this many missed frames
     motion_config: str
     model_override: dict[str, str]
     yaw_flip: bool
@@ -217,6 +217,12 @@ def _value(source: str, key: str, val: Any, kind: str) -> Any:
         if isinstance(val, bool) or not isinstance(val, (int, float)) or not np.isfinite(val) or val <= 0:
             fail("'timestamps' or a positive number of seconds")
         return float(val)
+    if kind == "punish":   # one integer for every class, or a map over the classes -> (7,) int64
+        if isinstance(val, dict):
+            return _value(source, key, val, "per_class_nonnegint").astype(np.int64)
+        if isinstance(val, bool) or not isinstance(val, (int, float)) or not float(val).is_integer() or val < 0:
+            fail(f"an integer >= 0 or a mapping over the tracking classes {', '.join(TRACKING_CLASSES)}")
+        return np.full(len(TRACKING_CLASSES), int(val), dtype=np.int64)
     if isinstance(val, bool) or not isinstance(val, (int, float)) or not np.isfinite(val):
         fail("a number")
     if kind == "unit":
