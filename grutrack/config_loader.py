@@ -103,7 +103,7 @@ def validate(kind: str, raw: dict, source: str, flags: dict[str, str] | None = N
     errors = sorted(_validator(kind).iter_errors(raw),
                     key=lambda e: (len(e.absolute_path), [str(p) for p in e.absolute_path], e.validator))
     if errors:
-        raise ConfigError(_message(errors[0], raw, kind, source, flags or {}))
+        raise ConfigError(_message(_inner(errors[0]), raw, kind, source, flags or {}))
 
 
 @lru_cache(maxsize=None)
@@ -118,6 +118,19 @@ def _validator(kind: str):
         "number", lambda _, x: isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x))
     cls = validators.extend(Draft202012Validator, type_checker=finite)
     return cls(schema(kind))
+
+
+def _inner(err):
+    """For a mapping or list that fits no branch of a oneOf / anyOf, the error inside the branch of its own
+    type (a per-class map missing a class is reported as that missing class, not as "fits no branch")."""
+    from jsonschema.exceptions import best_match
+
+    while err.validator in ("oneOf", "anyOf") and err.context and isinstance(err.instance, (dict, list)):
+        same_type = [e for e in err.context if not (e.validator == "type" and not e.relative_path)]
+        if not same_type:
+            break
+        err = best_match(same_type)
+    return err
 
 
 def _message(err, raw: dict, kind: str, source: str, flags: dict[str, str]) -> str:

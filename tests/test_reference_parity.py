@@ -99,20 +99,19 @@ def test_compare_tracks_cli(nusc_root, nusc_reference, tmp_path, capsys):
 
 #: the default preset's AMOTA on the reference sets (grutrack/configs/trackers/ekf.yaml gives the evidence for
 #: each of its choices); Poly-MOT's own AMOTA is read from the reference metrics
-EKF_AMOTA = {"mini_val_centerpoint_sim_s7": 0.8658, "mini_val_pointpillars_sim_s7": 0.5568,
-             "pointpillars_mini_val": 0.1842, "mini_train_centerpoint_sim_s7": 0.8577}
+EKF_AMOTA = {"mini_val_centerpoint_sim_s7": 0.8757, "mini_val_pointpillars_sim_s7": 0.5798,
+             "pointpillars_mini_val": 0.1842, "mini_train_centerpoint_sim_s7": 0.8656}
 
 
 @pytest.mark.parametrize("name", list(SETS))
 def test_default_preset_against_polymot(nusc_mini, nusc_reference, name):
-    """The ekf preset scores its measured AMOTA; at least Poly-MOT's own AMOTA - 0.001 on every reference set
-    (it is 0.0008 below on mini_val centerpoint seed 7: one truck track; above on the other three), and keeps its
-    lead on the real PointPillars file."""
+    """The ekf preset scores its measured AMOTA; above Poly-MOT's own AMOTA on every reference set (by 0.009 to
+    0.031), and keeps its lead on the real PointPillars file."""
     split, det = SETS[name]
     ours, _ = track(nusc_mini, "ekf", split, _file(nusc_reference, det))
     amota = fast_tracking_eval(nusc_mini, ours, split)["amota"]
     polymot = json.loads(_file(nusc_reference, f"polymot_{name}.metrics_summary.json").read_text())["amota"]
     assert amota == pytest.approx(EKF_AMOTA[name], abs=5e-5)
-    assert amota >= polymot - 0.001
+    assert amota >= polymot + 0.005
     if name == "pointpillars_mini_val":
         assert amota >= polymot + 0.015   # 0.1842 vs 0.1676

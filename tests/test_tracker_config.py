@@ -19,14 +19,15 @@ def test_ekf_preset_values():
     cfg = load_tracker_config("ekf")
     assert cfg.nms_threshold == 0.08 and cfg.two_stage and cfg.second_metric == "giou_bev"
     assert cfg.first_metric[1] == "giou_bev" and cfg.first_metric[2] == "giou_3d"  # bus, car
-    assert cfg.max_age.tolist() == [10, 10, 15, 20, 10, 10, 20] and cfg.punish_num == 1
+    assert cfg.max_age.tolist() == [10, 10, 15, 20, 10, 10, 20]
+    assert cfg.punish_num.tolist() == [2, 1, 1, 2, 1, 1, 1]  # bicycle, motorcycle coast two frames
     assert cfg.algorithm == "hungarian" and cfg.min_hits.tolist() == [1] * 7  # Poly-MOT's min_hit 1
     assert cfg.max_distance.tolist() == [3.0, 5.5, 4.0, 13.0, 1.0, 3.0, 4.0]  # CenterPoint, greedy only
 
 
 def test_baseline_presets():
     greedy, ab3dmot = load_tracker_config("greedy"), load_tracker_config("ab3dmot")
-    assert greedy.algorithm == "greedy" and not greedy.two_stage and greedy.punish_num == 0
+    assert greedy.algorithm == "greedy" and not greedy.two_stage and greedy.punish_num.tolist() == [0] * 7
     assert greedy.max_distance.tolist() == [8.75, 14.0, 16.0, 13.0, 2.0, 16.0, 15.0]  # AV2 baseline gates
     assert greedy.max_age.tolist() == [3] * 7 and greedy.nms_threshold == 1.0
     assert ab3dmot.algorithm == "hungarian" and ab3dmot.first_metric == ("iou_3d",) * 7
@@ -59,12 +60,24 @@ def test_every_preset_key_has_a_comment(preset):
                                                                        "positive distance"),
     (lambda r: r["lifecycle"]["min_hits"].__setitem__("car", 0), "'lifecycle.min_hits.car' must be an integer >= 1"),
     (lambda r: r["lifecycle"].pop("min_hits"), "missing key 'lifecycle.min_hits'"),
+    (lambda r: r["lifecycle"].__setitem__("punish_num", -1),
+     "'lifecycle.punish_num' must be an integer >= 0 or a mapping over the tracking classes"),
+    (lambda r: r["lifecycle"]["punish_num"].pop("bus"), "missing key 'lifecycle.punish_num.bus'"),
+    (lambda r: r["lifecycle"]["punish_num"].__setitem__("car", 1.5), "'lifecycle.punish_num.car' must be an integer"),
 ])
 def test_bad_preset_keys(mutate, message):
     raw = copy.deepcopy(_raw())
     mutate(raw)
     with pytest.raises(ConfigError, match=message):
         config_from_dict(raw, "preset.yaml")
+
+
+def test_punish_num_one_integer_or_per_class():
+    raw = copy.deepcopy(_raw())
+    raw["lifecycle"]["punish_num"] = 3
+    assert config_from_dict(raw).punish_num.tolist() == [3] * 7
+    raw["lifecycle"]["punish_num"] = {c: i for i, c in enumerate(raw["lifecycle"]["max_age"])}
+    assert config_from_dict(raw).punish_num.tolist() == list(range(7))
 
 
 def test_unknown_preset_name_lists_available():

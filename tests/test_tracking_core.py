@@ -95,9 +95,24 @@ def test_lifecycle_ids_punish_decay_and_death():
     ids = {int(i) for o in out for i in o.ids}
     assert ids == {0}  # one identity throughout
     assert [len(o) for o in out[:8]] == [1] * 7 + [0]  # punish_num = 1: one predicted box after the last hit
-    assert np.isclose(out[6].scores[0], 0.9 * 0.2)  # car decay rate 0.2
+    s = 0.9                        # born with the detection's score; matched: 1 - (1 - s_det)(1 - 0.52 s)
+    for _ in range(5):
+        s = 1 - (1 - 0.9) * (1 - 0.52 * s)
+    assert np.allclose([o.scores[0] for o in out[5:7]], [s, s * 0.52])  # car decay rate 0.52, multiply update
     assert out[6].boxes[0, 0] == pytest.approx(30.0, abs=1.0)  # predicted ahead at ~10 m/s
     assert len(tracker.groups[[g.classes[CAR] for g in tracker.groups].index(True)]) == 0  # died (max_age 15)
+
+
+def test_punish_num_per_class():
+    # the ekf preset coasts bicycles two missed frames, cars one
+    det = [[_box(0.5 * i, 0, vx=1.0)] for i in range(4)] + [[] for _ in range(4)]
+    scene, dets = _scene(det)
+    bike = {t: BoxSet(b.boxes, b.scores, np.full(len(b), CLASS_INDEX["bicycle"])) for t, b in dets.items()}
+    counts = {}
+    for name, d in (("car", dets), ("bicycle", bike)):
+        run = track_scenes(build_tracker("ekf"), [scene], d)
+        counts[name] = [len(run.results[f.token]) for f in scene.frames]
+    assert counts == {"car": [1] * 5 + [0] * 3, "bicycle": [1] * 6 + [0] * 2}
 
 
 def test_track_ids_unique_across_scenes():

@@ -43,7 +43,7 @@ class TrackerConfig:
     max_age: np.ndarray
     min_hits: np.ndarray
     decay_rate: np.ndarray
-    punish_num: int
+    punish_num: np.ndarray      # (7,) int64: predicted boxes written for at most this many missed frames
     motion_config: str
     model_override: dict[str, str]
     yaw_flip: bool
@@ -128,4 +128,8 @@ def _convert(val: Any, ref: str) -> Any:
         return float(val)
     if ref in ("posint", "nonnegint"):
         return int(val)
+    if ref == "punish":   # one integer for every class, or a map over the classes -> (7,) int64
+        if isinstance(val, dict):
+            return np.array([int(val[c]) for c in TRACKING_CLASSES], dtype=np.int64)
+        return np.full(len(TRACKING_CLASSES), int(val), dtype=np.int64)
     return val

@@ -185,7 +185,8 @@ class Tracker:
                 g.score_total = g.score_total + g.scores
                 g.score_count = g.score_count + 1
                 alive &= g.score_total / g.score_count >= self.cfg.delete_threshold[g.labels]
-            emit = alive & (matched | (g.misses <= self.cfg.punish_num)) & self._confirmed(g.hits, g.labels)
+            coasting = g.misses <= self.cfg.punish_num[g.labels]   # (N,) within the class's punish_num
+            emit = alive & (matched | coasting) & self._confirmed(g.hits, g.labels)
             boxes = g.backend.boxes(g.state)
             if self.cfg.matched_box == "detection" and len(rows):
                 boxes[rows, :6] = dets.boxes[drows, :6]  # detection centre and size; filter yaw, velocity
