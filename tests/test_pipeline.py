@@ -40,7 +40,7 @@ def test_merge_keeps_the_rest():
 def test_resolved_tracker_preset_and_its_errors(tmp_path):
     raw = resolve_tracker("ekf", {"association": {"first_threshold": {"car": 1.2}}})
     assert raw["association"]["first_threshold"]["car"] == 1.2
-    assert raw["association"]["first_threshold"]["bus"] == 1.335
+    assert raw["association"]["first_threshold"]["bus"] == 1.34   # the ekf preset takes Poly-MOT HEAD's stage-1 bus threshold
     with pytest.raises(ConfigError, match="association.first_treshold"):
         resolve_tracker("ekf", {"association": {"first_treshold": {"car": 1.2}}})
     with pytest.raises(ConfigError, match="first_threshold.cra"):
