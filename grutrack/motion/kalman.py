@@ -57,14 +57,28 @@ def wrap_yaw_residual(r_yaw: np.ndarray, yaw_flip: bool) -> np.ndarray:
 
 
 @njit(cache=True, inline="always")
-def _mm(A, B, out, a_t=False, b_t=False) -> None:
-    """``out = op(A) op(B)`` for 2-D arrays, ``op`` the transpose where ``a_t`` / ``b_t`` is set."""
-    for i in range(out.shape[0]):
-        for j in range(out.shape[1]):
-            acc = 0.0
-            for k in range(A.shape[0] if a_t else A.shape[1]):
-                acc += (A[k, i] if a_t else A[i, k]) * (B[j, k] if b_t else B[k, j])
-            out[i, j] = acc
+def _mm(A, B, out, a_t=False, b_t=False, sparse_b=False) -> None:
+    """``out = op(A) op(B)`` for 2-D arrays, ``op`` the transpose where ``a_t`` / ``b_t`` is set.
+
+    ``out[i, j] = sum_k op(A)[i, k] op(B)[k, j]`` summed in ascending k, k the outer loop, so the inner loops
+    run over independent entries. Zero entries of ``op(A)`` (of ``op(B)`` with ``sparse_b``: use it when B is
+    the sparse factor, e.g. a Jacobian) are skipped: a zero product adds nothing to a finite sum, so the
+    result is that of the plain triple loop, bit for bit.
+    """
+    out[:] = 0.0
+    for k in range(A.shape[0] if a_t else A.shape[1]):
+        if sparse_b:
+            for j in range(out.shape[1]):
+                b = B[j, k] if b_t else B[k, j]
+                if b != 0.0:
+                    for i in range(out.shape[0]):
+                        out[i, j] += (A[k, i] if a_t else A[i, k]) * b
+        else:
+            for i in range(out.shape[0]):
+                a = A[k, i] if a_t else A[i, k]
+                if a != 0.0:
+                    for j in range(out.shape[1]):
+                        out[i, j] += a * (B[j, k] if b_t else B[k, j])
 
 
 @njit(cache=True, inline="always")
@@ -82,7 +96,7 @@ def _propagate_kernel(F, P, Q, out) -> None:
     FP, A = np.empty((d, d)), np.empty((d, d))
     for n in range(F.shape[0]):
         _mm(F[n], P[n], FP)
-        _mm(FP, F[n], A, b_t=True)
+        _mm(FP, F[n], A, b_t=True, sparse_b=True)
         A += Q[n]
         _sym_into(A, out[n])
 
@@ -102,19 +116,19 @@ def _joseph_kernel(x, P, H, r, R, x_out, P_out) -> None:
     perm = np.empty(m, dtype=np.int64)
     for n in range(x.shape[0]):
         _mm(H[n], P[n], HP)                       # H P
-        _mm(HP, H[n], S, b_t=True)                # H P H^T
+        _mm(HP, H[n], S, b_t=True, sparse_b=True)   # H P H^T
         S += R[n]
         _sym_into(S, S_sym)
         _lu_solve(S_sym, HP, KT, perm)            # K^T = S^-1 H P
         _mm(KT, r[n:n + 1], Kr, a_t=True, b_t=True)   # K r
         x_out[n] = x[n] + Kr[:, 0]
-        _mm(KT, H[n], IKH, a_t=True)              # K H
+        _mm(KT, H[n], IKH, a_t=True, sparse_b=True)  # K H
         IKH *= -1.0
         for i in range(d):
             IKH[i, i] += 1.0                      # I - K H
         _mm(IKH, P[n], T1)
-        _mm(T1, IKH, A, b_t=True)                 # (I - K H) P (I - K H)^T
-        _mm(KT, R[n], KR, a_t=True)               # K R
+        _mm(T1, IKH, A, b_t=True, sparse_b=True)   # (I - K H) P (I - K H)^T
+        _mm(KT, R[n], KR, a_t=True, sparse_b=True)  # K R
         _mm(KR, KT, B)                            # K R K^T
         A += B
         _sym_into(A, P_out[n])
