@@ -188,8 +188,8 @@ class BatchKalmanFilter:
         """Predict ``dt`` seconds (scalar or ``(N,)``) ahead -> ``(x (N, dim_x), P (N, dim_x, dim_x))``."""
         x = np.asarray(x, dtype=np.float64)
         n, d = x.shape[0], self.model.dim_x
-        F = self.model.F(x, dt)
-        x_new = self.model.wrap_state(self.model.f(x, dt))
+        x_new, F = self.model.transition(x, dt)
+        x_new = self.model.wrap_state(x_new)
         P_new = np.empty((n, d, d))
         _propagate_kernel(F, _batch(P, n, d, "P"), _batch(Q, n, d, "Q"), P_new)
         return x_new, P_new

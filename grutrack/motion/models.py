@@ -135,6 +135,10 @@ class MotionModel:
     def H(self, x: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def transition(self, x: np.ndarray, dt) -> tuple[np.ndarray, np.ndarray]:
+        """``(f(x, dt), F(x, dt))`` at once (a model may share the work of the two)."""
+        return self.f(x, dt), self.F(x, dt)
+
     def to_boxes(self, x: np.ndarray) -> np.ndarray:
         """Boxes ``(N, 9)`` to write out: ``h(x)`` with the yaw wrapped to [-pi, pi)."""
         boxes = self.h(x)
@@ -193,7 +197,24 @@ class CTRA(MotionModel):
         """Transition ``(N, 10) -> (N, 10)`` over ``dt`` s."""
         x = np.asarray(x, dtype=np.float64)
         dt = _as_dt(dt, x.shape[0])
-        dx, dy, *_ = self._displacement(x, dt)
+        return self._f_of(x, dt, self._displacement(x, dt))
+
+    def F(self, x: np.ndarray, dt) -> np.ndarray:
+        """Jacobian ``(N, 10, 10)`` of :meth:`f` at ``x``."""
+        x = np.asarray(x, dtype=np.float64)
+        dt = _as_dt(dt, x.shape[0])
+        return self._F_of(x, dt, self._displacement(x, dt))
+
+    def transition(self, x: np.ndarray, dt) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`f` ``(N, 10)`` and :meth:`F` ``(N, 10, 10)`` from one evaluation of the arc."""
+        x = np.asarray(x, dtype=np.float64)
+        dt = _as_dt(dt, x.shape[0])
+        terms = self._displacement(x, dt)
+        return self._f_of(x, dt, terms), self._F_of(x, dt, terms)
+
+    def _f_of(self, x: np.ndarray, dt: np.ndarray, terms) -> np.ndarray:
+        """:meth:`f` from the terms of :meth:`_displacement`."""
+        dx, dy, *_ = terms
         out = x.copy()
         out[:, 0] += dx
         out[:, 1] += dy
@@ -201,14 +222,11 @@ class CTRA(MotionModel):
         out[:, 8] = x[:, 8] + x[:, 9] * dt
         return out
 
-    def F(self, x: np.ndarray, dt) -> np.ndarray:
-        """Jacobian ``(N, 10, 10)`` of :meth:`f` at ``x``."""
-        x = np.asarray(x, dtype=np.float64)
-        n = x.shape[0]
-        dt = _as_dt(dt, n)
+    def _F_of(self, x: np.ndarray, dt: np.ndarray, terms) -> np.ndarray:
+        """:meth:`F` from the terms of :meth:`_displacement`."""
         v, a = x[:, 6], x[:, 7]
-        dx, dy, c, s, e0, e1, e2 = self._displacement(x, dt)
-        J = _eye_batch(n, self.dim_x)
+        dx, dy, c, s, e0, e1, e2 = terms
+        J = _eye_batch(x.shape[0], self.dim_x)
         # d/dv: exp(i yaw) dt E0 ; d/da: exp(i yaw) dt^2 E1
         J[:, 0, 6] = dt * (c * e0[0] - s * e0[1])
         J[:, 1, 6] = dt * (s * e0[0] + c * e0[1])
@@ -458,6 +476,8 @@ class CTRAPiecewise(CTRA):
         if len(rows):
             _straight_jacobian(J, rows, x[:, 6], x[:, 7], x[:, 8], dt)
         return J
+
+    transition = MotionModel.transition  # f and F above (CTRA's shared form would skip the straight rows)
 
 
 class BicyclePiecewise(Bicycle):
