@@ -17,7 +17,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 
 #: top-level packages that cost tens to thousands of milliseconds to import
 HEAVY = ("numpy", "scipy", "torch", "nuscenes", "matplotlib", "sklearn", "pandas", "pyarrow", "shapely", "av2",
-         "cv2", "trackeval", "motmetrics", "tqdm", "threadpoolctl", "snakemake")
+         "cv2", "trackeval", "motmetrics", "tqdm", "threadpoolctl", "snakemake", "yaml")
 
 
 def _modules_after(code: str) -> set[str]:
@@ -102,7 +102,7 @@ def test_fast_evaluate_skips_the_devkit_package(nusc_root, tmp_path):
             "assert len(calls) > 0, 'no contested frame: the test would not cover the solver'\n")
     loaded = _modules_after(code)
     assert sorted(loaded.intersection({"torch", "nuscenes", "matplotlib", "sklearn", "cv2", "motmetrics", "pandas",
-                                       "scipy", "numba", "tqdm"})) == []
+                                       "scipy", "numba", "tqdm", "yaml"})) == []
     doc = json.loads(metrics.read_text())
     # ground truth fed back (every annotation, zero-point ones too: those are extra predictions to the evaluator)
     # with a shifted duplicate of each: the duplicates are false positives below the GT boxes' score

@@ -8,8 +8,6 @@ import pickle
 import shutil
 from pathlib import Path
 
-import yaml
-
 from grutrack.errors import ConfigError, InputFormatError
 from grutrack.io import atomic_path
 from grutrack.provenance import config_hash, file_record, sha256_file, write_manifest
@@ -83,6 +81,8 @@ def run_submit(args: argparse.Namespace) -> int:
         counts = write_validated(args.tracks, _split_tokens(args.dataroot, args.version, args.split), args.out)
     else:
         counts = _copy_av2(args.tracks, args.out)
+    import yaml
+
     cfg = yaml.safe_load(Path(args.tracker_config).read_text())
     manifest = args.manifest or str(Path(args.out).with_name(Path(args.out).stem + ".manifest.json"))
     write_manifest(manifest, {

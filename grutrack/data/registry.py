@@ -11,8 +11,6 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
-
 from grutrack.errors import ConfigError
 
 REGISTRY_PATH = Path(__file__).resolve().parents[1] / "configs" / "detections.yaml"
@@ -49,6 +47,8 @@ class DetectionSource:
 def load_registry(path: str | Path = REGISTRY_PATH) -> dict[str, DetectionSource]:
     """All sources of a registry YAML, validated; raises :class:`ConfigError` naming the file and key."""
     path = Path(path)
+    import yaml  # here, not at module level: every command's parser imports this module
+
     try:
         raw = yaml.safe_load(path.read_text()) or {}
     except (OSError, yaml.YAMLError) as exc:
