@@ -101,37 +101,54 @@ def _propagate_kernel(F, P, Q, out) -> None:
         _sym_into(A, out[n])
 
 
-@njit(cache=True)
-def _joseph_kernel(x, P, H, r, R, x_out, P_out) -> None:
-    """EKF correction of each track n, Joseph form, into ``x_out (N, d)`` and ``P_out (N, d, d)``.
+@njit(cache=True, inline="always")
+def _wrap(a: float) -> float:
+    """An angle (rad) wrapped to [-pi, pi), as :func:`grutrack.boxes.wrap_angle`."""
+    return np.remainder(a + np.pi, 2.0 * np.pi) - np.pi
 
-    ``x (N, d)``, ``P (N, d, d)``, ``H (N, m, d)``, residual ``r (N, m)``, ``R (N, m, m)``:
-    ``S = sym(H P H^T + R)``, ``K = P H^T S^-1`` (``K^T = S^-1 (H P)`` by LU with partial pivoting),
-    ``x' = x + K r``, ``P' = sym((I - K H) P (I - K H)^T + K R K^T)``.
+
+@njit(cache=True)
+def _correct_kernel(x, P, rows, z, h, H, R, R_index, yaw_flip, yaw_index) -> None:
+    """EKF correction, Joseph form, of the tracks ``rows (K,)`` of ``x (N, d)`` and ``P (N, d, d)``, in place.
+
+    ``z (K, m)`` measurements, ``h (K, m)`` = h(x[rows]), ``H (K, m, d)`` its Jacobian, ``R (C, m, m)`` a table
+    indexed by ``R_index (K,)``. Residual ``r = z - h`` with the yaw component (``YAW_Z``) wrapped to [-pi, pi)
+    (and turned by pi beyond pi/2 with ``yaw_flip``); ``S = sym(H P H^T + R)``, ``K = P H^T S^-1``
+    (``K^T = S^-1 (H P)`` by LU with partial pivoting), ``x' = x + K r`` with the yaw state ``yaw_index``
+    wrapped, ``P' = sym((I - K H) P (I - K H)^T + K R K^T)``.
     """
     d, m = x.shape[1], H.shape[1]
     HP, KT, S, S_sym = np.empty((m, d)), np.empty((m, d)), np.empty((m, m)), np.empty((m, m))
     IKH, T1, KR, A, B = np.empty((d, d)), np.empty((d, d)), np.empty((d, m)), np.empty((d, d)), np.empty((d, d))
-    Kr = np.empty((d, 1))
+    r, Kr = np.empty((1, m)), np.empty((d, 1))
     perm = np.empty(m, dtype=np.int64)
-    for n in range(x.shape[0]):
-        _mm(H[n], P[n], HP)                       # H P
-        _mm(HP, H[n], S, b_t=True, sparse_b=True)   # H P H^T
-        S += R[n]
+    for k in range(rows.shape[0]):
+        n = rows[k]
+        Rk, Hk, Pn = R[R_index[k]], H[k], P[n]
+        for i in range(m):
+            r[0, i] = z[k, i] - h[k, i]
+        r[0, YAW_Z] = _wrap(r[0, YAW_Z])
+        if yaw_flip and abs(r[0, YAW_Z]) > 0.5 * np.pi:
+            r[0, YAW_Z] = _wrap(r[0, YAW_Z] + np.pi)
+        _mm(Hk, Pn, HP)                           # H P
+        _mm(HP, Hk, S, b_t=True, sparse_b=True)   # H P H^T
+        S += Rk
         _sym_into(S, S_sym)
         _lu_solve(S_sym, HP, KT, perm)            # K^T = S^-1 H P
-        _mm(KT, r[n:n + 1], Kr, a_t=True, b_t=True)   # K r
-        x_out[n] = x[n] + Kr[:, 0]
-        _mm(KT, H[n], IKH, a_t=True, sparse_b=True)  # K H
+        _mm(KT, r, Kr, a_t=True, b_t=True)        # K r
+        _mm(KT, Hk, IKH, a_t=True, sparse_b=True)  # K H
         IKH *= -1.0
         for i in range(d):
             IKH[i, i] += 1.0                      # I - K H
-        _mm(IKH, P[n], T1)
+        _mm(IKH, Pn, T1)
         _mm(T1, IKH, A, b_t=True, sparse_b=True)   # (I - K H) P (I - K H)^T
-        _mm(KT, R[n], KR, a_t=True, sparse_b=True)  # K R
+        _mm(KT, Rk, KR, a_t=True, sparse_b=True)  # K R
         _mm(KR, KT, B)                            # K R K^T
         A += B
-        _sym_into(A, P_out[n])
+        for i in range(d):
+            x[n, i] += Kr[i, 0]
+        x[n, yaw_index] = _wrap(x[n, yaw_index])
+        _sym_into(A, Pn)
 
 
 @njit(cache=True)
@@ -210,14 +227,27 @@ class BatchKalmanFilter:
 
     def update(self, x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Correct with measurements ``z (N, 9)`` (row i for track i) -> ``(x, P)``, Joseph form."""
-        x = np.asarray(x, dtype=np.float64)
+        x = np.array(x, dtype=np.float64)
         n, d = x.shape[0], self.model.dim_x
         if n == 0:
-            return x.copy(), np.zeros((0, d, d))
-        P = _batch(P, n, d, "P")
-        R = _batch(R, n, BOX_DIM, "R")
-        H = self.model.H(x)
-        r = self.residual(x, z)
-        x_new, P_new = np.empty((n, d)), np.empty((n, d, d))
-        _joseph_kernel(x, P, H, r, R, x_new, P_new)
-        return self.model.wrap_state(x_new), P_new
+            return x, np.zeros((0, d, d))
+        P = np.array(_batch(P, n, d, "P"))
+        R = np.asarray(R, dtype=np.float64)
+        rows = np.arange(n)
+        if R.shape == (BOX_DIM, BOX_DIM):  # one matrix for all tracks: a table of one
+            self.correct(x, P, rows, z, R[None], np.zeros(n, dtype=np.int64))
+        else:
+            self.correct(x, P, rows, z, _batch(R, n, BOX_DIM, "R"), rows)
+        return x, P
+
+    def correct(self, x: np.ndarray, P: np.ndarray, rows: np.ndarray, z: np.ndarray, R: np.ndarray,
+                R_index: np.ndarray) -> None:
+        """Correct the tracks ``rows (K,)`` of ``x (N, dim_x)``, ``P (N, dim_x, dim_x)`` (C-contiguous float64,
+        changed in place) with ``z (K, 9)``; ``R (C, 9, 9)`` a table indexed by ``R_index (K,)`` (e.g. the
+        per-class noise and the tracks' labels). Row k of the result equals :meth:`update` of that track."""
+        if len(rows) == 0:
+            return
+        h, H = self.model.measurement(x[rows])
+        z = np.ascontiguousarray(z, dtype=np.float64).reshape(-1, BOX_DIM)
+        _correct_kernel(x, P, np.asarray(rows, dtype=np.int64), z, h, H, np.asarray(R, dtype=np.float64),
+                        np.asarray(R_index, dtype=np.int64), self.yaw_flip, self.model.yaw_index)

@@ -153,6 +153,10 @@ class MotionModel:
         """``(f(x, dt), F(x, dt))`` at once (a model may share the work of the two)."""
         return self.f(x, dt), self.F(x, dt)
 
+    def measurement(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(h(x) (N, 9), H(x) (N, 9, dim_x))`` at once (a model may share the work of the two)."""
+        return self.h(x), self.H(x)
+
     def to_boxes(self, x: np.ndarray) -> np.ndarray:
         """Boxes ``(N, 9)`` to write out: ``h(x)`` with the yaw wrapped to [-pi, pi)."""
         boxes = self.h(x)
@@ -213,6 +217,47 @@ def _ctra_kernel(x, dt, dt3, coeffs, out, J) -> None:
         J[n, 8, 9] = t
 
 
+@njit(cache=True)
+def _ctra_measurement_kernel(x, h, H) -> None:
+    """CTRA's predicted measurement ``h (N, 9) = [x, y, z, w, l, h, yaw, v cos yaw, v sin yaw]`` and its Jacobian
+    ``H (N, 9, 10)`` (zeros on entry) at ``x (N, 10)``."""
+    for n in range(x.shape[0]):
+        v, yaw = x[n, 6], x[n, 8]
+        c, s = np.cos(yaw), np.sin(yaw)
+        for i in range(6):
+            h[n, i] = x[n, i]
+            H[n, i, i] = 1.0
+        h[n, 6], h[n, 7], h[n, 8] = yaw, v * c, v * s
+        H[n, 6, 8] = 1.0
+        H[n, 7, 6], H[n, 7, 8] = c, -v * s
+        H[n, 8, 6], H[n, 8, 8] = s, v * c
+
+
+@njit(cache=True)
+def _bicycle_measurement_kernel(x, beta, dbeta, offset_ratio, delta_terms, h, H) -> None:
+    """The bicycle model's predicted measurement ``h (N, 9)`` and its Jacobian ``H (N, 9, 10)`` (zeros on entry) at
+    ``x (N, 10)`` with slip angles ``beta (N,)`` rad and ``dbeta/ddelta (N,)``; the box centre lies
+    ``d = offset_ratio * l`` behind the reference point. ``delta_terms``: whether H has d(vx, vy)/ddelta."""
+    for n in range(x.shape[0]):
+        v, yaw = x[n, 6], x[n, 8]
+        c, s = np.cos(yaw), np.sin(yaw)
+        cp, sp = np.cos(yaw + beta[n]), np.sin(yaw + beta[n])
+        d = offset_ratio * x[n, 4]
+        h[n, 0], h[n, 1] = x[n, 0] - d * c, x[n, 1] - d * s
+        for i in range(2, 6):
+            h[n, i] = x[n, i]
+        h[n, 6], h[n, 7], h[n, 8] = yaw, v * cp, v * sp
+        for i in range(6):
+            H[n, i, i] = 1.0
+        H[n, 0, 4], H[n, 0, 8] = -offset_ratio * c, d * s
+        H[n, 1, 4], H[n, 1, 8] = -offset_ratio * s, -d * c
+        H[n, 6, 8] = 1.0
+        H[n, 7, 6], H[n, 7, 8] = cp, -v * sp
+        H[n, 8, 6], H[n, 8, 8] = sp, v * cp
+        if delta_terms:
+            H[n, 7, 9], H[n, 8, 9] = -v * sp * dbeta[n], v * cp * dbeta[n]
+
+
 class CTRA(MotionModel):
     """Constant turn rate and acceleration.
 
@@ -253,6 +298,14 @@ class CTRA(MotionModel):
         dt = _as_dt(dt, n)
         _ctra_kernel(x, dt, dt**3, _COEFF_TABLE, out, J)
         return out, J
+
+    def measurement(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`h` ``(N, 9)`` and :meth:`H` ``(N, 9, 10)`` in one compiled pass (:func:`_ctra_measurement_kernel`)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        n = x.shape[0]
+        h, H = np.empty((n, BOX_DIM)), np.zeros((n, BOX_DIM, self.dim_x))
+        _ctra_measurement_kernel(x, h, H)
+        return h, H
 
     def h(self, x: np.ndarray) -> np.ndarray:
         """Predicted measurement ``(N, 9)`` ``[x, y, z, w, l, h, yaw, v cos yaw, v sin yaw]``."""
@@ -397,6 +450,19 @@ class Bicycle(MotionModel):
         J[:, 8, 7] = kappa * ddt_a
         J[:, 8, 9] = ds * dk_ddelta
         return J
+
+    #: whether H has the d(vx, vy)/ddelta terms (Poly-MOT's piecewise form leaves them out)
+    _delta_terms = True
+
+    def measurement(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`h` ``(N, 9)`` and :meth:`H` ``(N, 9, 10)`` in one compiled pass
+        (:func:`_bicycle_measurement_kernel`; slip angle from :meth:`_slip`)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        n = x.shape[0]
+        beta, dbeta = self._slip(x[:, 9])
+        h, H = np.empty((n, BOX_DIM)), np.zeros((n, BOX_DIM, self.dim_x))
+        _bicycle_measurement_kernel(x, beta, dbeta, self._offset_ratio, self._delta_terms, h, H)
+        return h, H
 
     def h(self, x: np.ndarray) -> np.ndarray:
         """Predicted measurement ``(N, 9)``: box centre, size, yaw, velocity of the reference point."""
@@ -555,6 +621,8 @@ class BicyclePiecewise(Bicycle):
         out, J = np.empty((n, self.dim_x)), np.zeros((n, self.dim_x, self.dim_x))
         _bicycle_piecewise_kernel(x, _as_dt(dt, n), beta, kappa, _COEFF_TABLE, out, J)
         return out, J
+
+    _delta_terms = False
 
     def H(self, x: np.ndarray) -> np.ndarray:
         """Jacobian ``(N, 9, 10)`` of :meth:`h` without the d(vx, vy)/ddelta terms (Poly-MOT's H)."""
