@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 
 from grutrack.boxes import BOX_DIM, wrap_angle
-from grutrack.motion.models import MotionModel
+from grutrack.motion.models import MotionModel, _wrap
 
 YAW_Z = 6  # yaw column of the canonical measurement / box
 
@@ -99,12 +99,6 @@ def _propagate_kernel(F, P, Q, out) -> None:
         _mm(FP, F[n], A, b_t=True, sparse_b=True)
         A += Q[n]
         _sym_into(A, out[n])
-
-
-@njit(cache=True, inline="always")
-def _wrap(a: float) -> float:
-    """An angle (rad) wrapped to [-pi, pi), as :func:`grutrack.boxes.wrap_angle`."""
-    return np.remainder(a + np.pi, 2.0 * np.pi) - np.pi
 
 
 @njit(cache=True)

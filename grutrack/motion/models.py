@@ -114,6 +114,12 @@ def _arc_step(x: np.ndarray, ds: np.ndarray, psi: np.ndarray, phi: np.ndarray) -
     return out
 
 
+@njit(cache=True, inline="always")
+def _wrap(a: float) -> float:
+    """An angle (rad) wrapped to [-pi, pi), as :func:`grutrack.boxes.wrap_angle`."""
+    return np.remainder(a + np.pi, 2.0 * np.pi) - np.pi
+
+
 def _as_dt(dt, n: int) -> np.ndarray:
     """``dt`` (scalar or ``(N,)`` seconds) as a ``(N,)`` float64 array."""
     return np.broadcast_to(np.asarray(dt, dtype=np.float64), (n,)).astype(np.float64)
@@ -218,26 +224,31 @@ def _ctra_kernel(x, dt, dt3, coeffs, out, J) -> None:
 
 
 @njit(cache=True)
-def _ctra_measurement_kernel(x, h, H) -> None:
-    """CTRA's predicted measurement ``h (N, 9) = [x, y, z, w, l, h, yaw, v cos yaw, v sin yaw]`` and its Jacobian
-    ``H (N, 9, 10)`` (zeros on entry) at ``x (N, 10)``."""
+def _ctra_measurement_kernel(x, h, H, wrap_yaw) -> None:
+    """CTRA's predicted measurement ``h (N, 9) = [x, y, z, w, l, h, yaw, v cos yaw, v sin yaw]`` (with
+    ``wrap_yaw`` the yaw wrapped to [-pi, pi), as a box) and its Jacobian ``H (N, 9, 10)`` (zeros on entry; not
+    written when it has no rows) at ``x (N, 10)``."""
     for n in range(x.shape[0]):
         v, yaw = x[n, 6], x[n, 8]
         c, s = np.cos(yaw), np.sin(yaw)
         for i in range(6):
             h[n, i] = x[n, i]
+        h[n, 6], h[n, 7], h[n, 8] = _wrap(yaw) if wrap_yaw else yaw, v * c, v * s
+        if H.shape[0] == 0:
+            continue
+        for i in range(6):
             H[n, i, i] = 1.0
-        h[n, 6], h[n, 7], h[n, 8] = yaw, v * c, v * s
         H[n, 6, 8] = 1.0
         H[n, 7, 6], H[n, 7, 8] = c, -v * s
         H[n, 8, 6], H[n, 8, 8] = s, v * c
 
 
 @njit(cache=True)
-def _bicycle_measurement_kernel(x, beta, dbeta, offset_ratio, delta_terms, h, H) -> None:
-    """The bicycle model's predicted measurement ``h (N, 9)`` and its Jacobian ``H (N, 9, 10)`` (zeros on entry) at
-    ``x (N, 10)`` with slip angles ``beta (N,)`` rad and ``dbeta/ddelta (N,)``; the box centre lies
-    ``d = offset_ratio * l`` behind the reference point. ``delta_terms``: whether H has d(vx, vy)/ddelta."""
+def _bicycle_measurement_kernel(x, beta, dbeta, offset_ratio, delta_terms, h, H, wrap_yaw) -> None:
+    """The bicycle model's predicted measurement ``h (N, 9)`` (``wrap_yaw``: the yaw wrapped to [-pi, pi)) and its
+    Jacobian ``H (N, 9, 10)`` (zeros on entry; not written when it has no rows) at ``x (N, 10)`` with slip angles
+    ``beta (N,)`` rad and ``dbeta/ddelta (N,)``; the box centre lies ``d = offset_ratio * l`` behind the reference
+    point. ``delta_terms``: whether H has d(vx, vy)/ddelta."""
     for n in range(x.shape[0]):
         v, yaw = x[n, 6], x[n, 8]
         c, s = np.cos(yaw), np.sin(yaw)
@@ -246,7 +257,9 @@ def _bicycle_measurement_kernel(x, beta, dbeta, offset_ratio, delta_terms, h, H)
         h[n, 0], h[n, 1] = x[n, 0] - d * c, x[n, 1] - d * s
         for i in range(2, 6):
             h[n, i] = x[n, i]
-        h[n, 6], h[n, 7], h[n, 8] = yaw, v * cp, v * sp
+        h[n, 6], h[n, 7], h[n, 8] = _wrap(yaw) if wrap_yaw else yaw, v * cp, v * sp
+        if H.shape[0] == 0:
+            continue
         for i in range(6):
             H[n, i, i] = 1.0
         H[n, 0, 4], H[n, 0, 8] = -offset_ratio * c, d * s
@@ -304,8 +317,15 @@ class CTRA(MotionModel):
         x = np.ascontiguousarray(x, dtype=np.float64)
         n = x.shape[0]
         h, H = np.empty((n, BOX_DIM)), np.zeros((n, BOX_DIM, self.dim_x))
-        _ctra_measurement_kernel(x, h, H)
+        _ctra_measurement_kernel(x, h, H, False)
         return h, H
+
+    def to_boxes(self, x: np.ndarray) -> np.ndarray:
+        """Boxes ``(N, 9)`` to write out: ``h(x)`` with the yaw wrapped to [-pi, pi) (compiled)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        h = np.empty((x.shape[0], BOX_DIM))
+        _ctra_measurement_kernel(x, h, np.zeros((0, BOX_DIM, self.dim_x)), True)
+        return h
 
     def h(self, x: np.ndarray) -> np.ndarray:
         """Predicted measurement ``(N, 9)`` ``[x, y, z, w, l, h, yaw, v cos yaw, v sin yaw]``."""
@@ -461,8 +481,17 @@ class Bicycle(MotionModel):
         n = x.shape[0]
         beta, dbeta = self._slip(x[:, 9])
         h, H = np.empty((n, BOX_DIM)), np.zeros((n, BOX_DIM, self.dim_x))
-        _bicycle_measurement_kernel(x, beta, dbeta, self._offset_ratio, self._delta_terms, h, H)
+        _bicycle_measurement_kernel(x, beta, dbeta, self._offset_ratio, self._delta_terms, h, H, False)
         return h, H
+
+    def to_boxes(self, x: np.ndarray) -> np.ndarray:
+        """Boxes ``(N, 9)`` to write out: ``h(x)`` with the yaw wrapped to [-pi, pi) (compiled)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        beta, dbeta = self._slip(x[:, 9])
+        h = np.empty((x.shape[0], BOX_DIM))
+        _bicycle_measurement_kernel(x, beta, dbeta, self._offset_ratio, self._delta_terms, h,
+                                    np.zeros((0, BOX_DIM, self.dim_x)), True)
+        return h
 
     def h(self, x: np.ndarray) -> np.ndarray:
         """Predicted measurement ``(N, 9)``: box centre, size, yaw, velocity of the reference point."""
