@@ -32,25 +32,23 @@ def _augmenting_path(cost: List[List[float]], u: List[float], v: List[float], pa
     ``SC``. Returns ``(sink column, path length)``; sink -1 when infeasible."""
     nc = len(v)
     remaining = list(range(nc - 1, -1, -1))  # reverse order: a constant matrix gives the identity
-    for k in range(len(SR)):
-        SR[k] = False
-    for k in range(nc):
-        SC[k] = False
-        spc[k] = math.inf
+    SR[:] = [False] * len(SR)
+    SC[:] = [False] * nc
+    spc[:] = [math.inf] * nc
     min_val = 0.0
     sink = -1
     while sink == -1:
         index, lowest = -1, math.inf
         SR[i] = True
         row, ui = cost[i], u[i]
-        for it in range(len(remaining)):
-            j = remaining[it]
+        for it, j in enumerate(remaining):
             r = min_val + row[j] - ui - v[j]
-            if r < spc[j]:
+            sj = spc[j]
+            if r < sj:
                 path[j] = i
-                spc[j] = r
-            if spc[j] < lowest or (spc[j] == lowest and row4col[j] == -1):
-                lowest = spc[j]
+                spc[j] = sj = r
+            if sj < lowest or (sj == lowest and row4col[j] == -1):
+                lowest = sj
                 index = it
         min_val = lowest
         if min_val == math.inf:
