@@ -16,6 +16,7 @@ Two assignment rules (tracker preset key ``association.assignment``), both over 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -169,6 +170,14 @@ def _cost_kernel(det_labels, trk_labels, ta, tb, codes, thresholds, costs) -> No
                     costs[st, i, j] = 1.0 - out[codes[st, lab], 0]
 
 
+@functools.lru_cache(maxsize=64)
+def _similarity_codes(metrics: tuple[tuple[str, ...], ...]) -> np.ndarray:
+    """(S, C) int64 similarity index (into ``geometry.SIMILARITIES``) of each stage's metric per class."""
+    codes = np.array([[geometry.SIMILARITIES.index(m) for m in metric] for metric in metrics], dtype=np.int64)
+    codes.setflags(write=False)
+    return codes
+
+
 def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray,
                      trk_labels: np.ndarray, stages: list[tuple[tuple[str, ...], np.ndarray]]) -> list[np.ndarray]:
     """(D, T) cost matrices, one per stage, from ONE compiled geometry pass over the candidate pairs.
@@ -180,12 +189,12 @@ def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: n
     D, T = len(det_boxes), len(trk_boxes)
     costs = np.full((len(stages), D, T), _INVALID)
     if D and T:
-        codes = np.array([[geometry.SIMILARITIES.index(m) for m in metric] for metric, _ in stages], dtype=np.int64)
+        codes = _similarity_codes(tuple(metric for metric, _ in stages))
         thresholds = np.array([thr for _, thr in stages], dtype=np.float64)
         det = geometry._check_boxes(det_boxes, "detection boxes")
         trk = geometry._check_boxes(trk_boxes, "track boxes")
-        _cost_kernel(det_labels.astype(np.int64), trk_labels.astype(np.int64), geometry._box_terms(det),
-                     geometry._box_terms(trk), codes, thresholds, costs)
+        _cost_kernel(det_labels.astype(np.int64, copy=False), trk_labels.astype(np.int64, copy=False),
+                     geometry._box_terms(det), geometry._box_terms(trk), codes, thresholds, costs)
     return list(costs)
 
 
