@@ -8,8 +8,10 @@ ordinary Kalman filter (its F and H are exact).
 
 * predict: ``F = F(x)`` at the prior state, ``x = f(x, dt)``, ``P = F P F^T + Q``; yaw state wrapped.
 * update: residual ``r = z - h(x)`` with the yaw component wrapped to [-pi, pi) (and, with ``yaw_flip``, turned
-  by pi when it exceeds pi/2, see below), ``S = H P H^T + R``, ``K = P H^T S^-1`` (by ``np.linalg.solve``),
+  by pi when it exceeds pi/2, see below), ``S = H P H^T + R``, ``K = P H^T S^-1`` (LU with partial pivoting),
   ``x = x + K r`` with the yaw wrapped again, and Joseph form ``P = (I-KH) P (I-KH)^T + K R K^T``, symmetrised.
+  :meth:`BatchKalmanFilter.correct` does this in place for selected rows with a per-class R table (the tracker's
+  call: one compiled pass, no gathered copies of P).
 
 Heading ambiguity (``yaw_flip``, default True): a box's footprint is the same under a 180 degree turn and
 detectors often return the reversed heading. When the wrapped yaw residual exceeds pi/2 in magnitude the
