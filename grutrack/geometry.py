@@ -112,15 +112,22 @@ def _box_terms(boxes: np.ndarray) -> np.ndarray:
     sine of the yaw; half length and half width (m); bottom and top (m); footprint area (m²); volume (m³);
     circumradius of the footprint (m). Rows are named by ``_X`` ... ``_RADIUS``."""
     t = np.empty((11, boxes.shape[0]))
-    t[_X], t[_Y] = boxes[:, 0], boxes[:, 1]
-    t[_C], t[_S] = np.cos(boxes[:, 6]), np.sin(boxes[:, 6])
-    t[_HL], t[_HW] = 0.5 * boxes[:, 4], 0.5 * boxes[:, 3]
-    half_h = 0.5 * boxes[:, 5]
-    t[_LO], t[_HI] = boxes[:, 2] - half_h, boxes[:, 2] + half_h
-    t[_AREA] = boxes[:, 3] * boxes[:, 4]
-    t[_VOL] = t[_AREA] * boxes[:, 5]
-    t[_RADIUS] = np.hypot(t[_HL], t[_HW])
+    _box_terms_kernel(boxes, t)
     return t
+
+
+@njit(cache=True)
+def _box_terms_kernel(boxes, t) -> None:
+    """:func:`_box_terms` of ``boxes (N, >=7)`` into ``t (11, N)``, box by box."""
+    for n in range(boxes.shape[0]):
+        t[_X, n], t[_Y, n] = boxes[n, 0], boxes[n, 1]
+        t[_C, n], t[_S, n] = np.cos(boxes[n, 6]), np.sin(boxes[n, 6])
+        t[_HL, n], t[_HW, n] = 0.5 * boxes[n, 4], 0.5 * boxes[n, 3]
+        half_h = 0.5 * boxes[n, 5]
+        t[_LO, n], t[_HI, n] = boxes[n, 2] - half_h, boxes[n, 2] + half_h
+        t[_AREA, n] = boxes[n, 3] * boxes[n, 4]
+        t[_VOL, n] = t[_AREA, n] * boxes[n, 5]
+        t[_RADIUS, n] = np.hypot(t[_HL, n], t[_HW, n])
 
 
 @njit(cache=True, inline="always")

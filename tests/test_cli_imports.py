@@ -17,7 +17,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 
 #: top-level packages that cost tens to thousands of milliseconds to import
 HEAVY = ("numpy", "scipy", "torch", "nuscenes", "matplotlib", "sklearn", "pandas", "pyarrow", "shapely", "av2",
-         "cv2", "trackeval", "motmetrics", "tqdm", "threadpoolctl", "snakemake")
+         "cv2", "trackeval", "motmetrics", "tqdm", "threadpoolctl", "snakemake", "yaml")
 
 
 def _modules_after(code: str) -> set[str]:
@@ -71,8 +71,10 @@ def test_command_help_lists_its_flags(name):
 
 
 def test_fast_evaluate_skips_the_devkit_package(nusc_root, tmp_path):
-    """The fast evaluator's command (config, loading, metrics classes) never imports the ``nuscenes`` package,
-    whose import pulls matplotlib, OpenCV and scikit-learn; its figures stay those of the devkit's config."""
+    """The fast evaluator's command (config, loading, metrics classes, the assignment of contested boxes) never
+    imports the ``nuscenes`` package, whose import pulls matplotlib, OpenCV and scikit-learn, nor motmetrics,
+    pandas or scipy; its figures stay those of the devkit's config. Every GT box comes back twice (the second
+    0.6 m off, another id, a lower score), so frames have contested pairs and the assignment solver runs."""
     from grutrack.data.nuscenes import load_scenes, open_nuscenes
 
     scenes = load_scenes(open_nuscenes(nusc_root, "v1.0-mini"), "mini_val", with_gt=True)
@@ -80,24 +82,31 @@ def test_fast_evaluate_skips_the_devkit_package(nusc_root, tmp_path):
     for s in scenes:
         for f in s.frames:
             for b, lab, inst in zip(f.gt.boxes, f.gt.labels, f.gt.ids):
-                results[f.token].append({
-                    "sample_token": f.token, "translation": b[:3].tolist(), "size": b[3:6].tolist(),
-                    "rotation": [float(np.cos(b[6] / 2)), 0.0, 0.0, float(np.sin(b[6] / 2))],
-                    "velocity": b[7:9].tolist(), "tracking_id": inst, "tracking_score": 0.9,
-                    "tracking_name": _class_name(int(lab))})
+                for dx, suffix, score in ((0.0, "", 0.9), (0.6, "-dup", 0.5)):
+                    results[f.token].append({
+                        "sample_token": f.token, "translation": [b[0] + dx, b[1], b[2]], "size": b[3:6].tolist(),
+                        "rotation": [float(np.cos(b[6] / 2)), 0.0, 0.0, float(np.sin(b[6] / 2))],
+                        "velocity": b[7:9].tolist(), "tracking_id": inst + suffix, "tracking_score": score,
+                        "tracking_name": _class_name(int(lab))})
     sub, metrics = tmp_path / "gt_tracks.json", tmp_path / "metrics.json"
     sub.write_text(json.dumps({"meta": {"use_camera": False, "use_lidar": True, "use_radar": False,
                                         "use_map": False, "use_external": False}, "results": results}))
-    code = ("import contextlib, io, grutrack.cli\n"
+    code = ("import contextlib, io, grutrack.cli, grutrack.evaluation.lsap as lsap\n"
+            "calls = []\n"
+            "solve = lsap.motmetrics_lsa\n"
+            "lsap.motmetrics_lsa = lambda dm: calls.append(dm.shape) or solve(dm)\n"
             "with contextlib.redirect_stdout(io.StringIO()):\n"
             f"    assert grutrack.cli.main(['evaluate', '--dataroot', {str(nusc_root)!r}, '--version', 'v1.0-mini', "
             f"'--split', 'mini_val', '--submission', {str(sub)!r}, '--out', {str(metrics)!r}, "
-            f"'--evaluator', 'fast']) == 0\n")
+            f"'--evaluator', 'fast']) == 0\n"
+            "assert len(calls) > 0, 'no contested frame: the test would not cover the solver'\n")
     loaded = _modules_after(code)
-    assert sorted(loaded.intersection({"torch", "nuscenes", "matplotlib", "sklearn", "cv2"})) == []
+    assert sorted(loaded.intersection({"torch", "nuscenes", "matplotlib", "sklearn", "cv2", "motmetrics", "pandas",
+                                       "scipy", "numba", "tqdm", "yaml"})) == []
     doc = json.loads(metrics.read_text())
     # ground truth fed back (every annotation, zero-point ones too: those are extra predictions to the evaluator)
-    assert 0.9 < doc["overall"]["amota"] <= 1.0 and doc["overall"]["ids"] == 0
+    # with a shifted duplicate of each: the duplicates are false positives below the GT boxes' score
+    assert 0.8 < doc["overall"]["amota"] <= 1.0 and doc["overall"]["fp"] > 0
     assert doc["devkit_summary"]["cfg"]["num_thresholds"] == 40
 
 

@@ -18,6 +18,7 @@ from grutrack.motion import (
     arc_moments,
     class_matrices,
     load_motion_config,
+    make_model,
 )
 
 MODELS = [CTRA(), Bicycle(), Bicycle(wheelbase_ratio=0.7, front_ratio=0.3), CA(), CV()]
@@ -416,3 +417,92 @@ def test_class_matrices_gather_per_track_noise():
     np.testing.assert_array_equal(P0[1], cfg["pedestrian"]["P0"])
     with pytest.raises(ValueError):
         class_matrices(cfg, np.array([CLASS_INDEX["car"], CLASS_INDEX["trailer"]]), "Q")
+
+
+# ------------------------------------------------------------------------------------------ compiled passes
+
+
+def _ctra_numpy(x: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """CTRA's f and F written with numpy arrays, operation for operation (the reference of the compiled pass)."""
+    v, a, yaw, om = x[:, 6], x[:, 7], x[:, 8], x[:, 9]
+    e0, e1, e2 = arc_moments(om * dt)
+    ar = v * dt * e0[0] + a * dt * dt * e1[0]
+    ai = v * dt * e0[1] + a * dt * dt * e1[1]
+    c, s = np.cos(yaw), np.sin(yaw)
+    dx, dy = c * ar - s * ai, s * ar + c * ai
+    out = x.copy()
+    out[:, 0] += dx
+    out[:, 1] += dy
+    out[:, 6] = v + a * dt
+    out[:, 8] = yaw + om * dt
+    J = np.repeat(np.eye(10)[None], len(x), axis=0)
+    J[:, 0, 6], J[:, 1, 6] = dt * (c * e0[0] - s * e0[1]), dt * (s * e0[0] + c * e0[1])
+    J[:, 0, 7], J[:, 1, 7] = dt * dt * (c * e1[0] - s * e1[1]), dt * dt * (s * e1[0] + c * e1[1])
+    J[:, 0, 8], J[:, 1, 8] = -dy, dx
+    br = v * dt**2 * e1[0] + a * dt**3 * e2[0]
+    bi = v * dt**2 * e1[1] + a * dt**3 * e2[1]
+    J[:, 0, 9], J[:, 1, 9] = -c * bi - s * br, -s * bi + c * br
+    J[:, 6, 7] = J[:, 8, 9] = dt
+    return out, J
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> None:
+    """Equal to rounding: the compiled passes repeat numpy's operations in order, so they agree bit for bit where
+    numba's sin and cos are numpy's (libm on the machines measured; numpy may use other SIMD routines)."""
+    np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-13)
+
+
+def test_compiled_ctra_transition_is_the_numpy_form():
+    x = random_states(CTRA(), n=400, seed=21)
+    x[:, 8] = np.random.default_rng(22).uniform(-4, 4, len(x))
+    for dt in (DT, 0.45, 0.0):
+        f, F = CTRA().transition(x, dt)
+        f_ref, F_ref = _ctra_numpy(x, np.full(len(x), dt))
+        _same(f, f_ref)
+        _same(F, F_ref)
+        np.testing.assert_array_equal(CTRA().f(x, dt), f)
+
+
+@pytest.mark.parametrize("model", [CTRA(), Bicycle(), Bicycle(wheelbase_ratio=0.7, front_ratio=0.3),
+                                   make_model("Bicycle", "piecewise"), make_model("CTRA", "piecewise"), CA(), CV()],
+                         ids=["CTRA", "Bicycle", "Bicycle-offset", "Bicycle-piecewise", "CTRA-piecewise", "CA", "CV"])
+def test_joint_passes_equal_the_separate_methods(model):
+    """transition = (f, F), measurement = (h, H) and to_boxes = h with the yaw wrapped (the compiled measurement and
+    box passes against the numpy h and H)."""
+    x = random_states(model, n=300, seed=23)
+    x[:, model.yaw_index] = np.random.default_rng(24).uniform(-4, 4, len(x))  # unwrapped yaw too
+    f, F = model.transition(x, DT)
+    np.testing.assert_array_equal(f, model.f(x, DT))
+    np.testing.assert_array_equal(F, model.F(x, DT))
+    h, H = model.measurement(x)
+    _same(h, model.h(x))
+    _same(H, model.H(x))
+    boxes = model.h(x)
+    boxes[:, 6] = wrap_angle(boxes[:, 6])
+    _same(model.to_boxes(x), boxes)
+
+
+@pytest.mark.parametrize("yaw_flip", [True, False])
+def test_correct_rows_in_place_equals_update_of_those_rows(yaw_flip):
+    """The tracker's in-place correction of some rows with a per-class R table gives, row for row, what
+    :meth:`BatchKalmanFilter.update` gives for those tracks; the other rows are untouched."""
+    model = CTRA()
+    rng = np.random.default_rng(25)
+    n = 30
+    x = random_states(model, n=n, seed=26)
+    A = rng.normal(size=(n, 10, 10))
+    P = A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(10)
+    R_table = np.stack([np.diag(rng.uniform(0.05, 2.0, 9)) for _ in range(7)])
+    labels = rng.integers(0, 7, n)
+    rows = np.array([3, 0, 17, 29, 8])
+    z = model.h(x[rows]) + rng.normal(0, 0.3, (len(rows), 9))
+    z[0, 6] += np.pi  # a flipped heading
+    kf = BatchKalmanFilter(model, yaw_flip=yaw_flip)
+    x_want, P_want = kf.update(x[rows], P[rows], z, R_table[labels[rows]])
+    x_c, P_c = x.copy(), P.copy()
+    kf.correct(x_c, P_c, rows, z, R_table, labels[rows])
+    np.testing.assert_array_equal(x_c[rows], x_want)
+    np.testing.assert_array_equal(P_c[rows], P_want)
+    rest = np.setdiff1d(np.arange(n), rows)
+    np.testing.assert_array_equal(x_c[rest], x[rest])
+    np.testing.assert_array_equal(P_c[rest], P[rest])

@@ -35,6 +35,14 @@ class Vocabulary:
 NUSCENES_VOCABULARY = Vocabulary(TRACKING_CLASSES, TRACKING_CLASSES)
 
 
+def _as_array(a, dtype, shape: tuple) -> np.ndarray:
+    """``np.asarray(a, dtype).reshape(shape)``; an array already of that dtype and shape is taken as it is (the
+    tracking loop makes a dozen box sets a frame)."""
+    if type(a) is np.ndarray and a.dtype == dtype and a.ndim == len(shape) and shape[-1] in (-1, a.shape[-1]):
+        return a
+    return np.asarray(a, dtype=dtype).reshape(shape)
+
+
 @dataclass
 class BoxSet:
     """Boxes of one frame.
@@ -53,9 +61,9 @@ class BoxSet:
     extra: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.boxes = np.asarray(self.boxes, dtype=np.float64).reshape(-1, BOX_DIM)
-        self.scores = np.asarray(self.scores, dtype=np.float64).reshape(-1)
-        self.labels = np.asarray(self.labels, dtype=np.int64).reshape(-1)
+        self.boxes = _as_array(self.boxes, np.float64, (-1, BOX_DIM))
+        self.scores = _as_array(self.scores, np.float64, (-1,))
+        self.labels = _as_array(self.labels, np.int64, (-1,))
         n = len(self.boxes)
         if len(self.scores) != n or len(self.labels) != n or (self.ids is not None and len(self.ids) != n):
             raise ValueError(f"BoxSet arrays disagree in length: boxes {n}, scores {len(self.scores)}, "

@@ -18,9 +18,9 @@ much faster:
   prediction have no other candidate is matched whatever motmetrics' state (every optimal assignment contains
   it), so most pairs of all frames are matched at once with array operations, MATCH or SWITCH following from
   the object's previous partner. The rows with competing candidates replay ``MOTAccumulator.update`` in time
-  order: keep the previous pairing if still within distance, then ``motmetrics.lap.linear_sum_assignment`` on
-  the very matrix motmetrics builds (so ties are broken by motmetrics' own solver), unless what is left is
-  one-to-one;
+  order: keep the previous pairing if still within distance, then motmetrics' ``linear_sum_assignment`` on
+  the very matrix motmetrics builds (:mod:`grutrack.evaluation.lsap`, a port of its scipy solver: ties are
+  broken as motmetrics breaks them), unless what is left is one-to-one;
 * the per-threshold metrics (MOTAR, MOTA, MOTP, FAF, MT, ML, FP, FN, IDS, FRAG, TID, LGD, recall) are array
   reductions over the GT boxes sorted by object, following ``nuscenes.eval.tracking.metrics`` and
   ``motmetrics.metrics`` on the devkit's frame numbering (only frames with a box of the class count); the
@@ -751,16 +751,15 @@ def _assign(dm: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
 
     When the finite entries form a one-to-one matching, every optimal assignment contains all of them (the
     solver first maximises the number of finite pairs: motmetrics makes the others expensive enough), so no
-    solver is needed; otherwise ``motmetrics.lap.linear_sum_assignment`` is called on the same matrix.
+    solver is needed; otherwise the same matrix goes to :func:`grutrack.evaluation.lsap.motmetrics_lsa`
+    (``motmetrics.lap.linear_sum_assignment`` with its scipy solver, ties included, without their imports).
     """
     ii, jj = np.nonzero(~np.isnan(dm))
     if len(ii) == 0 or not ((ii[1:] == ii[:-1]).any() or np.bincount(jj).max() > 1):
         return ii, jj
-    from motmetrics.lap import linear_sum_assignment
+    from grutrack.evaluation.lsap import motmetrics_lsa
 
-    rids, cids = linear_sum_assignment(dm)
-    keep = np.isfinite(dm[rids, cids])
-    return rids[keep].astype(np.int64), cids[keep].astype(np.int64)
+    return motmetrics_lsa(dm)
 
 
 class _NeedsDevkit(Exception):

@@ -74,17 +74,22 @@ def validate_submission(sub: dict, sample_tokens: list[str], where: str = "submi
             _validate_box(where, token, i, box)
 
 
+_BOX_KEY_SET = frozenset(BOX_KEYS)
+_CLASS_SET = frozenset(TRACKING_CLASSES)
+_VECTORS = (("translation", 3), ("size", 3), ("rotation", 4), ("velocity", 2))
+
+
 def _validate_box(where: str, token: str, i: int, box: dict) -> None:
-    if set(box) != set(BOX_KEYS):
+    if box.keys() != _BOX_KEY_SET:
         raise InputFormatError(f"{where}: sample {token} box {i}: keys must be {', '.join(BOX_KEYS)}")
     if box["sample_token"] != token:
         raise InputFormatError(f"{where}: sample {token} box {i}: sample_token is {box['sample_token']}")
-    if box["tracking_name"] not in TRACKING_CLASSES:
+    if box["tracking_name"] not in _CLASS_SET:
         raise InputFormatError(f"{where}: sample {token} box {i}: tracking_name '{box['tracking_name']}' is not "
                                f"one of {', '.join(TRACKING_CLASSES)}")
     if not isinstance(box["tracking_id"], str):
         raise InputFormatError(f"{where}: sample {token} box {i}: tracking_id must be a string")
-    for key, n in (("translation", 3), ("size", 3), ("rotation", 4), ("velocity", 2)):
+    for key, n in _VECTORS:
         v = box[key]
         if not _numbers(v, n):
             raise InputFormatError(f"{where}: sample {token} box {i}: '{key}' must be {n} finite numbers, got {v!r}")
@@ -93,15 +98,20 @@ def _validate_box(where: str, token: str, i: int, box: dict) -> None:
     if abs(math.sqrt(sum(q * q for q in box["rotation"])) - 1) > 1e-6:
         raise InputFormatError(f"{where}: sample {token} box {i}: 'rotation' must be a unit quaternion")
     s = box["tracking_score"]
-    if not _numbers([s], 1) or not 0 <= s <= 1:
+    if not _finite(s) or not 0 <= s <= 1:
         raise InputFormatError(f"{where}: sample {token} box {i}: tracking_score must be a number in [0, 1], "
                                f"got {s!r}")
 
 
 def _numbers(v, n: int) -> bool:
     """Whether ``v`` is a list of ``n`` finite JSON numbers (not strings, not booleans); plain Python, since
-    numpy calls on 2-4 numbers cost more than the check itself."""
-    return isinstance(v, list) and len(v) == n and all(_finite(x) for x in v)
+    numpy calls on 2-4 numbers cost more than the check itself (a float, what JSON gives, is tested first)."""
+    if type(v) is not list or len(v) != n:
+        return False
+    for x in v:
+        if not (math.isfinite(x) if type(x) is float else _finite(x)):
+            return False
+    return True
 
 
 def _finite(x) -> bool:

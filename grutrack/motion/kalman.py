@@ -8,8 +8,10 @@ ordinary Kalman filter (its F and H are exact).
 
 * predict: ``F = F(x)`` at the prior state, ``x = f(x, dt)``, ``P = F P F^T + Q``; yaw state wrapped.
 * update: residual ``r = z - h(x)`` with the yaw component wrapped to [-pi, pi) (and, with ``yaw_flip``, turned
-  by pi when it exceeds pi/2, see below), ``S = H P H^T + R``, ``K = P H^T S^-1`` (by ``np.linalg.solve``),
+  by pi when it exceeds pi/2, see below), ``S = H P H^T + R``, ``K = P H^T S^-1`` (LU with partial pivoting),
   ``x = x + K r`` with the yaw wrapped again, and Joseph form ``P = (I-KH) P (I-KH)^T + K R K^T``, symmetrised.
+  :meth:`BatchKalmanFilter.correct` does this in place for selected rows with a per-class R table (the tracker's
+  call: one compiled pass, no gathered copies of P).
 
 Heading ambiguity (``yaw_flip``, default True): a box's footprint is the same under a 180 degree turn and
 detectors often return the reversed heading. When the wrapped yaw residual exceeds pi/2 in magnitude the
@@ -26,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from grutrack.boxes import BOX_DIM, wrap_angle
-from grutrack.motion.models import MotionModel
+from grutrack.motion.models import MotionModel, _wrap
 
 YAW_Z = 6  # yaw column of the canonical measurement / box
 
@@ -57,14 +59,28 @@ def wrap_yaw_residual(r_yaw: np.ndarray, yaw_flip: bool) -> np.ndarray:
 
 
 @njit(cache=True, inline="always")
-def _mm(A, B, out, a_t=False, b_t=False) -> None:
-    """``out = op(A) op(B)`` for 2-D arrays, ``op`` the transpose where ``a_t`` / ``b_t`` is set."""
-    for i in range(out.shape[0]):
-        for j in range(out.shape[1]):
-            acc = 0.0
-            for k in range(A.shape[0] if a_t else A.shape[1]):
-                acc += (A[k, i] if a_t else A[i, k]) * (B[j, k] if b_t else B[k, j])
-            out[i, j] = acc
+def _mm(A, B, out, a_t=False, b_t=False, sparse_b=False) -> None:
+    """``out = op(A) op(B)`` for 2-D arrays, ``op`` the transpose where ``a_t`` / ``b_t`` is set.
+
+    ``out[i, j] = sum_k op(A)[i, k] op(B)[k, j]`` summed in ascending k, k the outer loop, so the inner loops
+    run over independent entries. Zero entries of ``op(A)`` (of ``op(B)`` with ``sparse_b``: use it when B is
+    the sparse factor, e.g. a Jacobian) are skipped: a zero product adds nothing to a finite sum, so the
+    result is that of the plain triple loop, bit for bit.
+    """
+    out[:] = 0.0
+    for k in range(A.shape[0] if a_t else A.shape[1]):
+        if sparse_b:
+            for j in range(out.shape[1]):
+                b = B[j, k] if b_t else B[k, j]
+                if b != 0.0:
+                    for i in range(out.shape[0]):
+                        out[i, j] += (A[k, i] if a_t else A[i, k]) * b
+        else:
+            for i in range(out.shape[0]):
+                a = A[k, i] if a_t else A[i, k]
+                if a != 0.0:
+                    for j in range(out.shape[1]):
+                        out[i, j] += a * (B[j, k] if b_t else B[k, j])
 
 
 @njit(cache=True, inline="always")
@@ -82,42 +98,53 @@ def _propagate_kernel(F, P, Q, out) -> None:
     FP, A = np.empty((d, d)), np.empty((d, d))
     for n in range(F.shape[0]):
         _mm(F[n], P[n], FP)
-        _mm(FP, F[n], A, b_t=True)
+        _mm(FP, F[n], A, b_t=True, sparse_b=True)
         A += Q[n]
         _sym_into(A, out[n])
 
 
 @njit(cache=True)
-def _joseph_kernel(x, P, H, r, R, x_out, P_out) -> None:
-    """EKF correction of each track n, Joseph form, into ``x_out (N, d)`` and ``P_out (N, d, d)``.
+def _correct_kernel(x, P, rows, z, h, H, R, R_index, yaw_flip, yaw_index) -> None:
+    """EKF correction, Joseph form, of the tracks ``rows (K,)`` of ``x (N, d)`` and ``P (N, d, d)``, in place.
 
-    ``x (N, d)``, ``P (N, d, d)``, ``H (N, m, d)``, residual ``r (N, m)``, ``R (N, m, m)``:
-    ``S = sym(H P H^T + R)``, ``K = P H^T S^-1`` (``K^T = S^-1 (H P)`` by LU with partial pivoting),
-    ``x' = x + K r``, ``P' = sym((I - K H) P (I - K H)^T + K R K^T)``.
+    ``z (K, m)`` measurements, ``h (K, m)`` = h(x[rows]), ``H (K, m, d)`` its Jacobian, ``R (C, m, m)`` a table
+    indexed by ``R_index (K,)``. Residual ``r = z - h`` with the yaw component (``YAW_Z``) wrapped to [-pi, pi)
+    (and turned by pi beyond pi/2 with ``yaw_flip``); ``S = sym(H P H^T + R)``, ``K = P H^T S^-1``
+    (``K^T = S^-1 (H P)`` by LU with partial pivoting), ``x' = x + K r`` with the yaw state ``yaw_index``
+    wrapped, ``P' = sym((I - K H) P (I - K H)^T + K R K^T)``.
     """
     d, m = x.shape[1], H.shape[1]
     HP, KT, S, S_sym = np.empty((m, d)), np.empty((m, d)), np.empty((m, m)), np.empty((m, m))
     IKH, T1, KR, A, B = np.empty((d, d)), np.empty((d, d)), np.empty((d, m)), np.empty((d, d)), np.empty((d, d))
-    Kr = np.empty((d, 1))
+    r, Kr = np.empty((1, m)), np.empty((d, 1))
     perm = np.empty(m, dtype=np.int64)
-    for n in range(x.shape[0]):
-        _mm(H[n], P[n], HP)                       # H P
-        _mm(HP, H[n], S, b_t=True)                # H P H^T
-        S += R[n]
+    for k in range(rows.shape[0]):
+        n = rows[k]
+        Rk, Hk, Pn = R[R_index[k]], H[k], P[n]
+        for i in range(m):
+            r[0, i] = z[k, i] - h[k, i]
+        r[0, YAW_Z] = _wrap(r[0, YAW_Z])
+        if yaw_flip and abs(r[0, YAW_Z]) > 0.5 * np.pi:
+            r[0, YAW_Z] = _wrap(r[0, YAW_Z] + np.pi)
+        _mm(Hk, Pn, HP)                           # H P
+        _mm(HP, Hk, S, b_t=True, sparse_b=True)   # H P H^T
+        S += Rk
         _sym_into(S, S_sym)
         _lu_solve(S_sym, HP, KT, perm)            # K^T = S^-1 H P
-        _mm(KT, r[n:n + 1], Kr, a_t=True, b_t=True)   # K r
-        x_out[n] = x[n] + Kr[:, 0]
-        _mm(KT, H[n], IKH, a_t=True)              # K H
+        _mm(KT, r, Kr, a_t=True, b_t=True)        # K r
+        _mm(KT, Hk, IKH, a_t=True, sparse_b=True)  # K H
         IKH *= -1.0
         for i in range(d):
             IKH[i, i] += 1.0                      # I - K H
-        _mm(IKH, P[n], T1)
-        _mm(T1, IKH, A, b_t=True)                 # (I - K H) P (I - K H)^T
-        _mm(KT, R[n], KR, a_t=True)               # K R
+        _mm(IKH, Pn, T1)
+        _mm(T1, IKH, A, b_t=True, sparse_b=True)   # (I - K H) P (I - K H)^T
+        _mm(KT, Rk, KR, a_t=True, sparse_b=True)  # K R
         _mm(KR, KT, B)                            # K R K^T
         A += B
-        _sym_into(A, P_out[n])
+        for i in range(d):
+            x[n, i] += Kr[i, 0]
+        x[n, yaw_index] = _wrap(x[n, yaw_index])
+        _sym_into(A, Pn)
 
 
 @njit(cache=True)
@@ -174,8 +201,8 @@ class BatchKalmanFilter:
         """Predict ``dt`` seconds (scalar or ``(N,)``) ahead -> ``(x (N, dim_x), P (N, dim_x, dim_x))``."""
         x = np.asarray(x, dtype=np.float64)
         n, d = x.shape[0], self.model.dim_x
-        F = self.model.F(x, dt)
-        x_new = self.model.wrap_state(self.model.f(x, dt))
+        x_new, F = self.model.transition(x, dt)
+        x_new = self.model.wrap_state(x_new)
         P_new = np.empty((n, d, d))
         _propagate_kernel(F, _batch(P, n, d, "P"), _batch(Q, n, d, "Q"), P_new)
         return x_new, P_new
@@ -196,14 +223,27 @@ class BatchKalmanFilter:
 
     def update(self, x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Correct with measurements ``z (N, 9)`` (row i for track i) -> ``(x, P)``, Joseph form."""
-        x = np.asarray(x, dtype=np.float64)
+        x = np.array(x, dtype=np.float64)
         n, d = x.shape[0], self.model.dim_x
         if n == 0:
-            return x.copy(), np.zeros((0, d, d))
-        P = _batch(P, n, d, "P")
-        R = _batch(R, n, BOX_DIM, "R")
-        H = self.model.H(x)
-        r = self.residual(x, z)
-        x_new, P_new = np.empty((n, d)), np.empty((n, d, d))
-        _joseph_kernel(x, P, H, r, R, x_new, P_new)
-        return self.model.wrap_state(x_new), P_new
+            return x, np.zeros((0, d, d))
+        P = np.array(_batch(P, n, d, "P"))
+        R = np.asarray(R, dtype=np.float64)
+        rows = np.arange(n)
+        if R.shape == (BOX_DIM, BOX_DIM):  # one matrix for all tracks: a table of one
+            self.correct(x, P, rows, z, R[None], np.zeros(n, dtype=np.int64))
+        else:
+            self.correct(x, P, rows, z, _batch(R, n, BOX_DIM, "R"), rows)
+        return x, P
+
+    def correct(self, x: np.ndarray, P: np.ndarray, rows: np.ndarray, z: np.ndarray, R: np.ndarray,
+                R_index: np.ndarray) -> None:
+        """Correct the tracks ``rows (K,)`` of ``x (N, dim_x)``, ``P (N, dim_x, dim_x)`` (C-contiguous float64,
+        changed in place) with ``z (K, 9)``; ``R (C, 9, 9)`` a table indexed by ``R_index (K,)`` (e.g. the
+        per-class noise and the tracks' labels). Row k of the result equals :meth:`update` of that track."""
+        if len(rows) == 0:
+            return
+        h, H = self.model.measurement(x[rows])
+        z = np.ascontiguousarray(z, dtype=np.float64).reshape(-1, BOX_DIM)
+        _correct_kernel(x, P, np.asarray(rows, dtype=np.int64), z, h, H, np.asarray(R, dtype=np.float64),
+                        np.asarray(R_index, dtype=np.int64), self.yaw_flip, self.model.yaw_index)

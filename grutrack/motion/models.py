@@ -1,4 +1,4 @@
-"""State-space motion models, batched over tracks (numpy).
+"""State-space motion models, batched over tracks (numpy, with numba-compiled passes for the EKF's models).
 
 Every model maps a state batch ``x (N, dim_x)`` through
 
@@ -7,12 +7,18 @@ Every model maps a state batch ``x (N, dim_x)`` through
 * ``h(x) -> (N, 9)``: the predicted measurement in the canonical box layout
   ``[x, y, z, w, l, h, yaw, vx, vy]`` of :mod:`grutrack.boxes` (the detector measures its velocity),
 * ``H(x) -> (N, 9, dim_x)``: the Jacobian ``dh/dx``,
-* ``init_state(z (N, 9)) -> (N, dim_x)`` and ``to_boxes(x) -> (N, 9)`` (yaw wrapped, global ``[vx, vy]``).
+* ``init_state(z (N, 9)) -> (N, dim_x)`` and ``to_boxes(x) -> (N, 9)`` (yaw wrapped, global ``[vx, vy]``),
+* ``transition(x, dt) -> (f, F)`` and ``measurement(x) -> (h, H)``: both at once, what the filter calls.
 
 Conventions: metres, radians, seconds, m/s. ``f`` and ``h`` never wrap angles (so that they are smooth and their
 Jacobians check against finite differences); the filter wraps the yaw state and the yaw residual. The singular
 limits (turn rate or steering angle -> 0, speed -> 0) use series expansions of the arc integrals, never a division
-by a small number. The arithmetic is plain elementwise numpy so that a torch mirror is a line-by-line copy.
+by a small number. The arithmetic is elementwise, so a torch mirror (:mod:`grutrack.motion.torch_models`) is a
+line-by-line copy. CTRA and the Bicycle models run f with F, h with H and the output boxes as one compiled loop
+over the tracks (the tracker predicts and corrects every frame; numpy's per-call cost dominated at tens of tracks);
+each loop performs the numpy form's operations in the same order, and takes from numpy what numba computes
+differently in the last bit (``dt**3``, the slip angle's arctan), so the results are the numpy form's bit for bit
+wherever numba's sin and cos are numpy's (libm on the x86-64 machines measured; tests/test_motion.py allows 1e-13).
 """
 
 from __future__ import annotations
@@ -50,32 +56,46 @@ _COEFFS = [_series_coefficients(n) for n in range(3)]
 _COEFF_TABLE = np.array([[c, d] for c, d in _COEFFS])  # (3, 2, _SERIES_TERMS): Re / Im series per order
 
 
+@njit(cache=True, inline="always")
+def _arc_moments_at(ph, cp, sp, coeffs, e) -> None:
+    """``e (order+1, 2)``: Re and Im of ``E_n(ph)`` for one angle ``ph`` (rad), with ``cp, sp = cos, sin`` of
+    the safe divisor (``ph``, or 1 where ``|ph| < _SERIES_LIMIT``). Closed form by the recursion
+    ``E_n = (e^{i ph} - n E_{n-1}) / (i ph)``; Horner-evaluated power series below the limit."""
+    n_terms = coeffs.shape[2]
+    small = abs(ph) < _SERIES_LIMIT
+    p = 1.0 if small else ph
+    u = ph * ph
+    prev_r, prev_i = 1.0, 0.0  # "n E_{n-1}" term for n = 0 is 1
+    for n in range(e.shape[0]):
+        # (e^{ip} - n E_{n-1}) / (i p) = (b / p, -a / p) with a + ib the numerator
+        num_r = cp - (prev_r if n == 0 else n * prev_r)
+        num_i = sp - (prev_i if n == 0 else n * prev_i)
+        closed_r, closed_i = num_i / p, -num_r / p
+        if small:
+            er, ei = coeffs[n, 0, n_terms - 1], coeffs[n, 1, n_terms - 1]
+            for t in range(n_terms - 2, -1, -1):
+                er = er * u + coeffs[n, 0, t]
+                ei = ei * u + coeffs[n, 1, t]
+            e[n, 0], e[n, 1] = er, ph * ei
+        else:
+            e[n, 0], e[n, 1] = closed_r, closed_i
+        prev_r, prev_i = closed_r, closed_i
+
+
+@njit(cache=True, inline="always")
+def _arc_moments_of(ph, coeffs, e) -> None:
+    """:func:`_arc_moments_at` of one angle ``ph`` (rad), its cosine and sine taken here."""
+    p = 1.0 if abs(ph) < _SERIES_LIMIT else ph
+    _arc_moments_at(ph, np.cos(p), np.sin(p), coeffs, e)
+
+
 @njit(cache=True)
 def _arc_moments_kernel(phi, cp, sp, coeffs, out) -> None:
-    """``out (order+1, 2, N)``: Re and Im of ``E_n(phi)`` for ``phi (N,)`` with ``cp, sp = cos, sin`` of the
-    safe divisor (``phi``, or 1 where ``|phi| < _SERIES_LIMIT``). Closed form by the recursion
-    ``E_n = (e^{i phi} - n E_{n-1}) / (i phi)``; Horner-evaluated power series below the limit."""
-    n_terms = coeffs.shape[2]
+    """``out (order+1, 2, N)``: :func:`_arc_moments_at` of every ``phi (N,)`` (``cp, sp (N,)``)."""
+    e = np.empty((out.shape[0], 2))
     for k in range(phi.shape[0]):
-        ph = phi[k]
-        small = abs(ph) < _SERIES_LIMIT
-        p = 1.0 if small else ph
-        u = ph * ph
-        prev_r, prev_i = 1.0, 0.0  # "n E_{n-1}" term for n = 0 is 1
-        for n in range(out.shape[0]):
-            # (e^{ip} - n E_{n-1}) / (i p) = (b / p, -a / p) with a + ib the numerator
-            num_r = cp[k] - (prev_r if n == 0 else n * prev_r)
-            num_i = sp[k] - (prev_i if n == 0 else n * prev_i)
-            closed_r, closed_i = num_i / p, -num_r / p
-            if small:
-                er, ei = coeffs[n, 0, n_terms - 1], coeffs[n, 1, n_terms - 1]
-                for t in range(n_terms - 2, -1, -1):
-                    er = er * u + coeffs[n, 0, t]
-                    ei = ei * u + coeffs[n, 1, t]
-                out[n, 0, k], out[n, 1, k] = er, ph * ei
-            else:
-                out[n, 0, k], out[n, 1, k] = closed_r, closed_i
-            prev_r, prev_i = closed_r, closed_i
+        _arc_moments_at(phi[k], cp[k], sp[k], coeffs, e)
+        out[:, :, k] = e
 
 
 def arc_moments(phi: np.ndarray, order: int = 2) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -98,6 +118,12 @@ def _arc_step(x: np.ndarray, ds: np.ndarray, psi: np.ndarray, phi: np.ndarray) -
     out[:, 1] += ds * (sp * e0r + cp * e0i)
     out[:, 8] = x[:, 8] + phi
     return out
+
+
+@njit(cache=True, inline="always")
+def _wrap(a: float) -> float:
+    """An angle (rad) wrapped to [-pi, pi), as :func:`grutrack.boxes.wrap_angle`."""
+    return np.remainder(a + np.pi, 2.0 * np.pi) - np.pi
 
 
 def _as_dt(dt, n: int) -> np.ndarray:
@@ -134,6 +160,14 @@ class MotionModel:
     def H(self, x: np.ndarray) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def transition(self, x: np.ndarray, dt) -> tuple[np.ndarray, np.ndarray]:
+        """``(f(x, dt), F(x, dt))`` at once (a model may share the work of the two)."""
+        return self.f(x, dt), self.F(x, dt)
+
+    def measurement(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(h(x) (N, 9), H(x) (N, 9, dim_x))`` at once (a model may share the work of the two)."""
+        return self.h(x), self.H(x)
+
     def to_boxes(self, x: np.ndarray) -> np.ndarray:
         """Boxes ``(N, 9)`` to write out: ``h(x)`` with the yaw wrapped to [-pi, pi)."""
         boxes = self.h(x)
@@ -153,6 +187,93 @@ class MotionModel:
 # ----------------------------------------------------------------------------------------------------------------
 # CTRA
 # ----------------------------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _ctra_kernel(x, dt, dt3, coeffs, out, J) -> None:
+    """CTRA's transition ``out (N, 10)`` and its Jacobian ``J (N, 10, 10)`` (zeros on entry) at ``x (N, 10)``
+    over ``dt (N,)`` s (``dt3 = dt**3`` as numpy's power gives it, which differs from libm's in the last bit).
+
+    With ``E_n = E_n(omega dt)`` and ``c, s = cos, sin yaw``: the displacement
+    ``d = exp(i yaw) (v dt E_0 + a dt^2 E_1)``; ``x' = x + d``, v' = v + a dt, yaw' = yaw + omega dt;
+    ``dd/dv = exp(i yaw) dt E_0``, ``dd/da = exp(i yaw) dt^2 E_1``, ``dd/dyaw = i d``,
+    ``dd/domega = exp(i yaw) i (v dt^2 E_1 + a dt^3 E_2)``.
+    """
+    e = np.empty((3, 2))
+    for n in range(x.shape[0]):
+        v, a, yaw, om, t = x[n, 6], x[n, 7], x[n, 8], x[n, 9], dt[n]
+        _arc_moments_of(om * t, coeffs, e)
+        ar = v * t * e[0, 0] + a * t * t * e[1, 0]
+        ai = v * t * e[0, 1] + a * t * t * e[1, 1]
+        c, s = np.cos(yaw), np.sin(yaw)
+        dx, dy = c * ar - s * ai, s * ar + c * ai
+        for i in range(10):
+            out[n, i] = x[n, i]
+            J[n, i, i] = 1.0
+        out[n, 0] += dx
+        out[n, 1] += dy
+        out[n, 6] = v + a * t
+        out[n, 8] = yaw + om * t
+        J[n, 0, 6] = t * (c * e[0, 0] - s * e[0, 1])
+        J[n, 1, 6] = t * (s * e[0, 0] + c * e[0, 1])
+        J[n, 0, 7] = t * t * (c * e[1, 0] - s * e[1, 1])
+        J[n, 1, 7] = t * t * (s * e[1, 0] + c * e[1, 1])
+        J[n, 0, 8] = -dy
+        J[n, 1, 8] = dx
+        br = v * (t * t) * e[1, 0] + a * dt3[n] * e[2, 0]
+        bi = v * (t * t) * e[1, 1] + a * dt3[n] * e[2, 1]
+        J[n, 0, 9] = -c * bi - s * br
+        J[n, 1, 9] = -s * bi + c * br
+        J[n, 6, 7] = t
+        J[n, 8, 9] = t
+
+
+@njit(cache=True)
+def _ctra_measurement_kernel(x, h, H, wrap_yaw) -> None:
+    """CTRA's predicted measurement ``h (N, 9) = [x, y, z, w, l, h, yaw, v cos yaw, v sin yaw]`` (with
+    ``wrap_yaw`` the yaw wrapped to [-pi, pi), as a box) and its Jacobian ``H (N, 9, 10)`` (zeros on entry; not
+    written when it has no rows) at ``x (N, 10)``."""
+    for n in range(x.shape[0]):
+        v, yaw = x[n, 6], x[n, 8]
+        c, s = np.cos(yaw), np.sin(yaw)
+        for i in range(6):
+            h[n, i] = x[n, i]
+        h[n, 6], h[n, 7], h[n, 8] = _wrap(yaw) if wrap_yaw else yaw, v * c, v * s
+        if H.shape[0] == 0:
+            continue
+        for i in range(6):
+            H[n, i, i] = 1.0
+        H[n, 6, 8] = 1.0
+        H[n, 7, 6], H[n, 7, 8] = c, -v * s
+        H[n, 8, 6], H[n, 8, 8] = s, v * c
+
+
+@njit(cache=True)
+def _bicycle_measurement_kernel(x, beta, dbeta, offset_ratio, delta_terms, h, H, wrap_yaw) -> None:
+    """The bicycle model's predicted measurement ``h (N, 9)`` (``wrap_yaw``: the yaw wrapped to [-pi, pi)) and its
+    Jacobian ``H (N, 9, 10)`` (zeros on entry; not written when it has no rows) at ``x (N, 10)`` with slip angles
+    ``beta (N,)`` rad and ``dbeta/ddelta (N,)``; the box centre lies ``d = offset_ratio * l`` behind the reference
+    point. ``delta_terms``: whether H has d(vx, vy)/ddelta."""
+    for n in range(x.shape[0]):
+        v, yaw = x[n, 6], x[n, 8]
+        c, s = np.cos(yaw), np.sin(yaw)
+        cp, sp = np.cos(yaw + beta[n]), np.sin(yaw + beta[n])
+        d = offset_ratio * x[n, 4]
+        h[n, 0], h[n, 1] = x[n, 0] - d * c, x[n, 1] - d * s
+        for i in range(2, 6):
+            h[n, i] = x[n, i]
+        h[n, 6], h[n, 7], h[n, 8] = _wrap(yaw) if wrap_yaw else yaw, v * cp, v * sp
+        if H.shape[0] == 0:
+            continue
+        for i in range(6):
+            H[n, i, i] = 1.0
+        H[n, 0, 4], H[n, 0, 8] = -offset_ratio * c, d * s
+        H[n, 1, 4], H[n, 1, 8] = -offset_ratio * s, -d * c
+        H[n, 6, 8] = 1.0
+        H[n, 7, 6], H[n, 7, 8] = cp, -v * sp
+        H[n, 8, 6], H[n, 8, 8] = sp, v * cp
+        if delta_terms:
+            H[n, 7, 9], H[n, 8, 9] = -v * sp * dbeta[n], v * cp * dbeta[n]
 
 
 class CTRA(MotionModel):
@@ -179,51 +300,37 @@ class CTRA(MotionModel):
         x[:, 8] = wrap_angle(z[:, 6])
         return x
 
-    def _displacement(self, x: np.ndarray, dt: np.ndarray):
-        """Shared terms of f and F: (dx, dy, c, s, E0, E1, E2)."""
-        v, a, yaw, om = x[:, 6], x[:, 7], x[:, 8], x[:, 9]
-        e0, e1, e2 = arc_moments(om * dt)
-        ar = v * dt * e0[0] + a * dt * dt * e1[0]
-        ai = v * dt * e0[1] + a * dt * dt * e1[1]
-        c, s = np.cos(yaw), np.sin(yaw)
-        return c * ar - s * ai, s * ar + c * ai, c, s, e0, e1, e2
-
     def f(self, x: np.ndarray, dt) -> np.ndarray:
         """Transition ``(N, 10) -> (N, 10)`` over ``dt`` s."""
-        x = np.asarray(x, dtype=np.float64)
-        dt = _as_dt(dt, x.shape[0])
-        dx, dy, *_ = self._displacement(x, dt)
-        out = x.copy()
-        out[:, 0] += dx
-        out[:, 1] += dy
-        out[:, 6] = x[:, 6] + x[:, 7] * dt
-        out[:, 8] = x[:, 8] + x[:, 9] * dt
-        return out
+        return self.transition(x, dt)[0]
 
     def F(self, x: np.ndarray, dt) -> np.ndarray:
         """Jacobian ``(N, 10, 10)`` of :meth:`f` at ``x``."""
-        x = np.asarray(x, dtype=np.float64)
+        return self.transition(x, dt)[1]
+
+    def transition(self, x: np.ndarray, dt) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`f` ``(N, 10)`` and :meth:`F` ``(N, 10, 10)`` in one compiled pass (:func:`_ctra_kernel`)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
         n = x.shape[0]
+        out, J = np.empty((n, self.dim_x)), np.zeros((n, self.dim_x, self.dim_x))
         dt = _as_dt(dt, n)
-        v, a = x[:, 6], x[:, 7]
-        dx, dy, c, s, e0, e1, e2 = self._displacement(x, dt)
-        J = _eye_batch(n, self.dim_x)
-        # d/dv: exp(i yaw) dt E0 ; d/da: exp(i yaw) dt^2 E1
-        J[:, 0, 6] = dt * (c * e0[0] - s * e0[1])
-        J[:, 1, 6] = dt * (s * e0[0] + c * e0[1])
-        J[:, 0, 7] = dt * dt * (c * e1[0] - s * e1[1])
-        J[:, 1, 7] = dt * dt * (s * e1[0] + c * e1[1])
-        # d/dyaw: i * displacement
-        J[:, 0, 8] = -dy
-        J[:, 1, 8] = dx
-        # d/domega: exp(i yaw) * i * (v dt^2 E1 + a dt^3 E2)
-        br = v * dt**2 * e1[0] + a * dt**3 * e2[0]
-        bi = v * dt**2 * e1[1] + a * dt**3 * e2[1]
-        J[:, 0, 9] = -c * bi - s * br
-        J[:, 1, 9] = -s * bi + c * br
-        J[:, 6, 7] = dt
-        J[:, 8, 9] = dt
-        return J
+        _ctra_kernel(x, dt, dt**3, _COEFF_TABLE, out, J)
+        return out, J
+
+    def measurement(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`h` ``(N, 9)`` and :meth:`H` ``(N, 9, 10)`` in one compiled pass (:func:`_ctra_measurement_kernel`)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        n = x.shape[0]
+        h, H = np.empty((n, BOX_DIM)), np.zeros((n, BOX_DIM, self.dim_x))
+        _ctra_measurement_kernel(x, h, H, False)
+        return h, H
+
+    def to_boxes(self, x: np.ndarray) -> np.ndarray:
+        """Boxes ``(N, 9)`` to write out: ``h(x)`` with the yaw wrapped to [-pi, pi) (compiled)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        h = np.empty((x.shape[0], BOX_DIM))
+        _ctra_measurement_kernel(x, h, np.zeros((0, BOX_DIM, self.dim_x)), True)
+        return h
 
     def h(self, x: np.ndarray) -> np.ndarray:
         """Predicted measurement ``(N, 9)`` ``[x, y, z, w, l, h, yaw, v cos yaw, v sin yaw]``."""
@@ -369,6 +476,28 @@ class Bicycle(MotionModel):
         J[:, 8, 9] = ds * dk_ddelta
         return J
 
+    #: whether H has the d(vx, vy)/ddelta terms (Poly-MOT's piecewise form leaves them out)
+    _delta_terms = True
+
+    def measurement(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`h` ``(N, 9)`` and :meth:`H` ``(N, 9, 10)`` in one compiled pass
+        (:func:`_bicycle_measurement_kernel`; slip angle from :meth:`_slip`)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        n = x.shape[0]
+        beta, dbeta = self._slip(x[:, 9])
+        h, H = np.empty((n, BOX_DIM)), np.zeros((n, BOX_DIM, self.dim_x))
+        _bicycle_measurement_kernel(x, beta, dbeta, self._offset_ratio, self._delta_terms, h, H, False)
+        return h, H
+
+    def to_boxes(self, x: np.ndarray) -> np.ndarray:
+        """Boxes ``(N, 9)`` to write out: ``h(x)`` with the yaw wrapped to [-pi, pi) (compiled)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        beta, dbeta = self._slip(x[:, 9])
+        h = np.empty((x.shape[0], BOX_DIM))
+        _bicycle_measurement_kernel(x, beta, dbeta, self._offset_ratio, self._delta_terms, h,
+                                    np.zeros((0, BOX_DIM, self.dim_x)), True)
+        return h
+
     def h(self, x: np.ndarray) -> np.ndarray:
         """Predicted measurement ``(N, 9)``: box centre, size, yaw, velocity of the reference point."""
         x = np.asarray(x, dtype=np.float64)
@@ -435,28 +564,60 @@ class CTRAPiecewise(CTRA):
 
     name = "CTRA"
 
-    def f(self, x: np.ndarray, dt) -> np.ndarray:
-        """Transition ``(N, 10) -> (N, 10)`` over ``dt`` s."""
-        x = np.asarray(x, dtype=np.float64)
+    def transition(self, x: np.ndarray, dt) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`f` ``(N, 10)`` and :meth:`F` ``(N, 10, 10)``: CTRA's, with straight-line rows below the switch."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
         dt = _as_dt(dt, x.shape[0])
-        out = super().f(x, dt)
+        out, J = super().transition(x, dt)
         small = np.abs(x[:, 9]) < PIECEWISE_SWITCH
         if small.any():
             v, a, yaw, t = x[small, 6], x[small, 7], x[small, 8], dt[small]
             ds = v * t + 0.5 * a * t * t
             out[small, 0] = x[small, 0] + ds * np.cos(yaw)
             out[small, 1] = x[small, 1] + ds * np.sin(yaw)
-        return out
+            _straight_jacobian(J, np.flatnonzero(small), x[:, 6], x[:, 7], x[:, 8], dt)
+        return out, J
 
-    def F(self, x: np.ndarray, dt) -> np.ndarray:
-        """Jacobian ``(N, 10, 10)`` of :meth:`f` (straight-line rows below the switch)."""
-        x = np.asarray(x, dtype=np.float64)
-        dt = _as_dt(dt, x.shape[0])
-        J = super().F(x, dt)
-        rows = np.flatnonzero(np.abs(x[:, 9]) < PIECEWISE_SWITCH)
-        if len(rows):
-            _straight_jacobian(J, rows, x[:, 6], x[:, 7], x[:, 8], dt)
-        return J
+
+@njit(cache=True)
+def _bicycle_piecewise_kernel(x, dt, beta, kappa, coeffs, out, J) -> None:
+    """:class:`BicyclePiecewise`'s transition ``out (N, 10)`` and Jacobian ``J (N, 10, 10)`` (zeros on entry) at
+    ``x (N, 10)`` over ``dt (N,)`` s, with slip angles ``beta (N,)`` rad and curvatures ``kappa (N,)`` 1/m.
+
+    Turning (``|beta| > PIECEWISE_SWITCH``): ``ds = v dt``, ``psi = yaw + beta``, ``phi = kappa ds``,
+    ``(x + i y)' = (x + i y) + ds exp(i psi) E_0(phi)``, yaw' = yaw + phi, v' = v, a' = 0; F: d/dv, d/dyaw of the
+    position, d yaw'/dv = kappa dt, a zero row for a. Straight: ``ds = v dt + a dt^2 / 2`` along yaw, v' = v + a dt;
+    F of the straight line (:func:`_straight_jacobian`) and dv'/da = dt.
+    """
+    e = np.empty((1, 2))
+    for n in range(x.shape[0]):
+        v, a, yaw, t, b, k = x[n, 6], x[n, 7], x[n, 8], dt[n], beta[n], kappa[n]
+        turning = abs(b) > PIECEWISE_SWITCH
+        ds = v * t if turning else v * t + 0.5 * a * t * t
+        psi = yaw + b if turning else yaw
+        phi = k * ds if turning else 0.0
+        _arc_moments_of(phi, coeffs, e)
+        cp, sp = np.cos(psi), np.sin(psi)
+        for i in range(10):
+            out[n, i] = x[n, i]
+            J[n, i, i] = 1.0
+        out[n, 0] += ds * (cp * e[0, 0] - sp * e[0, 1])
+        out[n, 1] += ds * (sp * e[0, 0] + cp * e[0, 1])
+        out[n, 8] = yaw + phi
+        out[n, 6] = v if turning else v + a * t
+        out[n, 7] = 0.0 if turning else a
+        if turning:
+            J[n, 0, 6], J[n, 1, 6] = t * np.cos(psi + phi), t * np.sin(psi + phi)
+            J[n, 0, 8] = -ds * (sp * e[0, 0] + cp * e[0, 1])
+            J[n, 1, 8] = ds * (cp * e[0, 0] - sp * e[0, 1])
+            J[n, 7, 7] = 0.0
+            J[n, 8, 6] = t * k
+        else:
+            c, s = np.cos(yaw), np.sin(yaw)
+            J[n, 0, 6], J[n, 1, 6] = t * c, t * s
+            J[n, 0, 7], J[n, 1, 7] = 0.5 * t * t * c, 0.5 * t * t * s
+            J[n, 0, 8], J[n, 1, 8] = -ds * s, ds * c
+            J[n, 6, 7] = t
 
 
 class BicyclePiecewise(Bicycle):
@@ -479,45 +640,23 @@ class BicyclePiecewise(Bicycle):
 
     def f(self, x: np.ndarray, dt) -> np.ndarray:
         """Transition ``(N, 10) -> (N, 10)`` over ``dt`` s."""
-        x = np.asarray(x, dtype=np.float64)
-        dt = _as_dt(dt, x.shape[0])
-        v, a, yaw = x[:, 6], x[:, 7], x[:, 8]
-        beta, _, kappa, _, _ = self._curvature(x)
-        turning = np.abs(beta) > PIECEWISE_SWITCH
-        ds = np.where(turning, v * dt, v * dt + 0.5 * a * dt * dt)
-        psi = np.where(turning, yaw + beta, yaw)
-        phi = np.where(turning, kappa * ds, 0.0)
-        out = _arc_step(x, ds, psi, phi)
-        out[:, 6] = np.where(turning, v, v + a * dt)
-        out[:, 7] = np.where(turning, 0.0, a)
-        return out
+        return self.transition(x, dt)[0]
 
     def F(self, x: np.ndarray, dt) -> np.ndarray:
         """Poly-MOT's Jacobian ``(N, 10, 10)`` of :meth:`f` (no d/dl, d/ddelta columns)."""
-        x = np.asarray(x, dtype=np.float64)
+        return self.transition(x, dt)[1]
+
+    def transition(self, x: np.ndarray, dt) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`f` ``(N, 10)`` and :meth:`F` ``(N, 10, 10)`` in one compiled pass
+        (:func:`_bicycle_piecewise_kernel`; slip angle and curvature from :meth:`_curvature`)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
         n = x.shape[0]
-        dt = _as_dt(dt, n)
-        v, a, yaw = x[:, 6], x[:, 7], x[:, 8]
         beta, _, kappa, _, _ = self._curvature(x)
-        turning = np.abs(beta) > PIECEWISE_SWITCH
-        J = _eye_batch(n, self.dim_x)
-        rows = np.flatnonzero(turning)
-        if len(rows):
-            t, k = dt[rows], kappa[rows]
-            ds = v[rows] * t
-            psi, phi = yaw[rows] + beta[rows], k * ds
-            (e0r, e0i), = arc_moments(phi, order=0)
-            cp, sp = np.cos(psi), np.sin(psi)
-            J[rows, 0, 6], J[rows, 1, 6] = t * np.cos(psi + phi), t * np.sin(psi + phi)
-            J[rows, 0, 8] = -ds * (sp * e0r + cp * e0i)
-            J[rows, 1, 8] = ds * (cp * e0r - sp * e0i)
-            J[rows, 7, 7] = 0.0
-            J[rows, 8, 6] = t * k
-        rows = np.flatnonzero(~turning)
-        if len(rows):
-            _straight_jacobian(J, rows, v, a, yaw, dt)
-            J[rows, 6, 7] = dt[rows]
-        return J
+        out, J = np.empty((n, self.dim_x)), np.zeros((n, self.dim_x, self.dim_x))
+        _bicycle_piecewise_kernel(x, _as_dt(dt, n), beta, kappa, _COEFF_TABLE, out, J)
+        return out, J
+
+    _delta_terms = False
 
     def H(self, x: np.ndarray) -> np.ndarray:
         """Jacobian ``(N, 9, 10)`` of :meth:`h` without the d(vx, vy)/ddelta terms (Poly-MOT's H)."""

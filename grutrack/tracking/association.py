@@ -16,6 +16,7 @@ Two assignment rules (tracker preset key ``association.assignment``), both over 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,32 +38,48 @@ class Matches:
     unmatched_tracks: np.ndarray
 
 
-@njit(cache=True, inline="always")
-def _similarity_bound(a, b, code: int) -> float:
-    """Upper bound of similarity ``code`` (index into ``geometry.SIMILARITIES``) of boxes ``a, b (>=7,)``.
+#: slack of the pruning test: a pair is scored unless its similarity bound is this far below what the
+#: threshold needs (covers the rounding of the bound and of the polygon areas, ~TOL * perimeter)
+_BOUND_SLACK = 1e-9
 
-    When the BEV centre distance d exceeds the sum of circumradii the footprints are disjoint (IoU = 0), and the
-    convex hull contains that of the inscribed discs (radii rho = min(w, l) / 2): the trapezoid between their
-    diameters across the centre line and the two outer half discs, ``C >= d (rho_a + rho_b) + pi/2 (rho_a^2 +
-    rho_b^2)``. So GIoU_bev <= (A_a + A_b) / C - 1; in 3D the enclosing volume is at least C max(h_a, h_b).
-    Elsewhere the bound is the trivial 1.
+
+@njit(cache=True, inline="always")
+def _similarity_bound(ta, i, tb, j, d: float, code: int) -> float:
+    """Upper bound of similarity ``code`` (index into ``geometry.SIMILARITIES``) of boxes ``i`` and ``j`` of the
+    term arrays ``ta (11, N)``, ``tb (11, M)`` (:func:`geometry._box_terms`) at BEV centre distance ``d`` (m).
+
+    When d exceeds the sum of circumradii the footprints are disjoint (IoU = 0, union ``A_a + A_b``) and the
+    convex hull contains both boxes, and also the trapezoid between their chords across the centre line
+    (each at least ``2 rho``, ``rho = min(w, l) / 2``) plus the two outer halves of the boxes, so
+    ``C >= max(A_a + A_b, d (rho_a + rho_b) + (A_a + A_b) / 2)``; then GIoU_bev <= (A_a + A_b) / C - 1. In 3D
+    the enclosing volume is at least C times the vertical span of the pair, so GIoU_3d <= (V_a + V_b) / (C span)
+    - 1. Elsewhere, and for boxes of zero area or volume, the bound is the trivial 1.
     """
-    d = np.hypot(a[0] - b[0], a[1] - b[1])
-    if d <= 0.5 * (np.hypot(a[3], a[4]) + np.hypot(b[3], b[4])):
+    if d <= ta[geometry._RADIUS, i] + tb[geometry._RADIUS, j]:
         return 1.0
     if code == geometry._IOU_BEV or code == geometry._IOU_3D:
         return 0.0
-    ra, rb = 0.5 * min(a[3], a[4]), 0.5 * min(b[3], b[4])
-    hull = max(d * (ra + rb) + 0.5 * np.pi * (ra * ra + rb * rb), 1e-12)
+    area = ta[geometry._AREA, i] + tb[geometry._AREA, j]
+    rho = min(ta[geometry._HL, i], ta[geometry._HW, i]) + min(tb[geometry._HL, j], tb[geometry._HW, j])
+    hull = max(area, d * rho + 0.5 * area)
     if code == geometry._GIOU_3D:
-        return min((a[3] * a[4] * a[5] + b[3] * b[4] * b[5]) / (hull * max(a[5], b[5])) - 1.0, 1.0)
-    return min((a[3] * a[4] + b[3] * b[4]) / hull - 1.0, 1.0)
+        span = max(ta[geometry._HI, i], tb[geometry._HI, j]) - min(ta[geometry._LO, i], tb[geometry._LO, j])
+        volume = ta[geometry._VOL, i] + tb[geometry._VOL, j]
+        return min(volume / (hull * span) - 1.0, 1.0) if volume > 0.0 else 1.0
+    return min(area / hull - 1.0, 1.0) if area > 0.0 else 1.0
+
+
+@njit(cache=True, inline="always")
+def _centre_distance(ta, i, tb, j) -> float:
+    """BEV distance (m) between the centres of box ``i`` of ``ta`` and box ``j`` of ``tb`` (term arrays)."""
+    dx, dy = ta[geometry._X, i] - tb[geometry._X, j], ta[geometry._Y, i] - tb[geometry._Y, j]
+    return np.sqrt(dx * dx + dy * dy)
 
 
 @njit(cache=True)
-def _bound_kernel(a, b, code, out) -> None:
-    for k in range(a.shape[0]):
-        out[k] = _similarity_bound(a[k], b[k], code)
+def _bound_kernel(ta, tb, code, out) -> None:
+    for k in range(out.shape[0]):
+        out[k] = _similarity_bound(ta, k, tb, k, _centre_distance(ta, k, tb, k), code)
 
 
 def similarity_upper_bound(a: np.ndarray, b: np.ndarray, metric: str) -> np.ndarray:
@@ -71,7 +88,7 @@ def similarity_upper_bound(a: np.ndarray, b: np.ndarray, metric: str) -> np.ndar
     computing the polygon geometry; the result is identical."""
     a, b = geometry._check_boxes(a, "a"), geometry._check_boxes(b, "b")
     out = np.empty(a.shape[0])
-    _bound_kernel(a, b, geometry.SIMILARITIES.index(metric), out)
+    _bound_kernel(geometry._box_terms(a), geometry._box_terms(b), geometry.SIMILARITIES.index(metric), out)
     return out
 
 
@@ -118,29 +135,30 @@ def _unmatched(n: int, matched: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _cost_kernel(det, det_labels, trk, trk_labels, ta, tb, codes, thresholds, costs) -> None:
+def _cost_kernel(det_labels, trk_labels, ta, tb, codes, thresholds, costs) -> None:
     """Fill ``costs (S, D, T)`` (pre-set to ``_INVALID``) with ``1 - similarity`` of every candidate pair.
 
-    det (D, >=7), trk (T, >=7): boxes; ta, tb: their :func:`geometry._box_terms`; codes (S, C) int: the
-    similarity (index into ``geometry.SIMILARITIES``) of each stage and class; thresholds (S, C): cost
-    thresholds. A pair is a candidate of stage s when its labels agree and the bound of
+    ta (11, D), tb (11, T): :func:`geometry._box_terms` of the detections and the tracks; labels (D,), (T,);
+    codes (S, C) int: the similarity (index into ``geometry.SIMILARITIES``) of each stage and class;
+    thresholds (S, C): cost thresholds. A pair is a candidate of stage s when its labels agree and the bound of
     :func:`similarity_upper_bound` can beat ``thresholds[s, label]``.
     """
     n_stages = codes.shape[0]
     out, work, flags = np.zeros((4, 1)), np.empty((12, 16)), np.empty(16, dtype=np.bool_)
     keys = np.empty(16, dtype=np.int64)
     want, need = np.zeros(4, dtype=np.bool_), np.zeros(n_stages, dtype=np.bool_)
-    for i in range(det.shape[0]):
+    for i in range(det_labels.shape[0]):
         lab = det_labels[i]
-        for j in range(trk.shape[0]):
+        for j in range(trk_labels.shape[0]):
             if trk_labels[j] != lab:
                 continue
+            d = _centre_distance(ta, i, tb, j)
             want[:] = False
             any_need = False
             for st in range(n_stages):
                 code = codes[st, lab]
-                bound = _similarity_bound(det[i], trk[j], code)
-                need[st] = bound > 1.0 - thresholds[st, lab]
+                bound = _similarity_bound(ta, i, tb, j, d, code)
+                need[st] = bound > 1.0 - thresholds[st, lab] - _BOUND_SLACK
                 if need[st]:
                     want[code] = True
                     any_need = True
@@ -150,6 +168,14 @@ def _cost_kernel(det, det_labels, trk, trk_labels, ta, tb, codes, thresholds, co
             for st in range(n_stages):
                 if need[st]:
                     costs[st, i, j] = 1.0 - out[codes[st, lab], 0]
+
+
+@functools.lru_cache(maxsize=64)
+def _similarity_codes(metrics: tuple[tuple[str, ...], ...]) -> np.ndarray:
+    """(S, C) int64 similarity index (into ``geometry.SIMILARITIES``) of each stage's metric per class."""
+    codes = np.array([[geometry.SIMILARITIES.index(m) for m in metric] for metric in metrics], dtype=np.int64)
+    codes.setflags(write=False)
+    return codes
 
 
 def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray,
@@ -163,12 +189,12 @@ def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: n
     D, T = len(det_boxes), len(trk_boxes)
     costs = np.full((len(stages), D, T), _INVALID)
     if D and T:
-        codes = np.array([[geometry.SIMILARITIES.index(m) for m in metric] for metric, _ in stages], dtype=np.int64)
+        codes = _similarity_codes(tuple(metric for metric, _ in stages))
         thresholds = np.array([thr for _, thr in stages], dtype=np.float64)
         det = geometry._check_boxes(det_boxes, "detection boxes")
         trk = geometry._check_boxes(trk_boxes, "track boxes")
-        _cost_kernel(det, det_labels.astype(np.int64), trk, trk_labels.astype(np.int64), geometry._box_terms(det),
-                     geometry._box_terms(trk), codes, thresholds, costs)
+        _cost_kernel(det_labels.astype(np.int64, copy=False), trk_labels.astype(np.int64, copy=False),
+                     geometry._box_terms(det), geometry._box_terms(trk), codes, thresholds, costs)
     return list(costs)
 
 

@@ -43,7 +43,7 @@ class KalmanBackend:
     def update(self, s: KFState, rows: np.ndarray, z: np.ndarray) -> KFState:
         """Correct tracks ``rows`` with measurements z (K, 9)."""
         x, P = s.x.copy(), s.P.copy()
-        x[rows], P[rows] = self.kf.update(s.x[rows], s.P[rows], z, self.R[s.labels[rows]])
+        self.kf.correct(x, P, rows, z, self.R, s.labels[rows])
         return KFState(x, P, s.labels)
 
     def boxes(self, s: KFState) -> np.ndarray:

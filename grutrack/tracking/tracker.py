@@ -18,7 +18,7 @@ from grutrack.boxes import empty_boxes
 from grutrack.data.scene import BoxSet, Scene
 from grutrack.tracking.association import Matches, associate, gated_association, gated_association_needed
 from grutrack.tracking.config import TrackerConfig
-from grutrack.tracking.fastpoly import update_scores
+from grutrack.tracking.lifecycle import lifecycle_kernel
 from grutrack.tracking.preprocess import preprocess_frame
 
 
@@ -119,6 +119,10 @@ class Tracker:
         self.last_timestamp: int | None = None
         self.frame_count = 0  # frames of the current scene, this one included
         self.associate = associate if associate is not None else two_stage_association(cfg)
+        #: per-class lifecycle tables of :func:`lifecycle_kernel`: decay_rate, max_age, min_hits, delete_threshold
+        self._life = tuple(np.ascontiguousarray(a, dtype=np.float64)
+                           for a in (cfg.decay_rate, cfg.max_age, cfg.min_hits, cfg.delete_threshold))
+        self._punish = np.ascontiguousarray(cfg.punish_num, dtype=np.float64)  # (7,) frames a track may coast
         #: optional callable(group, rows, det_rows) run every frame for every non-empty group, right after its
         #: matched tracks ``rows`` (possibly none) are corrected (training reads the states there, before
         #: expired tracks are dropped)
@@ -174,38 +178,18 @@ class Tracker:
                 g.state = g.backend.update(g.state, rows, dets.boxes[drows])
             if self.update_hook is not None:
                 self.update_hook(g, rows, drows)
-            matched = np.zeros(n, dtype=bool)
-            matched[rows] = True
-            self._update_scores(g, rows, dets.scores[drows], matched)
-            g.misses[rows] = 0
-            g.hits[rows] += 1
-            alive = g.misses < self.cfg.max_age[g.labels]
-            if self.cfg.termination == "average_score":
-                # Fast-Poly: dead when mean_t(s_t) = sum_t s_t / n < delete_threshold (t: birth .. this frame)
-                g.score_total = g.score_total + g.scores
-                g.score_count = g.score_count + 1
-                alive &= g.score_total / g.score_count >= self.cfg.delete_threshold[g.labels]
-            coasting = g.misses <= self.cfg.punish_num[g.labels]   # (N,) within the class's punish_num
-            emit = alive & (matched | coasting) & self._confirmed(g.hits, g.labels)
+            matched, alive, emit = np.empty(n, dtype=bool), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+            cfg = self.cfg
+            lifecycle_kernel(rows, dets.scores[drows], g.labels, g.scores, g.misses, g.hits, g.score_total,
+                             g.score_count, *self._life, cfg.score_update == "multiply",
+                             cfg.termination == "average_score", self._punish, self.frame_count, matched,
+                             alive, emit)
             boxes = g.backend.boxes(g.state)
             if self.cfg.matched_box == "detection" and len(rows):
                 boxes[rows, :6] = dets.boxes[drows, :6]  # detection centre and size; filter yaw, velocity
             out.append(BoxSet(boxes[emit], g.scores[emit], g.labels[emit], g.ids[emit]))
             g.keep(alive)
         return out
-
-    def _update_scores(self, g: TrackGroup, rows: np.ndarray, det_scores: np.ndarray, matched: np.ndarray) -> None:
-        """Scores of group ``g`` after this frame: unmatched tracks decay, ``s <- s * decay_rate``; matched
-        tracks ``rows (K,)`` take the detection's score (``detection``) or ``1 - (1 - s_det)(1 - s * decay_rate)``
-        (``multiply``, Fast-Poly)."""
-        decay = self.cfg.decay_rate[g.labels]
-        if self.cfg.score_update == "multiply":
-            predicted = g.scores * decay
-            g.scores = predicted
-            g.scores[rows] = update_scores(predicted[rows], det_scores)
-        else:
-            g.scores[rows] = det_scores
-            g.scores[~matched] *= decay[~matched]
 
     def _confirmed(self, hits: np.ndarray, labels: np.ndarray) -> np.ndarray:
         """(N,) bool: tracks with at least min_hits matched frames, or all while the scene is that young."""
