@@ -9,7 +9,7 @@ Each measurement runs in a child process per checkout (the reference in a tempor
 checkouts alternating run by run; medians are printed with the ratio reference / current (> 1: faster now).
 Inputs (made once by the current checkout, the same files for both): mini_val ground truth turned into ~75
 detections per frame (benchmarks/bench_tracking.py), SIMULATED CenterPoint-profile detections of mini_train and
-mini_val for the GRU-KF, and a GRU-KF checkpoint after 2 training steps.
+mini_val for the GRU-KF; each checkout trains its own GRU-KF checkpoint (2 steps) for the tracking row.
 """
 
 from __future__ import annotations
@@ -53,6 +53,22 @@ print(f"training frames/s {frames / dt:.3f}")
 """
 
 
+#: a 2-step GRU-KF checkpoint made by the checkout that reads it (a checkpoint's format may differ between commits)
+CHECKPOINT_DRIVER = """
+import sys
+from grutrack.data.nusc_detections import load_detections
+from grutrack.data.nuscenes import load_scenes, open_nuscenes
+from grutrack.training.config import load_train_config
+from grutrack.training.trainer import Trainer
+root, dets, out = sys.argv[1:4]
+scenes = load_scenes(open_nuscenes(root, "v1.0-mini"), "mini_train", with_gt=True)
+d = load_detections(dets, [f.token for s in scenes for f in s.frames])
+t = Trainer(load_train_config("grukf", {"device": "cpu", "checkpoint_every": 0}), scenes, d, out, progress=False)
+t.run(max_steps=2)
+t.save("bench.pt")
+"""
+
+
 def write_dense_detections(scenes, path: Path, target: int = 75, seed: int = 0) -> int:
     """Detector-like boxes from the scenes' ground truth (``bench_tracking.noisy_detections``: noise, misses,
     duplicates and false positives up to ``target`` per frame, CenterPoint's density) as a detection JSON."""
@@ -78,12 +94,10 @@ def write_dense_detections(scenes, path: Path, target: int = 75, seed: int = 0) 
 
 
 def make_inputs(root: Path, tmp: Path) -> dict:
-    """Dense mini_val detections, simulated GRU-KF detections and a 2-step checkpoint (current checkout)."""
+    """Dense mini_val detections and simulated CenterPoint-profile detections of mini_train and mini_val (current
+    checkout); the GRU-KF checkpoints are made by each checkout (:data:`CHECKPOINT_DRIVER`)."""
     from grutrack.data.detection_sim import simulate_nuscenes
-    from grutrack.data.nusc_detections import load_detections
     from grutrack.data.nuscenes import load_scenes, open_nuscenes
-    from grutrack.training.config import load_train_config
-    from grutrack.training.trainer import Trainer
 
     nusc = open_nuscenes(root, "v1.0-mini")
     val = load_scenes(nusc, "mini_val", with_gt=True)
@@ -93,12 +107,6 @@ def make_inputs(root: Path, tmp: Path) -> dict:
         paths[split] = tmp / f"sim_{split}.json"
         paths[split].write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", split, "centerpoint", seed,
                                                              nusc=nusc)))
-    train = load_scenes(nusc, "mini_train", with_gt=True)
-    dets = load_detections(paths["mini_train"], [f.token for s in train for f in s.frames])
-    cfg = load_train_config("grukf", {"device": "cpu", "checkpoint_every": 0, "epochs": 100})
-    trainer = Trainer(cfg, train, dets, tmp / "train", progress=False)
-    trainer.run(max_steps=2)
-    paths["checkpoint"] = trainer.save("bench.pt")
     return paths
 
 
@@ -182,9 +190,14 @@ def main(argv=None) -> int:
             rows.append(("grutrack evaluate --evaluator devkit", "s", devkit, lambda x: x.median("wall"), False))
             rows.append(("  its CPU time", "s", devkit, lambda x: x.median("cpu"), False))
         if "grukf_track" not in args.skip:
+            checkpoint = {}
+            for name, r in roots.items():
+                run_measured([py, "-", str(root), str(paths["mini_train"]), str(tmp / f"ck_{name}")], r,
+                             stdin=CHECKPOINT_DRIVER)
+                checkpoint[r] = str(tmp / f"ck_{name}" / "bench.pt")
             s = interleaved(lambda r: run_measured(
                 [py, "-m", "grutrack", "track", *common, "--detections", str(paths["mini_val"]), "--tracker", "grukf",
-                 "--checkpoint", str(paths["checkpoint"]), "--device", "cpu", "--out", out(r, "grukf"),
+                 "--checkpoint", checkpoint[r], "--device", "cpu", "--out", out(r, "grukf"),
                  "--no-progress"], r), roots, args.repeat_grukf)
             for r in (x for v in s.values() for x in v.runs):
                 r.fps = _fps(r, "tracking loop: [0-9]+ frames in [0-9.]+ s")

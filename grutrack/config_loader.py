@@ -91,9 +91,9 @@ def merge(base: dict, overrides: dict) -> dict:
 @lru_cache(maxsize=None)
 def schema(kind: str) -> dict:
     """The kind's JSON Schema (read once)."""
-    import yaml
+    from grutrack.io import parse_yaml
 
-    return yaml.safe_load((CONFIG_ROOT / "schemas" / KINDS[kind].schema).read_text())
+    return parse_yaml((CONFIG_ROOT / "schemas" / KINDS[kind].schema).read_text())
 
 
 def validate(kind: str, raw: dict, source: str, flags: dict[str, str] | None = None) -> None:

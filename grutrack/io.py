@@ -57,13 +57,20 @@ def read_json(path: str | os.PathLike, what: str = "JSON file"):
         raise InputFormatError(f"{path}: not valid JSON ({exc})") from exc
 
 
+def parse_yaml(text: str):
+    """``yaml.safe_load(text)`` with libyaml's C parser where PyYAML has it (ten times faster; same result)."""
+    import yaml
+
+    return yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+
+
 def read_yaml(path: str | os.PathLike, what: str = "YAML file"):
     """Parse a YAML file; a missing file or invalid YAML raises InputFormatError naming the file."""
     import yaml
 
     path, text = _read_text(path, what, "YAML")
     try:
-        return yaml.safe_load(text)
+        return parse_yaml(text)
     except yaml.YAMLError as exc:
         from grutrack.errors import InputFormatError
 

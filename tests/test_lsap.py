@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from grutrack.evaluation.lsap import motmetrics_lsa, scipy_lsa
+from grutrack.evaluation.lsap import motmetrics_lsa
+from grutrack.lsap import scipy_lsa, scipy_lsa_compiled
 
 
 def _matrices(n: int, seed: int):
@@ -47,3 +48,28 @@ def test_missing_edges():
     c = np.array([[0.1, np.nan], [np.nan, np.nan]])
     assert [x.tolist() for x in motmetrics_lsa(c)] == [[0], [0]]
     assert [x.tolist() for x in motmetrics_lsa(np.zeros((0, 3)))] == [[], []]
+
+
+def test_compiled_form_same_pairs_as_scipy_on_tracker_sized_matrices():
+    """The tracker's solver (compiled) against scipy on matrices the association builds: up to 120 x 120, wide
+    and tall, ties, and forbidden pairs at the association's large constant."""
+    from scipy.optimize import linear_sum_assignment
+
+    from grutrack.tracking.association import _INVALID
+
+    rng = np.random.default_rng(2)
+    for t in range(400):
+        nr, nc = rng.integers(0, 121, 2) if t % 5 else rng.integers(1, 9, 2)
+        c = rng.integers(0, 4, (nr, nc)).astype(float) / 4 if t % 2 else rng.random((nr, nc))
+        c[rng.random((nr, nc)) < 0.7] = _INVALID
+        want, got = linear_sum_assignment(c), scipy_lsa_compiled(c)
+        assert np.array_equal(want[0], got[0]) and np.array_equal(want[1], got[1]), (t, c.shape)
+        assert got[0].dtype == got[1].dtype == np.int64
+    for c, _ in _matrices(500, 3):
+        want, got = linear_sum_assignment(c), scipy_lsa_compiled(c)
+        assert np.array_equal(want[0], got[0]) and np.array_equal(want[1], got[1]), c
+
+
+def test_compiled_form_refuses_non_finite_costs():
+    with pytest.raises(ValueError, match="NaN or inf"):
+        scipy_lsa_compiled(np.array([[0.0, np.nan]]))

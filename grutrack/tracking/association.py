@@ -1,4 +1,4 @@
-"""Two-stage track-detection association with the Hungarian algorithm (scipy).
+"""Two-stage track-detection association with the Hungarian algorithm (scipy's, compiled: :mod:`grutrack.lsap`).
 
 Stage 1 scores every same-class (detection, track) pair with its class's similarity (3D or BEV GIoU/IoU),
 cost = 1 - similarity, and accepts assignments whose cost is below the class threshold. Stage 2 repeats
@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.optimize import linear_sum_assignment
 
 from grutrack import geometry
+from grutrack.lsap import scipy_lsa_compiled as linear_sum_assignment
 
 _INVALID = 1e6  # cost of a forbidden pair; far above any threshold (costs live in [0, 2])
 
