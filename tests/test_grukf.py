@@ -493,3 +493,24 @@ def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(nusc_min
     monkeypatch.setattr(tr, "run_scene", real)
     assert main([*argv[:-2], "2", "--no-progress", "--resume"]) == 2
     assert "last.pt: cannot resume with other training settings (epochs 1 -> 2)" in capsys.readouterr().err
+
+
+def test_heading_frame_rotation_against_the_matrix_form_and_its_inverse():
+    """Planar pairs rotated by -yaw (R(-yaw) [a, b]); other columns untouched; from_heading_frame undoes it;
+    gradients flow to the input and the yaw."""
+    from grutrack.motion.grukf import MEAS_PLANAR, from_heading_frame, to_heading_frame
+
+    g = torch.Generator().manual_seed(3)
+    v = torch.randn(50, 9, generator=g, dtype=torch.float64, requires_grad=True)
+    yaw = (torch.rand(50, generator=g, dtype=torch.float64) * 6.0 - 3.0).requires_grad_()
+    out = to_heading_frame(v, yaw, MEAS_PLANAR)
+    c, s = torch.cos(yaw), torch.sin(yaw)
+    rot = torch.stack([torch.stack([c, s], 1), torch.stack([-s, c], 1)], 1)        # (N, 2, 2) = R(-yaw)
+    for i, j in MEAS_PLANAR:
+        want = torch.einsum("nab,nb->na", rot, v[:, [i, j]])
+        assert torch.allclose(out[:, [i, j]], want, atol=1e-12)
+    others = [k for k in range(9) if k not in (0, 1, 7, 8)]
+    assert torch.equal(out[:, others], v[:, others])
+    assert torch.allclose(from_heading_frame(out, yaw, MEAS_PLANAR), v, atol=1e-12)
+    out.sum().backward()
+    assert v.grad is not None and yaw.grad is not None and torch.isfinite(yaw.grad).all()

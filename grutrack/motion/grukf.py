@@ -94,13 +94,16 @@ def _normalise(v: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
 
 
 def to_heading_frame(v: torch.Tensor, yaw: torch.Tensor, pairs: tuple[tuple[int, int], ...]) -> torch.Tensor:
-    """Rotate the planar column pairs of v (N, d) by -yaw (N,) into the heading frame."""
-    c, s = torch.cos(yaw), torch.sin(yaw)
-    cols = list(v.unbind(1))
-    for i, j in pairs:
-        a, b = cols[i], cols[j]
-        cols[i], cols[j] = c * a + s * b, -s * a + c * b
-    return torch.stack(cols, dim=1)
+    """Rotate the planar column pairs (i, j) of v (N, d) by -yaw (N,) into the heading frame:
+    ``[v_i, v_j] <- [c v_i + s v_j, -s v_i + c v_j]`` with ``c, s = cos yaw, sin yaw``; other columns unchanged.
+    All pairs in two indexed writes (one autograd node each, not one per column)."""
+    i, j = [p[0] for p in pairs], [p[1] for p in pairs]
+    c, s = torch.cos(yaw)[:, None], torch.sin(yaw)[:, None]
+    a, b = v[:, i], v[:, j]
+    out = v.clone()
+    out[:, i] = c * a + s * b
+    out[:, j] = -s * a + c * b
+    return out
 
 
 def from_heading_frame(v: torch.Tensor, yaw: torch.Tensor, pairs: tuple[tuple[int, int], ...]) -> torch.Tensor:
