@@ -132,3 +132,52 @@ def test_extra_row_that_is_a_paper_row_is_refused(cfg, paper):
     bad["reports"]["nusc_val"]["extra_rows"] = {"III": {"Poly-MOT": "polymot"}}
     with pytest.raises(ConfigError, match=r"reports.nusc_val.extra_rows.III.Poly-MOT: 'Poly-MOT' is a row of the paper"):
         spec.check_config(bad, paper, load_registry())
+
+
+def _shipped_workflow_config():
+    """The shipped workflow config with the paper numbers and the detection registry it is checked against."""
+    from grutrack.report.paper import load_paper
+
+    root = Path(__file__).resolve().parents[1]
+    cfg = yaml.safe_load((root / "workflow/config/config.yaml").read_text())
+    return cfg, load_paper(root / cfg["paper"]), load_registry()
+
+
+def test_workflow_checks_ask_the_dataset_what_it_supports():
+    """Evaluators, leaderboard zips, validation during training and dataroot layout come from the dataset
+    classes (grutrack.datasets), not from per-dataset branches of the workflow's checks."""
+    cfg, paper, registry = _shipped_workflow_config()
+    spec.check_config(cfg, paper, registry)
+    # a GRU-KF training on AV2 logs (no validation AMOTA there) is accepted; with validation it is refused
+    c = copy.deepcopy(cfg)
+    c["detectors"]["av2_sim"] = {"kind": "simulated", "profile": "centerpoint", "seeds": {"train": 1, "val": 2}}
+    c["trainings"]["av2_grukf"] = {"dataset": "av2", "split": "train", "detector": "av2_sim", "config": "grukf",
+                                   "overrides": {}, "validation": None}
+    spec.check_config(c, paper, registry)
+    c["trainings"]["av2_grukf"]["validation"] = {"split": "val", "every": 4}
+    with pytest.raises(ConfigError, match=r"trainings\.av2_grukf\.validation: .* \(av2\); set it to null"):
+        spec.check_config(c, paper, registry)
+    c = copy.deepcopy(cfg)
+    c["experiments"]["av2_val"]["evaluator"] = "fast"
+    with pytest.raises(ConfigError, match=r"experiments\.av2_val\.evaluator: 'fast' .* \(choose official, none\)"):
+        spec.check_config(c, paper, registry)
+    c = copy.deepcopy(cfg)
+    c["experiments"]["av2_val"]["leaderboard_run"] = "greedy"
+    with pytest.raises(ConfigError, match=r"experiments\.av2_val\.leaderboard_run: .* not av2"):
+        spec.check_config(c, paper, registry)
+    c = copy.deepcopy(cfg)
+    c["experiments"]["demo_val"]["evaluator"] = "official"
+    with pytest.raises(ConfigError, match=r"\(choose devkit, fast, none\)"):
+        spec.check_config(c, paper, registry)
+
+
+def test_dataroot_layout_comes_from_the_dataset(tmp_path):
+    cfg, _, _ = _shipped_workflow_config()
+    cfg["datasets"]["av2"]["dataroot"] = str(tmp_path)
+    with pytest.raises(ConfigError, match=r"val does not exist; it must be the Argoverse 2 sensor-dataset root"):
+        spec.require_dataroot(cfg, "av2", "val")
+    (tmp_path / "val").mkdir()
+    assert spec.require_dataroot(cfg, "av2", "val") == str(tmp_path)
+    cfg["datasets"]["nuscenes"]["dataroot"] = str(tmp_path)
+    with pytest.raises(ConfigError, match=r"v1.0-trainval does not exist; it must be the nuScenes dataroot"):
+        spec.require_dataroot(cfg, "nuscenes", "val")

@@ -21,6 +21,11 @@ class AV2Dataset:
     detections_suffix = ".feather"
     evaluators = ("official",)
     parallel_evaluation = True
+    dataroot_folder = "{split}"
+    dataroot_hint = ("the Argoverse 2 sensor-dataset root, i.e. the folder that holds {split}/<log_id>/ with "
+                     "annotations.feather, city_SE3_egovehicle.feather and map/")
+    leaderboard_zip = False
+    validates_training = False
 
     def __init__(self, options: DatasetOptions):
         self.options = options

@@ -45,13 +45,20 @@ class Dataset(Protocol):
     """One dataset. ``name`` as on the command line; ``submission_suffix`` / ``detections_suffix``: the file
     types of its submission (``.json``, ``.pkl``) and of the detections it reads and simulates (``.json``,
     ``.feather``); ``evaluators``: its evaluators, the default first; ``parallel_evaluation``: whether its
-    evaluation runs worker processes (``--workers``)."""
+    evaluation runs worker processes (``--workers``); ``dataroot_folder``: the folder a dataroot must hold
+    (a format string of ``version`` and ``split``) and ``dataroot_hint`` what a dataroot is, for error messages;
+    ``leaderboard_zip``: whether ``grutrack leaderboard-zip`` packs its submissions; ``validates_training``:
+    whether ``grutrack train`` can score validation AMOTA on it (``--val-split``)."""
 
     name: str
     submission_suffix: str
     detections_suffix: str
     evaluators: tuple[str, ...]
     parallel_evaluation: bool
+    dataroot_folder: str
+    dataroot_hint: str
+    leaderboard_zip: bool
+    validates_training: bool
     options: DatasetOptions
 
     @property

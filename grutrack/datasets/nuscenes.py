@@ -23,6 +23,11 @@ class NuScenesDataset:
     detections_suffix = ".json"
     evaluators = ("devkit", "fast")
     parallel_evaluation = False
+    dataroot_folder = "{version}"
+    dataroot_hint = ("the nuScenes dataroot, i.e. the folder that holds {version}/ (the JSON tables; v1.0-test/ "
+                     "too for the test split)")
+    leaderboard_zip = True
+    validates_training = True
 
     def __init__(self, options: DatasetOptions):
         if not options.version:

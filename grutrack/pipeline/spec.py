@@ -16,13 +16,6 @@ from grutrack.errors import ConfigError
 #: report kind -> the dataset kinds its experiment may use
 REPORT_DATASETS = {"demo": ("demo",), "nusc_val": ("nuscenes", "demo"), "nusc_test": ("nuscenes", "demo"),
                    "av2_val": ("av2",), "semi_supervised": ()}
-#: what a dataroot must hold, by dataset kind (for the error message)
-DATAROOT_HINT = {
-    "nuscenes": "the nuScenes dataroot, i.e. the folder that holds {version}/ (the JSON tables; v1.0-test/ too "
-                "for the test split)",
-    "av2": "the Argoverse 2 sensor-dataset root, i.e. the folder that holds {split}/<log_id>/ with "
-           "annotations.feather, city_SE3_egovehicle.feather and map/",
-}
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -114,9 +107,10 @@ def check_config(cfg: dict, paper: dict, registry: dict) -> None:
         key = f"trainings.{name}"
         _need(cfg["datasets"], tr["dataset"], f"{key}.dataset", "datasets")
         _need(cfg["detectors"], tr["detector"], f"{key}.detector", "detectors")
-        if cfg["datasets"][tr["dataset"]]["kind"] == "av2":
-            raise ConfigError(f"config key {key}.dataset: training reads nuScenes-format data (demo or nuscenes), "
-                              f"not '{tr['dataset']}' (av2)")
+        ds = dataset_class(cfg, tr["dataset"])
+        if tr["validation"] and not ds.validates_training:
+            raise ConfigError(f"config key {key}.validation: validation AMOTA during training is scored on "
+                              f"nuScenes-format data, not on '{tr['dataset']}' ({ds.name}); set it to null")
         splits = [tr["split"]] + ([tr["validation"]["split"]] if tr["validation"] else [])
         for split in splits:
             _detector_covers(cfg, registry, tr["detector"], split, f"{key}.detector")
@@ -171,16 +165,17 @@ def _check_experiment(cfg: dict, registry: dict, name: str, exp: dict) -> None:
             raise ConfigError(f"config key {rkey}.training: a grukf run needs a training, other trackers none")
         if run["training"] is not None:
             _need(cfg["trainings"], run["training"], f"{rkey}.training", "trainings")
-    evaluators = {"demo": ("devkit", "fast", "none"), "nuscenes": ("devkit", "fast", "none"),
-                  "av2": ("official", "none")}
-    if exp["evaluator"] not in evaluators[kind]:
+    ds = dataset_class(cfg, exp["dataset"])
+    evaluators = (*ds.evaluators, "none")
+    if exp["evaluator"] not in evaluators:
         raise ConfigError(f"config key {key}.evaluator: '{exp['evaluator']}' is not available for a {kind} "
-                          f"dataset (choose {', '.join(evaluators[kind])})")
+                          f"dataset (choose {', '.join(evaluators)})")
     lb = exp["leaderboard_run"]
     if lb is not None:
         _need(exp["runs"], lb, f"{key}.leaderboard_run", f"{key}.runs")
-        if kind == "av2":
-            raise ConfigError(f"config key {key}.leaderboard_run: leaderboard zips are built for nuScenes only")
+        if not ds.leaderboard_zip:
+            raise ConfigError(f"config key {key}.leaderboard_run: leaderboard zips are built for nuScenes-format "
+                              f"datasets, not {kind}; set it to null")
 
 
 def _check_report(cfg: dict, paper: dict, name: str, rep: dict) -> None:
@@ -242,12 +237,13 @@ def require_dataroot(cfg: dict, dataset: str, split: str | None = None) -> str:
     if ds["kind"] == "demo":
         return ds["dataroot"]
     version = version_for(cfg, dataset, split or "val") or ""
-    hint = DATAROOT_HINT[ds["kind"]].format(version=version, split=split or "<split>")
+    cls = dataset_class(cfg, dataset)
+    hint = cls.dataroot_hint.format(version=version, split=split or "<split>")
     root = ds["dataroot"]
     if not root:
         raise ConfigError(f"config key {key} is not set: put there {hint} (edit workflow/config/config.yaml or "
                           f"pass --config 'datasets={{{dataset}: {{dataroot: /path/to/it}}}}')")
-    need = Path(root) / (version if ds["kind"] == "nuscenes" else (split or ""))
+    need = Path(root) / cls.dataroot_folder.format(version=version, split=split or "")
     if not need.is_dir():
         raise ConfigError(f"config key {key} = {root}: {need} does not exist; it must be {hint}")
     return root

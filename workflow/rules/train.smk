@@ -33,9 +33,7 @@ rule train:
         training=lambda w: jq(_training(w)),
         base=lambda w: _training(w)["config"],
         overrides=lambda w: jq(_training(w)["overrides"]),
-        dataroot=lambda w: dataroot(_training(w)["dataset"]),
-        version=lambda w: S.version_for(config, _training(w)["dataset"], _training(w)["split"]),
-        split=lambda w: _training(w)["split"],
+        data=lambda w: S.dataset_args(config, _training(w)["dataset"], _training(w)["split"]),
         val=_val_args,
         code=code_version("train"),
     threads: 2
@@ -44,6 +42,6 @@ rule train:
     shell:
         "( {GRUTRACK} resolve-config training --base {params.base} --overrides {params.overrides:q} "
         "--out {output.config} && "
-        "{GRUTRACK} train --dataroot {params.dataroot:q} --version {params.version} --split {params.split} "
+        "{GRUTRACK} train {params.data} "
         "--detections {input.detections} --config {output.config} --out checkpoints/{wildcards.training} "
         "{params.val} --no-progress ) > {log} 2>&1 " + ON_FAIL
