@@ -30,9 +30,10 @@ What the composition adds, none of which changes a number:
 - the tuning runs its 10 threshold evaluations in this process for one worker and on a ``multiprocessing.Pool`` of
   ``min(10, workers)`` processes otherwise (``workers`` default: the cores this process may run on,
   ``os.sched_getaffinity``; the official function takes ``multiprocessing.cpu_count()``);
-- TrackEval's side outputs (console tables and configs, per-class summary / detailed files, PDF/PNG curves, the
-  error log inside the trackeval package) are off, or, with ``trackeval_dir``, the files are written under
-  ``trackeval_dir/trackeval/``; nothing is written to the working directory;
+- TrackEval's side outputs (console tables and configs, per-class summary / detailed files, PDF/PNG curves) are
+  off, or, with ``trackeval_dir``, the files are written under ``trackeval_dir/trackeval/`` (with the Identity
+  columns besides HOTA and CLEAR); its error log inside the trackeval package is never written, and nothing is
+  written to the working directory;
 - step 2 is one call of ``filter_drivable_area`` given the frames of labels and tracks together (the map and poses
   of each log are read once, not twice) and only frames that hold boxes: the official filter cannot build the box
   array of an empty frame (a (0,) quaternion array), and an empty frame has nothing to filter. Every frame is
