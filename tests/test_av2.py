@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import pickle
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -350,6 +351,128 @@ def test_oracle_without_the_doubly_annotated_car(av2_root, scenes):
     assert len(overall["present_classes"]) >= 5
     for c in overall["present_classes"]:
         assert per_class[c]["hota"] >= 0.99, (c, per_class[c])
+
+
+@pytest.fixture(scope="module")
+def simulated_ekf(av2_root, scenes):
+    """(tracks, labels): the ekf tracker on SIMULATED detections (centerpoint profile, seed 0) of the Table I
+    classes, and the labels of all 26 categories, both in the order the official evaluator regroups them."""
+    vocab = av2.vocabulary()
+    run = track_scenes(build_tracker("ekf", param_classes=vocab.param_classes), scenes,
+                       simulated_boxsets(scenes, vocab, seed=0))
+    labels = gt_sequences(av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True),
+                          av2.vocabulary(all_categories=True))
+    order = sorted(labels, key=lambda lg: labels[lg][0]["timestamp_ns"])
+    tracks = build_sequences(scenes, run.results, vocab)
+    return {lg: tracks[lg] for lg in order}, {lg: labels[lg] for lg in order}
+
+
+def _assert_tree_equal(a, b, where=""):
+    """Nested dicts of TrackEval results equal: integers and strings exactly, floats to 1e-12 (NaN == NaN)."""
+    if isinstance(a, dict):
+        assert set(a) == set(b), (where, set(a) ^ set(b))
+        for k in a:
+            _assert_tree_equal(a[k], b[k], f"{where}/{k}")
+    elif isinstance(a, np.ndarray) and a.dtype.kind == "f" or isinstance(a, float):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12, err_msg=where)
+    elif isinstance(a, np.ndarray):
+        np.testing.assert_array_equal(a, b, err_msg=where)
+    else:
+        assert a == b, (where, a, b)
+
+
+def test_composition_equals_the_unpatched_official_evaluate(av2_root, simulated_ekf, tmp_path):
+    import copy
+    import contextlib
+
+    import av2.evaluation.tracking.eval as official
+    from av2.evaluation.tracking import utils as official_utils
+
+    tracks, labels = simulated_ekf
+    ddir = str(av2_root / "val")
+    # the official function as shipped (it writes its TrackEval files under ./trackeval and fails on an empty frame,
+    # which this input does not have)
+    with contextlib.chdir(tmp_path):
+        res, tuned, mean = official.evaluate(copy.deepcopy(tracks), copy.deepcopy(labels), "HOTA", 50, ddir,
+                                             "trackeval/metrics.json")
+    assert (tmp_path / "trackeval" / "TRACKER").is_dir()
+    # its tuned thresholds: its own preprocessing and tuning, called as evaluate calls them
+    ref_labels = official.filter_max_dist(copy.deepcopy(labels), 50)
+    ref_tracks = copy.deepcopy(tracks)
+    official_utils.annotate_frame_metadata(official_utils.ungroup_frames(ref_tracks),
+                                           official_utils.ungroup_frames(ref_labels), ["ego_translation_m"])
+    ref_tracks = official.filter_max_dist(ref_tracks, 50)
+    assert all(len(f["yaw"]) for seqs in (ref_labels, ref_tracks) for fs in seqs.values() for f in fs)
+    ref_labels = official.filter_drivable_area(ref_labels, ddir)
+    ref_tracks = official.filter_drivable_area(ref_tracks, ddir)
+    thresholds, tuned_again, mean_again = official._tune_score_thresholds(
+        ref_labels, ref_tracks, "HOTA", list(av2.COMPETITION_CATEGORIES), num_thresholds=10, match_distance_m=2)
+    assert tuned_again == tuned and mean_again == mean        # the same tuning as inside evaluate
+    ref_final = official_utils.filter_by_class_thresholds(ref_tracks, thresholds)
+
+    combined = res["TrackEvalDataset"]["TRACKER"]["COMBINED_SEQ"]
+    assert set(combined) >= set(av2.COMPETITION_CATEGORIES) and len(av2.COMPETITION_CATEGORIES) == 26
+    for workers in (1, 2):                                    # in this process; a pool of 2
+        out = evaluate_sequences(tracks, labels, av2_root / "val", workers=workers, keep_inputs=True)
+        _assert_tree_equal(out["result"], res)                # every sequence, class, HOTA / CLEAR / Count field
+        ours = out["result"]["TrackEvalDataset"]["TRACKER"]["COMBINED_SEQ"]
+        for c in av2.COMPETITION_CATEGORIES:
+            for k in ("CLR_TP", "CLR_FP", "CLR_FN", "IDSW", "MT", "ML", "Frag"):
+                assert ours[c]["CLEAR"][k] == combined[c]["CLEAR"][k], (workers, c, k)
+            assert abs(ours[c]["CLEAR"]["MOTA"] - combined[c]["CLEAR"]["MOTA"]) <= 1e-12
+            assert abs(np.mean(ours[c]["HOTA"]["HOTA"]) - np.mean(combined[c]["HOTA"]["HOTA"])) <= 1e-12
+            assert abs(out["tuned"][c] - tuned[c]) <= 1e-12 and abs(out["mean"][c] - mean[c]) <= 1e-12
+            assert out["final"]["thresholds"][c] == float(thresholds[c]), (workers, c)
+        assert set(out["idf1"]) == set(av2.COMPETITION_CATEGORIES)
+        # the final inputs are the official ones
+        for mine, ref in ((out["final"]["labels"], ref_labels), (out["final"]["predictions"], ref_final)):
+            assert list(mine) == list(ref)
+            for lg in ref:
+                for a, b in zip(mine[lg], ref[lg], strict=True):
+                    np.testing.assert_array_equal(a["track_id"], b["track_id"])
+                    np.testing.assert_array_equal(a["translation_m"], b["translation_m"])
+    # a real input: classes with ground truth and tracks, and thresholds that filter
+    present = [c for c in av2.COMPETITION_CATEGORIES if combined[c]["CLEAR"]["CLR_TP"] > 0]
+    assert {"REGULAR_VEHICLE", "PEDESTRIAN"} <= set(present)
+    assert 0.2 < np.mean(combined["REGULAR_VEHICLE"]["HOTA"]["HOTA"]) < 0.95
+    assert any(thresholds[c] > 0 for c in present)
+
+
+def test_evaluation_patches_nothing(av2_root, tmp_path):
+    import ast
+    import inspect
+    import os
+    import subprocess
+    import sys
+
+    from grutrack.evaluation import av2_eval
+
+    tree = ast.parse(inspect.getsource(av2_eval))
+    imported = {a.name for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom)) for a in n.names}
+    imported |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    assert not {m for m in imported if m and ("mock" in m or m.startswith("unittest"))}, imported
+    assert not [n for n in ast.walk(tree) if isinstance(n, ast.Name) and n.id in ("setattr", "patch")]
+    # attribute assignments only on the module's own metrics document
+    targets = [t for n in ast.walk(tree) if isinstance(n, (ast.Assign, ast.AugAssign))
+               for t in (n.targets if isinstance(n, ast.Assign) else [n.target])]
+    attrs = [e for t in targets for e in (t.elts if isinstance(t, ast.Tuple) else [t]) if isinstance(e, ast.Attribute)]
+    assert attrs and all(isinstance(e.value, ast.Name) and e.value.id == "doc" for e in attrs)
+    # a whole evaluation (ROI, one worker) in a fresh interpreter imports no unittest.mock
+    code = ("import sys, json; from grutrack.data import av2; from grutrack.export.av2_tracks import gt_sequences;"
+            "from grutrack.evaluation.av2_eval import evaluate_sequences, metrics_from_result;"
+            f"root = {str(av2_root)!r}; import numpy as np;"
+            "lab = gt_sequences(av2.load_scenes(root, 'val', with_gt=True, all_categories=True),"
+            " av2.vocabulary(all_categories=True));"
+            "trk = {lg: [dict(f, score=np.ones(len(f['track_id']))) for f in fs] for lg, fs in lab.items()};"
+            "out = evaluate_sequences(trk, lab, root + '/val', workers=1);"
+            "print(json.dumps([metrics_from_result(out)[1]['REGULAR_VEHICLE']['tp'],"
+            " sorted(m for m in sys.modules if m.startswith('unittest'))]))")
+    env = {**os.environ, "PYTHONPATH": str(Path(av2_eval.__file__).resolve().parents[2])}
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env,
+                         check=True)
+    tp, unittest_modules = json.loads(run.stdout.strip().splitlines()[-1])
+    assert tp > 100 and "unittest.mock" not in unittest_modules
+    assert list(tmp_path.iterdir()) == []                    # nothing written to the working directory
 
 
 def test_simulated_detections_table(av2_root, scenes, tmp_path, capsys):

@@ -1,20 +1,46 @@
-"""Official Argoverse 2 tracking evaluation (``av2.evaluation.tracking.eval.evaluate``: HOTA objective, TrackEval
-HOTA + CLEAR, 50 m range, drivable-area ROI when every log has its map) and the metrics JSON.
+"""Argoverse 2 tracking evaluation composed of the official evaluator's own building blocks, and the metrics JSON.
 
-What the wrapper adds around the official function, without changing its numbers:
+The reference is ``av2.evaluation.tracking.eval.evaluate`` (HOTA objective, TrackEval HOTA + CLEAR, 50 m range,
+drivable-area ROI when every log has its map). :func:`evaluate_sequences` performs its steps in its order, each with
+the official module's function for it; nothing in ``av2`` or ``trackeval`` is replaced, patched or reassigned:
+
+1. range: ``filter_max_dist`` on the labels, ``utils.annotate_frame_metadata`` (each label frame's
+   ``ego_translation_m`` onto the prediction frame at the same position), ``filter_max_dist`` on the tracks;
+2. ROI (with ``dataset_dir``): ``filter_drivable_area``, labels and tracks;
+3. score-threshold tuning, the body of ``_tune_score_thresholds`` (HOTA objective, 10 recall levels, 2 m match
+   distance): per class ``_filter_by_class`` and ``_calculate_score_thresholds`` with ``_xy_center_similarity``;
+   per threshold index ``_evaluate_single_threshold``; then the official choice (threshold at the argmax of the
+   recall-level HOTA values, tuned HOTA ``max(0, best)``, mean ``nanmean`` of the values clipped at 0);
+4. ``utils.filter_by_class_thresholds`` with the tuned thresholds;
+5. the final evaluation as ``evaluate_tracking`` configures it (its frame-set check, ``TrackEvalDataset``, tracker
+   ``"TRACKER"``, HOTA + CLEAR at similarity 0.5), run by ``trackeval.Evaluator`` with an explicit evaluation
+   config.
+
+Private helpers of the official module that are called because it has no public equivalent: ``_filter_by_class``,
+``_calculate_score_thresholds``, ``_xy_center_similarity`` and ``_evaluate_single_threshold`` (step 3).
+``tests/test_av2.py`` checks the composition against the unmodified official ``evaluate`` on the real val logs
+(result tree, tuned and mean HOTA, tuned thresholds: all 26 categories, exactly).
+
+What the composition adds, none of which changes a number:
 
 - the labels are built from the split's ``annotations.feather`` at the evaluated rate (all 26 competition
-  categories, city frame) and the submission is checked first to hold exactly those frames, so the evaluator's
-  frame-equality assertion cannot fire; logs are given in the order the evaluator regroups them;
-- its score-threshold tuning pool follows ``workers`` (default: the cores this process may run on,
-  ``os.sched_getaffinity``) instead of ``multiprocessing.cpu_count()``; one worker runs in-process;
-- TrackEval's side outputs (per-class summary / detailed files, PDF/PNG curves, console tables) are switched
-  off, or written under ``trackeval_dir`` when given; nothing is written to the working directory;
-- the drivable-area filter is given only frames that hold boxes (the official one fails on an empty frame,
-  e.g. a log without tracks; an empty frame has nothing to filter);
-- the map / pose loader is remembered for the second of its two identical calls (labels, then tracks);
-- IDF1 (TrackEval's Identity metric) is computed on exactly the labels and score-filtered tracks that the
-  official final evaluation scores (the official function computes HOTA and CLEAR only);
+  categories, city frame) and the submission is checked first to hold exactly those frames, so the official
+  frame-equality assertions cannot fire; logs are given in the order the official function regroups them
+  (``utils.group_frames``: by timestamp), because step 1 pairs prediction and label frames by position;
+- the tuning runs its 10 threshold evaluations in this process for one worker and on a ``multiprocessing.Pool`` of
+  ``min(10, workers)`` processes otherwise (``workers`` default: the cores this process may run on,
+  ``os.sched_getaffinity``; the official function takes ``multiprocessing.cpu_count()``);
+- TrackEval's side outputs (console tables and configs, per-class summary / detailed files, PDF/PNG curves) are
+  off, or, with ``trackeval_dir``, the files are written under ``trackeval_dir/trackeval/`` (with the Identity
+  columns besides HOTA and CLEAR); its error log inside the trackeval package is never written, and nothing is
+  written to the working directory;
+- step 2 is one call of ``filter_drivable_area`` given the frames of labels and tracks together (the map and poses
+  of each log are read once, not twice) and only frames that hold boxes: the official filter cannot build the box
+  array of an empty frame (a (0,) quaternion array), and an empty frame has nothing to filter. Every frame is
+  filtered on its own and in place, as in the official function, so the result is the same;
+- TrackEval's Identity metric (IDF1) is computed in the same final TrackEval run, on exactly the labels and
+  score-filtered tracks that HOTA and CLEAR score (the official function computes HOTA and CLEAR only); its
+  entries are taken out of the result tree, which then holds what the official function returns;
 - on request (``keep_inputs``), those labels and score-filtered tracks and the tuned per-class score thresholds
   are handed back, so that the final CLEAR matching can be replayed frame by frame
   (:mod:`grutrack.evaluation.clear_frames`).
@@ -31,25 +57,28 @@ average over the Table I classes present in the ground truth.
 from __future__ import annotations
 
 import contextlib
-import copy
+import functools
 import io
 import multiprocessing
 import os
 import tempfile
 import time
-import types
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 
 from grutrack.data.av2 import COMPETITION_CATEGORIES, TABLE_I_CLASSES, load_scenes, split_dir, vocabulary
-from grutrack.errors import DatasetError
+from grutrack.errors import DatasetError, InputFormatError
 from grutrack.export.av2_tracks import expected_frames, gt_sequences, read_tracks_pickle, validate_sequences
 from grutrack.documents import MetricsDocument
 
 EVALUATOR = "av2.evaluation.tracking.eval.evaluate (HOTA objective)"
 DEFAULT_RANGE_M = 50
+OBJECTIVE = "HOTA"                 # the official evaluate's objective_metric as the challenge runs it
+NUM_THRESHOLDS = 10                # evaluate -> _tune_score_thresholds(num_thresholds=10, match_distance_m=2)
+MATCH_DISTANCE_M = 2
+SIMILARITY_THRESHOLD = 0.5         # iou_threshold default of _tune_score_thresholds and evaluate_tracking
+TRACKER_NAME = "TRACKER"           # evaluate -> evaluate_tracking(tracker_name="TRACKER")
 
 
 def default_workers() -> int:
@@ -58,22 +87,6 @@ def default_workers() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not on Linux
         return max(1, os.cpu_count() or 1)
-
-
-class _SerialPool:
-    """A stand-in for ``multiprocessing.Pool`` that runs ``imap`` in this process (one worker)."""
-
-    def __init__(self, *args, **kwargs):
-        pass
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return False
-
-    def imap(self, fn, iterable):
-        return map(fn, iterable)
 
 
 def has_maps(dataset_dir: Path, log_ids: list[str]) -> bool:
@@ -85,144 +98,156 @@ def has_maps(dataset_dir: Path, log_ids: list[str]) -> bool:
     return all(ok(lg) for lg in log_ids)
 
 
-def _identity_tap(original, idf1_out: dict, inputs_out: dict | None = None):
-    """``evaluate_tracking`` that also computes TrackEval's Identity metric (IDF1) on the same inputs, and keeps
-    those inputs (labels, score-filtered tracks) in ``inputs_out`` when given."""
-    import trackeval
-
-    from av2.evaluation.tracking.eval import TrackEvalDataset
-
-    def tapped(labels, track_predictions, classes, tracker_name, output_dir, iou_threshold=0.5):
-        if inputs_out is not None:
-            inputs_out.update(labels=labels, predictions=track_predictions, classes=list(classes),
-                              similarity_threshold=float(iou_threshold))
-        res = original(labels, track_predictions, classes, tracker_name, output_dir, iou_threshold)
-        cfg = {**TrackEvalDataset.get_default_dataset_config(), "GT_TRACKS": {tracker_name: labels},
-               "PREDICTED_TRACKS": {tracker_name: track_predictions}, "SEQ_IDS_TO_EVAL": list(labels.keys()),
-               "CLASSES_TO_EVAL": classes, "TRACKERS_TO_EVAL": [tracker_name], "OUTPUT_FOLDER": output_dir}
-        ev = trackeval.Evaluator({**_quiet_eval_config(), "TIME_PROGRESS": False})
-        with contextlib.redirect_stdout(io.StringIO()):
-            ident, _ = ev.evaluate([TrackEvalDataset(cfg)],
-                                   [trackeval.metrics.Identity({"THRESHOLD": iou_threshold, "PRINT_CONFIG": False})])
-        combined = ident["TrackEvalDataset"][tracker_name]["COMBINED_SEQ"]
-        idf1_out.update({c: float(combined[c]["Identity"]["IDF1"]) for c in classes})
-        return res
-
-    return tapped
-
-
-def _quiet_eval_config() -> dict:
-    """TrackEval evaluator settings with every file and console output off (numbers unaffected)."""
-    import trackeval
-
-    return {**trackeval.Evaluator.get_default_eval_config(), "PRINT_RESULTS": False, "PRINT_CONFIG": False,
-            "OUTPUT_SUMMARY": False, "OUTPUT_DETAILED": False, "PLOT_CURVES": False}
-
-
-def _memoised(load):
-    """The official map / pose loader, remembered per (logs, folder): it is called once for the labels and once
-    for the tracks with the same logs (the maps are read-only there)."""
-    cache: dict = {}
-
-    def cached(log_ids, dataset_dir):
-        key = (tuple(log_ids), str(dataset_dir))
-        if key not in cache:
-            cache[key] = load(log_ids, dataset_dir)
-        return cache[key]
-
-    return cached
-
-
-def _skip_empty_frames(filter_roi):
-    """The official drivable-area filter, given only frames that hold boxes: it cannot build the box array of
-    an empty frame (a (0,) quaternion array), and an empty frame has nothing to filter, so the result is the
-    same. Frames are filtered in place, as the official function does."""
-    def filtered(tracks, dataset_dir):
-        if dataset_dir is None:
-            return tracks
-        held = {lg: [f for f in frames if len(f["translation_m"])] for lg, frames in tracks.items()}
-        held = {lg: frames for lg, frames in held.items() if frames}
-        if held:
-            filter_roi(held, dataset_dir)
-        return tracks
-
-    return filtered
-
-
-def _threshold_tap(original, inputs_out: dict):
-    """The official score-threshold tuning, its per-class thresholds kept in ``inputs_out["thresholds"]``."""
-    def tapped(*args, **kwargs):
-        out = original(*args, **kwargs)
-        inputs_out["thresholds"] = {c: float(t) for c, t in out[0].items()}
-        return out
-
-    return tapped
-
-
-@contextlib.contextmanager
-def _official_settings(workers: int, quiet: bool, idf1_out: dict, inputs_out: dict | None = None):
-    """Patches scoped to one call: worker count, TrackEval side outputs, the IDF1 tap, the input taps."""
-    import trackeval
-
+def _official():
+    """The official tracking evaluation module (imports TrackEval with the numpy aliases it needs)."""
     import av2.evaluation.tracking.eval as official
 
-    pool = _SerialPool if workers == 1 else multiprocessing.Pool
-    shim = types.SimpleNamespace(cpu_count=lambda: workers, Pool=pool)
-    with contextlib.ExitStack() as stack:
-        stack.enter_context(mock.patch.object(official, "mp", shim))
-        stack.enter_context(mock.patch.object(official, "evaluate_tracking",
-                                              _identity_tap(official.evaluate_tracking, idf1_out, inputs_out)))
-        if inputs_out is not None:
-            stack.enter_context(mock.patch.object(official, "_tune_score_thresholds",
-                                                  _threshold_tap(official._tune_score_thresholds, inputs_out)))
-        stack.enter_context(mock.patch.object(official, "load_mapped_avm_and_egoposes",
-                                              _memoised(official.load_mapped_avm_and_egoposes)))
-        stack.enter_context(mock.patch.object(official, "filter_drivable_area",
-                                              _skip_empty_frames(official.filter_drivable_area)))
-        if quiet:
-            cfg = _quiet_eval_config()
-            stack.enter_context(mock.patch.object(trackeval.Evaluator, "get_default_eval_config",
-                                                  staticmethod(lambda: dict(cfg))))
-        yield official
+    return official
+
+
+def eval_config(quiet: bool) -> dict:
+    """TrackEval ``Evaluator`` config of the final evaluation: the official one (defaults, no timing) without the
+    error log in the trackeval package; ``quiet``: no console tables or configs, no summary / detailed / curve
+    files. Numbers are unaffected."""
+    import trackeval
+
+    cfg = {**trackeval.Evaluator.get_default_eval_config(), "TIME_PROGRESS": False, "LOG_ON_ERROR": None}
+    if quiet:
+        cfg.update(PRINT_RESULTS=False, PRINT_CONFIG=False, OUTPUT_SUMMARY=False, OUTPUT_DETAILED=False,
+                   PLOT_CURVES=False)
+    return cfg
+
+
+def _frame_keys(seqs: dict) -> dict:
+    """{log: [timestamp_ns, ...]} of a ``{log: [frame, ...]}`` sequence dict."""
+    return {lg: [int(f["timestamp_ns"]) for f in frames] for lg, frames in seqs.items()}
+
+
+def range_filter(predictions: dict, labels: dict, max_range_m: int) -> tuple[dict, dict]:
+    """Step 1: (tracks, labels) within ``max_range_m`` (metres, xy) of the ego vehicle, as the official
+    ``evaluate`` does it. The prediction frames get their label frame's ``ego_translation_m`` (in place)."""
+    from av2.evaluation.tracking import utils
+
+    official = _official()
+    labels = official.filter_max_dist(labels, max_range_m)
+    utils.annotate_frame_metadata(utils.ungroup_frames(predictions), utils.ungroup_frames(labels),
+                                  ["ego_translation_m"])
+    return official.filter_max_dist(predictions, max_range_m), labels
+
+
+def drivable_area_filter(predictions: dict, labels: dict, dataset_dir: Path) -> None:
+    """Step 2, in place: the official ``filter_drivable_area`` on the frames of labels and tracks that hold boxes,
+    in one call (each log's map and poses read once)."""
+    held: dict[str, list] = {}
+    for seqs in (labels, predictions):
+        for lg, frames in seqs.items():
+            held.setdefault(lg, []).extend(f for f in frames if len(f["translation_m"]))
+    held = {lg: frames for lg, frames in held.items() if frames}
+    if held:
+        _official().filter_drivable_area(held, str(dataset_dir))
+
+
+def tune_score_thresholds(labels: dict, predictions: dict, classes: list[str], workers: int,
+                          output_dir: str) -> tuple[dict, dict, dict]:
+    """Step 3, the body of the official ``_tune_score_thresholds`` (HOTA objective, 10 thresholds, 2 m) with
+    this module's pool: (threshold, tuned HOTA, recall-averaged HOTA), each ``{class: float}``."""
+    official = _official()
+    metric_class = official.SUBMETRIC_TO_METRIC_CLASS_NAME[OBJECTIVE]
+    metrics_config = {"METRICS": [metric_class], "THRESHOLD": SIMILARITY_THRESHOLD, "PRINT_CONFIG": False}
+    dataset_config = {**official.TrackEvalDataset.get_default_dataset_config(), "GT_TRACKS": {"tracker": labels},
+                      "PREDICTED_TRACKS": {"tracker": predictions}, "SEQ_IDS_TO_EVAL": list(labels.keys()),
+                      "CLASSES_TO_EVAL": classes, "TRACKERS_TO_EVAL": ["tracker"], "OUTPUT_FOLDER": output_dir}
+    sim_func = functools.partial(official._xy_center_similarity, zero_distance=MATCH_DISTANCE_M)
+    candidates = {c: official._calculate_score_thresholds(official._filter_by_class(labels, c),
+                                                          official._filter_by_class(predictions, c), sim_func,
+                                                          num_thresholds=NUM_THRESHOLDS) for c in classes}
+    jobs = [(i, candidates, classes, predictions, dataset_config, metrics_config) for i in range(NUM_THRESHOLDS)]
+    if workers == 1:
+        results = [official._evaluate_single_threshold(job) for job in jobs]
+    else:
+        with multiprocessing.Pool(min(NUM_THRESHOLDS, workers)) as pool:
+            results = list(pool.imap(official._evaluate_single_threshold, jobs))
+    thresholds, tuned, mean = {}, {}, {}
+    for c in classes:
+        values = [r[c][metric_class][OBJECTIVE] for r in results]
+        values = [np.mean(v) if isinstance(v, np.ndarray) else v for v in values]
+        thresholds[c] = candidates[c][np.argmax(values)]
+        tuned[c] = max(0, np.max(values))
+        mean[c] = np.nanmean(np.array(values).clip(min=0))
+    return thresholds, tuned, mean
+
+
+def final_evaluation(labels: dict, predictions: dict, classes: list[str], config: dict,
+                     output_dir: str) -> tuple[dict, dict]:
+    """Step 5: TrackEval HOTA + CLEAR configured as the official ``evaluate_tracking`` does, with Identity in the
+    same run. Returns (the result tree without the Identity entries, {class: IDF1})."""
+    import trackeval
+
+    from av2.evaluation.tracking import utils
+
+    official = _official()
+
+    def frames(seqs):
+        return {(f["seq_id"], f["timestamp_ns"]) for f in utils.ungroup_frames(seqs)}
+
+    if frames(labels) != frames(predictions):  # evaluate_tracking's check; the input check makes it a bug
+        raise RuntimeError("sequences ids and timestamp_ns in labels and predictions don't match")
+    metrics_config = {"METRICS": ["HOTA", "CLEAR", "Identity"], "THRESHOLD": SIMILARITY_THRESHOLD,
+                      "PRINT_CONFIG": bool(config["PRINT_CONFIG"])}
+    metrics = [getattr(trackeval.metrics, m)(metrics_config) for m in metrics_config["METRICS"]]
+    dataset_config = {**official.TrackEvalDataset.get_default_dataset_config(),
+                      "GT_TRACKS": {TRACKER_NAME: labels}, "PREDICTED_TRACKS": {TRACKER_NAME: predictions},
+                      "SEQ_IDS_TO_EVAL": list(labels.keys()), "CLASSES_TO_EVAL": classes,
+                      "TRACKERS_TO_EVAL": [TRACKER_NAME], "OUTPUT_FOLDER": output_dir}
+    result, _ = trackeval.Evaluator(config).evaluate([official.TrackEvalDataset(dataset_config)], metrics)
+    tree = result["TrackEvalDataset"][TRACKER_NAME]
+    idf1 = {c: float(tree["COMBINED_SEQ"][c]["Identity"]["IDF1"]) for c in classes}
+    for by_class in tree.values():
+        for by_metric in by_class.values():
+            by_metric.pop("Identity", None)
+    return result, idf1
 
 
 def evaluate_sequences(predictions: dict, labels: dict, dataset_dir: str | Path | None, *,
                        max_range_m: int = DEFAULT_RANGE_M, workers: int | None = None,
                        trackeval_dir: str | Path | None = None, verbose: bool = False,
                        keep_inputs: bool = False) -> dict:
-    """Run the official evaluation on in-memory sequences.
+    """Run the official evaluation on in-memory sequences (steps 1-5 of the module docstring).
 
-    predictions / labels: ``{log_id: [frame, ...]}`` (the pickle layout), same frames. dataset_dir: the split
-    folder (enables the ROI filter) or None. Returns ``{"result": TrackEval's result tree, "tuned": {class: HOTA},
-    "mean": {class: HOTA}, "idf1": {class: IDF1}}``; with ``keep_inputs`` also ``"final"``: ``{"labels",
-    "predictions"}`` (what the final HOTA / CLEAR evaluation scored: range- and ROI-filtered labels, tracks also
-    filtered by the tuned thresholds), ``"classes"``, ``"similarity_threshold"`` and ``"thresholds"``
-    ({class: tuned score threshold}).
+    predictions / labels: ``{log_id: [frame, ...]}`` (the pickle layout), same frames (else InputFormatError);
+    neither is modified. dataset_dir: the split folder (enables the ROI filter) or None. Returns ``{"result":
+    TrackEval's result tree, "tuned": {class: HOTA}, "mean": {class: HOTA}, "idf1": {class: IDF1}}``; with
+    ``keep_inputs`` also ``"final"``: ``{"labels", "predictions"}`` (what the final HOTA / CLEAR evaluation scored:
+    range- and ROI-filtered labels, tracks also filtered by the tuned thresholds), ``"classes"``,
+    ``"similarity_threshold"`` and ``"thresholds"`` ({class: tuned score threshold}).
     """
-    # the official function regroups the labels by first timestamp (a stable sort) and then pairs prediction and
-    # label frames by position: give both in that order
+    if _frame_keys(predictions) != _frame_keys(labels):
+        raise InputFormatError("predictions: logs and frames (timestamp_ns) must be exactly those of the labels")
+    # the official function regroups the labels by timestamp (a stable sort) and then pairs prediction and label
+    # frames by position: give both in that order. Frames are copied (step 1 adds a key to the prediction frames;
+    # later steps build new frames)
     order = sorted(labels, key=lambda lg: labels[lg][0]["timestamp_ns"] if labels[lg] else 0)
-    labels = copy.deepcopy({lg: labels[lg] for lg in order})
-    predictions = copy.deepcopy({lg: predictions[lg] for lg in order})
+    labels = {lg: [dict(f) for f in labels[lg]] for lg in order}
+    predictions = {lg: [dict(f) for f in predictions[lg]] for lg in order}
+    from av2.evaluation.tracking import utils
+
     workers = max(1, int(workers or default_workers()))
-    if dataset_dir is not None:
-        dataset_dir = Path(dataset_dir).resolve()      # the evaluation runs in another working directory
-    idf1: dict = {}
-    final: dict | None = {} if keep_inputs else None
-    with tempfile.TemporaryDirectory(prefix="grutrack-av2-eval-") as tmp:
-        out_root = Path(trackeval_dir).resolve() if trackeval_dir else Path(tmp)
-        out_root.mkdir(parents=True, exist_ok=True)
-        sink = contextlib.nullcontext() if verbose else contextlib.redirect_stdout(io.StringIO())
-        errsink = contextlib.nullcontext() if verbose else contextlib.redirect_stderr(io.StringIO())
-        with _official_settings(workers, quiet=trackeval_dir is None, idf1_out=idf1, inputs_out=final) as official, \
-                contextlib.chdir(out_root), sink, errsink:
-            # the official function writes under ".".join(out.split("/")[:-1]), relative to the working dir
-            res, tuned, mean = official.evaluate(predictions, labels, "HOTA", int(max_range_m),
-                                                 None if dataset_dir is None else str(dataset_dir),
-                                                 "trackeval/metrics.json")
+    classes = list(_official().constants.AV2_CATEGORIES)
+    sink = contextlib.nullcontext() if verbose else contextlib.redirect_stdout(io.StringIO())
+    errsink = contextlib.nullcontext() if verbose else contextlib.redirect_stderr(io.StringIO())
+    with tempfile.TemporaryDirectory(prefix="grutrack-av2-eval-") as tmp, sink, errsink:
+        out_dir = str(Path(trackeval_dir).resolve() / "trackeval" if trackeval_dir else Path(tmp))
+        predictions, labels = range_filter(predictions, labels, int(max_range_m))
+        if dataset_dir is not None:
+            drivable_area_filter(predictions, labels, Path(dataset_dir).resolve())
+        thresholds, tuned, mean = tune_score_thresholds(labels, predictions, classes, workers, tmp)
+        scored = utils.filter_by_class_thresholds(predictions, thresholds)
+        res, idf1 = final_evaluation(labels, scored, classes, eval_config(quiet=trackeval_dir is None), out_dir)
     out = {"result": res, "tuned": tuned, "mean": mean, "idf1": idf1}
-    if final is not None:
-        out["final"] = final
+    if keep_inputs:
+        out["final"] = {"labels": labels, "predictions": scored, "classes": classes,
+                        "similarity_threshold": float(SIMILARITY_THRESHOLD),
+                        "thresholds": {c: float(t) for c, t in thresholds.items()}}
     return out
 
 
