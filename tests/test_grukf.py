@@ -92,9 +92,9 @@ def test_batching_equals_one_by_one():
     hidden = net.init_hidden(6)
     hidden = {k: torch.randn_like(v) * 0.1 for k, v in hidden.items()}
     with torch.no_grad():
-        x_all, h_all = net.correct(*args, hidden)
+        x_all, h_all, _ = net.correct(*args, hidden)
         for i in range(6):
-            xi, hi = net.correct(*[a[i:i + 1] for a in args], {k: v[i:i + 1] for k, v in hidden.items()})
+            xi, hi, _ = net.correct(*[a[i:i + 1] for a in args], {k: v[i:i + 1] for k, v in hidden.items()})
             assert torch.allclose(xi, x_all[i:i + 1], atol=1e-9)
             assert all(torch.allclose(hi[k], h_all[k][i:i + 1], atol=1e-9) for k in hi)
 
@@ -106,7 +106,7 @@ def test_yaw_residual_wrapped():
     y = TorchCTRA().h(prior)
     y[0, 6] = math.pi - 0.01  # 0.02 rad away across the +-pi seam
     with torch.no_grad():
-        x, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(1))
+        x, _, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(1))
     step = (x[0, 8] - prior[0, 8] + math.pi) % (2 * math.pi) - math.pi
     assert abs(float(step)) < 0.03 and -math.pi <= float(x[0, 8]) < math.pi
 
@@ -119,7 +119,7 @@ def test_gain_prior_gives_constant_gain_filter_in_heading_frame():
     y = TorchCTRA().h(prior)
     y[:, 0] += 1.0  # 1 m innovation along global x
     with torch.no_grad():
-        x, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(3))
+        x, _, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(3))
     # K0 has 0.6 on x and y in the heading frame: the global correction is 0.6 m along x for any heading
     assert torch.allclose(x[:, 0] - prior[:, 0], torch.full((3,), 0.6, dtype=torch.float64), atol=1e-9)
     assert torch.allclose(x[:, 1], prior[:, 1], atol=1e-9)
@@ -130,7 +130,7 @@ def test_four_gru_variant_is_separate_and_runs():
     assert sum(p.numel() for p in b.parameters()) > sum(p.numel() for p in a.parameters())
     assert not hasattr(a, "gru_r") and hasattr(b, "gru_r")
     with torch.no_grad():
-        x, h = b.correct(*_correct_inputs(4), b.init_hidden(4))
+        x, h, _ = b.correct(*_correct_inputs(4), b.init_hidden(4))
     assert x.shape == (4, 10) and set(h) == {"q", "sigma", "s", "r"}
 
 
@@ -364,7 +364,7 @@ def test_gain_table_cells_start_at_given_gains_and_are_looked_up_per_track():
     n_upd = torch.tensor([5, 5, 5, 5])
     gaps = torch.tensor([1, 2, 9, 1])                                     # 9 -> the last gap bin
     with torch.no_grad():
-        x, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(4),
+        x, _, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(4),
                            net.table_index(labels, n_upd, gaps))
     step = (x[:, 0] - prior[:, 0]).numpy()
     # class 4 had no update in the table (NaN cells): it starts at the shared prior (zero gain here)
@@ -391,6 +391,23 @@ def test_backend_counts_updates_and_frames_since_the_last_update():
     assert s.n_updates.tolist() == [1, 1, 2] and s.since.tolist() == [3, 0, 0]
     both = be.concat(be.select(s, np.array([2])), be.select(s, np.array([0])))
     assert both.n_updates.tolist() == [2, 1] and both.since.tolist() == [0, 3]
+
+
+def test_correct_returns_the_gain_and_the_backend_keeps_each_tracks_largest_entry():
+    from grutrack.tracking.grukf_backend import GRUKFBackend
+
+    net = _table_net()                                     # silent network: K = the prior K0 (largest entry 0.6)
+    with torch.no_grad():
+        _, _, K = net.correct(*_correct_inputs(2), net.init_hidden(2))
+    assert K.shape == (2, 10, 9) and float(K.abs().max()) == pytest.approx(0.6)
+    assert not hasattr(net, "max_abs_gain")                # no state written during forward passes
+    be = GRUKFBackend(net, "cpu")
+    z = TorchCTRA().h(torch.tensor(_states(3))).numpy()
+    s = be.predict(be.initiate(z, np.array([0, 1, 2])), 0.5)
+    assert s.gain_abs_max.tolist() == [0.0, 0.0, 0.0]
+    s = be.update(s, np.array([0, 2]), z[[0, 2]])
+    assert s.gain_abs_max.tolist() == pytest.approx([0.6, 0.0, 0.6])
+    assert be.concat(be.select(s, np.array([1])), s).gain_abs_max.tolist() == pytest.approx([0.0, 0.6, 0.0, 0.6])
 
 
 def test_backend_maps_dataset_labels_to_tracking_classes():

@@ -144,8 +144,6 @@ class GRUKalmanNet(nn.Module):
         nn.init.zeros_(self.fc_gain[2].bias)
         if cfg.has_table:
             self.gain_table = nn.Parameter(torch.zeros(*cfg.table_shape, m * n))
-        #: largest |K| entry produced since the last reset (the trainer watches it for divergence)
-        self.max_abs_gain = 0.0
 
     def set_gain_prior(self, K0: torch.Tensor, K_table: torch.Tensor | None = None) -> None:
         """Start from the constant gain K0 (m, n) in the heading frame: output bias = K0, small weights.
@@ -213,12 +211,14 @@ class GRUKalmanNet(nn.Module):
     def correct(self, x_prior: torch.Tensor, y: torch.Tensor, y_prev: torch.Tensor, x_post_prev: torch.Tensor,
                 x_prior_prev: torch.Tensor, x_post_prev2: torch.Tensor, hidden: dict[str, torch.Tensor],
                 cells: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None,
-                counts: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+                counts: torch.Tensor | None = None
+                ) -> tuple[torch.Tensor, dict[str, torch.Tensor], torch.Tensor]:
         """One update of K tracks (all (K, ·) float64): prior x^-_n, measurement y_n, previous measurement,
         previous posterior x_{n-1|n-1}, previous prior x_{n-1|n-2}, posterior before that x_{n-2|n-2};
         ``cells``: the tracks' cells of the gain table (:meth:`table_index`; only with a table); ``counts``
         (K, 2): each track's update count at this update (1 = the first) and frames since its last update
-        (only with ``aux_inputs``). Returns the posterior (K, m) and the new hidden states.
+        (only with ``aux_inputs``). Returns the posterior (K, m), the new hidden states and the gain K
+        (K, m, n) it applied (heading frame; the trainer checks it for divergence).
         """
         yaw = x_prior[:, self.ss.yaw_index]
         innov = y - self.ss.h(x_prior)
@@ -241,15 +241,13 @@ class GRUKalmanNet(nn.Module):
                 raise ValueError("this GRU-KF's aux inputs need the update count and gap of every track")
             feats["aux"] = aux_features(raw, counts)
         K, new_hidden = self.gain(feats, hidden, cells)
-        if len(K):
-            self.max_abs_gain = max(self.max_abs_gain, float(K.detach().abs().max()))
         delta = torch.einsum("kmn,kn->km", K.to(innov_h.dtype), innov_h)
         delta = from_heading_frame(delta, yaw, STATE_PLANAR)
         x = x_prior + delta
         # sizes stay physical (a learned gain can overshoot); the yaw is wrapped
         x = torch.cat([x[:, :3], x[:, 3:6].clamp_min(MIN_SIZE), x[:, 6:yi], wrap_angle_t(x[:, yi:yi + 1]),
                        x[:, yi + 1:]], 1)
-        return x, new_hidden
+        return x, new_hidden, K
 
     def _yaw_res(self, r: torch.Tensor) -> torch.Tensor:
         """Yaw residuals (K, 1) wrapped to [-pi, pi); with ``yaw_flip`` those beyond pi/2 turned by pi."""
