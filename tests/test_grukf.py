@@ -78,6 +78,35 @@ def _net(seed=0, **kw):
     return net.double()
 
 
+@pytest.mark.parametrize("kw", [{}, {"four_gru": True, "class_gain": True, "aux_inputs": True}])
+def test_initialisation_from_a_generator_is_torchs_default_and_leaves_the_global_one_alone(kw):
+    from torch import nn
+
+    cfg = GRUKFConfig(**kw)
+    before = torch.get_rng_state()
+    net = GRUKalmanNet(cfg, generator=torch.Generator().manual_seed(7))
+    assert torch.equal(torch.get_rng_state(), before)      # nothing drawn from the global generator
+    # the reference: torch's own reset of every layer, in creation order, after a global seed
+    ref = GRUKalmanNet(cfg, generator=torch.Generator().manual_seed(123))
+    torch.manual_seed(7)
+    for mod in ref.modules():
+        if isinstance(mod, (nn.Linear, nn.GRUCell)):
+            mod.reset_parameters()
+    with torch.no_grad():
+        ref.fc_gain[2].weight.zero_()
+        ref.fc_gain[2].bias.zero_()
+    a, b = net.state_dict(), ref.state_dict()
+    assert set(a) == set(b) and all(torch.equal(a[k], b[k]) for k in a)
+    assert float(a["fc_gain.2.weight"].abs().sum()) == 0.0 and float(a["gru_q.weight_ih"].std()) > 0
+    # the gain prior's small weights come from the same generator
+    K0 = torch.zeros(10, 9)
+    g1, g2 = torch.Generator().manual_seed(1), torch.Generator().manual_seed(1)
+    before = torch.get_rng_state()
+    net.set_gain_prior(K0, generator=g1)
+    w = net.fc_gain[2].weight
+    assert torch.equal(w, torch.randn(w.shape, generator=g2) * 1e-3) and torch.equal(torch.get_rng_state(), before)
+
+
 def _correct_inputs(n, seed=1):
     rng = np.random.default_rng(seed)
     prior = torch.tensor(_states(n, seed))
@@ -198,6 +227,27 @@ def test_training_is_deterministic_and_resumes_exactly(small_training_set, tmp_p
     assert any(not torch.equal(init[k], sa[k]) for k in sa)
     text = (tmp_path / "a" / "train_log.csv").read_text().splitlines()
     assert text[0].startswith("step,epoch,scene,loss") and len(text) == 5
+
+
+def test_training_uses_its_own_generators(small_training_set, tmp_path):
+    import random
+
+    scenes, dets = small_training_set
+    np.random.seed(11)
+    random.seed(11)
+    torch.manual_seed(11)
+    before = (torch.get_rng_state(), np.random.get_state()[1].copy(), random.getstate())
+    t = _trainer(scenes, dets, tmp_path, epochs=1)
+    t.run(max_steps=1)
+    after = (torch.get_rng_state(), np.random.get_state()[1], random.getstate())
+    assert torch.equal(before[0], after[0]) and np.array_equal(before[1], after[1]) and before[2] == after[2]
+    # the initial weights are those of the config seed, whatever the process-wide generators hold
+    torch.manual_seed(99)
+    again = _trainer(scenes, dets, tmp_path / "again", epochs=1)
+    first = GRUKalmanNet(again.net.cfg, generator=torch.Generator().manual_seed(again.cfg.seed)).state_dict()
+    assert torch.equal(again.net.state_dict()["gru_q.weight_ih"], first["gru_q.weight_ih"])
+    from grutrack.motion.checkpoint import read_checkpoint
+    assert set(read_checkpoint(tmp_path / "last.pt")["rng"]) == {"numpy", "torch"}
 
 
 @pytest.fixture(scope="module")

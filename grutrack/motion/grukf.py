@@ -115,10 +115,19 @@ STATE_PLANAR = ((0, 1),)         # (x, y) in the CTRA / Bicycle state
 class GRUKalmanNet(nn.Module):
     """The learned gain network; see the module docstring. m = state dim (10), n = measurement dim (9)."""
 
-    def __init__(self, cfg: GRUKFConfig = GRUKFConfig()):
+    def __init__(self, cfg: GRUKFConfig = GRUKFConfig(), generator: torch.Generator | None = None):
+        """Layers of architecture ``cfg`` initialised from ``generator`` (a CPU ``torch.Generator``; None = torch's
+        global generator), see :meth:`reset_parameters`."""
         super().__init__()
         self.cfg = cfg
         self.ss = make_torch_model(cfg.ss_model, **cfg.ss_params)
+        with torch.device("meta"):      # allocated without drawing from any generator, initialised below
+            self._build(cfg)
+        self.to_empty(device="cpu")
+        self.reset_parameters(generator)
+
+    def _build(self, cfg: GRUKFConfig) -> None:
+        """Create the layers (parameters uninitialised)."""
         m, n = self.ss.dim_x, MEAS_DIM
         self.m, self.n = m, n
         self.h_q, self.h_sigma, self.h_s = m * m, m * m, n * n
@@ -140,20 +149,43 @@ class GRUKalmanNet(nn.Module):
                                      nn.Linear(hidden, m * n))            # output layer: K
         self.fc_back1 = _fc(self.h_s + m * n, m * m)
         self.fc_back2 = _fc(self.h_sigma + m * m, self.h_sigma)
-        nn.init.zeros_(self.fc_gain[2].weight)
-        nn.init.zeros_(self.fc_gain[2].bias)
         if cfg.has_table:
             self.gain_table = nn.Parameter(torch.zeros(*cfg.table_shape, m * n))
 
-    def set_gain_prior(self, K0: torch.Tensor, K_table: torch.Tensor | None = None) -> None:
-        """Start from the constant gain K0 (m, n) in the heading frame: output bias = K0, small weights.
+    def reset_parameters(self, generator: torch.Generator | None = None) -> None:
+        """PyTorch's default initialisation of every layer, drawn from ``generator`` in the order the layers
+        were created (so a generator seeded with s gives the weights ``torch.manual_seed(s)`` gives a network
+        built with default-initialised layers): Linear weights kaiming-uniform (a = sqrt(5)) and biases
+        U(+-1/sqrt(fan_in)), GRU cells U(+-1/sqrt(hidden)); then the output layer's last Linear and the gain
+        table are zeroed (the gain comes from :meth:`set_gain_prior`)."""
+        with torch.no_grad():
+            for mod in self.modules():
+                if isinstance(mod, nn.Linear):
+                    nn.init.kaiming_uniform_(mod.weight, a=math.sqrt(5), generator=generator)
+                    bound = 1 / math.sqrt(mod.in_features)
+                    nn.init.uniform_(mod.bias, -bound, bound, generator=generator)
+                elif isinstance(mod, nn.GRUCell):
+                    stdv = 1 / math.sqrt(mod.hidden_size)
+                    for w in mod.parameters():
+                        nn.init.uniform_(w, -stdv, stdv, generator=generator)
+            nn.init.zeros_(self.fc_gain[2].weight)
+            nn.init.zeros_(self.fc_gain[2].bias)
+            if self.cfg.has_table:
+                nn.init.zeros_(self.gain_table)
+
+    def set_gain_prior(self, K0: torch.Tensor, K_table: torch.Tensor | None = None,
+                       generator: torch.Generator | None = None) -> None:
+        """Start from the constant gain K0 (m, n) in the heading frame: output bias = K0, small weights
+        (N(0, 1e-3^2), drawn from ``generator``, a torch.Generator on the network's device; None = torch's
+        global generator).
 
         With a gain table, ``K_table`` (*table_shape, m, n) gives the starting gain of each (class, age, gap)
         cell (a NaN cell had no update in the training data: it starts at K0).
         """
         with torch.no_grad():
+            w = self.fc_gain[2].weight
             self.fc_gain[2].bias.copy_(K0.reshape(-1).to(self.fc_gain[2].bias))
-            self.fc_gain[2].weight.mul_(0.0).add_(torch.randn_like(self.fc_gain[2].weight) * 1e-3)
+            w.mul_(0.0).add_(torch.randn(w.shape, generator=generator, dtype=w.dtype, device=w.device) * 1e-3)
             if self.cfg.has_table and K_table is not None:
                 off = K_table.reshape(*self.cfg.table_shape, -1).to(self.gain_table) - self.fc_gain[2].bias
                 self.gain_table.copy_(torch.nan_to_num(off, nan=0.0))

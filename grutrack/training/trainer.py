@@ -12,7 +12,6 @@ AdamW step per scene; cosine annealing over all steps.
 from __future__ import annotations
 
 import hashlib
-import random
 import signal
 import sys
 import threading
@@ -290,14 +289,15 @@ def _plain(v):
     return list(v) if isinstance(v, tuple) else v
 
 
-def _rng_state(np_rng: np.random.Generator) -> dict:
-    return {"numpy": np_rng.bit_generator.state, "torch": torch.get_rng_state(), "python": random.getstate()}
+def _rng_state(np_rng: np.random.Generator, torch_rng: torch.Generator) -> dict:
+    """The states of a run's own generators (for its checkpoints)."""
+    return {"numpy": np_rng.bit_generator.state, "torch": torch_rng.get_state()}
 
 
-def _set_rng_state(np_rng: np.random.Generator, st: dict) -> None:
+def _set_rng_state(np_rng: np.random.Generator, torch_rng: torch.Generator, st: dict) -> None:
+    """Restore :func:`_rng_state` (a checkpoint's ``python`` entry, written by older versions, is not used)."""
     np_rng.bit_generator.state = st["numpy"]
-    torch.set_rng_state(st["torch"])
-    random.setstate(st["python"])
+    torch_rng.set_state(st["torch"])
 
 
 class Trainer:
@@ -318,12 +318,13 @@ class Trainer:
         vocab = scenes[0].vocabulary if scenes else NUSCENES_VOCABULARY
         self.index = param_index(vocab.param_classes)    # dataset label -> tracking class of its parameters
         self.tracker_cfg = remap_config(load_tracker_config(cfg.tracker_preset), self.index)
-        torch.manual_seed(cfg.seed)
+        # the run's own generators (no process-wide seeding): torch's for the initial weights, numpy's for the
+        # scene order of every epoch
+        self.torch_rng = torch.Generator().manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
-        random.seed(cfg.seed)
-        self.net = GRUKalmanNet(_arch(cfg))
+        self.net = GRUKalmanNet(_arch(cfg), generator=self.torch_rng)
         shared, table = mean_ekf_gain(scenes, dets, self.tracker_cfg, cfg, self.index)
-        self.net.set_gain_prior(torch.as_tensor(shared), torch.as_tensor(table))
+        self.net.set_gain_prior(torch.as_tensor(shared), torch.as_tensor(table), generator=self.torch_rng)
         self.net.to(self.device)
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
         self.total_steps = cfg.epochs * len(scenes)
@@ -337,8 +338,9 @@ class Trainer:
         path = self.out / name
         save_checkpoint(path, self.net, {
             "optimizer": self.opt.state_dict(), "scheduler": self.sched.state_dict(),
-            "rng": _rng_state(self.np_rng), "train_state": asdict(self.state), "train_config": asdict(self.cfg),
-            "log": [s.to_row() for s in self.log.steps], "data_fingerprint": self.fingerprint, "data_source": self.source})
+            "rng": _rng_state(self.np_rng, self.torch_rng), "train_state": asdict(self.state),
+            "train_config": asdict(self.cfg), "log": [s.to_row() for s in self.log.steps],
+            "data_fingerprint": self.fingerprint, "data_source": self.source})
         self._write_log()
         return path
 
@@ -350,7 +352,7 @@ class Trainer:
         load_weights(self.net, ck, path)
         self.opt.load_state_dict(ck["optimizer"])
         self.sched.load_state_dict(ck["scheduler"])
-        _set_rng_state(self.np_rng, ck["rng"])
+        _set_rng_state(self.np_rng, self.torch_rng, ck["rng"])
         self.state = TrainState(**ck["train_state"])
         self.log = TrainingLog([TrainingStep.from_row(r, str(path)) for r in ck["log"]])
 
