@@ -8,11 +8,12 @@ import pytest
 from grutrack import geometry
 from grutrack.classes import CLASS_INDEX
 from grutrack.data.scene import BoxSet, Frame, Scene
-from grutrack.tracking.association import associate, similarity_upper_bound
+from grutrack.tracking.association import associate
 from grutrack.tracking.config import load_tracker_config
 from grutrack.tracking.factory import build_tracker
-from grutrack.tracking.preprocess import nms_keep, preprocess
+from grutrack.tracking.preprocess import nms_keep, score_filter
 from grutrack.tracking.tracker import track_scenes
+from support.association_bounds import similarity_upper_bound
 
 CAR, PED = CLASS_INDEX["car"], CLASS_INDEX["pedestrian"]
 
@@ -33,7 +34,7 @@ def test_score_filter_per_class():
     cfg = load_tracker_config("ekf")
     dets = BoxSet(np.array([_box(0, 0), _box(10, 0), _box(20, 0)]), np.array([0.10, 0.20, 0.10]),
                   np.array([CAR, CAR, CLASS_INDEX["bus"]]))
-    kept = preprocess(dets, cfg.score_threshold, cfg.nms_threshold)
+    kept = score_filter(dets, cfg.score_threshold)
     assert kept.scores.tolist() == [0.20, 0.10]  # car threshold 0.16, bus 0.0
 
 
