@@ -78,6 +78,35 @@ def _net(seed=0, **kw):
     return net.double()
 
 
+@pytest.mark.parametrize("kw", [{}, {"four_gru": True, "class_gain": True, "aux_inputs": True}])
+def test_initialisation_from_a_generator_is_torchs_default_and_leaves_the_global_one_alone(kw):
+    from torch import nn
+
+    cfg = GRUKFConfig(**kw)
+    before = torch.get_rng_state()
+    net = GRUKalmanNet(cfg, generator=torch.Generator().manual_seed(7))
+    assert torch.equal(torch.get_rng_state(), before)      # nothing drawn from the global generator
+    # the reference: torch's own reset of every layer, in creation order, after a global seed
+    ref = GRUKalmanNet(cfg, generator=torch.Generator().manual_seed(123))
+    torch.manual_seed(7)
+    for mod in ref.modules():
+        if isinstance(mod, (nn.Linear, nn.GRUCell)):
+            mod.reset_parameters()
+    with torch.no_grad():
+        ref.fc_gain[2].weight.zero_()
+        ref.fc_gain[2].bias.zero_()
+    a, b = net.state_dict(), ref.state_dict()
+    assert set(a) == set(b) and all(torch.equal(a[k], b[k]) for k in a)
+    assert float(a["fc_gain.2.weight"].abs().sum()) == 0.0 and float(a["gru_q.weight_ih"].std()) > 0
+    # the gain prior's small weights come from the same generator
+    K0 = torch.zeros(10, 9)
+    g1, g2 = torch.Generator().manual_seed(1), torch.Generator().manual_seed(1)
+    before = torch.get_rng_state()
+    net.set_gain_prior(K0, generator=g1)
+    w = net.fc_gain[2].weight
+    assert torch.equal(w, torch.randn(w.shape, generator=g2) * 1e-3) and torch.equal(torch.get_rng_state(), before)
+
+
 def _correct_inputs(n, seed=1):
     rng = np.random.default_rng(seed)
     prior = torch.tensor(_states(n, seed))
@@ -92,9 +121,9 @@ def test_batching_equals_one_by_one():
     hidden = net.init_hidden(6)
     hidden = {k: torch.randn_like(v) * 0.1 for k, v in hidden.items()}
     with torch.no_grad():
-        x_all, h_all = net.correct(*args, hidden)
+        x_all, h_all, _ = net.correct(*args, hidden)
         for i in range(6):
-            xi, hi = net.correct(*[a[i:i + 1] for a in args], {k: v[i:i + 1] for k, v in hidden.items()})
+            xi, hi, _ = net.correct(*[a[i:i + 1] for a in args], {k: v[i:i + 1] for k, v in hidden.items()})
             assert torch.allclose(xi, x_all[i:i + 1], atol=1e-9)
             assert all(torch.allclose(hi[k], h_all[k][i:i + 1], atol=1e-9) for k in hi)
 
@@ -106,7 +135,7 @@ def test_yaw_residual_wrapped():
     y = TorchCTRA().h(prior)
     y[0, 6] = math.pi - 0.01  # 0.02 rad away across the +-pi seam
     with torch.no_grad():
-        x, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(1))
+        x, _, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(1))
     step = (x[0, 8] - prior[0, 8] + math.pi) % (2 * math.pi) - math.pi
     assert abs(float(step)) < 0.03 and -math.pi <= float(x[0, 8]) < math.pi
 
@@ -119,7 +148,7 @@ def test_gain_prior_gives_constant_gain_filter_in_heading_frame():
     y = TorchCTRA().h(prior)
     y[:, 0] += 1.0  # 1 m innovation along global x
     with torch.no_grad():
-        x, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(3))
+        x, _, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(3))
     # K0 has 0.6 on x and y in the heading frame: the global correction is 0.6 m along x for any heading
     assert torch.allclose(x[:, 0] - prior[:, 0], torch.full((3,), 0.6, dtype=torch.float64), atol=1e-9)
     assert torch.allclose(x[:, 1], prior[:, 1], atol=1e-9)
@@ -130,7 +159,7 @@ def test_four_gru_variant_is_separate_and_runs():
     assert sum(p.numel() for p in b.parameters()) > sum(p.numel() for p in a.parameters())
     assert not hasattr(a, "gru_r") and hasattr(b, "gru_r")
     with torch.no_grad():
-        x, h = b.correct(*_correct_inputs(4), b.init_hidden(4))
+        x, h, _ = b.correct(*_correct_inputs(4), b.init_hidden(4))
     assert x.shape == (4, 10) and set(h) == {"q", "sigma", "s", "r"}
 
 
@@ -198,6 +227,27 @@ def test_training_is_deterministic_and_resumes_exactly(small_training_set, tmp_p
     assert any(not torch.equal(init[k], sa[k]) for k in sa)
     text = (tmp_path / "a" / "train_log.csv").read_text().splitlines()
     assert text[0].startswith("step,epoch,scene,loss") and len(text) == 5
+
+
+def test_training_uses_its_own_generators(small_training_set, tmp_path):
+    import random
+
+    scenes, dets = small_training_set
+    np.random.seed(11)
+    random.seed(11)
+    torch.manual_seed(11)
+    before = (torch.get_rng_state(), np.random.get_state()[1].copy(), random.getstate())
+    t = _trainer(scenes, dets, tmp_path, epochs=1)
+    t.run(max_steps=1)
+    after = (torch.get_rng_state(), np.random.get_state()[1], random.getstate())
+    assert torch.equal(before[0], after[0]) and np.array_equal(before[1], after[1]) and before[2] == after[2]
+    # the initial weights are those of the config seed, whatever the process-wide generators hold
+    torch.manual_seed(99)
+    again = _trainer(scenes, dets, tmp_path / "again", epochs=1)
+    first = GRUKalmanNet(again.net.cfg, generator=torch.Generator().manual_seed(again.cfg.seed)).state_dict()
+    assert torch.equal(again.net.state_dict()["gru_q.weight_ih"], first["gru_q.weight_ih"])
+    from grutrack.motion.checkpoint import read_checkpoint
+    assert set(read_checkpoint(tmp_path / "last.pt")["rng"]) == {"numpy", "torch"}
 
 
 @pytest.fixture(scope="module")
@@ -364,7 +414,7 @@ def test_gain_table_cells_start_at_given_gains_and_are_looked_up_per_track():
     n_upd = torch.tensor([5, 5, 5, 5])
     gaps = torch.tensor([1, 2, 9, 1])                                     # 9 -> the last gap bin
     with torch.no_grad():
-        x, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(4),
+        x, _, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(4),
                            net.table_index(labels, n_upd, gaps))
     step = (x[:, 0] - prior[:, 0]).numpy()
     # class 4 had no update in the table (NaN cells): it starts at the shared prior (zero gain here)
@@ -391,6 +441,23 @@ def test_backend_counts_updates_and_frames_since_the_last_update():
     assert s.n_updates.tolist() == [1, 1, 2] and s.since.tolist() == [3, 0, 0]
     both = be.concat(be.select(s, np.array([2])), be.select(s, np.array([0])))
     assert both.n_updates.tolist() == [2, 1] and both.since.tolist() == [0, 3]
+
+
+def test_correct_returns_the_gain_and_the_backend_keeps_each_tracks_largest_entry():
+    from grutrack.tracking.grukf_backend import GRUKFBackend
+
+    net = _table_net()                                     # silent network: K = the prior K0 (largest entry 0.6)
+    with torch.no_grad():
+        _, _, K = net.correct(*_correct_inputs(2), net.init_hidden(2))
+    assert K.shape == (2, 10, 9) and float(K.abs().max()) == pytest.approx(0.6)
+    assert not hasattr(net, "max_abs_gain")                # no state written during forward passes
+    be = GRUKFBackend(net, "cpu")
+    z = TorchCTRA().h(torch.tensor(_states(3))).numpy()
+    s = be.predict(be.initiate(z, np.array([0, 1, 2])), 0.5)
+    assert s.gain_abs_max.tolist() == [0.0, 0.0, 0.0]
+    s = be.update(s, np.array([0, 2]), z[[0, 2]])
+    assert s.gain_abs_max.tolist() == pytest.approx([0.6, 0.0, 0.6])
+    assert be.concat(be.select(s, np.array([1])), s).gain_abs_max.tolist() == pytest.approx([0.0, 0.6, 0.0, 0.6])
 
 
 def test_backend_maps_dataset_labels_to_tracking_classes():

@@ -44,7 +44,7 @@ def test_yaw_flip_turns_a_reversed_detection_instead_of_pulling_the_heading():
     for flip in (False, True):
         net = _net(yaw_flip=flip)
         with torch.no_grad():
-            x, _ = net.correct(_prior(1), y, y, _prior(1), _prior(1), _prior(1), net.init_hidden(1))
+            x, _, _ = net.correct(_prior(1), y, y, _prior(1), _prior(1), _prior(1), net.init_hidden(1))
         steps[flip] = float((x[0, 8] - 0.3 + math.pi) % (2 * math.pi) - math.pi)
     # plain wrap: residual -(pi + 0.1) wraps to pi - 0.1 -> heading pulled by 0.5 * (pi - 0.1)
     assert steps[False] == pytest.approx(0.5 * (math.pi - 0.1), abs=1e-9)
@@ -73,8 +73,8 @@ def test_aux_inputs_reach_the_gain_and_are_required():
     y[:, 0] += 1.0
     args = (prior, y, y, prior, prior, prior)
     with torch.no_grad():
-        x_young, _ = net.correct(*args, net.init_hidden(2), counts=torch.tensor([[1, 1], [1, 1]]))
-        x_gap, _ = net.correct(*args, net.init_hidden(2), counts=torch.tensor([[1, 1], [20, 6]]))
+        x_young, _, _ = net.correct(*args, net.init_hidden(2), counts=torch.tensor([[1, 1], [1, 1]]))
+        x_gap, _, _ = net.correct(*args, net.init_hidden(2), counts=torch.tensor([[1, 1], [20, 6]]))
     # same features, other track age and gap: the first track's correction is unchanged, the second's differs
     assert torch.allclose(x_young[0], x_gap[0]) and not torch.allclose(x_young[1], x_gap[1])
     with pytest.raises(ValueError, match="aux inputs need"):

@@ -8,11 +8,12 @@ import pytest
 from grutrack import geometry
 from grutrack.classes import CLASS_INDEX
 from grutrack.data.scene import BoxSet, Frame, Scene
-from grutrack.tracking.association import associate, similarity_upper_bound
+from grutrack.tracking.association import associate
 from grutrack.tracking.config import load_tracker_config
 from grutrack.tracking.factory import build_tracker
-from grutrack.tracking.preprocess import nms_keep, preprocess
+from grutrack.tracking.preprocess import nms_keep, score_filter
 from grutrack.tracking.tracker import track_scenes
+from support.association_bounds import similarity_upper_bound
 
 CAR, PED = CLASS_INDEX["car"], CLASS_INDEX["pedestrian"]
 
@@ -33,7 +34,7 @@ def test_score_filter_per_class():
     cfg = load_tracker_config("ekf")
     dets = BoxSet(np.array([_box(0, 0), _box(10, 0), _box(20, 0)]), np.array([0.10, 0.20, 0.10]),
                   np.array([CAR, CAR, CLASS_INDEX["bus"]]))
-    kept = preprocess(dets, cfg.score_threshold, cfg.nms_threshold)
+    kept = score_filter(dets, cfg.score_threshold)
     assert kept.scores.tolist() == [0.20, 0.10]  # car threshold 0.16, bus 0.0
 
 
@@ -135,3 +136,35 @@ def test_param_classes_keep_labels_distinct():
     assert sorted(s1.labels.tolist()) == [0, 1]  # the label-0 track coasts (punish_num), a label-1 track is born
     assert int(s1.ids[s1.labels == 1][0]) != int(run.results["s0"].ids[0])
     assert tracker.cfg.max_age.tolist() == [15, 15]
+
+
+def test_step_with_updates_reports_each_groups_correction_before_the_lifecycle():
+    # a car (matched in frames 0-2, missed in 3, matched in 4) and a bicycle of another track group (frames 0-1)
+    bike = CLASS_INDEX["bicycle"]
+    frames = [[(_box(0, 0, vx=10.0), CAR), (_box(30, 5), bike)], [(_box(5.1, 0, vx=10.0), CAR), (_box(30, 5.2), bike)],
+              [(_box(10, 0, vx=10.0), CAR)], [], [(_box(20.2, 0, vx=10.0), CAR)]]
+    plain, recording = build_tracker("ekf"), build_tracker("ekf")
+    car_group = int(recording.group_of_class[CAR])
+    bike_group = int(recording.group_of_class[bike])
+    assert car_group != bike_group
+    reports = []
+    for i, f in enumerate(frames):
+        d = BoxSet(np.array([b for b, _ in f]).reshape(-1, 9), np.full(len(f), 0.9),
+                   np.array([c for _, c in f], dtype=np.int64))
+        out, updates = recording.step_with_updates(d, 1_000_000 + 500_000 * i)
+        ref = plain.step(d, 1_000_000 + 500_000 * i)
+        assert np.array_equal(out.boxes, ref.boxes) and np.array_equal(out.ids, ref.ids)  # same tracking
+        reports.append({u.group: u for u in updates})
+    assert reports[0] == {}                               # no track existed at the first predict
+    assert sorted(reports[1]) == sorted([car_group, bike_group])
+    car = reports[1][car_group]
+    assert (car.rows.tolist(), car.det_rows.tolist(), car.ids.tolist(), car.labels.tolist()) == ([0], [0], [0], [CAR])
+    assert reports[1][bike_group].det_rows.tolist() == [1]
+    # the correction pulls the predicted x (5 m at 10 m/s) towards the detection (5.1 m), not beyond it
+    assert 5.0 < car.posterior.x[0, 0] < 5.1 and car.prior.x[0, 0] == pytest.approx(5.0)
+    missed = reports[3][car_group]
+    assert len(missed.rows) == 0 and missed.posterior is missed.prior and missed.misses.tolist() == [1]
+    late = reports[4][car_group]                           # hits and misses as they were before this frame
+    assert (late.rows.tolist(), late.hits.tolist(), late.misses.tolist()) == ([0], [3], [2])
+    assert late.prior.x[0, 0] < late.posterior.x[0, 0] < 20.2
+    assert not hasattr(recording, "update_hook")

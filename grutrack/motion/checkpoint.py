@@ -40,7 +40,7 @@ def load_network(path: str | Path, map_location="cpu") -> GRUKalmanNet:
     """The trained network of a checkpoint (weights loaded once, never re-initialised afterwards)."""
     ck = read_checkpoint(path, map_location)
     try:
-        net = GRUKalmanNet(GRUKFConfig(**ck["arch"]))
+        net = GRUKalmanNet(GRUKFConfig(**ck["arch"]), generator=torch.Generator())  # weights loaded below
     except (TypeError, ValueError, KeyError) as exc:
         raise InputFormatError(f"{path}: field 'arch' is not a GRU-KF architecture ({exc})") from exc
     load_weights(net, ck, path)

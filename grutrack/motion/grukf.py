@@ -118,10 +118,19 @@ STATE_PLANAR = ((0, 1),)         # (x, y) in the CTRA / Bicycle state
 class GRUKalmanNet(nn.Module):
     """The learned gain network; see the module docstring. m = state dim (10), n = measurement dim (9)."""
 
-    def __init__(self, cfg: GRUKFConfig = GRUKFConfig()):
+    def __init__(self, cfg: GRUKFConfig = GRUKFConfig(), generator: torch.Generator | None = None):
+        """Layers of architecture ``cfg`` initialised from ``generator`` (a CPU ``torch.Generator``; None = torch's
+        global generator), see :meth:`reset_parameters`."""
         super().__init__()
         self.cfg = cfg
         self.ss = make_torch_model(cfg.ss_model, **cfg.ss_params)
+        with torch.device("meta"):      # allocated without drawing from any generator, initialised below
+            self._build(cfg)
+        self.to_empty(device="cpu")
+        self.reset_parameters(generator)
+
+    def _build(self, cfg: GRUKFConfig) -> None:
+        """Create the layers (parameters uninitialised)."""
         m, n = self.ss.dim_x, MEAS_DIM
         self.m, self.n = m, n
         self.h_q, self.h_sigma, self.h_s = m * m, m * m, n * n
@@ -143,22 +152,43 @@ class GRUKalmanNet(nn.Module):
                                      nn.Linear(hidden, m * n))            # output layer: K
         self.fc_back1 = _fc(self.h_s + m * n, m * m)
         self.fc_back2 = _fc(self.h_sigma + m * m, self.h_sigma)
-        nn.init.zeros_(self.fc_gain[2].weight)
-        nn.init.zeros_(self.fc_gain[2].bias)
         if cfg.has_table:
             self.gain_table = nn.Parameter(torch.zeros(*cfg.table_shape, m * n))
-        #: largest |K| entry produced since the last reset (the trainer watches it for divergence)
-        self.max_abs_gain = 0.0
 
-    def set_gain_prior(self, K0: torch.Tensor, K_table: torch.Tensor | None = None) -> None:
-        """Start from the constant gain K0 (m, n) in the heading frame: output bias = K0, small weights.
+    def reset_parameters(self, generator: torch.Generator | None = None) -> None:
+        """PyTorch's default initialisation of every layer, drawn from ``generator`` in the order the layers
+        were created (so a generator seeded with s gives the weights ``torch.manual_seed(s)`` gives a network
+        built with default-initialised layers): Linear weights kaiming-uniform (a = sqrt(5)) and biases
+        U(+-1/sqrt(fan_in)), GRU cells U(+-1/sqrt(hidden)); then the output layer's last Linear and the gain
+        table are zeroed (the gain comes from :meth:`set_gain_prior`)."""
+        with torch.no_grad():
+            for mod in self.modules():
+                if isinstance(mod, nn.Linear):
+                    nn.init.kaiming_uniform_(mod.weight, a=math.sqrt(5), generator=generator)
+                    bound = 1 / math.sqrt(mod.in_features)
+                    nn.init.uniform_(mod.bias, -bound, bound, generator=generator)
+                elif isinstance(mod, nn.GRUCell):
+                    stdv = 1 / math.sqrt(mod.hidden_size)
+                    for w in mod.parameters():
+                        nn.init.uniform_(w, -stdv, stdv, generator=generator)
+            nn.init.zeros_(self.fc_gain[2].weight)
+            nn.init.zeros_(self.fc_gain[2].bias)
+            if self.cfg.has_table:
+                nn.init.zeros_(self.gain_table)
+
+    def set_gain_prior(self, K0: torch.Tensor, K_table: torch.Tensor | None = None,
+                       generator: torch.Generator | None = None) -> None:
+        """Start from the constant gain K0 (m, n) in the heading frame: output bias = K0, small weights
+        (N(0, 1e-3^2), drawn from ``generator``, a torch.Generator on the network's device; None = torch's
+        global generator).
 
         With a gain table, ``K_table`` (*table_shape, m, n) gives the starting gain of each (class, age, gap)
         cell (a NaN cell had no update in the training data: it starts at K0).
         """
         with torch.no_grad():
+            w = self.fc_gain[2].weight
             self.fc_gain[2].bias.copy_(K0.reshape(-1).to(self.fc_gain[2].bias))
-            self.fc_gain[2].weight.mul_(0.0).add_(torch.randn_like(self.fc_gain[2].weight) * 1e-3)
+            w.mul_(0.0).add_(torch.randn(w.shape, generator=generator, dtype=w.dtype, device=w.device) * 1e-3)
             if self.cfg.has_table and K_table is not None:
                 off = K_table.reshape(*self.cfg.table_shape, -1).to(self.gain_table) - self.fc_gain[2].bias
                 self.gain_table.copy_(torch.nan_to_num(off, nan=0.0))
@@ -216,12 +246,14 @@ class GRUKalmanNet(nn.Module):
     def correct(self, x_prior: torch.Tensor, y: torch.Tensor, y_prev: torch.Tensor, x_post_prev: torch.Tensor,
                 x_prior_prev: torch.Tensor, x_post_prev2: torch.Tensor, hidden: dict[str, torch.Tensor],
                 cells: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None,
-                counts: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+                counts: torch.Tensor | None = None
+                ) -> tuple[torch.Tensor, dict[str, torch.Tensor], torch.Tensor]:
         """One update of K tracks (all (K, ·) float64): prior x^-_n, measurement y_n, previous measurement,
         previous posterior x_{n-1|n-1}, previous prior x_{n-1|n-2}, posterior before that x_{n-2|n-2};
         ``cells``: the tracks' cells of the gain table (:meth:`table_index`; only with a table); ``counts``
         (K, 2): each track's update count at this update (1 = the first) and frames since its last update
-        (only with ``aux_inputs``). Returns the posterior (K, m) and the new hidden states.
+        (only with ``aux_inputs``). Returns the posterior (K, m), the new hidden states and the gain K
+        (K, m, n) it applied (heading frame; the trainer checks it for divergence).
         """
         yaw = x_prior[:, self.ss.yaw_index]
         innov = y - self.ss.h(x_prior)
@@ -244,15 +276,13 @@ class GRUKalmanNet(nn.Module):
                 raise ValueError("this GRU-KF's aux inputs need the update count and gap of every track")
             feats["aux"] = aux_features(raw, counts)
         K, new_hidden = self.gain(feats, hidden, cells)
-        if len(K):
-            self.max_abs_gain = max(self.max_abs_gain, float(K.detach().abs().max()))
         delta = torch.einsum("kmn,kn->km", K.to(innov_h.dtype), innov_h)
         delta = from_heading_frame(delta, yaw, STATE_PLANAR)
         x = x_prior + delta
         # sizes stay physical (a learned gain can overshoot); the yaw is wrapped
         x = torch.cat([x[:, :3], x[:, 3:6].clamp_min(MIN_SIZE), x[:, 6:yi], wrap_angle_t(x[:, yi:yi + 1]),
                        x[:, yi + 1:]], 1)
-        return x, new_hidden
+        return x, new_hidden, K
 
     def _yaw_res(self, r: torch.Tensor) -> torch.Tensor:
         """Yaw residuals (K, 1) wrapped to [-pi, pi); with ``yaw_flip`` those beyond pi/2 turned by pi."""

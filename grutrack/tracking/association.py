@@ -76,22 +76,6 @@ def _centre_distance(ta, i, tb, j) -> float:
     return np.sqrt(dx * dx + dy * dy)
 
 
-@njit(cache=True)
-def _bound_kernel(ta, tb, code, out) -> None:
-    for k in range(out.shape[0]):
-        out[k] = _similarity_bound(ta, k, tb, k, _centre_distance(ta, k, tb, k), code)
-
-
-def similarity_upper_bound(a: np.ndarray, b: np.ndarray, metric: str) -> np.ndarray:
-    """Upper bounds ``(K,)`` of the similarity ``metric`` of aligned pairs of boxes ``a, b (K, >=7)`` (see
-    :func:`_similarity_bound`). Pairs whose bound cannot beat a threshold are skipped by the association without
-    computing the polygon geometry; the result is identical."""
-    a, b = geometry._check_boxes(a, "a"), geometry._check_boxes(b, "b")
-    out = np.empty(a.shape[0])
-    _bound_kernel(geometry._box_terms(a), geometry._box_terms(b), geometry.SIMILARITIES.index(metric), out)
-    return out
-
-
 def hungarian(cost: np.ndarray, threshold: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Minimum-cost assignment among the pairs with ``cost < threshold`` (elementwise).
 
@@ -141,7 +125,7 @@ def _cost_kernel(det_labels, trk_labels, ta, tb, codes, thresholds, costs) -> No
     ta (11, D), tb (11, T): :func:`geometry._box_terms` of the detections and the tracks; labels (D,), (T,);
     codes (S, C) int: the similarity (index into ``geometry.SIMILARITIES``) of each stage and class;
     thresholds (S, C): cost thresholds. A pair is a candidate of stage s when its labels agree and the bound of
-    :func:`similarity_upper_bound` can beat ``thresholds[s, label]``.
+    :func:`_similarity_bound` can beat ``thresholds[s, label]``.
     """
     n_stages = codes.shape[0]
     out, work, flags = np.zeros((4, 1)), np.empty((12, 16)), np.empty(16, dtype=np.bool_)
@@ -183,7 +167,7 @@ def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: n
     """(D, T) cost matrices, one per stage, from ONE compiled geometry pass over the candidate pairs.
 
     stages: per stage, (metric name per class, cost threshold per class (C,)). A pair is a candidate of a
-    stage when its classes agree and the similarity bound (:func:`similarity_upper_bound`) can beat that
+    stage when its classes agree and the similarity bound (:func:`_similarity_bound`) can beat that
     stage's threshold; everything else costs ``_INVALID`` (the bound never prunes a pair that could pass).
     """
     D, T = len(det_boxes), len(trk_boxes)

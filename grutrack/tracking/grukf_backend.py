@@ -42,14 +42,17 @@ def resolve_device(device: str = "auto", what: str = "--device") -> torch.device
 class GRUState:
     """N tracks: x current state (posterior after an update, prior after a predict) (N, m) float64; y_prev
     last measurement (N, 9); post1 / post2 the last two posteriors, prior1 the prior of the last update
-    (N, m); hidden GRU states {name: (N, hidden)}; labels (N,) int64, n_updates (N,) int64 the updates each
-    track has had and since (N,) int64 the frames predicted since its last update or birth (numpy)."""
+    (N, m); gain_abs_max (N,) float64 the largest |K| entry of each track's last gain (0 before its first
+    update; no autograd graph); hidden GRU states {name: (N, hidden)}; labels (N,) int64, n_updates (N,) int64
+    the updates each track has had and since (N,) int64 the frames predicted since its last update or birth
+    (numpy)."""
 
     x: torch.Tensor
     y_prev: torch.Tensor
     post1: torch.Tensor
     post2: torch.Tensor
     prior1: torch.Tensor
+    gain_abs_max: torch.Tensor
     hidden: dict
     labels: np.ndarray
     n_updates: np.ndarray
@@ -93,7 +96,8 @@ class GRUKFBackend:
             zt = self._t(z)
             x = self.ss.init_state(zt)
             zero = np.zeros(len(z), dtype=np.int64)
-            return GRUState(x, zt, x, x, x, self.net.init_hidden(len(z), self.device), labels.copy(), zero, zero)
+            return GRUState(x, zt, x, x, x, zt.new_zeros(len(z)), self.net.init_hidden(len(z), self.device),
+                            labels.copy(), zero, zero)
 
     def _cells(self, s: GRUState, rows: np.ndarray):
         """The gain-table cells of tracks ``rows`` at this update (None when the network has no table)."""
@@ -115,8 +119,8 @@ class GRUKFBackend:
     def predict(self, s: GRUState, dt: float) -> GRUState:
         """x <- f(x, dt) for every track."""
         with self._ctx():
-            return GRUState(self.ss.f(s.x, dt), s.y_prev, s.post1, s.post2, s.prior1, s.hidden, s.labels,
-                            s.n_updates, s.since + 1)
+            return GRUState(self.ss.f(s.x, dt), s.y_prev, s.post1, s.post2, s.prior1, s.gain_abs_max, s.hidden,
+                            s.labels, s.n_updates, s.since + 1)
 
     def update(self, s: GRUState, rows: np.ndarray, z: np.ndarray) -> GRUState:
         """Correct tracks ``rows`` (K,) with measurements z (K, 9) through the learned gain."""
@@ -124,7 +128,7 @@ class GRUKFBackend:
             r = torch.as_tensor(rows, device=self.device, dtype=torch.long)
             y = self._t(z)
             prior = s.x[r]
-            post, hid = self.net.correct(prior, y, s.y_prev[r], s.post1[r], s.prior1[r], s.post2[r],
+            post, hid, K = self.net.correct(prior, y, s.y_prev[r], s.post1[r], s.prior1[r], s.post2[r],
                                          {k: v[r] for k, v in s.hidden.items()},
                                          self._cells(s, rows), self._counts(s, rows))
 
@@ -134,7 +138,8 @@ class GRUKFBackend:
                 return out
 
             return GRUState(put(s.x, post), put(s.y_prev, y), put(s.post1, post), put(s.post2, s.post1[r]),
-                            put(s.prior1, prior), {k: put(s.hidden[k], hid[k]) for k in s.hidden}, s.labels,
+                            put(s.prior1, prior), put(s.gain_abs_max, K.detach().abs().amax(dim=(1, 2))),
+                            {k: put(s.hidden[k], hid[k]) for k in s.hidden}, s.labels,
                             _incremented(s.n_updates, rows), _zeroed(s.since, rows))
 
     def measure(self, s: GRUState) -> torch.Tensor:
@@ -157,7 +162,7 @@ class GRUKFBackend:
     def concat(self, a: GRUState, b: GRUState) -> GRUState:
         """Tracks of a then b."""
         return GRUState(*(torch.cat([getattr(a, n), getattr(b, n)]) for n in ("x", "y_prev", "post1", "post2",
-                                                                             "prior1")),
+                                                                             "prior1", "gain_abs_max")),
                         {k: torch.cat([a.hidden[k], b.hidden[k]]) for k in a.hidden},
                         *(np.concatenate([getattr(a, n), getattr(b, n)]) for n in ("labels", "n_updates", "since")))
 

@@ -69,13 +69,6 @@ def nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, threshol
     return np.flatnonzero(keep).astype(np.int64)
 
 
-def preprocess(dets: BoxSet, score_threshold: np.ndarray, nms_threshold: float,
-               nms_class_aware: bool = True) -> BoxSet:
-    """Score filter followed by NMS; returns the surviving detections in their original order."""
-    dets = score_filter(dets, score_threshold)
-    return dets.subset(nms_keep(dets.boxes, dets.scores, dets.labels, nms_threshold, nms_class_aware))
-
-
 def preprocess_frame(dets: BoxSet, cfg) -> BoxSet:
     """Pre-processing of one frame as a tracker preset (:class:`TrackerConfig`) asks: score filter (score at
     least or above the class threshold, ``preprocessing.score_filter``), then blend

@@ -85,6 +85,26 @@ class TrackGroup:
         self.score_count = np.concatenate([self.score_count, np.ones(len(ids), dtype=np.int64)])
 
 
+@dataclass(frozen=True)
+class GroupUpdate:
+    """The correction of one track group in one frame, as :meth:`Tracker.step_with_updates` reports it.
+
+    Reported for every group that had tracks at this frame's predict, after its matched tracks were corrected
+    and before the lifecycle (score, hit and miss counts, deaths) of this frame touched it. N = the group's
+    tracks at this frame, K = those matched.
+    """
+
+    group: int                  # index into ``Tracker.groups``
+    rows: np.ndarray            # (K,) int64 matched track rows (possibly none)
+    det_rows: np.ndarray        # (K,) int64 their detections' rows in the pre-processed frame
+    ids: np.ndarray             # (N,) int64 track ids
+    labels: np.ndarray          # (N,) int64 track labels
+    hits: np.ndarray            # (N,) int64 matched frames since birth, before this frame's update
+    misses: np.ndarray          # (N,) int64 frames since the last update (>= 1 after the predict)
+    prior: Any                  # the backend state of the N tracks after this frame's predict
+    posterior: Any              # the backend state after correcting ``rows`` (``prior`` when K = 0)
+
+
 #: association of one frame: (detections after pre-processing, predicted track boxes (T, 9), track labels (T,),
 #: dt seconds since the previous frame) -> :class:`Matches`
 AssociateFn = Callable[[BoxSet, np.ndarray, np.ndarray, float], Matches]
@@ -123,10 +143,6 @@ class Tracker:
         self._life = tuple(np.ascontiguousarray(a, dtype=np.float64)
                            for a in (cfg.decay_rate, cfg.max_age, cfg.min_hits, cfg.delete_threshold))
         self._punish = np.ascontiguousarray(cfg.punish_num, dtype=np.float64)  # (7,) frames a track may coast
-        #: optional callable(group, rows, det_rows) run every frame for every non-empty group, right after its
-        #: matched tracks ``rows`` (possibly none) are corrected (training reads the states there, before
-        #: expired tracks are dropped)
-        self.update_hook = None
 
     def reset(self) -> None:
         """Forget all tracks (start of a scene); track ids keep counting so they stay unique."""
@@ -143,6 +159,16 @@ class Tracker:
 
         Returns the boxes to write for this frame with their track ids (``ids`` int64).
         """
+        return self._step(dets, timestamp, None)
+
+    def step_with_updates(self, dets: BoxSet, timestamp: int) -> tuple[BoxSet, list[GroupUpdate]]:
+        """:meth:`step`, also returning a :class:`GroupUpdate` per group that had tracks (training reads the
+        filter states of the tracks corrected in this frame from them)."""
+        updates: list[GroupUpdate] = []
+        return self._step(dets, timestamp, updates), updates
+
+    def _step(self, dets: BoxSet, timestamp: int, updates: list[GroupUpdate] | None) -> BoxSet:
+        """:meth:`step`; appends the groups' :class:`GroupUpdate` s to ``updates`` unless it is None."""
         dt = 0.0 if self.last_timestamp is None else (timestamp - self.last_timestamp) * 1e-6
         if self.cfg.time_step is not None and self.last_timestamp is not None:
             dt = self.cfg.time_step  # a fixed prediction step (preset motion.time_step), e.g. Poly-MOT's 0.5 s
@@ -154,7 +180,7 @@ class Tracker:
         trk_boxes = np.concatenate([g.backend.boxes(g.state) if len(g) else empty_boxes() for g in self.groups])
         trk_labels = np.concatenate([g.labels for g in self.groups])
         m = self.associate(dets, trk_boxes, trk_labels, dt)
-        out = self._update_groups(dets, m.dets, m.tracks)
+        out = self._update_groups(dets, m.dets, m.tracks, updates)
         out.append(self._births(dets, m.unmatched_dets))
         return _concat_boxsets(out)
 
@@ -164,20 +190,24 @@ class Tracker:
                 g.state = g.backend.predict(g.state, dt)
                 g.misses += 1
 
-    def _update_groups(self, dets: BoxSet, mdets: np.ndarray, mtracks: np.ndarray) -> list[BoxSet]:
-        """Correct matched tracks, decay the others, kill the expired; return each group's output."""
+    def _update_groups(self, dets: BoxSet, mdets: np.ndarray, mtracks: np.ndarray,
+                       updates: list[GroupUpdate] | None) -> list[BoxSet]:
+        """Correct matched tracks, decay the others, kill the expired; return each group's output (and append
+        each group's :class:`GroupUpdate` to ``updates`` unless it is None)."""
         out, offset = [], 0
-        for g in self.groups:
+        for gi, g in enumerate(self.groups):
             n = len(g)
             sel = (mtracks >= offset) & (mtracks < offset + n)
             rows, drows = mtracks[sel] - offset, mdets[sel]
             offset += n
             if n == 0:
                 continue
+            prior = g.state
             if len(rows):
                 g.state = g.backend.update(g.state, rows, dets.boxes[drows])
-            if self.update_hook is not None:
-                self.update_hook(g, rows, drows)
+            if updates is not None:   # copies: the lifecycle kernel changes hits and misses in place
+                updates.append(GroupUpdate(gi, rows, drows, g.ids, g.labels, g.hits.copy(), g.misses.copy(),
+                                           prior, g.state))
             matched, alive, emit = np.empty(n, dtype=bool), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
             cfg = self.cfg
             lifecycle_kernel(rows, dets.scores[drows], g.labels, g.scores, g.misses, g.hits, g.score_total,

@@ -12,7 +12,6 @@ AdamW step per scene; cosine annealing over all steps.
 from __future__ import annotations
 
 import hashlib
-import random
 import signal
 import sys
 import threading
@@ -32,7 +31,7 @@ from grutrack.tracking.config import TrackerConfig, load_tracker_config
 from grutrack.tracking.ekf_backend import KalmanBackend, KFState
 from grutrack.tracking.factory import grukf_group, param_index, remap_config
 from grutrack.tracking.grukf_backend import GRUKFBackend, resolve_device
-from grutrack.tracking.tracker import Tracker, TrackGroup, track_scenes
+from grutrack.tracking.tracker import GroupUpdate, Tracker, TrackGroup
 from grutrack.motion.checkpoint import load_weights, read_checkpoint, save_checkpoint
 from grutrack.training.config import TrainConfig
 from grutrack.training.gt_association import StickyGTAssociation
@@ -97,28 +96,21 @@ def data_fingerprint(scenes: list[Scene], dets: dict[str, BoxSet]) -> str:
 class PairedBackend:
     """GRU-KF and EKF on the same tracks; boxes (for association and output) come from the GRU-KF.
 
-    After each predict, ``prior`` holds every track's GRU-KF measurement-space prior (N, 9) tensor (the box
-    association used); after each update, ``last`` holds the corrected rows' GRU-KF measurement-space
-    posterior (K, 9) tensor and the EKF posterior (K, 9) numpy array.
+    A state is the pair (GRU-KF state, EKF state); :meth:`measurements` reads the training targets from the
+    states a :class:`GroupUpdate` reports.
     """
 
     def __init__(self, gru: GRUKFBackend, ekf: KalmanBackend):
         self.gru, self.ekf = gru, ekf
-        self.last = self.prior = None
 
     def initiate(self, z, labels):
         return (self.gru.initiate(z, labels), self.ekf.initiate(z, labels))
 
     def predict(self, s, dt):
-        g = self.gru.predict(s[0], dt)
-        self.prior = self.gru.measure(g)
-        return (g, self.ekf.predict(s[1], dt))
+        return (self.gru.predict(s[0], dt), self.ekf.predict(s[1], dt))
 
     def update(self, s, rows, z):
-        g, e = self.gru.update(s[0], rows, z), self.ekf.update(s[1], rows, z)
-        r = torch.as_tensor(rows, dtype=torch.long, device=self.gru.device)
-        self.last = (self.gru.measure(g)[r], self.ekf.model.h(e.x[rows]))
-        return (g, e)
+        return (self.gru.update(s[0], rows, z), self.ekf.update(s[1], rows, z))
 
     def boxes(self, s):
         return self.gru.boxes(s[0])
@@ -129,6 +121,22 @@ class PairedBackend:
     def concat(self, a, b):
         return (self.gru.concat(a[0], b[0]), self.ekf.concat(a[1], b[1]))
 
+    def posterior(self, u: GroupUpdate) -> tuple[torch.Tensor, np.ndarray]:
+        """The corrected tracks' GRU-KF measurement-space posterior (K, 9) tensor (with its graph) and EKF
+        posterior (K, 9) numpy array."""
+        r = torch.as_tensor(u.rows, dtype=torch.long, device=self.gru.device)
+        return self.gru.measure(u.posterior[0])[r], self.ekf.model.h(u.posterior[1].x[u.rows])
+
+    def prior(self, u: GroupUpdate) -> torch.Tensor:
+        """Every track's GRU-KF measurement-space prior (N, 9) tensor (the box the association used)."""
+        return self.gru.measure(u.prior[0])
+
+    def max_abs_gain(self, u: GroupUpdate) -> torch.Tensor:
+        """The largest |K| entry of the gains the GRU-KF applied in this update (0-d tensor; 0 when none)."""
+        g = u.posterior[0].gain_abs_max
+        r = torch.as_tensor(u.rows, dtype=torch.long, device=g.device)
+        return g[r].max() if len(u.rows) else g.new_zeros(())
+
 
 def _residual(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """pred - target (K, 9) with the yaw component wrapped."""
@@ -137,40 +145,39 @@ def _residual(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 
 class SceneLoss:
-    """Collects the loss terms of one scene from the tracker's update hook."""
+    """Collects the loss terms of one scene from the tracker's :class:`GroupUpdate` s, and the largest gain
+    entry the GRU-KF applied (``max_abs_gain``, a 0-d tensor, for the divergence check)."""
 
     def __init__(self, cfg: TrainConfig, device: torch.device):
         self.cfg = cfg
         self.w = torch.tensor(cfg.loss_weights, dtype=torch.float64, device=device)
         self.assoc = StickyGTAssociation(cfg.gt_match_distance)
         self.total = torch.zeros((), dtype=torch.float64, device=device)
+        self.max_abs_gain = torch.zeros((), dtype=torch.float64, device=device)
         self.gt_terms = self.pseudo_terms = self.prediction_terms = 0
-        self.frame_gt: BoxSet | None = None
 
-    def hook(self, group: TrackGroup, rows: np.ndarray, det_rows: np.ndarray) -> None:
-        """Add the terms of this frame (called by the tracker for every group, every frame): posterior terms
-        of the tracks just corrected, and prediction terms of every track holding a GT instance."""
-        gt = self.frame_gt
-        if len(rows):
-            self._posterior_terms(group, rows, gt)
-        # the tracker calls this only for groups that had tracks at this frame's predict, so ``prior`` (set
-        # there) has a row for every track of the group
+    def add(self, u: GroupUpdate, backend: PairedBackend, gt: BoxSet) -> None:
+        """Add the terms of one group's update in a frame with ground truth ``gt``: posterior terms of the
+        tracks just corrected, and prediction terms of every track holding a GT instance."""
+        if len(u.rows):
+            self._posterior_terms(u, backend, gt)
+            self.max_abs_gain = torch.maximum(self.max_abs_gain, backend.max_abs_gain(u).to(self.max_abs_gain))
         if self.cfg.prediction_weight > 0 and len(gt):
-            held = self.assoc.held_rows(group.ids, gt.ids)
+            held = self.assoc.held_rows(u.ids, gt.ids)
             has = np.flatnonzero(held >= 0)
             if len(has):
-                prior = group.backend.prior
+                prior = backend.prior(u)
                 target = torch.as_tensor(gt.boxes[held[has]], dtype=torch.float64, device=prior.device)
                 res = _residual(prior[torch.as_tensor(has, device=prior.device)], target)
                 self.total = self.total + self.cfg.prediction_weight * (res ** 2 * self.w).sum()
                 self.prediction_terms += len(has)
 
-    def _posterior_terms(self, group: TrackGroup, rows: np.ndarray, gt: BoxSet) -> None:
-        pred, ekf = group.backend.last
-        ids, labels = group.ids[rows], group.labels[rows]
+    def _posterior_terms(self, u: GroupUpdate, backend: PairedBackend, gt: BoxSet) -> None:
+        pred, ekf = backend.posterior(u)
+        ids, labels = u.ids[u.rows], u.labels[u.rows]
         xy = pred.detach().cpu().numpy()[:, :2]
         match = self.assoc.match(ids, xy, labels, gt.ids, gt.boxes[:, :2], gt.labels) if len(gt) else \
-            np.full(len(rows), -1)
+            np.full(len(u.rows), -1)
         has = match >= 0
         if has.any():
             target = torch.as_tensor(gt.boxes[match[has]], dtype=torch.float64, device=pred.device)
@@ -193,25 +200,23 @@ def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_
     """Track one scene with gradients on; returns its collected loss. ``index`` (n_labels,): the tracking
     class each label of the scene's vocabulary takes its parameters (and the network its class gain) from."""
     gru = grukf_group(net, len(index), device, train=True, class_index=index).backend
-    group = TrackGroup(PairedBackend(gru, ekf_backend(cfg, index)), np.ones(len(index), dtype=bool))
-    tracker = Tracker(tracker_cfg, [group])
+    backend = PairedBackend(gru, ekf_backend(cfg, index))
+    tracker = Tracker(tracker_cfg, [TrackGroup(backend, np.ones(len(index), dtype=bool))])
     loss = SceneLoss(cfg, device)
-    tracker.update_hook = loss.hook
     for frame in scene.frames:
-        loss.frame_gt = frame.gt
-        tracker.step(dets[frame.token], frame.timestamp)
+        _, updates = tracker.step_with_updates(dets[frame.token], frame.timestamp)
+        for u in updates:
+            loss.add(u, backend, frame.gt)
     return loss
 
 
-class GainRecorder(KalmanBackend):
-    """An EKF backend that keeps the heading-frame Kalman gains (K, m, 9) of its last update in ``last``."""
-
-    def update(self, s: KFState, rows, z):
-        x, P = s.x[rows], s.P[rows]
-        _, H, S = self.kf.project(x, P, self.R[s.labels[rows]])
-        K = np.swapaxes(np.linalg.solve(S, H @ P), -1, -2)  # (K, m, 9) global frame
-        self.last = _rotate_gain(K, x[:, self.model.yaw_index])
-        return super().update(s, rows, z)
+def ekf_gain(backend: KalmanBackend, s: KFState, rows: np.ndarray) -> np.ndarray:
+    """The heading-frame Kalman gains (K, m, 9) with which ``backend`` corrects tracks ``rows`` (K,) of the
+    predicted state ``s``: K = P H^T S^-1, rotated by each track's yaw."""
+    x, P = s.x[rows], s.P[rows]
+    _, H, S = backend.kf.project(x, P, backend.R[s.labels[rows]])
+    K = np.swapaxes(np.linalg.solve(S, H @ P), -1, -2)  # (K, m, 9) global frame
+    return _rotate_gain(K, x[:, backend.model.yaw_index])
 
 
 def _rotate_gain(K: np.ndarray, yaw: np.ndarray) -> np.ndarray:
@@ -232,23 +237,26 @@ def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: Tra
     since the last update 1..gap_bins (the last bin takes the larger values too); NaN in cells without an
     update, zeros overall when there was none. ``index``: as for :func:`run_scene` (the class axis is the
     tracking class)."""
-    base = ekf_backend(cfg, index)
-    rec = GainRecorder(base.model, base.Q, base.R, base.P0)
+    from threadpoolctl import threadpool_limits
+
+    ekf = ekf_backend(cfg, index)
     shape = _arch(cfg).table_shape
-    total = np.zeros((*shape, base.model.dim_x, 9))
+    total = np.zeros((*shape, ekf.model.dim_x, 9))
     count = np.zeros(shape, dtype=np.int64)
-
-    def hook(group: TrackGroup, rows: np.ndarray, det_rows: np.ndarray) -> None:
-        if len(rows):
-            c = index[group.labels[rows]] if cfg.class_gain else np.zeros(len(rows), dtype=np.int64)
-            a = np.minimum(group.hits[rows], shape[1]) - 1   # hits = 1 + the updates before this one
-            g = np.minimum(group.misses[rows], shape[2]) - 1  # misses = frames since the last update
-            np.add.at(total, (c, a, g), rec.last)
-            np.add.at(count, (c, a, g), 1)
-
-    tracker = Tracker(tracker_cfg, [TrackGroup(rec, np.ones(len(index), dtype=bool))])
-    tracker.update_hook = hook
-    track_scenes(tracker, scenes, dets)
+    tracker = Tracker(tracker_cfg, [TrackGroup(ekf, np.ones(len(index), dtype=bool))])
+    with threadpool_limits(limits=1, user_api="blas"):   # tiny batched solves: threads only add stalls
+        for scene in scenes:
+            tracker.reset()
+            for frame in scene.frames:
+                for u in tracker.step_with_updates(dets[frame.token], frame.timestamp)[1]:
+                    if not len(u.rows):
+                        continue
+                    rows = u.rows
+                    c = index[u.labels[rows]] if cfg.class_gain else np.zeros(len(rows), dtype=np.int64)
+                    a = np.minimum(u.hits[rows], shape[1]) - 1   # hits = 1 + the updates before this one
+                    g = np.minimum(u.misses[rows], shape[2]) - 1  # misses = frames since the last update
+                    np.add.at(total, (c, a, g), ekf_gain(ekf, u.prior, rows))
+                    np.add.at(count, (c, a, g), 1)
     with np.errstate(invalid="ignore", divide="ignore"):
         table = total / count[..., None, None]
     shared = total.sum((0, 1, 2)) / max(int(count.sum()), 1)
@@ -281,14 +289,15 @@ def _plain(v):
     return list(v) if isinstance(v, tuple) else v
 
 
-def _rng_state(np_rng: np.random.Generator) -> dict:
-    return {"numpy": np_rng.bit_generator.state, "torch": torch.get_rng_state(), "python": random.getstate()}
+def _rng_state(np_rng: np.random.Generator, torch_rng: torch.Generator) -> dict:
+    """The states of a run's own generators (for its checkpoints)."""
+    return {"numpy": np_rng.bit_generator.state, "torch": torch_rng.get_state()}
 
 
-def _set_rng_state(np_rng: np.random.Generator, st: dict) -> None:
+def _set_rng_state(np_rng: np.random.Generator, torch_rng: torch.Generator, st: dict) -> None:
+    """Restore :func:`_rng_state` (a checkpoint's ``python`` entry, written by older versions, is not used)."""
     np_rng.bit_generator.state = st["numpy"]
-    torch.set_rng_state(st["torch"])
-    random.setstate(st["python"])
+    torch_rng.set_state(st["torch"])
 
 
 class Trainer:
@@ -309,12 +318,13 @@ class Trainer:
         vocab = scenes[0].vocabulary if scenes else NUSCENES_VOCABULARY
         self.index = param_index(vocab.param_classes)    # dataset label -> tracking class of its parameters
         self.tracker_cfg = remap_config(load_tracker_config(cfg.tracker_preset), self.index)
-        torch.manual_seed(cfg.seed)
+        # the run's own generators (no process-wide seeding): torch's for the initial weights, numpy's for the
+        # scene order of every epoch
+        self.torch_rng = torch.Generator().manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
-        random.seed(cfg.seed)
-        self.net = GRUKalmanNet(_arch(cfg))
+        self.net = GRUKalmanNet(_arch(cfg), generator=self.torch_rng)
         shared, table = mean_ekf_gain(scenes, dets, self.tracker_cfg, cfg, self.index)
-        self.net.set_gain_prior(torch.as_tensor(shared), torch.as_tensor(table))
+        self.net.set_gain_prior(torch.as_tensor(shared), torch.as_tensor(table), generator=self.torch_rng)
         self.net.to(self.device)
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
         self.total_steps = cfg.epochs * len(scenes)
@@ -328,8 +338,9 @@ class Trainer:
         path = self.out / name
         save_checkpoint(path, self.net, {
             "optimizer": self.opt.state_dict(), "scheduler": self.sched.state_dict(),
-            "rng": _rng_state(self.np_rng), "train_state": asdict(self.state), "train_config": asdict(self.cfg),
-            "log": [s.to_row() for s in self.log.steps], "data_fingerprint": self.fingerprint, "data_source": self.source})
+            "rng": _rng_state(self.np_rng, self.torch_rng), "train_state": asdict(self.state),
+            "train_config": asdict(self.cfg), "log": [s.to_row() for s in self.log.steps],
+            "data_fingerprint": self.fingerprint, "data_source": self.source})
         self._write_log()
         return path
 
@@ -341,7 +352,7 @@ class Trainer:
         load_weights(self.net, ck, path)
         self.opt.load_state_dict(ck["optimizer"])
         self.sched.load_state_dict(ck["scheduler"])
-        _set_rng_state(self.np_rng, ck["rng"])
+        _set_rng_state(self.np_rng, self.torch_rng, ck["rng"])
         self.state = TrainState(**ck["train_state"])
         self.log = TrainingLog([TrainingStep.from_row(r, str(path)) for r in ck["log"]])
 
@@ -450,13 +461,13 @@ class Trainer:
     def _step(self, scene: Scene) -> None:
         t0 = time.perf_counter()
         self.net.train()
-        self.net.max_abs_gain = 0.0
         loss = run_scene(self.net, scene, self.dets, self.tracker_cfg, self.cfg, self.device, self.index)
         value = loss.value()
         if not torch.isfinite(value):
             self._diverged(scene, f"the loss is {value.item()}")
-        if self.net.max_abs_gain > MAX_ABS_GAIN:
-            self._diverged(scene, f"the gain diverged (max |K| = {self.net.max_abs_gain:.3g} > {MAX_ABS_GAIN:g})")
+        gain = float(loss.max_abs_gain)
+        if gain > MAX_ABS_GAIN:
+            self._diverged(scene, f"the gain diverged (max |K| = {gain:.3g} > {MAX_ABS_GAIN:g})")
         self.opt.zero_grad()
         if value.requires_grad:
             value.backward()
