@@ -228,7 +228,8 @@ def test_fastpoly_preset_values_and_comments():
     (lambda r: r["lifecycle"].__setitem__("score_update", "max"), "'lifecycle.score_update' must be one of"),
     (lambda r: r["motion"]["geometry_filter"].__setitem__("truck", "mode"), "'motion.geometry_filter.truck' must be"),
     (lambda r: r["motion"]["geometry_window"].__setitem__("truck", 0), "'motion.geometry_window.truck' must be"),
-    (lambda r: r["lifecycle"].pop("delete_threshold"), "missing key 'lifecycle.delete_threshold'"),
+    (lambda r: r["lifecycle"].pop("delete_threshold"),
+     "'lifecycle.delete_threshold' is required with 'lifecycle.termination: average_score'"),
 ])
 def test_bad_fastpoly_keys(mutate, message):
     raw = copy.deepcopy(yaml.safe_load((PRESET_DIR / "fastpoly.yaml").read_text()))

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import copy
 
+import numpy as np
 import pytest
 import yaml
 
+from grutrack.classes import TRACKING_CLASSES
 from grutrack.errors import ConfigError
 from grutrack.tracking.config import PRESET_DIR, config_from_dict, load_tracker_config
 
@@ -22,7 +24,7 @@ def test_ekf_preset_values():
     assert cfg.max_age.tolist() == [10, 10, 15, 20, 10, 10, 20]
     assert cfg.punish_num.tolist() == [2, 1, 1, 2, 1, 1, 1]  # bicycle, motorcycle coast two frames
     assert cfg.algorithm == "hungarian" and cfg.min_hits.tolist() == [1] * 7  # Poly-MOT's min_hit 1
-    assert cfg.max_distance.tolist() == [3.0, 5.5, 4.0, 13.0, 1.0, 3.0, 4.0]  # CenterPoint, greedy only
+    assert np.isinf(cfg.max_distance).all()  # the greedy gate: not read by hungarian, so not in the preset
 
 
 def test_baseline_presets():
@@ -55,9 +57,16 @@ def test_every_preset_key_has_a_comment(preset):
     (lambda r: r["motion"].__setitem__("model_override", {"car": "CTRV"}), "'motion.model_override.car' must be one of"),
     (lambda r: r["lifecycle"]["max_age"].__setitem__("bus", 2.5), "must be an integer"),
     (lambda r: r["association"].__setitem__("algorithm", "greedyy"), "'association.algorithm' must be one of"),
-    (lambda r: r["association"].__setitem__("algorithm", "greedy"), "'association.two_stage' must be false"),
-    (lambda r: r["association"]["max_distance"].__setitem__("car", -1), "'association.max_distance.car' must be a "
-                                                                       "positive distance"),
+    (lambda r: r["association"].__setitem__("algorithm", "greedy"),
+     "'association.max_distance' is required with 'association.algorithm: greedy'"),
+    (lambda r: r["association"].update(algorithm="greedy", max_distance=dict.fromkeys(TRACKING_CLASSES, 2.0)),
+     "'association.two_stage' must be false"),
+    (lambda r: r["association"].__setitem__("max_distance", {**dict.fromkeys(TRACKING_CLASSES, 2.0), "car": -1}),
+     "'association.max_distance.car' must be a positive distance"),
+    (lambda r: r["association"].pop("second_threshold"),
+     "'association.second_threshold' is required with 'association.two_stage: true'"),
+    (lambda r: r["lifecycle"].__setitem__("termination", "average_score"),
+     "'lifecycle.delete_threshold' is required with 'lifecycle.termination: average_score'"),
     (lambda r: r["lifecycle"]["min_hits"].__setitem__("car", 0), "'lifecycle.min_hits.car' must be an integer >= 1"),
     (lambda r: r["lifecycle"].pop("min_hits"), "missing key 'lifecycle.min_hits'"),
     (lambda r: r["lifecycle"].__setitem__("punish_num", -1),
@@ -83,3 +92,31 @@ def test_punish_num_one_integer_or_per_class():
 def test_unknown_preset_name_lists_available():
     with pytest.raises(ConfigError, match="unknown tracker preset 'ekff'.*ekf"):
         load_tracker_config("ekff")
+
+
+def test_presets_carry_only_what_their_algorithm_reads():
+    """Keys a preset's settings never read are left out of the shipped presets (their schema default is a
+    placeholder), and leaving out a key with a default gives the tracker's behaviour without it."""
+    unread = {"greedy": ("association.assignment", "association.two_stage", "association.first_metric",
+                         "association.first_threshold", "association.second_metric", "association.second_threshold"),
+              "hungarian": ("association.max_distance",)}
+    for path in sorted(PRESET_DIR.glob("*.yaml")):
+        raw = yaml.safe_load(path.read_text())
+        keys = {f"{sec}.{k}" for sec, body in raw.items() for k in body}
+        assoc, pre, life = raw["association"], raw["preprocessing"], raw["lifecycle"]
+        never = set(unread[assoc["algorithm"]])
+        if not assoc.get("two_stage", False):
+            never |= {"association.second_metric", "association.second_threshold"}
+        if pre.get("nms_method", "blend") == "blend":
+            never |= {"preprocessing.nms_metric", "preprocessing.nms_scale", "preprocessing.nms_distance_gate"}
+        if life.get("termination", "age") == "age":
+            never.add("lifecycle.delete_threshold")
+        assert not keys & never, (path.name, sorted(keys & never))
+    # a key left out takes its schema default: the same tracker as with the default written out
+    raw = copy.deepcopy(_raw())
+    raw["output"]["max_boxes_per_sample"] = 500
+    raw["motion"]["model_override"] = {}
+    short = {**raw, "output": {"matched_box": raw["output"]["matched_box"]}}
+    full, short = config_from_dict(raw), config_from_dict(short)
+    assert full.max_boxes_per_sample == short.max_boxes_per_sample == 500
+

@@ -1,8 +1,13 @@
 """Tracker presets: YAML files under ``grutrack/configs/trackers/`` validated against
 ``grutrack/configs/schemas/tracker.schema.yaml`` by the one config loader (:mod:`grutrack.config_loader`).
 
-A preset is named (``ekf``) or given as a path. Every key is required, unknown keys are rejected, and
-per-class maps must list all 7 tracking classes: a misspelt key fails with the file and the key path.
+A preset is named (``ekf``) or given as a path. Each section requires its core keys; the other keys have a
+``default`` in the schema (what the tracker does without them: the Poly-MOT pipeline) and may be left out, so a
+preset carries only what its algorithm reads (greedy matching no assignment rule, stage thresholds or second
+stage; Hungarian matching no greedy distance gate; a one-stage association no second-stage keys; age termination
+no delete threshold; blend NMS no scale-NMS tables). The keys of :data:`NEEDED_WITH` have no usable default and
+are required with the setting that reads them. Unknown keys are rejected and per-class maps list all 7 tracking
+classes: a misspelt key fails with the file and the key path.
 """
 
 from __future__ import annotations
@@ -19,6 +24,14 @@ from grutrack.errors import ConfigError
 
 PRESET_DIR = Path(__file__).resolve().parents[1] / "configs" / "trackers"
 SECTIONS = ("preprocessing", "association", "lifecycle", "motion", "output")
+#: keys required with the setting that reads them: key -> (setting, value); without it their schema default
+#: is a placeholder nothing reads
+NEEDED_WITH = {"association.first_metric": ("association.algorithm", "hungarian"),
+               "association.first_threshold": ("association.algorithm", "hungarian"),
+               "association.max_distance": ("association.algorithm", "greedy"),
+               "association.second_metric": ("association.two_stage", True),
+               "association.second_threshold": ("association.two_stage", True),
+               "lifecycle.delete_threshold": ("lifecycle.termination", "average_score")}
 #: per-class settings that are names (kept as tuples; the numeric ones become (7,) arrays)
 _NAMED_PER_CLASS = ("per_class_metric", "per_class_nms_metric", "per_class_geometry_filter")
 
@@ -82,8 +95,12 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
     if not isinstance(raw, dict):
         raise ConfigError(f"{source}: expected a mapping of sections {', '.join(SECTIONS)}")
     validate("tracker", raw, source)
-    v = {f"{sec}.{key}": _convert(raw[sec][key], ref) for sec, keys in _section_refs().items()
-         for key, ref in keys.items()}
+    given = {f"{sec}.{key}": val for sec in SECTIONS for key, val in raw[sec].items()}
+    v = {f"{sec}.{key}": _convert(given.get(f"{sec}.{key}", default), ref)
+         for sec, keys in _section_refs().items() for key, (ref, default) in keys.items()}
+    for key, (setting, value) in NEEDED_WITH.items():
+        if v[setting] == value and key not in given:
+            raise ConfigError(f"{source}: '{key}' is required with '{setting}: {_yaml_scalar(value)}'")
     if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
         raise ConfigError(f"{source}: 'association.two_stage' must be false with 'association.algorithm' greedy "
                           f"(greedy matching is one stage)")
@@ -108,10 +125,24 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         geometry_filter=v["motion.geometry_filter"], geometry_window=v["motion.geometry_window"])
 
 
-def _section_refs() -> dict[str, dict[str, str]]:
-    """Section -> key -> the schema definition its value follows (``per_class_unit``, ``bool``, ...)."""
-    return {sec: {k: node["$ref"].rsplit("/", 1)[1] for k, node in spec["properties"].items()}
-            for sec, spec in schema("tracker")["properties"].items()}
+def _section_refs() -> dict[str, dict[str, tuple[str, Any]]]:
+    """Section -> key -> (the schema definition its value follows (``per_class_unit``, ``bool``, ...), its
+    default: None for a required key, one value for every class for a per-class key)."""
+    refs = {}
+    for sec, spec in schema("tracker")["properties"].items():
+        refs[sec] = {}
+        for k, node in spec["properties"].items():
+            ref = node["$ref"].rsplit("/", 1)[1]
+            default = node.get("default")
+            if default is not None and ref.startswith("per_class_"):
+                default = {c: default for c in TRACKING_CLASSES}
+            refs[sec][k] = (ref, default)
+    return refs
+
+
+def _yaml_scalar(value) -> str:
+    """A setting's value as the preset spells it (true / false, names)."""
+    return str(value).lower() if isinstance(value, bool) else str(value)
 
 
 def _convert(val: Any, ref: str) -> Any:
