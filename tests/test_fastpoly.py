@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from grutrack.tracking.fastpoly import (GeometryWindow, ScoreHistory, a_giou_3d, a_giou_bev, aligned_extents,
-                                        distance_mask, pairwise_a_giou, predict_scores, scale_nms_keep,
-                                        update_scores)
+from grutrack.tracking.fastpoly import (GeometryWindow, a_giou_3d, a_giou_bev, aligned_extents, distance_mask,
+                                        pairwise_a_giou, scale_nms_keep)
+from grutrack.tracking.lifecycle import lifecycle_kernel
 
 
 def box(x=0.0, y=0.0, z=0.0, w=1.0, l=1.0, h=1.0, yaw=0.0):
@@ -106,19 +106,37 @@ def test_geometry_window_respects_a_smaller_window():
     np.testing.assert_allclose(g.estimate()[0], np.full(4, 4.5))   # mean of the last 2
 
 
-def test_score_predict_update_and_average():
-    s = np.array([0.6, 0.5])
-    pred = predict_scores(s, np.array([0.5, 0.2]))
-    np.testing.assert_allclose(pred, [0.3, 0.1])
-    np.testing.assert_allclose(update_scores(pred, np.array([0.4, 0.5])), [1 - 0.6 * 0.7, 1 - 0.5 * 0.9])
-    np.testing.assert_allclose(update_scores(pred, np.array([0.4, 0.5]), "detection"), [0.4, 0.5])
-    h = ScoreHistory.start(s)
-    h.add(pred)
-    h.add(np.array([0.0, 0.9]))
-    np.testing.assert_allclose(h.average(), [0.3, 0.5])
-    assert h.select(np.array([1])).count.tolist() == [3]
-    with pytest.raises(ValueError, match="unknown score update"):
-        update_scores(pred, pred, "max")
+def _lifecycle(scores, rows, det_scores, multiply, average_score, totals=None, counts=None, delete=0.0):
+    """One frame of the tracker's compiled lifecycle for tracks of labels 0 and 1 (decay 0.5 and 0.2)."""
+    n = len(scores)
+    scores = np.array(scores, dtype=np.float64)
+    total = np.array(totals if totals is not None else scores, dtype=np.float64)
+    count = np.array(counts if counts is not None else [1] * n, dtype=np.int64)
+    per_class = np.array([0.5, 0.2, 1, 1, 1, 1, 1], dtype=np.float64)
+    matched, alive, emit = (np.empty(n, dtype=bool) for _ in range(3))
+    lifecycle_kernel(np.asarray(rows, dtype=np.int64), np.asarray(det_scores, dtype=np.float64),
+                     np.arange(n, dtype=np.int64), scores, np.zeros(n, dtype=np.int64), np.ones(n, dtype=np.int64),
+                     total, count, per_class, np.full(7, 5.0), np.ones(7), np.full(7, delete), multiply,
+                     average_score, np.ones(7), 2, matched, alive, emit)
+    return scores, total, count, alive
+
+
+def test_score_update_and_average_termination():
+    """Fast-Poly's scores in the tracker's lifecycle: predict s- = s d, update s+ = 1 - (1 - s_det)(1 - s-)
+    ('multiply'), or s+ = s_det ('detection'); the average termination keeps the running mean of the final scores
+    since birth and ends a track whose mean falls below its class's delete threshold."""
+    s, *_ = _lifecycle([0.6, 0.5], [], [], True, False)
+    np.testing.assert_allclose(s, [0.3, 0.1])                                        # predicted only
+    s, *_ = _lifecycle([0.6, 0.5], [0, 1], [0.4, 0.5], True, False)
+    np.testing.assert_allclose(s, [1 - 0.6 * 0.7, 1 - 0.5 * 0.9])
+    s, *_ = _lifecycle([0.6, 0.5], [0, 1], [0.4, 0.5], False, False)
+    np.testing.assert_allclose(s, [0.4, 0.5])
+    s, total, count, alive = _lifecycle([0.6, 0.5], [1], [0.9], True, True, delete=0.4)
+    np.testing.assert_allclose(total, [0.6 + 0.3, 0.5 + (1 - 0.1 * 0.9)])
+    assert count.tolist() == [2, 2]
+    assert alive.tolist() == [True, True]       # means 0.45 and 0.7
+    *_, alive = _lifecycle([0.6, 0.5], [1], [0.9], True, True, delete=0.5)
+    assert alive.tolist() == [False, True]      # 0.45 < 0.5
 
 
 # ---- the pieces wired into the tracker ----------------------------------------------------------------------

@@ -12,8 +12,9 @@ Each function is one of Fast-Poly's additions to the Poly-MOT pipeline, batched 
   per-class similarity (A-GIoU BEV or rotated BEV IoU) and threshold.
 * :class:`GeometryWindow`: the decoupled geometry, i.e. ``[z, w, l, h]`` of a track is the median (or mean) of
   its last ``W`` matched detections instead of a Kalman state.
-* :func:`predict_scores`, :func:`update_scores`, :class:`ScoreHistory`: the tracklet score (decayed while
-  unmatched, fused with the detection score when matched) and the average-score termination rule.
+* The tracklet score (decayed while unmatched, fused with the detection score when matched) and the
+  average-score termination rule run in the tracker's compiled lifecycle pass
+  (:func:`grutrack.tracking.lifecycle.lifecycle_kernel`, ``score_update: multiply``, ``termination: average_score``).
 
 Box arrays follow :mod:`grutrack.boxes`: ``(N, 9) float64 [x, y, z, w, l, h, yaw, vx, vy]``, metres, radians.
 """
@@ -231,57 +232,6 @@ class GeometryWindow:
         pad = [np.concatenate([np.full((len(g.hist), w - g.hist.shape[1], 4), np.nan), g.hist], axis=1)
                for g in (a, b)]
         return GeometryWindow(np.concatenate(pad), np.concatenate([a.mean, b.mean]))
-
-
-def predict_scores(scores: np.ndarray, decay: np.ndarray) -> np.ndarray:
-    """Tracklet score one frame ahead (Fast-Poly predict_mode 'Normal'): ``s- = s * d``; (N,), (N,) -> (N,)."""
-    return scores * decay
-
-
-def update_scores(predicted: np.ndarray, det_scores: np.ndarray, mode: str = "multiply") -> np.ndarray:
-    """Tracklet score after a match; (K,), (K,) -> (K,).
-
-    ``multiply`` (Fast-Poly 'Multi'): ``s+ = 1 - (1 - s_det) (1 - s-)``, a probabilistic OR of the decayed
-    track score and the detection score; ``detection``: ``s+ = s_det``.
-    """
-    if mode == "multiply":
-        return 1.0 - (1.0 - det_scores) * (1.0 - predicted)
-    if mode == "detection":
-        return det_scores.copy()
-    raise ValueError(f"unknown score update {mode!r} (expected 'multiply' or 'detection')")
-
-
-@dataclass
-class ScoreHistory:
-    """Running sum and count of every track's per-frame final score (birth frame included).
-
-    total (N,) float64, count (N,) int64. ``average = total / count`` is the tracklet average score of
-    Fast-Poly's 'average' termination: a track whose average falls below its class's delete threshold dies.
-    """
-
-    total: np.ndarray
-    count: np.ndarray
-
-    @classmethod
-    def start(cls, scores: np.ndarray) -> "ScoreHistory":
-        """Histories holding the birth scores (N,)."""
-        return cls(np.asarray(scores, dtype=np.float64).copy(), np.ones(len(scores), dtype=np.int64))
-
-    def add(self, scores: np.ndarray) -> None:
-        """Append this frame's final scores (N,) of all tracks (matched or not)."""
-        self.total = self.total + scores
-        self.count = self.count + 1
-
-    def average(self) -> np.ndarray:
-        """(N,) mean final score since birth."""
-        return self.total / self.count
-
-    def select(self, index: np.ndarray) -> "ScoreHistory":
-        return ScoreHistory(self.total[index], self.count[index])
-
-    @staticmethod
-    def concat(a: "ScoreHistory", b: "ScoreHistory") -> "ScoreHistory":
-        return ScoreHistory(np.concatenate([a.total, b.total]), np.concatenate([a.count, b.count]))
 
 
 @dataclass
