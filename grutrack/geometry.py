@@ -454,17 +454,6 @@ def paired_similarities(a: np.ndarray, b: np.ndarray, names) -> dict[str, np.nda
     return {n: out[SIMILARITIES.index(n)] for n in SIMILARITIES if n in set(names)}
 
 
-def pairwise_similarities(a: np.ndarray, b: np.ndarray, names,
-                          where: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """Several measures of all pairs of ``a (N, >=7)`` x ``b (M, >=7)`` from one geometry pass.
-
-    names: any of :data:`SIMILARITIES`. Returns ``{name: (N, M) float64}``, each equal to the matching
-    ``pairwise_*`` function where ``where (N, M) bool`` is set (default: everywhere) and 0 elsewhere.
-    """
-    out = _pairwise_measures(a, b, names, where)
-    return {n: out[SIMILARITIES.index(n)] for n in SIMILARITIES if n in set(names)}
-
-
 def pairwise_bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """BEV IoU ``(N, M) float64`` in [0, 1] between ``a (N, >=7)`` and ``b (M, >=7)``."""
     return _pairwise_measure("iou_bev", a, b)
