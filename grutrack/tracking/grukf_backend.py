@@ -176,7 +176,7 @@ class GRUKFBackend:
             K_ekf, P = self._ekf_gain(s, rows, z)
             post, hid = self.net.correct(prior, y, s.y_prev[r], s.post1[r], s.prior1[r], s.post2[r],
                                          {k: v[r] for k, v in s.hidden.items()},
-                                         self._cells(s, rows), self._counts(s, rows), K_ekf)
+                                         self._cells(s, rows), self._counts(s, rows), K_prior=K_ekf)
 
             def put(t: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
                 out = t.clone()
