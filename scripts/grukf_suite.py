@@ -30,6 +30,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 EVAL_SETS = (("centerpoint_s11", "centerpoint", 11), ("pointpillars_s12", "pointpillars", 12),
              ("heavytail_s13", str(ROOT / "docs/results/grukf_eval/heavytail.yaml"), 13))
+MORE_SETS = (("centerpoint_s2", "centerpoint", 2), ("pointpillars_s3", "pointpillars", 3))
 
 
 def _overrides(text: str) -> dict:
@@ -75,6 +76,12 @@ def main() -> None:
     ap.add_argument("--train", action="append", default=[], help="NAME=key:value,... (training config overrides)")
     ap.add_argument("--constant-gain", default=None, help="name of the constant-gain ablation row")
     ap.add_argument("--checkpoint", action="append", default=[], help="NAME=PATH: also evaluate a trained model")
+    ap.add_argument("--untrained", action="append", default=[],
+                    help="NAME=key:value,...: the network of that training config before any step (e.g. "
+                         "gain_prior:ekf, which is then the EKF with the GRU-KF's SS model)")
+    ap.add_argument("--no-ekf", action="store_true", help="leave out the ekf preset's row")
+    ap.add_argument("--more-sets", action="store_true",
+                    help="also centerpoint seed 2 and pointpillars seed 3 (the sets options were compared on)")
     args = ap.parse_args()
 
     from grutrack.data.nusc_detections import load_detections
@@ -93,17 +100,24 @@ def main() -> None:
     tr_dets = _dets(nusc, "mini_train", "centerpoint", 1, tr_tokens, out / "detections")
     va_scenes = load_scenes(nusc, "mini_val")
     va_tokens = [f.token for s in va_scenes for f in s.frames]
-    sets = {name: _dets(nusc, "mini_val", prof, seed, va_tokens, out / "detections") for name, prof, seed in EVAL_SETS}
+    eval_sets = EVAL_SETS + (MORE_SETS if args.more_sets else ())
+    sets = {name: _dets(nusc, "mini_val", prof, seed, va_tokens, out / "detections") for name, prof, seed in eval_sets}
     sets["real_pointpillars"] = load_detections(Path(args.dataroot) / "detections/pointpillars_mini_val.json",
                                                 va_tokens)
 
-    models: list[tuple[str, dict, object]] = [("ekf", {}, None)]
+    models: list[tuple[str, dict, object]] = [] if args.no_ekf else [("ekf", {}, None)]
     resampler = DetectionResampler(NuScenesDataset(DatasetOptions(args.dataroot, "v1.0-mini")), "mini_train",
                                    tr_scenes)
     if args.constant_gain:
         cfg = load_train_config("grukf", {"device": "cpu", "gap_bins": 0, "class_gain": False, "age_bins": 0})
         t = ResamplingTrainer(cfg, tr_scenes, tr_dets, out / args.constant_gain, resampler, progress=False)
         models.append((args.constant_gain, {"gap_bins": 0, "steps": 0}, t.save("model.pt")))
+    for spec in args.untrained:
+        name, _, over = spec.partition("=")
+        over = _overrides(over)
+        cfg = load_train_config("grukf", {"device": "cpu", **over})
+        t = ResamplingTrainer(cfg, tr_scenes, tr_dets, out / name, resampler, progress=False)
+        models.append((name, {**over, "steps": 0}, t.save("model.pt")))
     for spec in args.train:
         name, _, over = spec.partition("=")
         over = _overrides(over)
@@ -125,13 +139,15 @@ def main() -> None:
             row[f"{sname}_amota"], row[f"{sname}_amotp"] = round(a, 4), round(p, 4)
         rows.append(row)
         print(row, flush=True)
+        with open(out / "rows.jsonl", "a") as f:   # rows as they come (a long run can be read before it ends)
+            f.write(json.dumps(row) + "\n")
     with open(out / "suite.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
     lines = ["| model | " + " | ".join(sets) + " | mean simulated AMOTA / AMOTP |",
              "|---" * (len(sets) + 2) + "|"]
-    sim = [n for n, _, _ in EVAL_SETS]
+    sim = [n for n, _, _ in eval_sets]
     for r in rows:
         cells = [f"{r[f'{s}_amota']:.4f} / {r[f'{s}_amotp']:.3f}" for s in sets]
         ma = np.mean([r[f"{s}_amota"] for s in sim])

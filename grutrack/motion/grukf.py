@@ -20,6 +20,15 @@ expressed in the track's heading frame (longitudinal / lateral) and the planar p
 rotated back to the global frame, so the learned gain does not depend on the direction of travel. The
 output layer's bias starts at a given gain (the EKF's mean gain on the training data, see
 :mod:`grutrack.training`), so an untrained network is a constant-gain filter close to the EKF.
+
+EKF gain prior (``gain_prior="ekf"``, a grutrack option): the network's gain is a learned residual added to the
+gain of an EKF run on the GRU-KF's own state, ``K = K_ekf + dK`` with ``K_ekf = P^- H^T S^-1``,
+``S = H P^- H^T + R``, where each track's covariance P is propagated as the EKF does (``P^- = F P F^T + Q``,
+Joseph-form update with K_ekf) from the per-class Q, R, P0 the network carries. The output layer (and the gain
+table) starts at zero, so an untrained network IS that EKF, with its per-track adaptivity (a young track or one
+after missed detections takes a large gain, a settled one a small gain); training moves it away from the EKF only
+as far as the loss asks. The covariance is computed by the backend (:mod:`grutrack.tracking.grukf_backend`) on
+the detached state: gradients flow through the state and the innovation, not through K_ekf.
 """
 
 from __future__ import annotations
@@ -38,6 +47,8 @@ MEAS_DIM = 9
 AUX_DIM = 6
 MIN_SIZE = 0.05  # metres: lower bound of the posterior w, l, h
 _YAW_Z = 6
+#: what the network's output is added to: nothing ("constant", the paper) or the per-track EKF gain ("ekf")
+GAIN_PRIORS = ("constant", "ekf")
 
 
 @dataclass(frozen=True)
@@ -59,6 +70,9 @@ class GRUKFConfig:
     extra inputs of the S-GRU's input layer and of the output layer (a grutrack addition).
     ss_params: constructor parameters of the SS model (Bicycle: wheelbase_ratio, front_ratio), the training
     motion config's, so that the network's f and h are the parallel EKF's.
+    gain_prior: "constant" (the network's output is the gain; it starts at the EKF's mean gain) or "ekf" (the
+    output is a residual added to the per-track EKF gain K_ekf; it starts at zero; the network then carries the
+    EKF's per-class Q, R, P0 as buffers ``ekf_Q``, ``ekf_R``, ``ekf_P0``; see the module docstring).
     """
 
     ss_model: str = "CTRA"
@@ -72,6 +86,7 @@ class GRUKFConfig:
     yaw_flip: bool = False
     aux_inputs: bool = False
     ss_params: dict = field(default_factory=dict)   # the SS model's constructor parameters (motion config)
+    gain_prior: str = "constant"   # "constant": K = network output; "ekf": K = K_ekf + network output
 
     @property
     def table_shape(self) -> tuple[int, int, int]:
@@ -124,10 +139,17 @@ class GRUKalmanNet(nn.Module):
         super().__init__()
         self.cfg = cfg
         self.ss = make_torch_model(cfg.ss_model, **cfg.ss_params)
+        if cfg.gain_prior not in GAIN_PRIORS:
+            raise ValueError(f"gain_prior must be one of {', '.join(GAIN_PRIORS)}, got {cfg.gain_prior!r}")
         with torch.device("meta"):      # allocated without drawing from any generator, initialised below
             self._build(cfg)
         self.to_empty(device="cpu")
         self.reset_parameters(generator)
+        if cfg.gain_prior == "ekf":   # the EKF's per-class noise (tracking classes), float64 like the state
+            m, n = self.m, self.n
+            self.register_buffer("ekf_Q", torch.zeros(cfg.n_classes, m, m, dtype=torch.float64))
+            self.register_buffer("ekf_R", torch.zeros(cfg.n_classes, n, n, dtype=torch.float64))
+            self.register_buffer("ekf_P0", torch.zeros(cfg.n_classes, m, m, dtype=torch.float64))
 
     def _build(self, cfg: GRUKFConfig) -> None:
         """Create the layers (parameters uninitialised)."""
@@ -193,6 +215,15 @@ class GRUKalmanNet(nn.Module):
                 off = K_table.reshape(*self.cfg.table_shape, -1).to(self.gain_table) - self.fc_gain[2].bias
                 self.gain_table.copy_(torch.nan_to_num(off, nan=0.0))
 
+    def set_ekf_noise(self, Q: torch.Tensor, R: torch.Tensor, P0: torch.Tensor) -> None:
+        """The prior EKF's noise per tracking class: Q, P0 (n_classes, m, m), R (n_classes, 9, 9) (state and
+        measurement units squared, per step of the motion config). ``gain_prior="ekf"`` only."""
+        if self.cfg.gain_prior != "ekf":
+            raise ValueError("set_ekf_noise is for a GRU-KF with gain_prior 'ekf'")
+        with torch.no_grad():
+            for buf, v in ((self.ekf_Q, Q), (self.ekf_R, R), (self.ekf_P0, P0)):
+                buf.copy_(torch.as_tensor(v, dtype=torch.float64).reshape(buf.shape))
+
     def table_index(self, labels: torch.Tensor, n_updates: torch.Tensor, gaps: torch.Tensor
                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Cells of the gain table (three (K,) int64 index tensors) for tracks of classes ``labels`` (K,) at
@@ -246,14 +277,19 @@ class GRUKalmanNet(nn.Module):
     def correct(self, x_prior: torch.Tensor, y: torch.Tensor, y_prev: torch.Tensor, x_post_prev: torch.Tensor,
                 x_prior_prev: torch.Tensor, x_post_prev2: torch.Tensor, hidden: dict[str, torch.Tensor],
                 cells: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None,
-                counts: torch.Tensor | None = None
+                counts: torch.Tensor | None = None, K_prior: torch.Tensor | None = None
                 ) -> tuple[torch.Tensor, dict[str, torch.Tensor], torch.Tensor]:
         """One update of K tracks (all (K, ·) float64): prior x^-_n, measurement y_n, previous measurement,
         previous posterior x_{n-1|n-1}, previous prior x_{n-1|n-2}, posterior before that x_{n-2|n-2};
         ``cells``: the tracks' cells of the gain table (:meth:`table_index`; only with a table); ``counts``
         (K, 2): each track's update count at this update (1 = the first) and frames since its last update
-        (only with ``aux_inputs``). Returns the posterior (K, m), the new hidden states and the gain K
-        (K, m, n) it applied (heading frame; the trainer checks it for divergence).
+        (only with ``aux_inputs``); ``K_prior`` (K, m, 9) float64: the EKF gain ``P^- H^T S^-1`` of each track,
+        global frame (only with ``gain_prior="ekf"``). Returns the posterior (K, m), the new hidden states and
+        the network's gain K (K, m, n) it applied (heading frame; the trainer checks it for divergence).
+
+        ``x = x^- + K_prior r + Rs(yaw) dK r_h``: r the innovation (yaw wrapped), r_h = Rm(-yaw) r the same in
+        the heading frame, dK (K, m, 9) the network's heading-frame gain (the whole gain with
+        ``gain_prior="constant"``, where K_prior is absent).
         """
         yaw = x_prior[:, self.ss.yaw_index]
         innov = y - self.ss.h(x_prior)
@@ -278,6 +314,10 @@ class GRUKalmanNet(nn.Module):
         K, new_hidden = self.gain(feats, hidden, cells)
         delta = torch.einsum("kmn,kn->km", K.to(innov_h.dtype), innov_h)
         delta = from_heading_frame(delta, yaw, STATE_PLANAR)
+        if self.cfg.gain_prior == "ekf":
+            if K_prior is None:
+                raise ValueError("this GRU-KF's EKF gain prior needs every track's EKF gain")
+            delta = delta + torch.einsum("kmn,kn->km", K_prior.to(innov.dtype), innov)   # K_ekf r
         x = x_prior + delta
         # sizes stay physical (a learned gain can overshoot); the yaw is wrapped
         x = torch.cat([x[:, :3], x[:, 3:6].clamp_min(MIN_SIZE), x[:, 6:yi], wrap_angle_t(x[:, yi:yi + 1]),

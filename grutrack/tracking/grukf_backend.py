@@ -3,6 +3,14 @@
 Per-track tensors (state, the previous posteriors/prior and measurement that feed the network, and the GRU
 hidden states) are rows of arrays indexed like the track group; they are born and removed with the tracks.
 In inference no autograd graph is kept; in training (``train=True``) the graph spans the frames of a scene.
+
+With an EKF gain prior (``GRUKFConfig.gain_prior == "ekf"``) every track also carries the EKF covariance P, which
+is propagated here with the numpy EKF (:class:`grutrack.motion.kalman.BatchKalmanFilter`, the same SS model and
+form, the network's per-class Q, R, P0), linearised at the GRU-KF's own (detached) state:
+
+* predict: ``P^- = F P F^T + Q``, F the Jacobian of f at the posterior;
+* update: ``K_ekf = P^- H^T S^-1``, ``S = H P^- H^T + R`` (given to the network, which adds its residual), and
+  ``P = (I - K_ekf H) P^- (I - K_ekf H)^T + K_ekf R K_ekf^T`` (Joseph form, the EKF's own update).
 """
 
 from __future__ import annotations
@@ -45,7 +53,8 @@ class GRUState:
     (N, m); gain_abs_max (N,) float64 the largest |K| entry of each track's last gain (0 before its first
     update; no autograd graph); hidden GRU states {name: (N, hidden)}; labels (N,) int64, n_updates (N,) int64
     the updates each track has had and since (N,) int64 the frames predicted since its last update or birth
-    (numpy)."""
+    (numpy); P (N, m, m) float64 numpy, the EKF covariance of each track (``gain_prior="ekf"`` only, else
+    None)."""
 
     x: torch.Tensor
     y_prev: torch.Tensor
@@ -57,13 +66,14 @@ class GRUState:
     labels: np.ndarray
     n_updates: np.ndarray
     since: np.ndarray
+    P: np.ndarray | None = None
 
     def map(self, fn_t, fn_np) -> "GRUState":
-        """Apply fn_t to every tensor, fn_np to the numpy arrays (labels, n_updates, since)."""
+        """Apply fn_t to every tensor, fn_np to the numpy arrays (labels, n_updates, since, P)."""
         kw = {}
         for f in fields(self):
             v = getattr(self, f.name)
-            kw[f.name] = ({k: fn_t(t) for k, t in v.items()} if isinstance(v, dict)
+            kw[f.name] = (None if v is None else {k: fn_t(t) for k, t in v.items()} if isinstance(v, dict)
                           else fn_np(v) if isinstance(v, np.ndarray) else fn_t(v))
         return GRUState(**kw)
 
@@ -83,6 +93,19 @@ class GRUKFBackend:
         self.net.to(self.device)
         self.train = train
         self.ss = net.ss
+        self.kf = None
+        if net.cfg.gain_prior == "ekf":   # the prior EKF: same SS model, the network's noise tables (numpy)
+            from grutrack.motion.kalman import BatchKalmanFilter
+            from grutrack.motion.models import make_model
+
+            self.kf = BatchKalmanFilter(make_model(net.cfg.ss_model, "arc", **net.cfg.ss_params),
+                                        yaw_flip=net.cfg.yaw_flip)
+            self.Q, self.R, self.P0 = (getattr(net, k).detach().cpu().numpy().astype(np.float64)
+                                       for k in ("ekf_Q", "ekf_R", "ekf_P0"))
+
+    def _classes(self, labels: np.ndarray) -> np.ndarray:
+        """Tracking class (N,) int64 of dataset labels (N,)."""
+        return labels if self.class_index is None else self.class_index[labels]
 
     def _t(self, a: np.ndarray) -> torch.Tensor:
         return torch.as_tensor(np.asarray(a, dtype=np.float64), device=self.device)
@@ -96,14 +119,15 @@ class GRUKFBackend:
             zt = self._t(z)
             x = self.ss.init_state(zt)
             zero = np.zeros(len(z), dtype=np.int64)
+            P = None if self.kf is None else self.P0[self._classes(labels)].copy()   # P = P0 of the class
             return GRUState(x, zt, x, x, x, zt.new_zeros(len(z)), self.net.init_hidden(len(z), self.device),
-                            labels.copy(), zero, zero)
+                            labels.copy(), zero, zero, P)
 
     def _cells(self, s: GRUState, rows: np.ndarray):
         """The gain-table cells of tracks ``rows`` at this update (None when the network has no table)."""
         if not self.net.cfg.has_table:
             return None
-        cls = s.labels[rows] if self.class_index is None else self.class_index[s.labels[rows]]
+        cls = self._classes(s.labels[rows])
         t = [torch.as_tensor(a, device=self.device, dtype=torch.long)
              for a in (cls, s.n_updates[rows] + 1, np.maximum(s.since[rows], 1))]
         return self.net.table_index(*t)
@@ -118,9 +142,34 @@ class GRUKFBackend:
 
     def predict(self, s: GRUState, dt: float) -> GRUState:
         """x <- f(x, dt) for every track."""
+        P = None
+        if self.kf is not None:   # P^- = F P F^T + Q, F at the posterior
+            _, P = self.kf.predict(self._np(s.x), s.P, self.Q[self._classes(s.labels)], dt)
         with self._ctx():
             return GRUState(self.ss.f(s.x, dt), s.y_prev, s.post1, s.post2, s.prior1, s.gain_abs_max, s.hidden,
-                            s.labels, s.n_updates, s.since + 1)
+                            s.labels, s.n_updates, s.since + 1, P)
+
+    @staticmethod
+    def _np(t: torch.Tensor) -> np.ndarray:
+        """A detached float64 numpy copy of a tensor."""
+        return t.detach().cpu().numpy().astype(np.float64)
+
+    def _ekf_gain(self, s: GRUState, rows: np.ndarray, z: np.ndarray) -> tuple[torch.Tensor | None, np.ndarray | None]:
+        """The EKF gain ``K_ekf = P^- H^T S^-1`` (K, m, 9) tensor of tracks ``rows`` at their prior and the
+        covariance of all tracks after the EKF's Joseph-form update of ``rows`` with z (K, 9) ((N, m, m));
+        (None, None) without an EKF gain prior."""
+        if self.kf is None:
+            return None, None
+        x = self._np(s.x)
+        R_index = self._classes(s.labels[rows])
+        _, H = self.kf.model.measurement(x[rows])
+        HP = H @ s.P[rows]                                                    # H P^-  (K, 9, m)
+        S = HP @ np.swapaxes(H, -1, -2) + self.R[R_index]                     # S = H P^- H^T + R
+        S = 0.5 * (S + np.swapaxes(S, -1, -2))
+        K = np.swapaxes(np.linalg.solve(S, HP), -1, -2)                       # K = P^- H^T S^-1  (K, m, 9)
+        P = np.ascontiguousarray(s.P, dtype=np.float64).copy()
+        self.kf.correct(x, P, rows, z, self.R, R_index)                       # Joseph form on rows of P
+        return torch.as_tensor(K, device=self.device), P
 
     def update(self, s: GRUState, rows: np.ndarray, z: np.ndarray) -> GRUState:
         """Correct tracks ``rows`` (K,) with measurements z (K, 9) through the learned gain."""
@@ -128,9 +177,10 @@ class GRUKFBackend:
             r = torch.as_tensor(rows, device=self.device, dtype=torch.long)
             y = self._t(z)
             prior = s.x[r]
+            K_ekf, P = self._ekf_gain(s, rows, z)
             post, hid, K = self.net.correct(prior, y, s.y_prev[r], s.post1[r], s.prior1[r], s.post2[r],
                                          {k: v[r] for k, v in s.hidden.items()},
-                                         self._cells(s, rows), self._counts(s, rows))
+                                         self._cells(s, rows), self._counts(s, rows), K_prior=K_ekf)
 
             def put(t: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
                 out = t.clone()
@@ -140,7 +190,7 @@ class GRUKFBackend:
             return GRUState(put(s.x, post), put(s.y_prev, y), put(s.post1, post), put(s.post2, s.post1[r]),
                             put(s.prior1, prior), put(s.gain_abs_max, K.detach().abs().amax(dim=(1, 2))),
                             {k: put(s.hidden[k], hid[k]) for k in s.hidden}, s.labels,
-                            _incremented(s.n_updates, rows), _zeroed(s.since, rows))
+                            _incremented(s.n_updates, rows), _zeroed(s.since, rows), P)
 
     def measure(self, s: GRUState) -> torch.Tensor:
         """h(x) (N, 9) as a tensor (keeps the graph in training)."""
@@ -164,7 +214,8 @@ class GRUKFBackend:
         return GRUState(*(torch.cat([getattr(a, n), getattr(b, n)]) for n in ("x", "y_prev", "post1", "post2",
                                                                              "prior1", "gain_abs_max")),
                         {k: torch.cat([a.hidden[k], b.hidden[k]]) for k in a.hidden},
-                        *(np.concatenate([getattr(a, n), getattr(b, n)]) for n in ("labels", "n_updates", "since")))
+                        *(np.concatenate([getattr(a, n), getattr(b, n)]) for n in ("labels", "n_updates", "since")),
+                        None if a.P is None else np.concatenate([a.P, b.P]))
 
 
 def _zeroed(counts: np.ndarray, rows: np.ndarray) -> np.ndarray:

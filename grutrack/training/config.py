@@ -26,6 +26,7 @@ class TrainConfig:
     gap_bins: int
     yaw_flip: bool
     aux_inputs: bool
+    gain_prior: str
     tracker_preset: str
     motion_config: str
     gt_match_distance: float

@@ -263,6 +263,24 @@ def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: Tra
     return shared, table
 
 
+def init_gain_prior(net: GRUKalmanNet, cfg: TrainConfig, scenes: list[Scene], dets: dict[str, BoxSet],
+                    tracker_cfg: TrackerConfig, index: np.ndarray, generator: torch.Generator | None = None
+                    ) -> None:
+    """The untrained network's starting point. ``gain_prior: constant``: the output layer's bias (and gain table)
+    at the EKF's mean gain on the training data (:func:`mean_ekf_gain`). ``gain_prior: ekf``: the EKF's per-class
+    Q, R, P0 of the motion config (``ss_model`` for every class) in the network; the output layer and table
+    stay zero, so the untrained GRU-KF is that EKF. ``generator``: draws the output layer's small starting
+    weights (constant prior)."""
+    if cfg.gain_prior == "ekf":
+        from grutrack.classes import TRACKING_CLASSES
+
+        ekf = ekf_backend(cfg, np.arange(len(TRACKING_CLASSES)))
+        net.set_ekf_noise(torch.as_tensor(ekf.Q), torch.as_tensor(ekf.R), torch.as_tensor(ekf.P0))
+        return
+    shared, table = mean_ekf_gain(scenes, dets, tracker_cfg, cfg, index)
+    net.set_gain_prior(torch.as_tensor(shared), torch.as_tensor(table), generator=generator)
+
+
 def _arch(cfg: TrainConfig) -> GRUKFConfig:
     """The network architecture a training config asks for."""
     from grutrack.classes import TRACKING_CLASSES
@@ -271,7 +289,7 @@ def _arch(cfg: TrainConfig) -> GRUKFConfig:
     params = load_motion_config(cfg.motion_config, cfg.ss_model)[TRACKING_CLASSES[0]]["params"]
     return GRUKFConfig(ss_model=cfg.ss_model, ss_params=dict(params), four_gru=cfg.four_gru,
                        class_gain=cfg.class_gain, age_bins=cfg.age_bins, gap_bins=cfg.gap_bins,
-                       yaw_flip=cfg.yaw_flip, aux_inputs=cfg.aux_inputs)
+                       yaw_flip=cfg.yaw_flip, aux_inputs=cfg.aux_inputs, gain_prior=cfg.gain_prior)
 
 
 @dataclass
@@ -323,8 +341,7 @@ class Trainer:
         self.torch_rng = torch.Generator().manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
         self.net = GRUKalmanNet(_arch(cfg), generator=self.torch_rng)
-        shared, table = mean_ekf_gain(scenes, dets, self.tracker_cfg, cfg, self.index)
-        self.net.set_gain_prior(torch.as_tensor(shared), torch.as_tensor(table), generator=self.torch_rng)
+        init_gain_prior(self.net, cfg, scenes, dets, self.tracker_cfg, self.index, generator=self.torch_rng)
         self.net.to(self.device)
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
         self.total_steps = cfg.epochs * len(scenes)
