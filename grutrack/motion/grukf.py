@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
+import functools
 import math
 
 import torch
@@ -108,17 +109,20 @@ def _normalise(v: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
     return v / (v.norm(dim=1, keepdim=True) + eps)
 
 
+@functools.lru_cache(maxsize=None)
+def _pair_columns(pairs: tuple[tuple[int, int], ...], device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """The first and second columns of the planar pairs as index tensors on ``device`` (made once)."""
+    return (torch.tensor([p[0] for p in pairs], device=device), torch.tensor([p[1] for p in pairs], device=device))
+
+
 def to_heading_frame(v: torch.Tensor, yaw: torch.Tensor, pairs: tuple[tuple[int, int], ...]) -> torch.Tensor:
     """Rotate the planar column pairs (i, j) of v (N, d) by -yaw (N,) into the heading frame:
     ``[v_i, v_j] <- [c v_i + s v_j, -s v_i + c v_j]`` with ``c, s = cos yaw, sin yaw``; other columns unchanged.
-    All pairs in two indexed writes (one autograd node each, not one per column)."""
-    i, j = [p[0] for p in pairs], [p[1] for p in pairs]
+    All pairs at once (two column gathers, two column writes), not one autograd node per column."""
+    ii, jj = _pair_columns(pairs, v.device)
     c, s = torch.cos(yaw)[:, None], torch.sin(yaw)[:, None]
-    a, b = v[:, i], v[:, j]
-    out = v.clone()
-    out[:, i] = c * a + s * b
-    out[:, j] = -s * a + c * b
-    return out
+    a, b = v.index_select(1, ii), v.index_select(1, jj)
+    return v.index_copy(1, ii, c * a + s * b).index_copy(1, jj, -s * a + c * b)
 
 
 def from_heading_frame(v: torch.Tensor, yaw: torch.Tensor, pairs: tuple[tuple[int, int], ...]) -> torch.Tensor:
