@@ -117,6 +117,20 @@ def test_dataroot_messages(cfg, tmp_path):
     assert spec.require_dataroot(cfg, "demo") == "data/demo"
 
 
+def test_a_new_datasets_modules_version_every_stage_that_goes_through_a_dataset(tmp_path, monkeypatch):
+    """A dataset's interface, readers and writers (datasets/, data/, export/) version the stages that run through
+    the dataset interface without being listed one by one."""
+    monkeypatch.delenv("GRUTRACK_CODE_VERSION", raising=False)
+    _tree(tmp_path, {"tracking/tracker.py": "a", "report/demo.py": "b"})
+    dataset_stages = {"simulate", "train", "track", "submit", "evaluate", "render"}
+    for rel in ("datasets/newset.py", "data/newset.py", "export/newset_tracks.py"):
+        before = {s: codever.code_version(s, tmp_path) for s in codever.STAGE_SOURCES}
+        _tree(tmp_path, {rel: "x"})
+        after = {s: codever.code_version(s, tmp_path) for s in codever.STAGE_SOURCES}
+        assert dataset_stages <= {s for s in before if before[s] != after[s]}, rel
+        assert before["report"] == after["report"] and before["resolve"] == after["resolve"], rel
+
+
 def test_core_geometry_and_box_code_re_run_tracking():
     """Geometry, the box layout and the canonical scene form feed every tracker: they version the track stages."""
     from grutrack.pipeline.codever import STAGE_SOURCES
@@ -124,7 +138,7 @@ def test_core_geometry_and_box_code_re_run_tracking():
     for stage in ("track", "train"):
         for path in ("geometry.py", "boxes.py", "data/scene.py", "tracking", "motion"):
             assert path in STAGE_SOURCES[stage], (stage, path)
-    assert "evaluation/fast_loading.py" in STAGE_SOURCES["evaluate"]
+    assert "evaluation" in STAGE_SOURCES["evaluate"]   # every evaluator module, fast_loading.py included
 
 
 def test_extra_row_that_is_a_paper_row_is_refused(cfg, paper):

@@ -19,35 +19,27 @@ PACKAGE = Path(__file__).resolve().parents[1]
 _COMMON = ("errors.py", "io.py", "provenance.py", "boxes.py", "classes.py", "geometry.py", "data/scene.py")
 _TRACKING = ("tracking", "motion", "geometry.py", "boxes.py", "classes.py", "data/scene.py", "configs/trackers",
              "configs/motion", "motion/checkpoint.py", "pipeline/presets.py", "cli/common.py")
-#: the dataset interface and the stage documents, read by every stage that goes through a dataset
-_DATASETS = ("datasets", "documents.py", "cli/common.py")
-#: the datasets' scene and detection readers, and their submission writers
-_READERS = ("data/nuscenes.py", "data/nusc_tables.py", "data/nusc_detections.py", "data/av2.py",
-            "data/lt3d_detections.py")
-_WRITERS = ("export/nuscenes_json.py", "export/av2_tracks.py")
+#: what every stage that goes through a dataset runs: the dataset interface, the stage documents, and the
+#: datasets' readers and writers (the data and export layers whole, so a new dataset's modules count without
+#: being listed here)
+_DATASETS = ("datasets", "documents.py", "cli/common.py", "data", "export")
 
 #: stage -> package paths (files or folders) whose content defines the stage's code version
 STAGE_SOURCES: dict[str, tuple[str, ...]] = {
     "data": ("data/demo.py", "cli/demo.py"),
-    "simulate": ("data/detection_sim.py", "data/nuscenes.py", "data/av2.py", "data/lt3d_detections.py",
-                 "configs/detector_profiles", "cli/demo.py", *_DATASETS),
+    "simulate": ("configs/detector_profiles", "cli/demo.py", *_DATASETS),
     "fetch": ("data/registry.py", "data/download.py", "configs/detections.yaml", "cli/detections.py"),
     "convert": ("data/registry.py", "data/nusc_convert.py", "data/lt3d_convert.py", "data/nusc_detections.py",
                 "data/lt3d_detections.py", "data/nuscenes.py", "data/av2.py", "configs/detections.yaml",
                 "cli/detections.py"),
-    "train": ("training", "documents.py", "data/nuscenes.py", "data/nusc_detections.py", "evaluation/fast_amota.py",
-              "evaluation/fast_loading.py",
-              "export/nuscenes_json.py", "configs/training", "cli/train.py", *_TRACKING),
+    "train": ("training", "evaluation/fast_amota.py", "evaluation/fast_loading.py", "configs/training",
+              "cli/train.py", *_TRACKING, *_DATASETS),
     "resolve": ("pipeline/presets.py", "tracking/config.py", "motion/defaults.py", "configs/trackers",
                 "configs/motion", "cli/resolve.py"),
-    "track": (*_READERS, *_WRITERS, "cli/track.py", *_TRACKING, *_DATASETS),
-    "submit": (*_WRITERS, "export/leaderboard.py", "data/nuscenes.py", "data/av2.py", "cli/submit.py", *_DATASETS),
-    "evaluate": ("evaluation/nuscenes_eval.py", "evaluation/fast_amota.py", "evaluation/fast_loading.py",
-                 "evaluation/av2_eval.py", "evaluation/tracking_classes.py", "data/nuscenes.py", "data/av2.py",
-                 "export/av2_tracks.py", "export/leaderboard.py", "cli/evaluate.py", *_DATASETS),
-    "render": ("render", "evaluation/fast_amota.py", "evaluation/fast_loading.py", "evaluation/av2_eval.py",
-               "evaluation/clear_frames.py", *_READERS, "export/av2_tracks.py", "threads.py", "cli/render.py",
-               *_DATASETS),
+    "track": ("cli/track.py", *_TRACKING, *_DATASETS),
+    "submit": ("cli/submit.py", *_DATASETS),
+    "evaluate": ("evaluation", "cli/evaluate.py", *_DATASETS),
+    "render": ("render", "evaluation", "threads.py", "cli/render.py", *_DATASETS),
     "report": ("report", "render", "documents.py", "cli/report.py"),
 }
 
