@@ -98,7 +98,8 @@ def test_presets_carry_only_what_their_algorithm_reads():
     """Keys a preset's settings never read are left out of the shipped presets (their schema default is a
     placeholder), and leaving out a key with a default gives the tracker's behaviour without it."""
     unread = {"greedy": ("association.assignment", "association.two_stage", "association.first_metric",
-                         "association.first_threshold", "association.second_metric", "association.second_threshold"),
+                         "association.first_threshold", "association.second_metric", "association.second_threshold",
+                         "association.distance_gate"),
               "hungarian": ("association.max_distance",)}
     for path in sorted(PRESET_DIR.glob("*.yaml")):
         raw = yaml.safe_load(path.read_text())
@@ -112,6 +113,7 @@ def test_presets_carry_only_what_their_algorithm_reads():
         if life.get("termination", "age") == "age":
             never.add("lifecycle.delete_threshold")
         assert not keys & never, (path.name, sorted(keys & never))
+        assert ("motion" in raw) == (assoc["algorithm"] != "greedy"), path.name   # greedy: no motion filter
     # a key left out takes its schema default: the same tracker as with the default written out
     raw = copy.deepcopy(_raw())
     raw["output"]["max_boxes_per_sample"] = 500
@@ -119,4 +121,8 @@ def test_presets_carry_only_what_their_algorithm_reads():
     short = {**raw, "output": {"matched_box": raw["output"]["matched_box"]}}
     full, short = config_from_dict(raw), config_from_dict(short)
     assert full.max_boxes_per_sample == short.max_boxes_per_sample == 500
+    # a preset without a motion section runs the default motion config with every motion default
+    no_motion = config_from_dict({k: v for k, v in _raw().items() if k != "motion"})
+    assert (no_motion.motion_config, no_motion.time_step, no_motion.ctra_form, no_motion.yaw_flip) == \
+        ("polymot_nusc", None, "arc", False)
 

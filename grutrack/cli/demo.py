@@ -70,9 +70,8 @@ def run_simulate(args: argparse.Namespace) -> int:
     profile = load_profile(args.profile)
     ds = dataset_of(args)
     counts = ds.simulate_detections(args.split, profile, args.seed, args.out)
-    where = f"{args.version}/{args.split}" if args.dataset == "nuscenes" else f"av2 {args.split}"
     print(f"wrote {args.out}: {counts.pop('detections')} SYNTHETIC detections ({profile.name}, seed {args.seed}) "
-          f"on {', '.join(f'{v} {k}' for k, v in counts.items())} of {where}")
+          f"on {', '.join(f'{v} {k}' for k, v in counts.items())}, split {args.split} of {ds.describe()}")
     return 0
 
 
@@ -82,8 +81,7 @@ def run_stats(args: argparse.Namespace) -> int:
 
     ds = dataset_of(args)
     stats = ds.gt_statistics(args.split)
-    where = args.version if ds.name == "nuscenes" else f"{ds.name} at {args.rate:g} Hz"
-    label = f"{Path(args.dataroot).name}/{where} {'+'.join(args.split)}"
+    label = f"{Path(args.dataroot).name}: {ds.describe()} {'+'.join(args.split)}"
     print(format_table(stats, title=f"ground truth of {label}, {len(stats) - 1} classes"))
     if args.json_out:
         write_stats_json(args.json_out, stats, {"dataset": ds.name, "dataroot": str(args.dataroot),

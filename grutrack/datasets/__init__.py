@@ -31,6 +31,18 @@ def dataset_class(name: str) -> type:
     return getattr(importlib.import_module(module), cls)
 
 
+def config_kinds() -> dict[str, tuple[str, dict]]:
+    """Every workflow config dataset kind -> (the dataset that reads it, the JSON schema of a ``datasets:`` entry
+    of that kind), from the ``config_kinds`` of every class in :data:`DATASETS`."""
+    kinds: dict[str, tuple[str, dict]] = {}
+    for name in DATASETS:
+        for kind, schema in dataset_class(name).config_kinds.items():
+            if kind in kinds:
+                raise RuntimeError(f"config kind '{kind}' is declared by datasets {kinds[kind][0]} and {name}")
+            kinds[kind] = (name, schema)
+    return kinds
+
+
 def open_dataset(name: str, options: DatasetOptions) -> Dataset:
     """The dataset ``name`` at ``options.dataroot`` (nothing is read until a method needs it)."""
     return dataset_class(name)(options)
@@ -45,4 +57,4 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'grutrack.datasets' has no attribute {name!r}")
 
 
-__all__ = ["DATASETS", "Dataset", "DatasetOptions", "dataset_class", "open_dataset"]
+__all__ = ["DATASETS", "Dataset", "DatasetOptions", "config_kinds", "dataset_class", "open_dataset"]

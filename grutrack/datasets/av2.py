@@ -26,9 +26,37 @@ class AV2Dataset:
                      "annotations.feather, city_SE3_egovehicle.feather and map/")
     leaderboard_zip = False
     validates_training = False
+    #: workflow config kinds this class reads -> the JSON schema of such a ``datasets:`` entry
+    config_kinds = {
+        "av2": {
+            "type": "object", "additionalProperties": False,
+            "required": ["kind", "dataroot", "version", "rate_hz"],
+            "properties": {
+                "kind": {"const": "av2"},
+                "dataroot": {"type": ["string", "null"], "minLength": 1},
+                "version": {"type": "null"},
+                "rate_hz": {"type": "number", "exclusiveMinimum": 0,
+                            "description": "the rate the logs are tracked at, Hz (the lidar sweeps at 10)"},
+            },
+        },
+    }
+
+    @staticmethod
+    def config_version(entry: dict, split: str) -> None:
+        """AV2 has no versions."""
+        return None
+
+    @staticmethod
+    def config_options(entry: dict) -> list[str]:
+        """``--rate`` from the entry's ``rate_hz``."""
+        return ["--rate", str(entry["rate_hz"])]
 
     def __init__(self, options: DatasetOptions):
         self.options = options
+
+    def describe(self) -> str:
+        """``av2 at <rate> Hz``, for messages."""
+        return f"{self.name} at {self.options.rate_hz:g} Hz"
 
     @property
     def vocabulary(self) -> Vocabulary:

@@ -48,7 +48,10 @@ class Dataset(Protocol):
     evaluation runs worker processes (``--workers``); ``dataroot_folder``: the folder a dataroot must hold
     (a format string of ``version`` and ``split``) and ``dataroot_hint`` what a dataroot is, for error messages;
     ``leaderboard_zip``: whether ``grutrack leaderboard-zip`` packs its submissions; ``validates_training``:
-    whether ``grutrack train`` can score validation AMOTA on it (``--val-split``)."""
+    whether ``grutrack train`` can score validation AMOTA on it (``--val-split``); ``config_kinds``: the
+    workflow config kinds it reads (``datasets: {<name>: {kind: <kind>, ...}}``), each with the JSON schema of
+    such an entry; ``config_version`` / ``config_options``: the ``--version`` and other command-line options
+    of a split of such an entry."""
 
     name: str
     submission_suffix: str
@@ -59,7 +62,20 @@ class Dataset(Protocol):
     dataroot_hint: str
     leaderboard_zip: bool
     validates_training: bool
+    config_kinds: dict[str, dict]
     options: DatasetOptions
+
+    @staticmethod
+    def config_version(entry: dict, split: str) -> str | None:
+        ...
+
+    @staticmethod
+    def config_options(entry: dict) -> list[str]:
+        ...
+
+    def describe(self) -> str:
+        """What is read, for messages (``nuscenes v1.0-mini``, ``av2 at 2 Hz``)."""
+        ...
 
     @property
     def vocabulary(self) -> Vocabulary:

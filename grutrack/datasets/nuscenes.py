@@ -28,12 +28,54 @@ class NuScenesDataset:
                      "too for the test split)")
     leaderboard_zip = True
     validates_training = True
+    #: workflow config kinds (``datasets: {<name>: {kind: ...}}``) this class reads -> the JSON schema of such an
+    #: entry; the demo is nuScenes-format data that the workflow generates (rule demo_data)
+    config_kinds = {
+        "nuscenes": {
+            "type": "object", "additionalProperties": False,
+            "required": ["kind", "dataroot", "version", "test_version"],
+            "properties": {
+                "kind": {"const": "nuscenes"},
+                "dataroot": {"type": ["string", "null"], "minLength": 1},
+                "version": {"type": "string", "minLength": 1},
+                "test_version": {"type": ["string", "null"], "minLength": 1},
+            },
+        },
+        "demo": {
+            "type": "object", "additionalProperties": False,
+            "required": ["kind", "dataroot", "version", "scenes", "frames_per_scene", "seed"],
+            "properties": {
+                "kind": {"const": "demo"},
+                "dataroot": {"type": "string", "minLength": 1},
+                "version": {"type": "string", "minLength": 1},
+                "scenes": {"type": "integer", "minimum": 2},
+                "frames_per_scene": {"type": "integer", "minimum": 2},
+                "seed": {"type": "integer"},
+            },
+        },
+    }
+
+    @staticmethod
+    def config_version(entry: dict, split: str) -> str | None:
+        """The version a split of a workflow config entry lives in (nuScenes test: ``test_version``)."""
+        if split == "test" and entry.get("test_version"):
+            return entry["test_version"]
+        return entry["version"]
+
+    @staticmethod
+    def config_options(entry: dict) -> list[str]:
+        """Command-line options besides ``--dataset/--dataroot/--version/--split`` for a config entry: none."""
+        return []
 
     def __init__(self, options: DatasetOptions):
         if not options.version:
             raise ConfigError("--version is required with --dataset nuscenes (e.g. v1.0-trainval, v1.0-mini)")
         self.options = options
         self._nusc = None
+
+    def describe(self) -> str:
+        """``<name> <version>``, for messages."""
+        return f"{self.name} {self.options.version}"
 
     @property
     def vocabulary(self) -> Vocabulary:
@@ -123,7 +165,7 @@ class NuScenesDataset:
             from grutrack.evaluation.fast_amota import fast_tracking_eval
 
             summary = fast_tracking_eval(self.tables, sub, split)
-        doc = metrics_document(summary, dataset="nuscenes", version=self.options.version, split=split,
+        doc = metrics_document(summary, dataset=self.name, version=self.options.version, split=split,
                                evaluator=evaluator, submission=str(submission))
         doc.seconds = round(time.perf_counter() - t0, 3)
         return doc

@@ -36,10 +36,13 @@ def _fail(path: Path, key: str, msg: str) -> ConfigError:
     return ConfigError(f"{path}: key '{key}': {msg}")
 
 
-def _canonical_model(name: str) -> str:
-    """The canonical model name (``CTRA``, ``Bicycle``, ``CA``, ``CV``) of a case-insensitive spelling the
-    schema accepted."""
-    return {k.lower(): k for k in MODELS}[name.lower()]
+def _canonical_model(path: Path, key: str, name: str) -> str:
+    """The canonical model name (a key of :data:`MODELS`: ``CTRA``, ``Bicycle``, ``CA``, ``CV``, ...) of a
+    case-insensitive spelling; an unknown name is a :class:`ConfigError` naming ``key``."""
+    lookup = {k.lower(): k for k in MODELS}
+    if not isinstance(name, str) or name.lower() not in lookup:
+        raise _fail(path, key, f"unknown motion model {name!r} (expected one of {sorted(MODELS)})")
+    return lookup[name.lower()]
 
 
 def _is_number(v) -> bool:
@@ -81,9 +84,9 @@ def _noise(path: Path, where: str, node: Mapping, model: str) -> dict[str, np.nd
 def _model_defaults(path: Path, models_node) -> dict[str, dict]:
     """Schema-checked ``models`` section -> ``{model: {"Q", "R", "P0", "params"}}``."""
     out = {}
-    for name in MODELS:
-        where = f"models.{name}"
-        node = models_node[name]
+    for given, node in models_node.items():
+        where = f"models.{given}"
+        name = _canonical_model(path, where, given)
         params = node["params"] if node["params"] is not None else {}
         try:
             make_model(name, **params)
@@ -97,12 +100,8 @@ def _overrides(path: Path, model_override) -> dict[str, str]:
     """``model_override`` (None, a model name for all classes, or ``{class: model}``) -> ``{class: model}``."""
     if model_override is None:
         return {}
-    lookup = {k.lower(): k for k in MODELS}
-
     def model(key: str, name) -> str:
-        if not isinstance(name, str) or name.lower() not in lookup:
-            raise _fail(path, key, f"unknown motion model {name!r} (expected one of {sorted(MODELS)})")
-        return lookup[name.lower()]
+        return _canonical_model(path, key, name)
 
     if isinstance(model_override, str):
         return {cls: model("model_override", model_override) for cls in TRACKING_CLASSES}
@@ -139,9 +138,13 @@ def load_motion_config(path: str | Path | None = None, model_override=None) -> d
     for cls in TRACKING_CLASSES:
         where = f"classes.{cls}"
         node = raw["classes"][cls]
-        own = _canonical_model(node["model"])
+        own = _canonical_model(path, f"{where}.model", node["model"])
         noise = _noise(path, where, node, own)
         model = override.get(cls, own)
+        if model not in defaults:
+            key = f"models.{model}" if model == own else f"model_override.{cls}"
+            raise _fail(path, key, f"no defaults for motion model {model} under 'models' (P0, Q, R, params: "
+                                   f"its constructor parameters)")
         if model != own:
             noise = {k: defaults[model][k].copy() for k in ("Q", "R", "P0")}
         out[cls] = {"model": model, **noise, "params": dict(defaults[model]["params"])}

@@ -63,7 +63,7 @@ def validate_config(cfg: dict, schema_path: str | Path, files: list, cli: dict |
     import jsonschema
     import yaml
 
-    schema = yaml.safe_load(Path(schema_path).read_text())
+    schema = with_dataset_kinds(yaml.safe_load(Path(schema_path).read_text()))
     errors = list(jsonschema.validators.validator_for(schema)(schema).iter_errors(cfg))
     if not errors:
         return
@@ -82,6 +82,20 @@ def validate_config(cfg: dict, schema_path: str | Path, files: list, cli: dict |
                 origin = f"--configfile {fname}"
                 break
     raise ConfigError(f"config key {key} (from {origin}): {err.message}")
+
+
+def with_dataset_kinds(schema: dict) -> dict:
+    """The workflow config schema with the dataset kinds of :func:`grutrack.datasets.config_kinds`: the entry
+    of ``datasets`` takes one of those kinds and, for each, that kind's schema (``$defs/<kind>_dataset``)."""
+    from grutrack.datasets import config_kinds
+
+    kinds = config_kinds()
+    entry = schema["properties"]["datasets"]["additionalProperties"]
+    entry["properties"] = {**entry.get("properties", {}), "kind": {"enum": sorted(kinds)}}
+    entry["allOf"] = [{"if": {"properties": {"kind": {"const": k}}}, "then": {"$ref": f"#/$defs/{k}_dataset"}}
+                      for k in sorted(kinds)]
+    schema["$defs"].update({f"{k}_dataset": sub for k, (_, sub) in kinds.items()})
+    return schema
 
 
 def _has_path(d, path: list) -> bool:
@@ -223,11 +237,9 @@ def _check_report(cfg: dict, paper: dict, name: str, rep: dict) -> None:
 # ------------------------------------------------------------------------------------------------------------
 
 def version_for(cfg: dict, dataset: str, split: str) -> str | None:
-    """The dataset version a split lives in (nuScenes test lives in test_version)."""
-    ds = cfg["datasets"][dataset]
-    if ds["kind"] == "nuscenes" and split == "test" and ds.get("test_version"):
-        return ds["test_version"]
-    return ds.get("version")
+    """The dataset version a split lives in, as the dataset class reads its config entry (nuScenes test lives
+    in test_version; AV2 has none)."""
+    return dataset_class(cfg, dataset).config_version(cfg["datasets"][dataset], split)
 
 
 def require_dataroot(cfg: dict, dataset: str, split: str | None = None) -> str:
@@ -254,19 +266,23 @@ def require_dataroot(cfg: dict, dataset: str, split: str | None = None) -> str:
 # ------------------------------------------------------------------------------------------------------------
 
 def dataset_kind(cfg: dict, dataset: str) -> str:
-    """demo, nuscenes or av2."""
+    """The config kind of a dataset entry (one a dataset class declares in its ``config_kinds``)."""
     return cfg["datasets"][dataset]["kind"]
 
 
-#: config dataset kind -> the dataset (grutrack.datasets) that reads it: the demo is nuScenes-format
-KIND_DATASET = {"demo": "nuscenes", "nuscenes": "nuscenes", "av2": "av2"}
+def dataset_name(cfg: dict, dataset: str) -> str:
+    """The :mod:`grutrack.datasets` name (``--dataset``) of a config dataset: the class that declares its kind
+    (the demo is nuScenes-format)."""
+    from grutrack.datasets import config_kinds
+
+    return config_kinds()[dataset_kind(cfg, dataset)][0]
 
 
 def dataset_class(cfg: dict, dataset: str) -> type:
     """The :mod:`grutrack.datasets` class of a config dataset."""
     from grutrack.datasets import dataset_class as cls
 
-    return cls(KIND_DATASET[dataset_kind(cfg, dataset)])
+    return cls(dataset_name(cfg, dataset))
 
 
 def evaluation_threads(cfg: dict, dataset: str) -> int:
@@ -281,12 +297,12 @@ def dataset_args(cfg: dict, dataset: str, split: str) -> str:
     import shlex
 
     ds = cfg["datasets"][dataset]
-    args = ["--dataset", KIND_DATASET[ds["kind"]], "--dataroot", str(ds["dataroot"]), "--split", split]
-    version = version_for(cfg, dataset, split)
+    cls = dataset_class(cfg, dataset)
+    args = ["--dataset", cls.name, "--dataroot", str(ds["dataroot"]), "--split", split]
+    version = cls.config_version(ds, split)
     if version:
         args += ["--version", version]
-    if ds.get("rate_hz") is not None:
-        args += ["--rate", str(ds["rate_hz"])]
+    args += cls.config_options(ds)
     return " ".join(shlex.quote(a) for a in args)
 
 

@@ -95,12 +95,13 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
     if not isinstance(raw, dict):
         raise ConfigError(f"{source}: expected a mapping of sections {', '.join(SECTIONS)}")
     validate("tracker", raw, source)
-    given = {f"{sec}.{key}": val for sec in SECTIONS for key, val in raw[sec].items()}
+    given = {f"{sec}.{key}": val for sec in SECTIONS for key, val in (raw.get(sec) or {}).items()}
     v = {f"{sec}.{key}": _convert(given.get(f"{sec}.{key}", default), ref)
          for sec, keys in _section_refs().items() for key, (ref, default) in keys.items()}
     for key, (setting, value) in NEEDED_WITH.items():
         if v[setting] == value and key not in given:
             raise ConfigError(f"{source}: '{key}' is required with '{setting}: {_yaml_scalar(value)}'")
+    _check_model_names(v["motion.model_override"], source)
     if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
         raise ConfigError(f"{source}: 'association.two_stage' must be false with 'association.algorithm' greedy "
                           f"(greedy matching is one stage)")
@@ -123,6 +124,19 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         distance_gate=v["association.distance_gate"], score_update=v["lifecycle.score_update"],
         termination=v["lifecycle.termination"], delete_threshold=v["lifecycle.delete_threshold"],
         geometry_filter=v["motion.geometry_filter"], geometry_window=v["motion.geometry_window"])
+
+
+def _check_model_names(override: dict[str, str], source: str) -> None:
+    """Every model named in ``motion.model_override`` is one of :data:`grutrack.motion.models.MODELS`."""
+    if not override:
+        return
+    from grutrack.motion.models import MODELS
+
+    names = sorted(m.upper() for m in MODELS)
+    for cls, model in override.items():
+        if model not in names:
+            raise ConfigError(f"{source}: 'motion.model_override.{cls}' must be one of {', '.join(names)} "
+                              f"(a motion model of grutrack/motion/models.py), not {model!r}")
 
 
 def _section_refs() -> dict[str, dict[str, tuple[str, Any]]]:
