@@ -167,3 +167,48 @@ def test_a_new_motion_model_is_its_class_and_one_models_line(monkeypatch, nusc_r
     assert main(["track", *common, "--config", str(tmp_path / "bad.yaml"), "--detections", str(dets),
                  "--out", str(tmp_path / "bad.json")]) == 2
     assert "'motion.model_override.car' must be one of BICYCLE, CA, CTRA, CV, TWINCV" in capsys.readouterr().err
+
+
+#: a new report module: the overall AMOTA of each run, one line each
+REPORT_MODULE = textwrap.dedent('''
+    def build(inp):
+        lines = [f"# {inp.name}", ""]
+        for run, doc in sorted(inp.docs().items()):
+            lines.append(f"- {run}: AMOTA {doc.overall['amota']:.4f}")
+        return "\\n".join(lines) + "\\n"
+''')
+
+
+def test_a_new_report_is_its_module_and_one_kinds_line(monkeypatch, tmp_path, capsys):
+    """The workflow config accepts the new kind and checks its experiment as the line says; the command
+    builds it."""
+    from grutrack.cli import main
+    from grutrack.data.registry import load_registry
+    from grutrack.documents import MetricsDocument
+    from grutrack.report import KINDS, ReportKind
+
+    (tmp_path / "amota_list.py").write_text(REPORT_MODULE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setitem(KINDS, "amota_list", ReportKind("amota_list", ("demo", "nuscenes"), ("runs",)))
+    cfg = yaml.safe_load((REPO / "workflow/config/config.yaml").read_text())
+    paper = yaml.safe_load((REPO / "workflow/config/paper.yaml").read_text())
+    cfg["reports"]["short"] = {"kind": "amota_list", "experiment": "demo_val", "tables": {}, "trainings": {}}
+    spec.validate_config(cfg, SCHEMA, files=[])
+    spec.check_config(cfg, paper, load_registry())
+    bad = copy.deepcopy(cfg)
+    bad["reports"]["short"]["experiment"] = "av2_val"
+    with pytest.raises(ConfigError, match=r"reports\.short\.experiment: a amota_list report needs a demo or "
+                                          r"nuscenes experiment, 'av2_val' is av2"):
+        spec.check_config(bad, paper, load_registry())
+    bad["reports"]["short"]["kind"] = "amota_lst"
+    with pytest.raises(ConfigError, match=r"reports\.short\.kind .*'amota_lst' is not one of"):
+        spec.validate_config(bad, SCHEMA, files=[])
+    metrics = tmp_path / "m.json"
+    MetricsDocument(dataset="nuscenes", version="v1.0-mini", split="mini_val", evaluator="fast",
+                    submission="sub.json", overall={"amota": 0.61234}, per_class={}).write(metrics)
+    out = tmp_path / "short.md"
+    assert main(["report", "amota_list", "--out", str(out), "--run", f"ekf={metrics}"]) == 0
+    assert out.read_text() == "# short\n\n- ekf: AMOTA 0.6123\n"
+    assert main(["report", "amota_list", "--out", str(out), "--run", f"ekf={metrics}",
+                 "--render", f"ekf={tmp_path}/counts.json"]) == 2
+    assert "--render: a amota_list report shows no key frames (it reads runs)" in capsys.readouterr().err

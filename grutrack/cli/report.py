@@ -90,11 +90,11 @@ def run(args: argparse.Namespace) -> int:
                        train_logs={k: Path(v) for k, v in _pairs(args.train_log, "--train-log").items()},
                        zips={k: Path(v) for k, v in _pairs(args.zip, "--zip").items()},
                        renders={k: Path(v) for k, v in _pairs(args.render, "--render").items()})
-    if inp.renders and args.kind in ("nusc_test", "semi_supervised"):
-        raise ConfigError(f"--render: a {args.kind} report shows no key frames (" + (
-            "nuScenes test has no public ground truth)" if args.kind == "nusc_test" else "it has no tracking run)"))
+    if inp.renders and "renders" not in KINDS[args.kind].reads:
+        raise ConfigError(f"--render: a {args.kind} report shows no key frames (it reads "
+                          f"{', '.join(KINDS[args.kind].reads)})")
     inp.figures.mkdir(parents=True, exist_ok=True)
-    text = importlib.import_module(KINDS[args.kind]).build(inp)
+    text = importlib.import_module(KINDS[args.kind].module).build(inp)
     write_text_atomic(out, text)
     print(f"wrote {out} and its figures in {inp.figures}")
     return 0

@@ -13,9 +13,12 @@ from pathlib import Path
 
 from grutrack.errors import ConfigError
 
-#: report kind -> the dataset kinds its experiment may use
-REPORT_DATASETS = {"demo": ("demo",), "nusc_val": ("nuscenes", "demo"), "nusc_test": ("nuscenes", "demo"),
-                   "av2_val": ("av2",), "semi_supervised": ()}
+
+def report_kind(kind: str):
+    """The :class:`grutrack.report.ReportKind` of a config report kind (what its rule gives it)."""
+    from grutrack.report import KINDS
+
+    return KINDS[kind]
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -63,7 +66,7 @@ def validate_config(cfg: dict, schema_path: str | Path, files: list, cli: dict |
     import jsonschema
     import yaml
 
-    schema = with_dataset_kinds(yaml.safe_load(Path(schema_path).read_text()))
+    schema = with_registered_kinds(yaml.safe_load(Path(schema_path).read_text()))
     errors = list(jsonschema.validators.validator_for(schema)(schema).iter_errors(cfg))
     if not errors:
         return
@@ -84,10 +87,15 @@ def validate_config(cfg: dict, schema_path: str | Path, files: list, cli: dict |
     raise ConfigError(f"config key {key} (from {origin}): {err.message}")
 
 
-def with_dataset_kinds(schema: dict) -> dict:
-    """The workflow config schema with the dataset kinds of :func:`grutrack.datasets.config_kinds`: the entry
-    of ``datasets`` takes one of those kinds and, for each, that kind's schema (``$defs/<kind>_dataset``)."""
+def with_registered_kinds(schema: dict) -> dict:
+    """The workflow config schema with the kinds the registries define: a ``datasets`` entry takes one of the
+    kinds of :func:`grutrack.datasets.config_kinds` and, for each, that kind's schema
+    (``$defs/<kind>_dataset``); a ``reports`` entry one of :data:`grutrack.report.KINDS`."""
     from grutrack.datasets import config_kinds
+    from grutrack.report import KINDS
+
+    report = schema["properties"]["reports"]["additionalProperties"]
+    report["properties"]["kind"] = {"enum": list(KINDS)}
 
     kinds = config_kinds()
     entry = schema["properties"]["datasets"]["additionalProperties"]
@@ -194,28 +202,29 @@ def _check_experiment(cfg: dict, registry: dict, name: str, exp: dict) -> None:
 
 def _check_report(cfg: dict, paper: dict, name: str, rep: dict) -> None:
     key = f"reports.{name}"
-    if rep["kind"] == "semi_supervised":
-        for role in ("semi_supervised", "supervised"):
-            if role not in rep["trainings"]:
-                raise ConfigError(f"config key {key}.trainings needs '{role}': <training name>")
-            tr = rep["trainings"][role]
-            _need(cfg["trainings"], tr, f"{key}.trainings.{role}", "trainings")
-            if cfg["trainings"][tr]["validation"] is None:
-                raise ConfigError(f"config key trainings.{tr}.validation must be set (the figure plots validation "
-                                  f"AMOTA against step)")
+    kind = report_kind(rep["kind"])
+    for role in kind.training_roles:
+        if role not in rep["trainings"]:
+            raise ConfigError(f"config key {key}.trainings needs '{role}': <training name>")
+        tr = rep["trainings"][role]
+        _need(cfg["trainings"], tr, f"{key}.trainings.{role}", "trainings")
+        if cfg["trainings"][tr]["validation"] is None:
+            raise ConfigError(f"config key trainings.{tr}.validation must be set (the figure plots validation "
+                              f"AMOTA against step)")
+    if not kind.datasets:
         return
     if rep["experiment"] is None:
         raise ConfigError(f"config key {key}.experiment: a {rep['kind']} report needs an experiment")
     _need(cfg["experiments"], rep["experiment"], f"{key}.experiment", "experiments")
     exp = cfg["experiments"][rep["experiment"]]
-    kind = cfg["datasets"][exp["dataset"]]["kind"]
-    if kind not in REPORT_DATASETS[rep["kind"]]:
+    ds_kind = cfg["datasets"][exp["dataset"]]["kind"]
+    if ds_kind not in kind.datasets:
         raise ConfigError(f"config key {key}.experiment: a {rep['kind']} report needs a "
-                          f"{' or '.join(REPORT_DATASETS[rep['kind']])} experiment, '{rep['experiment']}' is {kind}")
-    if rep["kind"] == "nusc_test" and exp["leaderboard_run"] is None:
+                          f"{' or '.join(kind.datasets)} experiment, '{rep['experiment']}' is {ds_kind}")
+    if "zips" in kind.reads and exp["leaderboard_run"] is None:
         raise ConfigError(f"config key experiments.{rep['experiment']}.leaderboard_run must name the run whose zips "
                           f"the {name} report shows")
-    if rep["kind"] != "nusc_test" and exp["evaluator"] == "none":
+    if "runs" in kind.reads and exp["evaluator"] == "none":
         raise ConfigError(f"config key {key}.experiment: a {rep['kind']} report needs metrics, but experiment "
                           f"'{rep['experiment']}' has evaluator none")
     for table, rows in rep["tables"].items():

@@ -1,7 +1,36 @@
 """Reports: the paper's tables (``workflow/config/paper.yaml``) beside reproduced numbers read from metrics
-JSONs (never recomputed), figures as PNG, and the paper-vs-reproduced check. One module per report kind."""
+JSONs (never recomputed), figures as PNG, and the paper-vs-reproduced check. One module per report kind.
 
-#: report kind -> module with ``build(inputs) -> str``
-KINDS = {"demo": "grutrack.report.demo", "nusc_val": "grutrack.report.nusc_val",
-         "nusc_test": "grutrack.report.nusc_test", "av2_val": "grutrack.report.av2_val",
-         "semi_supervised": "grutrack.report.semi_supervised"}
+Adding a report: its module (``build(inputs) -> str``) and one :data:`KINDS` line saying what the workflow gives
+it; the workflow config accepts the kind and the report rule gathers its inputs from that line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class ReportKind:
+    """One report kind. ``module``: the module with ``build(inputs) -> str``; ``datasets``: the workflow dataset
+    kinds its experiment may use (empty: the report has no experiment); ``reads``: what the report rule gives it,
+    of ``runs`` (each run's metrics JSON and manifest: the experiment must be evaluated), ``trainings`` (the
+    training logs of the experiment's GRU-KF runs, or of the report's own ``trainings`` map when it has no
+    experiment), ``renders`` (each run's worst-scene frames) and ``zips`` (the leaderboard zips: the experiment
+    must name its ``leaderboard_run``); ``training_roles``: the keys its ``trainings`` map must hold."""
+
+    module: str
+    datasets: tuple[str, ...]
+    reads: tuple[str, ...]
+    training_roles: tuple[str, ...] = ()
+
+
+#: report kind -> what it is
+KINDS: dict[str, ReportKind] = {
+    "demo": ReportKind("grutrack.report.demo", ("demo",), ("runs", "trainings", "renders")),
+    "nusc_val": ReportKind("grutrack.report.nusc_val", ("nuscenes", "demo"), ("runs", "trainings", "renders")),
+    "nusc_test": ReportKind("grutrack.report.nusc_test", ("nuscenes", "demo"), ("zips",)),
+    "av2_val": ReportKind("grutrack.report.av2_val", ("av2",), ("runs", "trainings", "renders")),
+    "semi_supervised": ReportKind("grutrack.report.semi_supervised", (), ("trainings",),
+                                  training_roles=("semi_supervised", "supervised")),
+}

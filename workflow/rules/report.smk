@@ -8,7 +8,7 @@ def _report(w):
 
 def _report_runs(rep):
     """(run, metrics JSON, manifest) of the report's experiment, first detector (evaluated experiments)."""
-    if rep["kind"] in ("semi_supervised", "nusc_test"):
+    if "runs" not in S.report_kind(rep["kind"]).reads:
         return []
     exp_name = rep["experiment"]
     det = config["experiments"][exp_name]["detectors"][0]
@@ -18,20 +18,23 @@ def _report_runs(rep):
 
 
 def _report_trainings(rep):
-    """(name, train_log.csv, training.yaml) of the trainings the report shows."""
-    if rep["kind"] == "semi_supervised":
+    """(name, train_log.csv, training.yaml) of the trainings the report shows: those of its experiment's GRU-KF
+    runs, or its own ``trainings`` map when it has no experiment."""
+    kind = S.report_kind(rep["kind"])
+    if "trainings" not in kind.reads:
+        return []
+    if not kind.datasets:
         names = rep["trainings"]
     else:
         runs = config["experiments"][rep["experiment"]]["runs"]
         names = {r["training"]: r["training"] for r in runs.values() if r["training"]}
-    return [(label, f"checkpoints/{t}/train_log.csv", f"checkpoints/{t}/training.yaml") for label, t in names.items()
-            if rep["kind"] in ("semi_supervised", "demo", "nusc_val", "av2_val")]
+    return [(label, f"checkpoints/{t}/train_log.csv", f"checkpoints/{t}/training.yaml") for label, t in names.items()]
 
 
 def _report_renders(rep):
     """(run, render folder) of a report that shows each run's worst scene (experiments with ground truth: not
     nuScenes test)."""
-    if rep["kind"] not in ("demo", "nusc_val", "av2_val"):
+    if "renders" not in S.report_kind(rep["kind"]).reads:
         return []
     exp_name = rep["experiment"]
     det = config["experiments"][exp_name]["detectors"][0]
@@ -40,7 +43,7 @@ def _report_renders(rep):
 
 def _report_zips(rep):
     """(detector, zip, manifest) of a leaderboard report."""
-    if rep["kind"] != "nusc_test":
+    if "zips" not in S.report_kind(rep["kind"]).reads:
         return []
     name = rep["experiment"]
     exp = config["experiments"][name]
