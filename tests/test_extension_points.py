@@ -211,4 +211,4 @@ def test_a_new_report_is_its_module_and_one_kinds_line(monkeypatch, tmp_path, ca
     assert out.read_text() == "# short\n\n- ekf: AMOTA 0.6123\n"
     assert main(["report", "amota_list", "--out", str(out), "--run", f"ekf={metrics}",
                  "--render", f"ekf={tmp_path}/counts.json"]) == 2
-    assert "--render: a amota_list report shows no key frames (it reads runs)" in capsys.readouterr().err
+    assert "--render: a amota_list report shows no key frames (it has no tracking run)" in capsys.readouterr().err

@@ -91,8 +91,7 @@ def run(args: argparse.Namespace) -> int:
                        zips={k: Path(v) for k, v in _pairs(args.zip, "--zip").items()},
                        renders={k: Path(v) for k, v in _pairs(args.render, "--render").items()})
     if inp.renders and "renders" not in KINDS[args.kind].reads:
-        raise ConfigError(f"--render: a {args.kind} report shows no key frames (it reads "
-                          f"{', '.join(KINDS[args.kind].reads)})")
+        raise ConfigError(f"--render: a {args.kind} report shows no key frames ({KINDS[args.kind].no_renders})")
     inp.figures.mkdir(parents=True, exist_ok=True)
     text = importlib.import_module(KINDS[args.kind].module).build(inp)
     write_text_atomic(out, text)

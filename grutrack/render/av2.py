@@ -23,10 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from grutrack.errors import ConfigError, DatasetError
+from grutrack.errors import DatasetError
 from grutrack.io import write_json_atomic
 from grutrack.render.views import (COUNT_KEYS, GT_IGNORED, GT_MATCH, GT_MISS, GT_SWITCH, TR_BELOW, TR_FP,
-                                   TR_IGNORED, TR_MATCH, TR_SWITCH, FrameView, scene_record, update_trails)
+                                   TR_IGNORED, TR_MATCH, TR_SWITCH, FrameView, choose_scenes, scene_record,
+                                   update_trails)
 
 MATCHING = ("official AV2 tracking evaluation (av2.evaluation.tracking.eval.evaluate, HOTA objective): per class "
             "at its tuned score threshold, TrackEval CLEAR on centre distance (similarity 1 - d/2 m >= 0.5, i.e. "
@@ -118,17 +119,8 @@ def scene_errors(ev: Av2Evaluation) -> dict:
 
 def select_scenes(ev: Av2Evaluation, names: list[str] | None, worst: int | None) -> list:
     """The logs named (in the given order), or the ``worst`` logs by id switches + FP + FN (ties: log id)."""
-    by_name = {s.name: s for s in ev.scenes}
-    if names:
-        unknown = [n for n in names if n not in by_name]
-        if unknown:
-            raise DatasetError(f"--scene {unknown[0]}: not a log of this split (logs: {', '.join(by_name)})")
-        return [by_name[n] for n in dict.fromkeys(names)]
-    if worst is None or worst < 1:
-        raise ConfigError("--worst must be at least 1")
-    errors = scene_errors(ev)
-    ranked = sorted(ev.scenes, key=lambda s: (-errors.get(s.name, 0), s.name))
-    return ranked[:worst]
+    logs = sorted(ev.scenes, key=lambda s: s.name)
+    return choose_scenes(logs, names, worst, lambda: scene_errors(ev), lambda s: s.name, "log")
 
 
 def _boxes(frame: dict) -> np.ndarray:

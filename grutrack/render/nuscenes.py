@@ -14,9 +14,10 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from grutrack.errors import ConfigError, DatasetError, InputFormatError
+from grutrack.errors import InputFormatError
 from grutrack.io import read_json, write_json_atomic
-from grutrack.render.views import COUNT_KEYS, FrameView, build_views, scene_record, scene_errors
+from grutrack.render.views import (COUNT_KEYS, FrameView, build_views, choose_scenes, scene_errors,
+                                   scene_record)
 
 
 def load_evaluation(dataroot: str, version: str, split: str, submission: str | Path):
@@ -51,17 +52,7 @@ def load_evaluation(dataroot: str, version: str, split: str, submission: str | P
 def select_scenes(scenes: list, decisions, names: list[str] | None, worst: int | None) -> list:
     """The scenes named (in the given order), or the ``worst`` scenes by id switches + FP + FN (ties: split
     order)."""
-    by_name = {s.name: s for s in scenes}
-    if names:
-        unknown = [n for n in names if n not in by_name]
-        if unknown:
-            raise DatasetError(f"--scene {unknown[0]}: not a scene of this split (scenes: {', '.join(by_name)})")
-        return [by_name[n] for n in dict.fromkeys(names)]
-    if worst is None or worst < 1:
-        raise ConfigError("--worst must be at least 1")
-    errors = scene_errors(decisions)
-    ranked = sorted(range(len(scenes)), key=lambda i: (-errors.get(scenes[i].token, 0), i))
-    return [scenes[i] for i in ranked[:worst]]
+    return choose_scenes(scenes, names, worst, lambda: scene_errors(decisions), lambda s: s.token, "scene")
 
 
 def sum_counts(views: list[FrameView], thresholds: dict, gt_classes: set) -> dict:

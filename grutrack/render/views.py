@@ -211,6 +211,24 @@ def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detectio
     return views
 
 
+def choose_scenes(scenes: list, names: list[str] | None, worst: int | None, errors, key, what: str) -> list:
+    """The ``scenes`` named (``--scene``, in the given order), or the ``worst`` of them by id switches + FP + FN
+    (``errors()``: a dict keyed by ``key(scene)``; ties keep the order of ``scenes``); ``what``: "scene" or
+    "log", for messages."""
+    from grutrack.errors import ConfigError, DatasetError
+
+    by_name = {s.name: s for s in scenes}
+    if names:
+        unknown = [n for n in names if n not in by_name]
+        if unknown:
+            raise DatasetError(f"--scene {unknown[0]}: not a {what} of this split ({what}s: {', '.join(by_name)})")
+        return [by_name[n] for n in dict.fromkeys(names)]
+    if worst is None or worst < 1:
+        raise ConfigError("--worst must be at least 1")
+    counts = errors()
+    return sorted(scenes, key=lambda s: -counts.get(key(s), 0))[:worst]
+
+
 def scene_errors(decisions: MatchDecisions) -> dict:
     """{scene token: id switches + false positives + misses} over the scene's evaluated boxes."""
     tokens = [s for s, _ in decisions.frame_keys]

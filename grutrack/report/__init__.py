@@ -17,19 +17,22 @@ class ReportKind:
     of ``runs`` (each run's metrics JSON and manifest: the experiment must be evaluated), ``trainings`` (the
     training logs of the experiment's GRU-KF runs, or of the report's own ``trainings`` map when it has no
     experiment), ``renders`` (each run's worst-scene frames) and ``zips`` (the leaderboard zips: the experiment
-    must name its ``leaderboard_run``); ``training_roles``: the keys its ``trainings`` map must hold."""
+    must name its ``leaderboard_run``); ``training_roles``: the keys its ``trainings`` map must hold;
+    ``no_renders``: why a report that does not read renders has none (for the error when one is given)."""
 
     module: str
     datasets: tuple[str, ...]
     reads: tuple[str, ...]
     training_roles: tuple[str, ...] = ()
+    no_renders: str = "it has no tracking run"
 
 
 #: report kind -> what it is
 KINDS: dict[str, ReportKind] = {
     "demo": ReportKind("grutrack.report.demo", ("demo",), ("runs", "trainings", "renders")),
     "nusc_val": ReportKind("grutrack.report.nusc_val", ("nuscenes", "demo"), ("runs", "trainings", "renders")),
-    "nusc_test": ReportKind("grutrack.report.nusc_test", ("nuscenes", "demo"), ("zips",)),
+    "nusc_test": ReportKind("grutrack.report.nusc_test", ("nuscenes", "demo"), ("zips",),
+                            no_renders="nuScenes test has no public ground truth"),
     "av2_val": ReportKind("grutrack.report.av2_val", ("av2",), ("runs", "trainings", "renders")),
     "semi_supervised": ReportKind("grutrack.report.semi_supervised", (), ("trainings",),
                                   training_roles=("semi_supervised", "supervised")),
