@@ -192,6 +192,22 @@ class _Flat:
     p_raw_id: List[Any]         # tracking_id of each prediction box
 
 
+def _evaluated(boxes, cls_index: Dict[str, int], ids: Dict[Any, int], raw_ids: List[Any]):
+    """``(class index, dense id, box)`` of each box of an evaluated class; a tracking id not in ``ids`` gets the
+    next dense id (its raw id appended to ``raw_ids``)."""
+    out = []
+    for box in boxes:
+        c = cls_index.get(box.tracking_name, -1)
+        if c < 0:
+            continue
+        i = ids.get(box.tracking_id)
+        if i is None:
+            i = ids[box.tracking_id] = len(raw_ids)
+            raw_ids.append(box.tracking_id)
+        out.append((c, i, box))
+    return out
+
+
 def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
     cls_index = {name: i for i, name in enumerate(class_names)}
     g_frame: List[int] = []
@@ -206,7 +222,7 @@ def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
     obj_raw_id: List[Any] = []
     frame_keys: List[Tuple[Any, Any]] = []
     p_raw_id: List[Any] = []
-    n_hyp = 0
+    hyp_raw_id: List[Any] = []      # one entry per dense hypothesis id (ids are per scene)
     f = 0
     # The devkit iterates the GT scenes and, within each, the GT timestamps; prediction ids are per scene
     # (each scene has its own accumulator), hence the per-scene id maps.
@@ -216,26 +232,12 @@ def _flatten(tracks_gt, tracks_pred, class_names: List[str]) -> _Flat:
         hyp_ids: Dict[Any, int] = {}
         for timestamp, frame_gt in scene_gt.items():
             frame_pred = scene_pred[timestamp]
-            for box in frame_gt:
-                c = cls_index.get(box.tracking_name, -1)
-                if c < 0:
-                    continue
-                o = obj_ids.get(box.tracking_id)
-                if o is None:
-                    o = obj_ids[box.tracking_id] = len(obj_raw_id)
-                    obj_raw_id.append(box.tracking_id)
+            for c, o, box in _evaluated(frame_gt, cls_index, obj_ids, obj_raw_id):
                 g_frame.append(f)
                 g_cls.append(c)
                 g_obj.append(o)
                 g_xy.append((box.translation[0], box.translation[1]))
-            for box in frame_pred:
-                c = cls_index.get(box.tracking_name, -1)
-                if c < 0:
-                    continue
-                h = hyp_ids.get(box.tracking_id)
-                if h is None:
-                    h = hyp_ids[box.tracking_id] = n_hyp
-                    n_hyp += 1
+            for c, h, box in _evaluated(frame_pred, cls_index, hyp_ids, hyp_raw_id):
                 p_frame.append(f)
                 p_cls.append(c)
                 p_hyp.append(h)
