@@ -22,6 +22,7 @@ SCHEMA = REPO / "workflow/schemas/config.schema.yaml"
 #: a new dataset module: nuScenes-format data whose workflow entries name a fixed version (the module is all a
 #: contributor writes; the test adds the registry line)
 MODULE = textwrap.dedent('''
+    from grutrack.datasets.base import config_entry
     from grutrack.datasets.nuscenes import NuScenesDataset
 
 
@@ -29,12 +30,8 @@ MODULE = textwrap.dedent('''
         """nuScenes-format keyframes under another name and config kind."""
 
         name = "keyframes"
-        config_kinds = {"keyframes": {
-            "type": "object", "additionalProperties": False,
-            "required": ["kind", "dataroot", "version"],
-            "properties": {"kind": {"const": "keyframes"}, "dataroot": {"type": "string"},
-                           "version": {"type": "string"}},
-        }}
+        config_kinds = {"keyframes": config_entry("keyframes", dataroot={"type": "string"},
+                                                  version={"type": "string"})}
 
         @staticmethod
         def config_version(entry, split):

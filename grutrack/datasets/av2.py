@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from grutrack.data.scene import BoxSet, Scene, Vocabulary
-from grutrack.datasets.base import DatasetOptions, Detections
+from grutrack.datasets.base import DatasetOptions, Detections, config_entry
 from grutrack.documents import MetricsDocument
 from grutrack.errors import ConfigError
 
@@ -28,17 +28,9 @@ class AV2Dataset:
     validates_training = False
     #: workflow config kinds this class reads -> the JSON schema of such a ``datasets:`` entry
     config_kinds = {
-        "av2": {
-            "type": "object", "additionalProperties": False,
-            "required": ["kind", "dataroot", "version", "rate_hz"],
-            "properties": {
-                "kind": {"const": "av2"},
-                "dataroot": {"type": ["string", "null"], "minLength": 1},
-                "version": {"type": "null"},
-                "rate_hz": {"type": "number", "exclusiveMinimum": 0,
-                            "description": "the rate the logs are tracked at, Hz (the lidar sweeps at 10)"},
-            },
-        },
+        "av2": config_entry("av2", dataroot={"type": ["string", "null"], "minLength": 1}, version={"type": "null"},
+                            rate_hz={"type": "number", "exclusiveMinimum": 0,
+                                     "description": "the rate the logs are tracked at, Hz (the lidar sweeps at 10)"}),
     }
 
     @staticmethod

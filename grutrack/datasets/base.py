@@ -40,6 +40,13 @@ class Detections:
     warnings: list[str] = field(default_factory=list)
 
 
+def config_entry(kind: str, **properties: dict) -> dict:
+    """The JSON schema of a workflow-config ``datasets:`` entry of ``kind`` with these properties (each a JSON
+    schema), all required, no other key."""
+    return {"type": "object", "additionalProperties": False, "required": ["kind", *properties],
+            "properties": {"kind": {"const": kind}, **properties}}
+
+
 @runtime_checkable
 class Dataset(Protocol):
     """One dataset. ``name`` as on the command line; ``submission_suffix`` / ``detections_suffix``: the file

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from grutrack.data.scene import NUSCENES_VOCABULARY, BoxSet, Scene, Vocabulary
-from grutrack.datasets.base import DatasetOptions, Detections
+from grutrack.datasets.base import DatasetOptions, Detections, config_entry
 from grutrack.documents import MetricsDocument
 from grutrack.errors import ConfigError
 
@@ -31,28 +31,12 @@ class NuScenesDataset:
     #: workflow config kinds (``datasets: {<name>: {kind: ...}}``) this class reads -> the JSON schema of such an
     #: entry; the demo is nuScenes-format data that the workflow generates (rule demo_data)
     config_kinds = {
-        "nuscenes": {
-            "type": "object", "additionalProperties": False,
-            "required": ["kind", "dataroot", "version", "test_version"],
-            "properties": {
-                "kind": {"const": "nuscenes"},
-                "dataroot": {"type": ["string", "null"], "minLength": 1},
-                "version": {"type": "string", "minLength": 1},
-                "test_version": {"type": ["string", "null"], "minLength": 1},
-            },
-        },
-        "demo": {
-            "type": "object", "additionalProperties": False,
-            "required": ["kind", "dataroot", "version", "scenes", "frames_per_scene", "seed"],
-            "properties": {
-                "kind": {"const": "demo"},
-                "dataroot": {"type": "string", "minLength": 1},
-                "version": {"type": "string", "minLength": 1},
-                "scenes": {"type": "integer", "minimum": 2},
-                "frames_per_scene": {"type": "integer", "minimum": 2},
-                "seed": {"type": "integer"},
-            },
-        },
+        "nuscenes": config_entry("nuscenes", dataroot={"type": ["string", "null"], "minLength": 1},
+                                 version={"type": "string", "minLength": 1},
+                                 test_version={"type": ["string", "null"], "minLength": 1}),
+        "demo": config_entry("demo", dataroot={"type": "string", "minLength": 1},
+                             version={"type": "string", "minLength": 1}, scenes={"type": "integer", "minimum": 2},
+                             frames_per_scene={"type": "integer", "minimum": 2}, seed={"type": "integer"}),
     }
 
     @staticmethod
