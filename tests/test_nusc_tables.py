@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from grutrack.data.nusc_tables import TABLE_NAMES, NuScenesTables, predefined_split_scenes
-from grutrack.data.nuscenes import TRACKING_NAME_OF_CATEGORY, category_to_tracking_name, load_scenes, open_nuscenes
+from grutrack.data.nuscenes import (DETECTION_NAME_OF_CATEGORY, DETECTION_VOCABULARY, TRACKING_NAME_OF_CATEGORY,
+                                    category_to_tracking_name, load_scenes, open_nuscenes)
 
 
 def test_tables_equal_the_devkits(nusc_root, nusc_mini):
@@ -41,6 +42,28 @@ def test_split_lists_and_class_map_equal_the_devkits(nusc_mini):
     assert [category_to_tracking_name(n) for n in names] == [devkit_map(n) for n in names]
     assert set(TRACKING_NAME_OF_CATEGORY.values()) == {"bicycle", "bus", "car", "motorcycle", "pedestrian",
                                                        "trailer", "truck"}
+    from nuscenes.eval.detection.utils import category_to_detection_name
+
+    assert [DETECTION_NAME_OF_CATEGORY.get(n) for n in names] == [category_to_detection_name(n) for n in names]
+
+
+def test_one_reader_gives_tracking_and_detection_ground_truth(nusc_root):
+    """The 10-class ground truth (simulator, statistics) and the 7-class one (tracking) come from the same
+    annotations: the tracking boxes are the detection boxes of the tracking classes, in the same order."""
+    nusc = open_nuscenes(nusc_root, "v1.0-mini")
+    det = load_scenes(nusc, "mini_val", with_gt=True, vocabulary=DETECTION_VOCABULARY)
+    trk = load_scenes(nusc, "mini_val", with_gt=True)
+    assert det[0].vocabulary == DETECTION_VOCABULARY and trk[0].vocabulary.names[2] == "car"
+    n_det = n_trk = 0
+    for sd, st in zip(det, trk):
+        for fd, ft in zip(sd.frames, st.frames):
+            names = np.asarray(DETECTION_VOCABULARY.names)[fd.gt.labels]
+            keep = np.isin(names, st.vocabulary.names)
+            np.testing.assert_array_equal(fd.gt.boxes[keep], ft.gt.boxes)
+            assert list(names[keep]) == [st.vocabulary.names[i] for i in ft.gt.labels]
+            np.testing.assert_array_equal(fd.gt.extra["num_pts"][keep], ft.gt.extra["num_pts"])
+            n_det, n_trk = n_det + len(fd.gt), n_trk + len(ft.gt)
+    assert n_det > n_trk > 3000          # barriers and cones are in the detection ground truth only
 
 
 def test_scenes_from_tables_equal_scenes_from_the_devkit(nusc_root, nusc_mini):

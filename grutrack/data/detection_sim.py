@@ -2,9 +2,10 @@
 
 The core (:func:`simulate_frame`) knows no dataset format: it takes one :class:`GTFrame` of canonical arrays
 (boxes ``(N, 9)`` global frame, detection-class names, lidar point counts, ego position) and a
-:class:`DetectorProfile`, and returns a :class:`DetFrame`. The nuScenes edge (:func:`nusc_gt_frames`, reading
-through nuscenes-devkit) and the official detection-submission JSON writer (:func:`detection_json`) sit apart,
-so the same core runs on AV2 ground truth once an adapter fills ``GTFrame`` from its annotations.
+:class:`DetectorProfile`, and returns a :class:`DetFrame`. Ground truth comes from the datasets' canonical
+scenes (:func:`scene_gt_frames`; nuScenes through :func:`grutrack.data.nuscenes.load_scenes` with the 10
+detection classes, :func:`nusc_gt_frames`), and the official detection-submission JSON writer
+(:func:`detection_json`) sits apart, so the same core runs on any dataset's ground truth.
 
 What is simulated, per class (parameters in ``grutrack/configs/detector_profiles/<name>.yaml``):
 
@@ -32,7 +33,7 @@ from typing import Iterable
 
 import numpy as np
 
-from grutrack.boxes import BOX_DIM, VX, VY, W, H, YAW, quaternion_from_yaw, wrap_angle, yaw_from_quaternion
+from grutrack.boxes import BOX_DIM, VX, VY, W, H, YAW, quaternion_from_yaw, wrap_angle
 from grutrack.classes import DETECTION_CLASSES
 from grutrack.data.scene import BoxSet
 from grutrack.errors import ConfigError
@@ -372,16 +373,19 @@ def simulate(frames: Iterable[GTFrame], profile: DetectorProfile, seed: int) -> 
 def scene_gt_frames(scenes: Iterable, sim_class: tuple[str, ...]) -> list[GTFrame]:
     """GT frames of canonical scenes with ground truth (any dataset). ``sim_class[label]``: the detection
     class (:data:`DETECTION_CLASSES`) whose profile statistics a box of that label is simulated with; lidar
-    points from ``gt.extra['num_pts']`` (0 where the dataset has none)."""
+    points from ``gt.extra['num_lidar_pts']`` (else ``num_pts``; 0 where the dataset has none), radar points
+    from ``num_radar_pts`` (0 where none)."""
     to_sim = np.asarray(sim_class, dtype=object)
     frames = []
     for s in scenes:
         for f in s.frames:
             gt = f.gt
-            pts = gt.extra.get("num_pts", np.zeros(len(gt), np.int64))
+            none = np.zeros(len(gt), np.int64)
+            lidar = gt.extra.get("num_lidar_pts", gt.extra.get("num_pts", none))
             frames.append(GTFrame(token=f.token, scene=s.name, timestamp=f.timestamp,
                                   ego_translation=f.ego_translation, boxes=gt.boxes, names=to_sim[gt.labels],
-                                  num_lidar_pts=np.asarray(pts, np.int64), num_radar_pts=np.zeros(len(gt), np.int64),
+                                  num_lidar_pts=np.asarray(lidar, np.int64),
+                                  num_radar_pts=np.asarray(gt.extra.get("num_radar_pts", none), np.int64),
                                   instance_ids=gt.ids if gt.ids is not None else np.arange(len(gt)).astype(object)))
     return frames
 
@@ -415,53 +419,14 @@ def open_dataset(dataroot: str | os.PathLike, version: str):
     return open_nuscenes(dataroot, version)
 
 
-def split_scenes(nusc, split: str) -> list[str]:
-    """Scene names of a predefined or custom (``splits.json``) split; ``DatasetError`` when unknown."""
-    from grutrack.data.nuscenes import split_scene_names
-
-    return split_scene_names(nusc, split)
-
-
 def nusc_gt_frames(nusc, split: str) -> list[GTFrame]:
-    """Canonical GT frames of every sample of ``split``, scene by scene in time order.
+    """Canonical GT frames of every sample of ``split``, scene by scene in time order: the annotations of the
+    10 detection classes (devkit class mapping), as :func:`grutrack.data.nuscenes.load_scenes` reads them
+    (velocity from the devkit's ``box_velocity`` with NaN set to 0)."""
+    from grutrack.data.nuscenes import DETECTION_VOCABULARY, load_scenes
 
-    Keeps annotations of the 10 detection classes (devkit class mapping); velocity from the devkit's
-    ``box_velocity`` with NaN set to 0.
-    """
-    from nuscenes.eval.detection.utils import category_to_detection_name
-
-    wanted = set(split_scenes(nusc, split))
-    frames = []
-    for scene in nusc.scene:
-        if scene["name"] not in wanted:
-            continue
-        token = scene["first_sample_token"]
-        while token:
-            sample = nusc.get("sample", token)
-            frames.append(_nusc_frame(nusc, sample, scene["name"], category_to_detection_name))
-            token = sample["next"]
-    return frames
-
-
-def _nusc_frame(nusc, sample: dict, scene_name: str, to_det) -> GTFrame:
-    """One sample's annotations as a GTFrame."""
-    sd = nusc.get("sample_data", sample["data"]["LIDAR_TOP"])
-    ego = np.asarray(nusc.get("ego_pose", sd["ego_pose_token"])["translation"], dtype=np.float64)
-    anns = [nusc.get("sample_annotation", t) for t in sample["anns"]]
-    anns = [(a, to_det(a["category_name"])) for a in anns]
-    anns = [(a, n) for a, n in anns if n is not None]
-    boxes = np.zeros((len(anns), BOX_DIM))
-    if anns:
-        boxes[:, 0:3] = [a["translation"] for a, _ in anns]
-        boxes[:, 3:6] = [a["size"] for a, _ in anns]
-        boxes[:, YAW] = yaw_from_quaternion(np.array([a["rotation"] for a, _ in anns]))
-        vel = np.array([nusc.box_velocity(a["token"])[:2] for a, _ in anns])
-        boxes[:, VX:VY + 1] = np.where(np.isfinite(vel), vel, 0.0)
-    return GTFrame(token=sample["token"], scene=scene_name, timestamp=int(sample["timestamp"]), ego_translation=ego,
-                   boxes=boxes, names=np.array([n for _, n in anns], dtype=object),
-                   num_lidar_pts=np.array([a["num_lidar_pts"] for a, _ in anns], dtype=np.int64),
-                   num_radar_pts=np.array([a["num_radar_pts"] for a, _ in anns], dtype=np.int64),
-                   instance_ids=np.array([a["instance_token"] for a, _ in anns], dtype=object))
+    scenes = load_scenes(nusc, split, with_gt=True, vocabulary=DETECTION_VOCABULARY)
+    return scene_gt_frames(scenes, DETECTION_VOCABULARY.names)
 
 
 def attribute_names(names: np.ndarray, boxes: np.ndarray) -> list[str]:

@@ -1,7 +1,11 @@
 """nuScenes adapter: the scenes of a split (standard, mini or custom ``splits.json``) as canonical scenes.
 
-Reads the dataset through nuscenes-devkit. Ground truth, when asked for, is mapped to the 7 tracking classes
-(annotations of other categories are dropped) with the devkit's centred-difference velocity (NaN -> 0).
+Reads the dataset's tables (the devkit's records without importing it). Ground truth, when asked for, is mapped
+to a vocabulary's classes: the 7 tracking classes (default) or the 10 detection classes (what the detector
+simulator and the dataset statistics read), annotations of other categories dropped, with the devkit's
+centred-difference velocity (NaN -> 0). This module is the one place nuScenes ground truth is read for
+tracking, training, simulation and statistics (the evaluator's loader, grutrack/evaluation/fast_loading.py,
+reproduces the devkit's own loading and filters instead).
 """
 
 from __future__ import annotations
@@ -14,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from grutrack.boxes import yaw_from_quaternion
-from grutrack.classes import CLASS_INDEX
-from grutrack.data.scene import BoxSet, Frame, Scene
+from grutrack.classes import DETECTION_CLASSES
+from grutrack.data.scene import NUSCENES_VOCABULARY, BoxSet, Frame, Scene, Vocabulary
 from grutrack.errors import DatasetError
 
 PREDEFINED_SPLITS = ("train", "val", "test", "mini_train", "mini_val", "train_detect", "train_track")
@@ -87,12 +91,20 @@ def split_scene_names(nusc, split: str) -> list[str]:
     return [n for n in names if n in present]
 
 
-def load_scenes(nusc, split: str, with_gt: bool = False) -> list[Scene]:
+def load_scenes(nusc, split: str, with_gt: bool = False,
+                vocabulary: Vocabulary = NUSCENES_VOCABULARY) -> list[Scene]:
     """Canonical scenes of ``split`` in the order of the dataset's scene table.
 
-    Each frame is a keyframe (sample) with its LIDAR_TOP ego pose; ``gt`` holds the annotations of the
-    7 tracking classes when ``with_gt`` (ids = instance tokens, ``extra['num_pts']`` = lidar + radar points).
+    Each frame is a keyframe (sample) with its LIDAR_TOP ego pose; ``gt`` holds, when ``with_gt``, the
+    annotations of the classes of ``vocabulary`` (:data:`NUSCENES_VOCABULARY`: the 7 tracking classes, or
+    :data:`DETECTION_VOCABULARY`: the 10 detection classes); ids = instance tokens, ``extra``:
+    ``num_lidar_pts``, ``num_radar_pts`` and ``num_pts`` (their sum).
     """
+    if vocabulary.names not in _CATEGORY_MAPS:
+        raise ValueError(f"no nuScenes category mapping for the classes {vocabulary.names}")
+    to_class = _CATEGORY_MAPS[vocabulary.names]
+    label = {name: i for i, name in enumerate(vocabulary.names)}
+    to_label = {cat: label[name] for cat, name in to_class.items()}
     wanted = set(split_scene_names(nusc, split))
     scenes = []
     for rec in nusc.scene:
@@ -101,19 +113,20 @@ def load_scenes(nusc, split: str, with_gt: bool = False) -> list[Scene]:
         frames, token = [], rec["first_sample_token"]
         while token:
             sample = nusc.get("sample", token)
-            frames.append(_frame(nusc, sample, with_gt))
+            frames.append(_frame(nusc, sample, to_label if with_gt else None))
             token = sample["next"]
-        scenes.append(Scene(name=rec["name"], token=rec["token"], frames=frames))
+        scenes.append(Scene(name=rec["name"], token=rec["token"], frames=frames, vocabulary=vocabulary))
     return scenes
 
 
-def _frame(nusc, sample: dict, with_gt: bool) -> Frame:
+def _frame(nusc, sample: dict, to_label: dict[str, int] | None) -> Frame:
+    """One keyframe; its ground truth when ``to_label`` (category -> label) is given."""
     sd = nusc.get("sample_data", sample["data"]["LIDAR_TOP"])
     pose = nusc.get("ego_pose", sd["ego_pose_token"])
     return Frame(token=sample["token"], timestamp=int(sample["timestamp"]),
                  ego_translation=np.asarray(pose["translation"], dtype=np.float64),
                  ego_rotation=np.asarray(pose["rotation"], dtype=np.float64),
-                 gt=_gt_boxes(nusc, sample) if with_gt else None)
+                 gt=_gt_boxes(nusc, sample, to_label) if to_label is not None else None)
 
 
 #: nuScenes category -> tracking class: the devkit's ``category_to_tracking_name`` (other categories: None)
@@ -125,27 +138,46 @@ TRACKING_NAME_OF_CATEGORY = {
 }
 
 
+#: nuScenes category -> detection class: the devkit's ``category_to_detection_name`` (other categories: None)
+DETECTION_NAME_OF_CATEGORY = {
+    **TRACKING_NAME_OF_CATEGORY, "movable_object.barrier": "barrier", "vehicle.construction": "construction_vehicle",
+    "movable_object.trafficcone": "traffic_cone",
+}
+
+#: the 10 detection classes; the three without a tracking class take the tracker parameters of the nearest one
+#: (static objects: pedestrian, as AV2's bollards and cones; construction vehicles: truck)
+DETECTION_VOCABULARY = Vocabulary(DETECTION_CLASSES, tuple(
+    {"barrier": "pedestrian", "traffic_cone": "pedestrian", "construction_vehicle": "truck"}.get(c, c)
+    for c in DETECTION_CLASSES))
+
+#: vocabulary class names -> the category mapping that labels ground truth with them
+_CATEGORY_MAPS = {NUSCENES_VOCABULARY.names: TRACKING_NAME_OF_CATEGORY,
+                  DETECTION_VOCABULARY.names: DETECTION_NAME_OF_CATEGORY}
+
+
 def category_to_tracking_name(category_name: str) -> str | None:
     """The tracking class of a nuScenes category, or None (as nuscenes-devkit's function of that name)."""
     return TRACKING_NAME_OF_CATEGORY.get(category_name)
 
 
-def _gt_boxes(nusc, sample: dict) -> BoxSet:
-    """Ground-truth boxes of one sample, 7 tracking classes only."""
-    rows, labels, ids, pts = [], [], [], []
+def _gt_boxes(nusc, sample: dict, to_label: dict[str, int]) -> BoxSet:
+    """Ground-truth boxes of one sample, of the categories ``to_label`` maps (category -> label)."""
+    rows, labels, ids, lidar, radar = [], [], [], [], []
     for ann_token in sample["anns"]:
         ann = nusc.get("sample_annotation", ann_token)
-        name = category_to_tracking_name(ann["category_name"])
-        if name is None:
+        lab = to_label.get(ann["category_name"])
+        if lab is None:
             continue
         vel = nusc.box_velocity(ann_token)[:2]
         vel = np.where(np.isfinite(vel), vel, 0.0)
         yaw = yaw_from_quaternion(np.asarray(ann["rotation"]))[0]
         rows.append([*ann["translation"], *ann["size"], yaw, *vel])
-        labels.append(CLASS_INDEX[name])
+        labels.append(lab)
         ids.append(ann["instance_token"])
-        pts.append(ann["num_lidar_pts"] + ann["num_radar_pts"])
+        lidar.append(ann["num_lidar_pts"])
+        radar.append(ann["num_radar_pts"])
     if not rows:
         return BoxSet.empty(with_ids=True)
-    return BoxSet(np.asarray(rows), np.ones(len(rows)), np.asarray(labels),
-                  np.asarray(ids, dtype=object), {"num_pts": np.asarray(pts, dtype=np.int64)})
+    lidar, radar = np.asarray(lidar, dtype=np.int64), np.asarray(radar, dtype=np.int64)
+    return BoxSet(np.asarray(rows), np.ones(len(rows)), np.asarray(labels), np.asarray(ids, dtype=object),
+                  {"num_pts": lidar + radar, "num_lidar_pts": lidar, "num_radar_pts": radar})
