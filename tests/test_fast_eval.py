@@ -521,3 +521,95 @@ def test_match_decisions_random_crowded_tracks(seed):
     decisions, metrics = match_decisions(tracks_gt, tracks_pred)
     _assert_decisions_match(decisions, metrics.serialize()["label_metrics"])
     assert metrics.serialize()["ids"] > 0
+
+
+# ----- the accumulation as a drop-in inside the devkit's own TrackingEval -----------------------------------------
+def _plugin_evaluate(reference, tmp_path):
+    """FastTrackingEval.evaluate on the tracks the devkit loaded for ``reference`` (its __init__'s output)."""
+    from nuscenes.eval.common.config import config_factory
+
+    from grutrack.evaluation.devkit_plugin import FastTrackingEval
+
+    ev = object.__new__(FastTrackingEval)
+    ev.cfg, ev.output_dir, ev.verbose, ev.render_classes = config_factory("tracking_nips_2019"), str(tmp_path), \
+        False, None
+    ev.tracks_gt, ev.tracks_pred = reference[2], reference[3]
+    return ev.evaluate()
+
+
+@pytest.mark.parametrize("case", ["corrupted_mini_val", "contested_mini_val"])
+def test_devkit_tracking_eval_with_the_fast_accumulation(nusc_mini, mini_val_gt, devkit_reference, case,
+                                                         tmp_path):
+    """The devkit's own TrackingEval (its aggregation code) driving FastTrackingEvaluation gives the devkit's
+    metrics and per-threshold data; the devkit's modules are left as they were."""
+    import nuscenes.eval.tracking.algo as algo
+    import nuscenes.eval.tracking.evaluate as evaluate
+
+    if case == "corrupted_mini_val":      # the submissions of the cases above (their devkit runs are reused)
+        sub = corrupt_submission(nusc_mini, "mini_val", seed=0, base=mini_val_gt)
+    else:
+        sub = corrupt_submission(nusc_mini, "mini_val", seed=2, base=mini_val_gt, duplicate=0.3,
+                                 exact_duplicate=0.15, repeated_id=0.01, noise=0.4)
+    ref = devkit_reference(case, nusc_mini, sub, "mini_val")
+    metrics, md_list = _plugin_evaluate(ref, tmp_path)
+    worst, bad = compare_summaries(ref[0], dict(metrics.serialize(), meta=ref[0]["meta"]))
+    assert not bad, bad[:5]
+    assert not compare_metric_data(ref[1], md_list)[1]
+    assert type(md_list["car"]).__module__ == "nuscenes.eval.tracking.data_classes"
+    assert evaluate.TrackingEvaluation is algo.TrackingEvaluation
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_fast_tracking_evaluation_is_a_drop_in_per_class(seed):
+    """Same constructor and accumulate() as the devkit's TrackingEvaluation, same metric data, including a
+    class that falls back to the devkit (a repeated GT id) and one without ground truth."""
+    from nuscenes.eval.common.config import config_factory
+    from nuscenes.eval.tracking.data_classes import TrackingMetricData
+
+    from grutrack.evaluation.devkit_plugin import FastTrackingEvaluation
+
+    cfg = config_factory("tracking_nips_2019")
+    tracks_gt, tracks_pred = _random_tracks(seed)
+    first = next(iter(tracks_gt.values()))
+    ts = next(t for t, boxes in first.items() if boxes)
+    first[ts].append(copy.deepcopy(first[ts][0]))                # one class goes to the devkit's own class
+    ref = _devkit_metric_data(tracks_gt, tracks_pred, cfg)
+    for name in ("car", "pedestrian", "bus"):
+        md = FastTrackingEvaluation(tracks_gt, tracks_pred, name, cfg.dist_fcn_callable, cfg.dist_th_tp,
+                                    cfg.min_recall, num_thresholds=TrackingMetricData.nelem,
+                                    metric_worst=cfg.metric_worst, verbose=False).accumulate()
+        assert isinstance(md, TrackingMetricData)
+        assert md == ref[name] or not compare_metric_data(_one(ref[name], name), _one(md, name))[1], name
+
+
+def _one(md, name):
+    from nuscenes.eval.tracking.data_classes import TrackingMetricDataList
+
+    out = TrackingMetricDataList()
+    out.set(name, md)
+    return out
+
+
+def test_fast_tracking_eval_main_on_a_submission_file(nusc_root, pointpillars_mini_val, tmp_path):
+    """The whole devkit path (NuScenes load, loaders, filters, files written) with the fast accumulation, on a
+    tracker's submission file: the summary equals the toolkit's fast evaluator's."""
+    from nuscenes.eval.common.config import config_factory
+
+    from grutrack.evaluation.devkit_plugin import FastTrackingEval
+    from grutrack.evaluation.fast_amota import fast_tracking_eval as fast
+    from grutrack.data.nuscenes import open_nuscenes
+
+    sub = _tracked_submission(open_nuscenes(nusc_root, "v1.0-mini"), "mini_val", pointpillars_mini_val)
+    path = tmp_path / "sub.json"
+    path.write_text(json.dumps(sub))
+    import contextlib
+    import io
+
+    with contextlib.redirect_stdout(io.StringIO()):
+        summary = FastTrackingEval(config_factory("tracking_nips_2019"), str(path), "mini_val", str(tmp_path / "out"),
+                                   "v1.0-mini", str(nusc_root), verbose=False).main(render_curves=False)
+    assert (tmp_path / "out" / "metrics_summary.json").is_file()
+    ours = fast(open_nuscenes(nusc_root, "v1.0-mini"), str(path), "mini_val")
+    worst, bad = compare_summaries(summary, ours)
+    assert not bad, bad[:5]
+    assert 0.1 < summary["amota"] < 0.3
