@@ -10,7 +10,8 @@ Reported (medians over the repeats, seconds of wall-clock and of CPU time of thi
     loaded tracks (what the devkit reports as eval_time);
   * loading + filtering: the devkit's loaders vs the fast exact re-implementation (``load_tracks``);
   * whole pipeline: ``TrackingEval(...).main(render_curves=False)`` (it loads NuScenes itself; that load is also
-    timed on its own) vs ``fast_tracking_eval(nusc, ...)`` with a loaded NuScenes.
+    timed on its own) vs ``fast_tracking_eval(nusc, ...)`` with a loaded NuScenes, and the devkit's own pipeline
+    with the fast accumulation (``FastTrackingEval(...).main()``, grutrack.evaluation.devkit_plugin).
 The two results are compared number by number (max |difference|, NaN == NaN).
 """
 
@@ -141,6 +142,17 @@ def main(argv=None) -> int:
             t_dev_whole, dev_whole_summary = _median_time(devkit_whole, args.repeat_devkit)
             diff_whole = _max_diff(dev_whole_summary, fast_summary)
 
+        from grutrack.evaluation.devkit_plugin import FastTrackingEval
+
+        def plugin_whole():
+            with contextlib.redirect_stderr(io.StringIO()):
+                ev = FastTrackingEval(cfg, sub_path, args.split, os.path.join(tmp, "plugin"), args.version,
+                                      args.dataroot, verbose=False)
+                return ev.main(render_curves=False)
+
+        t_plugin_whole, plugin_summary = _median_time(plugin_whole, args.repeat)
+        diff_plugin = _max_diff(plugin_summary, fast_summary)
+
     def line(label, t, fmt="%.2f"):
         print("  %-34s %9.3f s wall  %9.3f s CPU   (wall runs: %s)" % (label, t.wall_med, t.cpu_med, t.runs(fmt)))
 
@@ -167,6 +179,10 @@ def main(argv=None) -> int:
               % (t_nusc, t_load_dev.cpu_med, t_dev_acc.cpu_med))
         ratio("ratio", t_dev_whole, t_fast_whole)
         print("  max |difference| of the results    %9.3g" % diff_whole)
+    line("FastTrackingEval(...).main()", t_plugin_whole, "%.3f")
+    print("    (the devkit's TrackingEval with the fast accumulation; max |difference| %.3g)" % diff_plugin)
+    if t_dev_whole is not None:
+        ratio("ratio devkit / FastTrackingEval", t_dev_whole, t_plugin_whole)
     else:
         print("  devkit loading + evaluate()        %9.3f s CPU   ratio %.1f x"
               % (t_load_dev.cpu_med + t_dev_acc.cpu_med,
