@@ -35,6 +35,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--epochs", type=int, default=None, help="override the config's epochs")
     p.add_argument("--val-every", type=int, default=None, help="override the config's val_every")
     p.add_argument("--seed", type=int, default=None, help="override the config's seed")
+    p.add_argument("--source", action="append", default=[], metavar="MAPPING",
+                   help="one more training source, a YAML mapping such as '{dataset: av2, dataroot: AV2, split: "
+                        "val, profile: centerpoint, seed: 1}' or '{dataset: demo, scenes: 700, "
+                        "frames_per_scene: 40, split: demo_all, profile: centerpoint}' (repeatable; added to the "
+                        "config's sources; see grutrack/training/sources.py)")
     p.add_argument("--resume", action="store_true", help="continue from --out/last.pt")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -55,6 +60,13 @@ def run(args: argparse.Namespace) -> int:
     apply_thread_policy()
     if (args.val_split is None) != (args.val_detections is None):
         raise ConfigError("--val-split and --val-detections go together")
+    extra = [(e, f"{cfg_name(args.config)} sources[{i}]") for i, e in enumerate(cfg.sources)]
+    extra += [(e, f"--source {i + 1}") for i, e in enumerate(_parsed_sources(args.source))]
+    if extra:
+        from grutrack.training.sources import check_source
+
+        for e, where in extra:
+            check_source(e, where)      # before any data is read
     ds = dataset_of(args)
     if args.val_split and ds.name != "nuscenes":
         raise ConfigError(f"--val-split: validation AMOTA is scored on nuScenes-format data; train on {ds.name} "
@@ -67,10 +79,22 @@ def run(args: argparse.Namespace) -> int:
               "split": args.split, "detections": str(Path(args.detections).resolve())}
     if ds.name != "nuscenes":
         source["rate_hz"] = args.rate
-    if cfg.resample_profiles:
-        from grutrack.training.resample import DetectionResampler, ResamplingTrainer
+    from grutrack.training.resample import DetectionResampler
 
-        resampler = DetectionResampler(ds, args.split, scenes, yaw)
+    resampler = DetectionResampler(ds, args.split, scenes, yaw)
+    if extra:
+        from grutrack.training.sources import LoadedSource, load_source, merge, merged_resampler
+
+        loaded = [LoadedSource(scenes, dets, resampler, source)]
+        loaded += [load_source(e, yaw, Path(args.out) / "sources", where) for e, where in extra]
+        scenes, dets = merge(loaded)
+        resampler = merged_resampler(loaded)
+        source = {**source, "sources": [src.description for src in loaded[1:]]}
+        print(f"training on {len(scenes)} scenes, {sum(len(sc) for sc in scenes)} frames from {len(loaded)} "
+              f"sources")
+    if cfg.resample_profiles:
+        from grutrack.training.resample import ResamplingTrainer
+
         trainer = ResamplingTrainer(cfg, scenes, dets, args.out, resampler, progress=not args.no_progress,
                                     source=source)
     else:
@@ -93,6 +117,18 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {final} after {trainer.state.step} steps (loss {last.loss if last else None}, "
           f"val AMOTA {(last.val_amota if last else None) or 'n/a'}); log: {Path(args.out) / 'train_log.csv'}")
     return 0
+
+
+def cfg_name(config_arg: str) -> str:
+    """How errors name the training config: its file name or preset name."""
+    return Path(config_arg).name
+
+
+def _parsed_sources(values: list[str]) -> list[dict]:
+    """The ``--source`` mappings, each checked (exit 2 naming the flag and key)."""
+    from grutrack.training.sources import parse_source
+
+    return [parse_source(v, i + 1) for i, v in enumerate(values)]
 
 
 def write_training_yaml(cfg, config_arg: str, path: Path, source: dict) -> None:

@@ -36,6 +36,7 @@ class TrainConfig:
     matched_box: str
     val_every: int
     checkpoint_every: int
+    sources: tuple = ()          # extra training sources (grutrack/training/sources.py), mappings
 
 
 #: fields holding real numbers: a string that reads as one is taken as that number (PyYAML reads ``1e-5``, which
@@ -75,6 +76,7 @@ def config_from_dict(raw: dict, source: str = "<dict>", flags: dict | None = Non
     vals = dict(raw)
     vals["loss_weights"] = tuple(float(x) for x in raw["loss_weights"])
     vals["resample_profiles"] = tuple(str(x) for x in raw["resample_profiles"])
+    vals["sources"] = tuple(dict(x) for x in raw.get("sources", []))
     for k in _FLOAT_FIELDS:
         vals[k] = float(raw[k])
-    return TrainConfig(**{k: vals[k] for k in names})
+    return TrainConfig(**{k: vals[k] for k in names if k in vals})

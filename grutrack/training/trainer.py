@@ -334,20 +334,31 @@ class Trainer:
         self.progress = progress
         self.device = resolve_device(cfg.device, "training config 'device'")
         vocab = scenes[0].vocabulary if scenes else NUSCENES_VOCABULARY
-        self.index = param_index(vocab.param_classes)    # dataset label -> tracking class of its parameters
-        self.tracker_cfg = remap_config(load_tracker_config(cfg.tracker_preset), self.index)
+        self._preset = load_tracker_config(cfg.tracker_preset)
+        self._setups: dict = {}                          # vocabulary -> (label index, remapped preset)
+        # the first scene's vocabulary (the command's own split): the gain prior and validation use it
+        self.index, self.tracker_cfg = self._setup(vocab)
         # the run's own generators (no process-wide seeding): torch's for the initial weights, numpy's for the
         # scene order of every epoch
         self.torch_rng = torch.Generator().manual_seed(cfg.seed)
         self.np_rng = np.random.default_rng(cfg.seed)
         self.net = GRUKalmanNet(_arch(cfg), generator=self.torch_rng)
-        init_gain_prior(self.net, cfg, scenes, dets, self.tracker_cfg, self.index, generator=self.torch_rng)
+        first = [sc for sc in scenes if sc.vocabulary == vocab]
+        init_gain_prior(self.net, cfg, first, dets, self.tracker_cfg, self.index, generator=self.torch_rng)
         self.net.to(self.device)
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
         self.total_steps = cfg.epochs * len(scenes)
         self.sched = torch.optim.lr_scheduler.CosineAnnealingLR(self.opt, T_max=max(self.total_steps, 1))
         self.state = TrainState()
         self.log = TrainingLog()
+
+    def _setup(self, vocab) -> tuple[np.ndarray, TrackerConfig]:
+        """The label index (n_labels,) (dataset label -> tracking class of its parameters) and the tracker
+        preset re-indexed by label, of one vocabulary (sources of several datasets mix vocabularies)."""
+        if vocab not in self._setups:
+            index = param_index(vocab.param_classes)
+            self._setups[vocab] = (index, remap_config(self._preset, index))
+        return self._setups[vocab]
 
     # -- checkpoints ------------------------------------------------------------------------------------
     def save(self, name: str = "last.pt") -> Path:
@@ -478,7 +489,8 @@ class Trainer:
     def _step(self, scene: Scene) -> None:
         t0 = time.perf_counter()
         self.net.train()
-        loss = run_scene(self.net, scene, self.dets, self.tracker_cfg, self.cfg, self.device, self.index)
+        index, tracker_cfg = self._setup(scene.vocabulary)
+        loss = run_scene(self.net, scene, self.dets, tracker_cfg, self.cfg, self.device, index)
         value = loss.value()
         if not torch.isfinite(value):
             self._diverged(scene, f"the loss is {value.item()}")
