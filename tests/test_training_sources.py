@@ -48,7 +48,7 @@ def test_config_sources_and_resampling_cover_every_source(nusc_root, mini_train_
     """Sources listed in the training config are read like --source ones; with resample_profiles every
     source's frames get fresh detections in epoch 1."""
     from grutrack.training.config import load_train_config
-    from grutrack.training.sources import LoadedSource, load_source, merge, merged_resampler
+    from grutrack.training.sources import load_source, merge, merged_resampler
 
     cfg = dict(yaml.safe_load((Path(__file__).resolve().parents[1] / "grutrack/configs/training/grukf.yaml")
                               .read_text()))
