@@ -78,13 +78,17 @@ def demo_run(tmp_path_factory):
 def test_demo_report_tables_match_metrics_json(demo_run):
     text = (demo_run / "reports/demo_val.md").read_text()
     assert "SYNTHETIC" in text and "No comparison between the two is implied" in text
-    for run in ("ekf", "grukf"):
+    for run in ("ekf", "grukf", "constant_gain"):
         doc = json.loads((demo_run / f"reports/metrics/demo_val/centerpoint_sim/{run}.json").read_text())
         o = doc["overall"]
         row = re.search(rf"^\| {run} \| (.+) \|$", text, re.M).group(1).split(" | ")
         assert row[:5] == [f"{100 * o['amota']:.1f}", f"{100 * o['amotp']:.1f}", f"{100 * o['mota']:.1f}",
                            f"{100 * o['recall']:.1f}", f"{o['ids']:.0f}"]
     assert re.search(r"^\| Ours \| 73\.2 \| 51\.1 \| 267 \|$", text, re.M)          # paper numbers, labelled
+    # the constant-gain ablation: a training of no step, shown beside the EKF and the trained GRU-KF
+    assert "## Training 'demo_constant_gain'\n\nNo training step: the network as initialised, whose gain is one " \
+           "constant" in text
+    assert re.search(r"^\| demo_constant_gain \| .* \| no step \(the initialised network\) \|", text, re.M)
     assert "config hash" in text and "grutrack 0.1.0" in text and "centerpoint_sim.json" in text
     links = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", text)
     assert links

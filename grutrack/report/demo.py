@@ -3,6 +3,8 @@ dataset, with the paper's Table III shown separately, for reference only (real n
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from grutrack.report import figures
 from grutrack.documents import TrainingLog
 from grutrack.report.inputs import ReportInputs
@@ -52,6 +54,7 @@ def _training_sections(inp: ReportInputs) -> list[str]:
     for label, log in inp.train_logs.items():
         tl = TrainingLog.read(log)
         if not tl.steps:
+            out += ["", f"## Training '{label}'", "", _no_step(Path(log).parent / "training.yaml")]
             continue
         path = figures.lines(inp.figures / f"training_{label}.png",
                              {"loss": ([s.step for s in tl.steps], [s.loss for s in tl.steps])},
@@ -62,6 +65,17 @@ def _training_sections(inp: ReportInputs) -> list[str]:
                 + (f"; last validation AMOTA {val[-1].val_amota:.3f}" if val else "") + ".", "",
                 image(path, inp.out.parent, f"training loss of {label}")]
     return out
+
+
+def _no_step(cfg_path: Path) -> str:
+    """What a training without a step gives: the initialised network (one constant gain without a gap table)."""
+    import yaml
+
+    cfg = yaml.safe_load(cfg_path.read_text()) if cfg_path.is_file() else {}
+    if cfg.get("gap_bins") == 0 and cfg.get("gain_prior", "constant") == "constant":
+        return ("No training step: the network as initialised, whose gain is one constant, the EKF's mean gain "
+                "on the training data (the constant-gain ablation).")
+    return "No training step: the network as initialised (its gain prior)."
 
 
 def _paper_table(inp: ReportInputs) -> str:

@@ -189,8 +189,9 @@ def training_provenance(train_logs: dict[str, Path]) -> str:
         cfg_path, model = folder / "training.yaml", folder / "model.pt"
         cfg_hash = config_hash(yaml.safe_load(cfg_path.read_text())) if cfg_path.is_file() else DASH
         model_txt = f"`{model}` (sha256 {short(sha256_file(model))})" if model.is_file() else DASH
-        steps = TrainingLog.read(log).steps if Path(log).is_file() else []
-        done = f"{steps[-1].step} steps, {steps[-1].epoch + 1} epochs" if steps else DASH
+        steps = TrainingLog.read(log).steps if Path(log).is_file() else None
+        done = (f"{steps[-1].step} steps, {steps[-1].epoch + 1} epochs" if steps else
+                "no step (the initialised network)" if steps is not None else DASH)
         rows.append([label, training_data(cfg_path), done, f"`{log}`", f"`{cfg_path}` (config hash {cfg_hash})",
                      model_txt])
     return table(["training", "trained on", "length", "log", "training config", "checkpoint"], rows, "llllll")
