@@ -4,6 +4,11 @@ GRU-KF tracking frames/s and GRU-KF training frames/s. Thread variables (OMP_NUM
 the children's environment: the figures are what a user gets without setting them.
 
     .venv/bin/python benchmarks/bench_commands.py --reference c9e955d [--repeat 5 --repeat-devkit 1]
+    .venv/bin/python benchmarks/bench_commands.py --reference c9e955d --only grukf_track --only grukf_train
+
+The GRU-KF tracking row is the loop's frames/s as ``grutrack track`` prints it. A checkout whose tracker pays its
+one-time start before the loop (``Tracker.warm_up``: numba loading its compiled kernels, torch's first operators)
+prints that separately; the row below it, the whole command's wall time, includes everything the user waits for.
 
 Each measurement runs in a child process per checkout (the reference in a temporary git worktree), the
 checkouts alternating run by run; medians are printed with the ratio reference / current (> 1: faster now).
@@ -133,6 +138,10 @@ class _Rows(list):
         print("measured: " + _line(*row), file=sys.stderr, flush=True)
 
 
+#: the measurements, as --skip and --only name them
+MEASUREMENTS = ("help", "track", "fast", "devkit", "grukf_track", "grukf_train")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dataroot", default=str(DEFAULT_DATA))
@@ -142,9 +151,12 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat-grukf", type=int, default=3, help="runs of GRU-KF tracking and training")
     ap.add_argument("--train-steps", type=int, default=4)
     ap.add_argument("--make-inputs", default=None, help=argparse.SUPPRESS)  # internal: build inputs into DIR
-    ap.add_argument("--skip", action="append", default=[], help="skip a measurement (help, track, fast, devkit, "
-                                                                  "grukf_track, grukf_train)")
+    ap.add_argument("--skip", action="append", default=[], choices=MEASUREMENTS, help="skip a measurement")
+    ap.add_argument("--only", action="append", default=[], choices=MEASUREMENTS,
+                    help="run only this measurement (repeatable), e.g. --only grukf_track --only grukf_train")
     args = ap.parse_args(argv)
+    if args.only:
+        args.skip = [m for m in MEASUREMENTS if m not in args.only]
     root = Path(args.dataroot)
     if args.make_inputs:
         paths = make_inputs(root, Path(args.make_inputs))
@@ -168,7 +180,8 @@ def main(argv=None) -> int:
             rows.append(("grutrack --help", "s", s, lambda x: x.median("wall"), False))
             rows.append(("  its CPU time", "s", s, lambda x: x.median("cpu"), False))
         # the track output of each checkout is what its evaluate commands read
-        s = interleaved(lambda r: run_measured([py, "-m", "grutrack", "track", *common, "--detections",
+        need_track = {"track", "fast", "devkit"} - set(args.skip)
+        s = None if not need_track else interleaved(lambda r: run_measured([py, "-m", "grutrack", "track", *common, "--detections",
                                                 str(paths["dense"]), "--out", out(r, "tracks"), "--no-progress"], r),
                         roots, args.repeat)
         if "track" not in args.skip:
@@ -202,6 +215,7 @@ def main(argv=None) -> int:
             for r in (x for v in s.values() for x in v.runs):
                 r.fps = _fps(r, "tracking loop: [0-9]+ frames in [0-9.]+ s")
             rows.append(("GRU-KF tracking loop (grutrack track)", "frames/s", s, lambda x: x.median("fps"), True))
+            rows.append(("  the whole command's wall time", "s", s, lambda x: x.median("wall"), False))
         if "grukf_train" not in args.skip:
             s = interleaved(lambda r: run_measured([py, "-", str(root), str(paths["mini_train"]),
                                                     str(tmp / f"train_{'ref' if r == ref else 'cur'}"),

@@ -128,6 +128,19 @@ def test_batching_equals_one_by_one():
             assert all(torch.allclose(hi[k], h_all[k][i:i + 1], atol=1e-9) for k in hi)
 
 
+def test_a_network_used_in_inference_mode_then_trains_with_the_same_values():
+    # tracking runs the network under torch.inference_mode; the index tensors it caches then must still serve a
+    # training pass (autograd saves them), and the forward values are those of no_grad
+    net = _net()
+    args = _correct_inputs(4)
+    with torch.inference_mode():
+        x_inf, _, K_inf = net.correct(*args, net.init_hidden(4))
+    x, _, K = net.correct(*args, net.init_hidden(4))
+    x.sum().backward()
+    assert torch.equal(x.detach(), x_inf) and torch.equal(K.detach(), K_inf)
+    assert float(net.fc_gain[2].weight.grad.abs().sum()) > 0 and float(net.gru_q.weight_ih.grad.abs().sum()) > 0
+
+
 def test_yaw_residual_wrapped():
     net = _net()
     prior = torch.tensor(_states(1))

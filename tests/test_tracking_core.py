@@ -168,3 +168,33 @@ def test_step_with_updates_reports_each_groups_correction_before_the_lifecycle()
     assert (late.rows.tolist(), late.hits.tolist(), late.misses.tolist()) == ([0], [3], [2])
     assert late.prior.x[0, 0] < late.posterior.x[0, 0] < 20.2
     assert not hasattr(recording, "update_hook")
+
+
+@pytest.mark.parametrize("name", ["ekf", "grukf"])
+def test_warm_up_leaves_no_trace(name):
+    # track_scenes warms the tracker up (two synthetic frames, then reset): the results, ids included, are those
+    # of a tracker that never saw them, and the start is reported apart from the loop's seconds
+    det = [[_box(5.0 * i, 0, vx=10.0), _box(20.0, 5.0 + 0.5 * i, vy=1.0)] for i in range(5)]
+    scene, dets = _scene(det)
+
+    def tracker():
+        if name == "ekf":
+            return build_tracker("ekf")
+        import torch
+
+        from grutrack.motion.grukf import GRUKalmanNet
+        from grutrack.tracking.factory import grukf_group
+        from grutrack.tracking.tracker import Tracker
+
+        net = GRUKalmanNet(generator=torch.Generator().manual_seed(0))
+        return Tracker(load_tracker_config("ekf"), [grukf_group(net, 7, "cpu")])
+
+    plain = tracker()
+    cold = {f.token: plain.step(dets[f.token], f.timestamp) for f in scene.frames}
+    t = tracker()
+    run = track_scenes(t, [scene], dets)
+    assert run.start_seconds > 0 and run.frames == 5
+    for f in scene.frames:
+        a, b = cold[f.token], run.results[f.token]
+        assert np.array_equal(a.boxes, b.boxes) and np.array_equal(a.ids, b.ids) and len(a) == 2
+    assert t.next_id == plain.next_id == 2

@@ -59,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     if dets.summary:
         print(dets.summary)
     print(f"wrote {args.out}: {', '.join(f'{v} {k}' for k, v in counts.items())}")
-    print(f"tracking loop: {run_.frames} frames in {run_.seconds:.2f} s ({run_.fps:.1f} frames/s)")
+    print(f"tracking loop: {run_.frames} frames in {run_.seconds:.2f} s ({run_.fps:.1f} frames/s); "
+          f"tracker start {run_.start_seconds:.2f} s")
     return 0
 
 

@@ -40,6 +40,7 @@ import math
 
 import torch
 from torch import nn
+from torch.nn import functional as F
 
 from grutrack.motion.torch_models import make_torch_model, wrap_angle_t
 
@@ -104,15 +105,27 @@ def _fc(i: int, o: int) -> nn.Sequential:
     return nn.Sequential(nn.Linear(i, o), nn.ReLU())
 
 
-def _normalise(v: torch.Tensor, eps: float = 1e-6) -> torch.Tensor:
-    """Rows of (N, d) scaled to unit L2 norm (zero rows stay zero)."""
-    return v / (v.norm(dim=1, keepdim=True) + eps)
+_EPS = 1e-6   # added to the L2 norm of each input before dividing by it (zero rows stay zero)
+
+
+def _fc_apply(fc: nn.Sequential, x: torch.Tensor) -> torch.Tensor:
+    """``fc(x)`` for an :func:`_fc` block (Linear then ReLU), through ``torch.nn.functional``."""
+    lin = fc._modules["0"]
+    return torch.relu(F.linear(x, lin.weight, lin.bias))
+
+
+def _gru(cell: nn.GRUCell, x: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
+    """``cell(x, h)`` for batched (N, ·) inputs: the operator GRUCell.forward calls."""
+    return torch.gru_cell(x, h, cell.weight_ih, cell.weight_hh, cell.bias_ih, cell.bias_hh)
 
 
 @functools.lru_cache(maxsize=None)
 def _pair_columns(pairs: tuple[tuple[int, int], ...], device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
-    """The first and second columns of the planar pairs as index tensors on ``device`` (made once)."""
-    return (torch.tensor([p[0] for p in pairs], device=device), torch.tensor([p[1] for p in pairs], device=device))
+    """The first and second columns of the planar pairs as index tensors on ``device`` (made once; normal
+    tensors even when first asked for under ``torch.inference_mode``, so that training can save them)."""
+    with torch.inference_mode(False):
+        return (torch.tensor([p[0] for p in pairs], device=device),
+                torch.tensor([p[1] for p in pairs], device=device))
 
 
 def to_heading_frame(v: torch.Tensor, yaw: torch.Tensor, pairs: tuple[tuple[int, int], ...]) -> torch.Tensor:
@@ -249,32 +262,57 @@ class GRUKalmanNet(nn.Module):
             h["r"] = torch.zeros(n_tracks, self.n * self.n, device=device, dtype=dt)
         return h
 
-    def gain(self, feats: dict[str, torch.Tensor], hidden: dict[str, torch.Tensor],
-             cells: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None
-             ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        """Gain K (N, m, n) from the four normalised features and the hidden states (and, with a gain table,
-        the tracks' cells of it, see :meth:`table_index`); returns new hidden states."""
+    def _layout(self, device: torch.device) -> dict[str, torch.Tensor]:
+        """Index tensors (on ``device``, made once) of the four inputs side by side (K, 2n + 2m):
+        ``[obs_diff (n), innovation (n), fwd_evol (m), fwd_update (m)]``: ``angles`` their yaw columns,
+        ``pairs`` (i, j) the planar column pairs in the heading frame (x, y and vx, vy of the measurements; x, y
+        of the states), ``part`` the input each column belongs to (0..3)."""
+        cache = self.__dict__.setdefault("_layout_cache", {})
+        if device not in cache:
+            n, m, yi = self.n, self.m, self.ss.yaw_index
+            starts = (0, n, 2 * n, 2 * n + m)
+            pairs = tuple((o + i, o + j) for o, planar in zip(starts, (MEAS_PLANAR, MEAS_PLANAR, STATE_PLANAR,
+                                                                       STATE_PLANAR)) for i, j in planar)
+            with torch.inference_mode(False):   # normal tensors: training saves them for the backward pass
+                cache[device] = {"angles": torch.tensor([_YAW_Z, n + _YAW_Z, 2 * n + yi, 2 * n + m + yi],
+                                                        device=device), "pairs": pairs,
+                                 "part": torch.tensor([0] * n + [1] * n + [2] * m + [3] * m, device=device)}
+        return cache[device]
+
+    def gain(self, feats: torch.Tensor, hidden: dict[str, torch.Tensor],
+             cells: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None,
+             aux: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """Gain K (N, m, n) from the four normalised inputs side by side, ``feats`` (N, 2n + 2m) =
+        ``[obs_diff, innovation, fwd_evol, fwd_update]`` (see :meth:`_layout`), and the hidden states (and, with
+        a gain table, the tracks' cells of it, see :meth:`table_index`; with ``aux_inputs``, ``aux`` (N,
+        AUX_DIM), see :func:`aux_features`); returns new hidden states. The layers are applied through
+        ``torch.nn.functional`` (the same operators as the modules' forward, without the module call
+        machinery: this runs once per frame)."""
         dt = self.fc_gain[2].weight.dtype
-        f_upd, f_evol = feats["fwd_update"].to(dt), feats["fwd_evol"].to(dt)
-        f_obs = torch.cat([feats["obs_diff"], feats["innovation"]], dim=1).to(dt)
-        aux = [feats["aux"].to(dt)] if self.cfg.aux_inputs else []
-        f_obs = torch.cat([f_obs, *aux], dim=1)
-        h_q = self.gru_q(self.fc_fwd_update(f_upd), hidden["q"])
-        h_sigma = self.gru_sigma(torch.cat([h_q, self.fc_fwd_evol(f_evol)], dim=1), hidden["sigma"])
-        s_in = [self.fc_sigma_to_s(h_sigma), self.fc_obs(f_obs)]
+        n, m = self.n, self.m
+        f = feats.to(dt)
+        f_obs, f_evol, f_upd = f[:, :2 * n], f[:, 2 * n:2 * n + m], f[:, 2 * n + m:]
+        aux = [aux.to(dt)] if self.cfg.aux_inputs else []
+        if aux:
+            f_obs = torch.cat([f_obs, *aux], dim=1)
+        h_q = _gru(self.gru_q, _fc_apply(self.fc_fwd_update, f_upd), hidden["q"])
+        h_sigma = _gru(self.gru_sigma, torch.cat([h_q, _fc_apply(self.fc_fwd_evol, f_evol)], dim=1), hidden["sigma"])
+        s_in = [_fc_apply(self.fc_sigma_to_s, h_sigma), _fc_apply(self.fc_obs, f_obs)]
         new = {"q": h_q}
         if self.cfg.four_gru:
-            h_r = self.gru_r(self.fc_r_in(feats["obs_diff"].to(dt)), hidden["r"])
+            h_r = _gru(self.gru_r, _fc_apply(self.fc_r_in, f[:, :n]), hidden["r"])
             s_in.append(h_r)
             new["r"] = h_r
-        h_s = self.gru_s(torch.cat(s_in, dim=1), hidden["s"])
-        K = self.fc_gain(torch.cat([h_sigma, h_s, *aux], dim=1))
+        h_s = _gru(self.gru_s, torch.cat(s_in, dim=1), hidden["s"])
+        g0, g2 = self.fc_gain._modules["0"], self.fc_gain._modules["2"]
+        K = F.linear(torch.relu(F.linear(torch.cat([h_sigma, h_s, *aux], dim=1), g0.weight, g0.bias)),
+                     g2.weight, g2.bias)
         if self.cfg.has_table:
             if cells is None:
                 raise ValueError("this GRU-KF's gain table needs the class, update count and gap of every track")
             K = K + self.gain_table[cells]
-        back = self.fc_back1(torch.cat([h_s, K], dim=1))
-        new["sigma"] = self.fc_back2(torch.cat([h_sigma, back], dim=1))
+        back = _fc_apply(self.fc_back1, torch.cat([h_s, K], dim=1))
+        new["sigma"] = _fc_apply(self.fc_back2, torch.cat([h_sigma, back], dim=1))
         new["s"] = h_s
         return K.reshape(-1, self.m, self.n), new
 
@@ -294,33 +332,39 @@ class GRUKalmanNet(nn.Module):
         ``x = x^- + K_prior r + Rs(yaw) dK r_h``: r the innovation (yaw wrapped), r_h = Rm(-yaw) r the same in
         the heading frame, dK (K, m, 9) the network's heading-frame gain (the whole gain with
         ``gain_prior="constant"``, where K_prior is absent).
+
+        The four inputs are formed side by side in one (K, 2n + 2m) tensor (:meth:`_layout`): their yaw
+        components wrapped, their planar pairs turned into the heading frame and each input L2-normalised by a
+        few operators on the whole, not a chain of them per input (the same values).
         """
-        yaw = x_prior[:, self.ss.yaw_index]
-        innov = y - self.ss.h(x_prior)
-        innov = torch.cat([innov[:, :_YAW_Z], self._yaw_res(innov[:, _YAW_Z:_YAW_Z + 1]), innov[:, _YAW_Z + 1:]], 1)
-        obs_diff = y - y_prev
-        obs_diff = torch.cat([obs_diff[:, :_YAW_Z], self._yaw_res(obs_diff[:, _YAW_Z:_YAW_Z + 1]),
-                              obs_diff[:, _YAW_Z + 1:]], 1)
-        yi = self.ss.yaw_index
-        fwd_evol = x_post_prev - x_post_prev2
-        fwd_upd = x_post_prev - x_prior_prev
-        fwd_evol = torch.cat([fwd_evol[:, :yi], wrap_angle_t(fwd_evol[:, yi:yi + 1]), fwd_evol[:, yi + 1:]], 1)
-        fwd_upd = torch.cat([fwd_upd[:, :yi], wrap_angle_t(fwd_upd[:, yi:yi + 1]), fwd_upd[:, yi + 1:]], 1)
-        innov_h = to_heading_frame(innov, yaw, MEAS_PLANAR)
-        raw = {"innovation": innov_h, "obs_diff": to_heading_frame(obs_diff, yaw, MEAS_PLANAR),
-               "fwd_evol": to_heading_frame(fwd_evol, yaw, STATE_PLANAR),
-               "fwd_update": to_heading_frame(fwd_upd, yaw, STATE_PLANAR)}
-        feats = {k: _normalise(v) for k, v in raw.items()}
+        n, m, yi = self.n, self.m, self.ss.yaw_index
+        lay = self._layout(x_prior.device)
+        yaw = x_prior[:, yi]
+        raw = torch.cat([y - y_prev, y - self.ss.h(x_prior), x_post_prev - x_post_prev2, x_post_prev - x_prior_prev],
+                        dim=1)
+        ang = wrap_angle_t(raw.index_select(1, lay["angles"]))
+        if self.cfg.yaw_flip:   # the measurement-space yaw residuals (observation difference, innovation)
+            flip = torch.where(ang.abs() > 0.5 * math.pi, wrap_angle_t(ang + math.pi), ang)
+            ang = torch.cat([flip[:, :2], ang[:, 2:]], dim=1)
+        wrapped = raw.index_copy(1, lay["angles"], ang)
+        raw = to_heading_frame(wrapped, yaw, lay["pairs"])
+        norms = torch.stack([raw[:, :n].norm(dim=1), raw[:, n:2 * n].norm(dim=1),
+                             raw[:, 2 * n:2 * n + m].norm(dim=1), raw[:, 2 * n + m:].norm(dim=1)], dim=1)
+        feats = raw / (norms + _EPS).index_select(1, lay["part"])
+        aux = None
         if self.cfg.aux_inputs:
             if counts is None:
                 raise ValueError("this GRU-KF's aux inputs need the update count and gap of every track")
-            feats["aux"] = aux_features(raw, counts)
-        K, new_hidden = self.gain(feats, hidden, cells)
+            aux = aux_features({"innovation": raw[:, n:2 * n], "obs_diff": raw[:, :n],
+                                "fwd_evol": raw[:, 2 * n:2 * n + m], "fwd_update": raw[:, 2 * n + m:]}, counts)
+        innov_h = raw[:, n:2 * n]
+        K, new_hidden = self.gain(feats, hidden, cells, aux)
         delta = torch.einsum("kmn,kn->km", K.to(innov_h.dtype), innov_h)
         delta = from_heading_frame(delta, yaw, STATE_PLANAR)
         if self.cfg.gain_prior == "ekf":
             if K_prior is None:
                 raise ValueError("this GRU-KF's EKF gain prior needs every track's EKF gain")
+            innov = wrapped[:, n:2 * n]                                                    # global frame
             delta = delta + torch.einsum("kmn,kn->km", K_prior.to(innov.dtype), innov)   # K_ekf r
         x = x_prior + delta
         # sizes stay physical (a learned gain can overshoot); the yaw is wrapped

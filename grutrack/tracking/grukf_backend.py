@@ -111,7 +111,9 @@ class GRUKFBackend:
         return torch.as_tensor(np.asarray(a, dtype=np.float64), device=self.device)
 
     def _ctx(self):
-        return torch.enable_grad() if self.train else torch.no_grad()
+        """Training: autograd records the scene's graph. Tracking: inference mode (no graph, and none of the
+        per-operator bookkeeping autograd needs, e.g. version counters)."""
+        return torch.enable_grad() if self.train else torch.inference_mode()
 
     def initiate(self, z: np.ndarray, labels: np.ndarray) -> GRUState:
         """New tracks from detections z (N, 9)."""
@@ -176,18 +178,19 @@ class GRUKFBackend:
         with self._ctx():
             r = torch.as_tensor(rows, device=self.device, dtype=torch.long)
             y = self._t(z)
-            prior = s.x[r]
+
+            def take(t: torch.Tensor) -> torch.Tensor:
+                return t.index_select(0, r)
+
+            def put(t: torch.Tensor, v: torch.Tensor) -> torch.Tensor:   # a copy of t with rows r set to v
+                return t.index_copy(0, r, v.to(t.dtype))
+
+            prior, post1 = take(s.x), take(s.post1)
             K_ekf, P = self._ekf_gain(s, rows, z)
-            post, hid, K = self.net.correct(prior, y, s.y_prev[r], s.post1[r], s.prior1[r], s.post2[r],
-                                         {k: v[r] for k, v in s.hidden.items()},
-                                         self._cells(s, rows), self._counts(s, rows), K_prior=K_ekf)
-
-            def put(t: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
-                out = t.clone()
-                out[r] = v.to(out.dtype)
-                return out
-
-            return GRUState(put(s.x, post), put(s.y_prev, y), put(s.post1, post), put(s.post2, s.post1[r]),
+            post, hid, K = self.net.correct(prior, y, take(s.y_prev), post1, take(s.prior1), take(s.post2),
+                                            {k: take(v) for k, v in s.hidden.items()},
+                                            self._cells(s, rows), self._counts(s, rows), K_prior=K_ekf)
+            return GRUState(put(s.x, post), put(s.y_prev, y), put(s.post1, post), put(s.post2, post1),
                             put(s.prior1, prior), put(s.gain_abs_max, K.detach().abs().amax(dim=(1, 2))),
                             {k: put(s.hidden[k], hid[k]) for k in s.hidden}, s.labels,
                             _incremented(s.n_updates, rows), _zeroed(s.since, rows), P)
@@ -198,7 +201,7 @@ class GRUKFBackend:
 
     def boxes(self, s: GRUState) -> np.ndarray:
         """Canonical boxes (N, 9) float64 of the current state."""
-        with torch.no_grad():
+        with torch.no_grad() if self.train else torch.inference_mode():
             b = self.ss.h(s.x).detach().cpu().numpy().astype(np.float64)
         b[:, 6] = (b[:, 6] + np.pi) % (2 * np.pi) - np.pi
         return b
@@ -206,11 +209,17 @@ class GRUKFBackend:
     def select(self, s: GRUState, index: np.ndarray) -> GRUState:
         """Subset of the tracks (mask or indices)."""
         idx = np.flatnonzero(index) if np.asarray(index).dtype == bool else np.asarray(index)
-        it = torch.as_tensor(idx, device=self.device, dtype=torch.long)
-        return s.map(lambda t: t[it], lambda a: a[idx])
+        with self._ctx():
+            it = torch.as_tensor(idx, device=self.device, dtype=torch.long)
+            return s.map(lambda t: t.index_select(0, it), lambda a: a[idx])
 
     def concat(self, a: GRUState, b: GRUState) -> GRUState:
         """Tracks of a then b."""
+        with self._ctx():
+            return self._concat(a, b)
+
+    @staticmethod
+    def _concat(a: GRUState, b: GRUState) -> GRUState:
         return GRUState(*(torch.cat([getattr(a, n), getattr(b, n)]) for n in ("x", "y_prev", "post1", "post2",
                                                                              "prior1", "gain_abs_max")),
                         {k: torch.cat([a.hidden[k], b.hidden[k]]) for k in a.hidden},

@@ -33,7 +33,8 @@ class StickyGTAssociation:
     def _held_rows(held: np.ndarray, gt_ids: np.ndarray) -> np.ndarray:
         """Row of ``gt_ids`` (G,) holding each held instance (K,) object, -1 where absent or none."""
         out = np.full(len(held), -1, dtype=np.int64)
-        present = np.isin(held, gt_ids) & (held != "")
+        gt_set = set(gt_ids.tolist())   # a set lookup per track: np.isin sorts object arrays (slow per frame)
+        present = np.fromiter((h != "" and h in gt_set for h in held), dtype=bool, count=len(held))
         if present.any():
             order = np.argsort(gt_ids)
             out[present] = order[np.searchsorted(gt_ids[order], held[present])]
@@ -49,7 +50,8 @@ class StickyGTAssociation:
         # rows of the current GT list holding each track's instance (sticky tracks whose instance is present)
         held, gt_ids = self._held(track_ids), np.asarray(gt_ids, dtype=object)
         out = self._held_rows(held, gt_ids)
-        taken = np.isin(gt_ids, np.array(list(self.held.values()), dtype=object))
+        held_set = set(self.held.values())
+        taken = np.fromiter((g in held_set for g in gt_ids), dtype=bool, count=len(gt_ids))
         ft = np.flatnonzero(held == "")
         free_gt = np.flatnonzero(~taken)
         if len(ft) == 0 or len(free_gt) == 0:
