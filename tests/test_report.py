@@ -114,6 +114,34 @@ def test_semi_supervised_report_from_two_logs(tmp_path):
     assert "1,700 steps" in text and (tmp_path / "figures/s/val_amota_vs_step.png").is_file()
 
 
+def test_semi_supervised_report_over_seeds(tmp_path):
+    """Three runs per mode: per-mode mean and spread of the final validation AMOTA and of the first step that
+    reaches 99 % of it, a band figure, and every validation point as CSV."""
+    import csv
+
+    head = "step,epoch,scene,loss,gt_terms,pseudo_terms,lr,val_amota,seconds\n"
+    args = ["report", "semi_supervised", "--out", str(tmp_path / "s.md"), "--paper", str(PAPER)]
+    finals = {}
+    for mode, base in (("semi_supervised", 0.60), ("supervised", 0.50)):
+        for k, label in enumerate((mode, f"{mode}_2", f"{mode}_3")):
+            # AMOTA rises by 0.05 per logged step until step 4 (semi) / 8 (supervised), then stays
+            top = 4 if mode == "semi_supervised" else 8
+            rows = "".join(f"{st},0,sc,0.1,1,1,1e-5,{base + 0.01 * k + 0.05 * min(st, top)},1.0\n"
+                           for st in range(2, 11, 2))
+            (tmp_path / label).mkdir()
+            (tmp_path / label / "train_log.csv").write_text(head + rows)
+            args += ["--train-log", f"{label}={tmp_path / label / 'train_log.csv'}"]
+            finals.setdefault(mode, []).append(base + 0.01 * k + 0.05 * top)
+    assert main(args) == 0
+    text = (tmp_path / "s.md").read_text()
+    assert "| semi_supervised | 3 | 0.8100 ± 0.0100 (0.8000–0.8200) | 4 ± 0 (4–4) |" in text, text
+    assert "| supervised | 3 | 0.9100 ± 0.0100 (0.9000–0.9200) | 8 ± 0 (8–8) |" in text
+    assert (tmp_path / "figures/s/val_amota_vs_step_seeds.png").read_bytes()[:4] == b"\x89PNG"
+    rows = list(csv.DictReader((tmp_path / "figures/s/val_amota_vs_step.csv").open()))
+    assert len(rows) == 30 and {r["mode"] for r in rows} == {"semi_supervised", "supervised"}
+    assert "[val_amota_vs_step.csv](figures/s/val_amota_vs_step.csv)" in text
+
+
 def test_reports_name_their_sources_training_data_and_scored_logs(tmp_path, monkeypatch):
     from grutrack.cli.train import write_training_yaml
     from grutrack.report import figures

@@ -57,3 +57,24 @@ def lines(path: str | Path, series: dict[str, tuple[list[float], list[float]]], 
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return _save(fig, Path(path))
+
+
+def bands(path: str | Path, groups: dict[str, tuple[list[float], list[float], list[float], list[float]]],
+          title: str, xlabel: str, ylabel: str, min_span: float | None = None) -> Path:
+    """Per group, the mean line over its runs and the band from their minimum to their maximum:
+    ``groups[label] = (x, mean, low, high)``."""
+    fig, ax = plt.subplots(figsize=(6.0, 3.6))
+    for label, (x, mean, lo, hi) in groups.items():
+        line, = ax.plot(x, mean, marker="o", markersize=3, label=label)
+        ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2, linewidth=0)
+    if min_span:
+        lo_, hi_ = ax.get_ylim()
+        if hi_ - lo_ < min_span:
+            mid = (lo_ + hi_) / 2
+            ax.set_ylim(mid - min_span / 2, mid + min_span / 2)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, Path(path))
