@@ -209,3 +209,28 @@ def test_a_new_report_is_its_module_and_one_kinds_line(monkeypatch, tmp_path, ca
     assert main(["report", "amota_list", "--out", str(out), "--run", f"ekf={metrics}",
                  "--render", f"ekf={tmp_path}/counts.json"]) == 2
     assert "--render: a amota_list report shows no key frames (it has no tracking run)" in capsys.readouterr().err
+
+
+def test_a_new_av2_metric_is_one_line(monkeypatch, av2_root, tmp_path):
+    """A column from a TrackEval metric class is one TRACKEVAL_COLUMNS line (a class the official run lacks, as
+    Identity for idf1, runs in the same final evaluation; a field of one it has is read from its tree): here
+    Count's detections, which land in the metrics JSON; the other columns are unchanged."""
+    from grutrack.cli import main
+    from grutrack.documents import MetricsDocument
+    from grutrack.evaluation import av2_eval
+
+    common = ["--dataset", "av2", "--dataroot", str(av2_root), "--split", "val"]
+    dets, tracks, sub = tmp_path / "d.feather", tmp_path / "t.pkl", tmp_path / "s.pkl"
+    assert main(["simulate-detections", *common, "--profile", "centerpoint", "--seed", "4", "--out", str(dets)]) == 0
+    assert main(["track", *common, "--detections", str(dets), "--out", str(tracks), "--no-progress"]) == 0
+    assert main(["submit", *common, "--tracks", str(tracks), "--out", str(sub), "--manifest", "none"]) == 0
+    assert main(["evaluate", *common, "--submission", str(sub), "--out", str(tmp_path / "a.json"),
+                 "--workers", "1"]) == 0
+    monkeypatch.setitem(av2_eval.TRACKEVAL_COLUMNS, "dets", ("Count", "Dets", "int"))    # the one line
+    assert main(["evaluate", *common, "--submission", str(sub), "--out", str(tmp_path / "b.json"),
+                 "--workers", "1"]) == 0
+    before, after = MetricsDocument.read(tmp_path / "a.json"), MetricsDocument.read(tmp_path / "b.json")
+    for c, row in after.per_class.items():
+        assert row.pop("dets") == row["tp"] + row["fp"], c        # Count's detections: the scored tracks' boxes
+        assert row == before.per_class[c]
+    assert sum(r["tp"] for r in after.per_class.values()) > 500

@@ -38,9 +38,10 @@ What the composition adds, none of which changes a number:
   of each log are read once, not twice) and only frames that hold boxes: the official filter cannot build the box
   array of an empty frame (a (0,) quaternion array), and an empty frame has nothing to filter. Every frame is
   filtered on its own and in place, as in the official function, so the result is the same;
-- TrackEval's Identity metric (IDF1) is computed in the same final TrackEval run, on exactly the labels and
-  score-filtered tracks that HOTA and CLEAR score (the official function computes HOTA and CLEAR only); its
-  entries are taken out of the result tree, which then holds what the official function returns;
+- TrackEval's Identity metric (IDF1), and any other metric class of ``TRACKEVAL_COLUMNS``, is computed in the same
+  final TrackEval run, on exactly the labels and score-filtered tracks that HOTA and CLEAR score (the official
+  function computes HOTA and CLEAR only); its entries are taken out of the result tree, which then holds what the
+  official function returns;
 - on request (``keep_inputs``), those labels and score-filtered tracks and the tuned per-class score thresholds
   are handed back, so that the final CLEAR matching can be replayed frame by frame
   (:mod:`grutrack.evaluation.clear_frames`).
@@ -177,10 +178,35 @@ def tune_score_thresholds(labels: dict, predictions: dict, classes: list[str], w
     return thresholds, tuned, mean
 
 
+#: TrackEval metric classes the official ``evaluate_tracking`` runs (its result tree holds these and Count,
+#: which TrackEval's evaluator adds to every run)
+OFFICIAL_METRICS = ("HOTA", "CLEAR")
+_IN_TREE = (*OFFICIAL_METRICS, "Count")
+
+#: metrics-JSON column -> (TrackEval metric class, its field, how it is reduced: "mean" over the similarity
+#: thresholds (HOTA's alphas), "float" or "int" of a scalar), read from the final TrackEval run. A column from
+#: another TrackEval metric class (``trackeval.metrics``) is one more line here: that class then runs in the same
+#: final evaluation, on the same labels and score-filtered tracks.
+TRACKEVAL_COLUMNS: dict[str, tuple[str, str, str]] = {
+    "hota": ("HOTA", "HOTA", "mean"), "detA": ("HOTA", "DetA", "mean"), "assA": ("HOTA", "AssA", "mean"),
+    "mota": ("CLEAR", "MOTA", "float"), "idsw": ("CLEAR", "IDSW", "int"), "tp": ("CLEAR", "CLR_TP", "int"),
+    "fp": ("CLEAR", "CLR_FP", "int"), "fn": ("CLEAR", "CLR_FN", "int"), "ids": ("CLEAR", "IDSW", "int"),
+    "idf1": ("Identity", "IDF1", "float"),
+}
+
+
+def _reduced(value, how: str):
+    """A TrackEval field reduced as :data:`TRACKEVAL_COLUMNS` says."""
+    if how == "mean":
+        return float(np.mean(value))
+    return int(value) if how == "int" else float(value)
+
+
 def final_evaluation(labels: dict, predictions: dict, classes: list[str], config: dict,
                      output_dir: str) -> tuple[dict, dict]:
-    """Step 5: TrackEval HOTA + CLEAR configured as the official ``evaluate_tracking`` does, with Identity in the
-    same run. Returns (the result tree without the Identity entries, {class: IDF1})."""
+    """Step 5: TrackEval HOTA + CLEAR configured as the official ``evaluate_tracking`` does, with the other metric
+    classes of :data:`TRACKEVAL_COLUMNS` (Identity) in the same run. Returns (the result tree with the official
+    metrics only, ``{class: {metric class: {field: value}}}`` of the other classes, combined over sequences)."""
     import trackeval
 
     from av2.evaluation.tracking import utils
@@ -192,7 +218,8 @@ def final_evaluation(labels: dict, predictions: dict, classes: list[str], config
 
     if frames(labels) != frames(predictions):  # evaluate_tracking's check; the input check makes it a bug
         raise RuntimeError("sequences ids and timestamp_ns in labels and predictions don't match")
-    metrics_config = {"METRICS": ["HOTA", "CLEAR", "Identity"], "THRESHOLD": SIMILARITY_THRESHOLD,
+    extra = sorted({m for m, _, _ in TRACKEVAL_COLUMNS.values()} - set(_IN_TREE))
+    metrics_config = {"METRICS": [*OFFICIAL_METRICS, *extra], "THRESHOLD": SIMILARITY_THRESHOLD,
                       "PRINT_CONFIG": bool(config["PRINT_CONFIG"])}
     metrics = [getattr(trackeval.metrics, m)(metrics_config) for m in metrics_config["METRICS"]]
     dataset_config = {**official.TrackEvalDataset.get_default_dataset_config(),
@@ -201,11 +228,12 @@ def final_evaluation(labels: dict, predictions: dict, classes: list[str], config
                       "TRACKERS_TO_EVAL": [TRACKER_NAME], "OUTPUT_FOLDER": output_dir}
     result, _ = trackeval.Evaluator(config).evaluate([official.TrackEvalDataset(dataset_config)], metrics)
     tree = result["TrackEvalDataset"][TRACKER_NAME]
-    idf1 = {c: float(tree["COMBINED_SEQ"][c]["Identity"]["IDF1"]) for c in classes}
+    others = {c: {m: tree["COMBINED_SEQ"][c][m] for m in extra} for c in classes}
     for by_class in tree.values():
         for by_metric in by_class.values():
-            by_metric.pop("Identity", None)
-    return result, idf1
+            for m in extra:
+                by_metric.pop(m, None)
+    return result, others
 
 
 def evaluate_sequences(predictions: dict, labels: dict, dataset_dir: str | Path | None, *,
@@ -216,7 +244,8 @@ def evaluate_sequences(predictions: dict, labels: dict, dataset_dir: str | Path 
 
     predictions / labels: ``{log_id: [frame, ...]}`` (the pickle layout), same frames (else InputFormatError);
     neither is modified. dataset_dir: the split folder (enables the ROI filter) or None. Returns ``{"result":
-    TrackEval's result tree, "tuned": {class: HOTA}, "mean": {class: HOTA}, "idf1": {class: IDF1}}``; with
+    TrackEval's result tree, "tuned": {class: HOTA}, "mean": {class: HOTA}, "others": {class: {metric class:
+    {field: value}}} (the non-official metric classes of TRACKEVAL_COLUMNS, e.g. Identity)}``; with
     ``keep_inputs`` also ``"final"``: ``{"labels", "predictions"}`` (what the final HOTA / CLEAR evaluation scored:
     range- and ROI-filtered labels, tracks also filtered by the tuned thresholds), ``"classes"``,
     ``"similarity_threshold"`` and ``"thresholds"`` ({class: tuned score threshold}).
@@ -242,8 +271,8 @@ def evaluate_sequences(predictions: dict, labels: dict, dataset_dir: str | Path 
             drivable_area_filter(predictions, labels, Path(dataset_dir).resolve())
         thresholds, tuned, mean = tune_score_thresholds(labels, predictions, classes, workers, tmp)
         scored = utils.filter_by_class_thresholds(predictions, thresholds)
-        res, idf1 = final_evaluation(labels, scored, classes, eval_config(quiet=trackeval_dir is None), out_dir)
-    out = {"result": res, "tuned": tuned, "mean": mean, "idf1": idf1}
+        res, others = final_evaluation(labels, scored, classes, eval_config(quiet=trackeval_dir is None), out_dir)
+    out = {"result": res, "tuned": tuned, "mean": mean, "others": others}
     if keep_inputs:
         out["final"] = {"labels": labels, "predictions": scored, "classes": classes,
                         "similarity_threshold": float(SIMILARITY_THRESHOLD),
@@ -256,15 +285,11 @@ def metrics_from_result(out: dict) -> tuple[dict, dict]:
     combined = out["result"]["TrackEvalDataset"]["TRACKER"]["COMBINED_SEQ"]
     per_class = {}
     for c in COMPETITION_CATEGORIES:
-        m = combined[c]
+        m = {**combined[c], **out["others"].get(c, {})}
         gt = int(m["CLEAR"]["CLR_TP"] + m["CLEAR"]["CLR_FN"])
-        per_class[c] = {"hota": float(np.mean(m["HOTA"]["HOTA"])), "mota": float(m["CLEAR"]["MOTA"]),
-                        "idf1": float(out["idf1"].get(c, 0.0)), "hota_tuned": float(out["tuned"][c]),
-                        "hota_mean": float(out["mean"][c]), "detA": float(np.mean(m["HOTA"]["DetA"])),
-                        "assA": float(np.mean(m["HOTA"]["AssA"])), "idsw": int(m["CLEAR"]["IDSW"]),
-                        "tp": int(m["CLEAR"]["CLR_TP"]), "fp": int(m["CLEAR"]["CLR_FP"]),
-                        "fn": int(m["CLEAR"]["CLR_FN"]), "ids": int(m["CLEAR"]["IDSW"]),
-                        "gt_boxes": gt, "present": gt > 0}
+        per_class[c] = {col: _reduced(m[metric][field], how) for col, (metric, field, how) in TRACKEVAL_COLUMNS.items()}
+        per_class[c].update({"hota_tuned": float(out["tuned"][c]), "hota_mean": float(out["mean"][c]),
+                             "gt_boxes": gt, "present": gt > 0})
     present = [c for c in TABLE_I_CLASSES if per_class[c]["present"]]
     overall = {f"{k}": float(np.mean([per_class[c][k] for c in TABLE_I_CLASSES])) for k in ("hota", "mota", "idf1")}
     overall.update({f"{k}_present": (float(np.mean([per_class[c][k] for c in present])) if present else None)
