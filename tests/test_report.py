@@ -132,6 +132,8 @@ def test_semi_supervised_report_over_seeds(tmp_path):
             (tmp_path / label / "train_log.csv").write_text(head + rows)
             args += ["--train-log", f"{label}={tmp_path / label / 'train_log.csv'}"]
             finals.setdefault(mode, []).append(base + 0.01 * k + 0.05 * top)
+    args += ["--experiment", "study_val:demo:demo_val:centerpoint_sim:simulated",
+             "--run", f"ekf={nusc_metrics(tmp_path / 'ekf.json', 0.8765, 0.4, 20)}"]
     assert main(args) == 0
     text = (tmp_path / "s.md").read_text()
     assert "| semi_supervised | 3 | 0.8100 ± 0.0100 (0.8000–0.8200) | 4 ± 0 (4–4) |" in text, text
@@ -140,6 +142,8 @@ def test_semi_supervised_report_over_seeds(tmp_path):
     rows = list(csv.DictReader((tmp_path / "figures/s/val_amota_vs_step.csv").open()))
     assert len(rows) == 30 and {r["mode"] for r in rows} == {"semi_supervised", "supervised"}
     assert "[val_amota_vs_step.csv](figures/s/val_amota_vs_step.csv)" in text
+    assert "Reference lines: AMOTA of trackers without training on the same validation split and detections " \
+           "(ekf 0.8765)." in text
 
 
 def test_reports_name_their_sources_training_data_and_scored_logs(tmp_path, monkeypatch):

@@ -211,7 +211,7 @@ def _check_report(cfg: dict, paper: dict, name: str, rep: dict) -> None:
         if cfg["trainings"][tr]["validation"] is None:
             raise ConfigError(f"config key trainings.{tr}.validation must be set (the figure plots validation "
                               f"AMOTA against step)")
-    if not kind.datasets:
+    if not kind.datasets or (rep["experiment"] is None and kind.optional_experiment):
         return
     if rep["experiment"] is None:
         raise ConfigError(f"config key {key}.experiment: a {rep['kind']} report needs an experiment")

@@ -60,13 +60,17 @@ def lines(path: str | Path, series: dict[str, tuple[list[float], list[float]]], 
 
 
 def bands(path: str | Path, groups: dict[str, tuple[list[float], list[float], list[float], list[float]]],
-          title: str, xlabel: str, ylabel: str, min_span: float | None = None) -> Path:
+          title: str, xlabel: str, ylabel: str, min_span: float | None = None,
+          hlines: dict[str, float] | None = None) -> Path:
     """Per group, the mean line over its runs and the band from their minimum to their maximum:
-    ``groups[label] = (x, mean, low, high)``."""
+    ``groups[label] = (x, mean, low, high)``; optional labelled horizontal reference lines."""
     fig, ax = plt.subplots(figsize=(6.0, 3.6))
     for label, (x, mean, lo, hi) in groups.items():
         line, = ax.plot(x, mean, marker="o", markersize=3, label=label)
         ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2, linewidth=0)
+    for label, y in (hlines or {}).items():
+        ax.axhline(y, linestyle="--", linewidth=1, color="grey")
+        ax.annotate(label, (ax.get_xlim()[0], y), fontsize=7, color="grey", va="bottom")
     if min_span:
         lo_, hi_ = ax.get_ylim()
         if hi_ - lo_ < min_span:

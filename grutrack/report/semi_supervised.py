@@ -33,9 +33,13 @@ def build(inp: ReportInputs) -> str:
                      "the curves show the method's behaviour, not the paper's values."],
                     source="the training logs (train_log.csv) written by `grutrack train`")]
     groups = _groups(logs)
-    parts += ["", "## Validation AMOTA against step", "", _figure(inp, logs), ""]
+    refs = _references(inp)
+    parts += ["", "## Validation AMOTA against step", "", _figure(inp, logs, refs), ""]
+    if refs:
+        parts += ["Reference lines: AMOTA of trackers without training on the same validation split and "
+                  "detections (" + ", ".join(f"{k} {v:.4f}" for k, v in refs.items()) + ").", ""]
     if any(len(g) > 1 for g in groups.values()):
-        parts += [_band_figure(inp, logs, groups), "", "## Across seeds", "", _across(logs, groups), ""]
+        parts += [_band_figure(inp, logs, groups, refs), "", "## Across seeds", "", _across(logs, groups), ""]
     csv_path = _csv(inp, logs, groups)
     parts += [f"Every validation point: [{csv_path.name}]({_relative(csv_path, inp.out.parent)}).", "",
               "## Summary", "", _summary(logs), "",
@@ -48,11 +52,18 @@ def _validated(rows: list[TrainingStep]) -> list[TrainingStep]:
     return [r for r in rows if r.val_amota is not None]
 
 
-def _figure(inp: ReportInputs, logs: dict[str, list[TrainingStep]]) -> str:
+def _references(inp: ReportInputs) -> dict[str, float]:
+    """Run -> AMOTA of the report's experiment runs (trackers without training on the validation split)."""
+    return {run: float(doc.overall["amota"]) for run, doc in inp.docs().items()
+            if doc.overall.get("amota") is not None}
+
+
+def _figure(inp: ReportInputs, logs: dict[str, list[TrainingStep]], refs: dict[str, float]) -> str:
     series = {label: ([r.step for r in _validated(rows)], [r.val_amota for r in _validated(rows)])
               for label, rows in logs.items()}
     path = figures.lines(inp.figures / "val_amota_vs_step.png", series, "Validation AMOTA against training step",
-                         "step (one optimizer step per scene)", "validation AMOTA", min_span=MIN_AMOTA_SPAN)
+                         "step (one optimizer step per scene)", "validation AMOTA", hlines=refs,
+                         min_span=MIN_AMOTA_SPAN)
     return image(path, inp.out.parent, "validation AMOTA against step")
 
 
@@ -85,7 +96,8 @@ def _relative(path, base) -> str:
         return Path(path).as_posix()
 
 
-def _band_figure(inp: ReportInputs, logs: dict[str, list[TrainingStep]], groups: dict[str, list[str]]) -> str:
+def _band_figure(inp: ReportInputs, logs: dict[str, list[TrainingStep]], groups: dict[str, list[str]],
+                 refs: dict[str, float]) -> str:
     """Mean validation AMOTA of each mode's runs with their min-max band, at the steps every run logged."""
     data = {}
     for mode, labels in groups.items():
@@ -98,7 +110,7 @@ def _band_figure(inp: ReportInputs, logs: dict[str, list[TrainingStep]], groups:
                                                 [max(v) for v in vals])
     path = figures.bands(inp.figures / "val_amota_vs_step_seeds.png", data,
                          "Validation AMOTA against step: mean and min-max over seeds", "step",
-                         "validation AMOTA", min_span=MIN_AMOTA_SPAN)
+                         "validation AMOTA", min_span=MIN_AMOTA_SPAN, hlines=refs)
     return image(path, inp.out.parent, "validation AMOTA against step, mean and spread over seeds")
 
 

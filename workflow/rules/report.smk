@@ -8,7 +8,7 @@ def _report(w):
 
 def _report_runs(rep):
     """(run, metrics JSON, manifest) of the report's experiment, first detector (evaluated experiments)."""
-    if "runs" not in S.report_kind(rep["kind"]).reads:
+    if "runs" not in S.report_kind(rep["kind"]).reads or not rep["experiment"]:
         return []
     exp_name = rep["experiment"]
     det = config["experiments"][exp_name]["detectors"][0]
@@ -18,12 +18,12 @@ def _report_runs(rep):
 
 
 def _report_trainings(rep):
-    """(name, train_log.csv, training.yaml) of the trainings the report shows: those of its experiment's GRU-KF
-    runs, or its own ``trainings`` map when it has no experiment."""
+    """(name, train_log.csv, training.yaml) of the trainings the report shows: its own ``trainings`` map when its
+    kind names training roles, else those of its experiment's GRU-KF runs."""
     kind = S.report_kind(rep["kind"])
     if "trainings" not in kind.reads:
         return []
-    if not kind.datasets:
+    if kind.training_roles:
         names = rep["trainings"]
     else:
         runs = config["experiments"][rep["experiment"]]["runs"]
