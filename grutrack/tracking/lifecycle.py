@@ -10,7 +10,6 @@ is at least ``delete_threshold``). A track is written when alive, matched or mis
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
 
