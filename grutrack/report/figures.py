@@ -36,13 +36,10 @@ def grouped_bars(path: str | Path, categories: list[str], series: dict[str, list
     return _save(fig, Path(path))
 
 
-def lines(path: str | Path, series: dict[str, tuple[list[float], list[float]]], title: str, xlabel: str,
-          ylabel: str, hlines: dict[str, float] | None = None, min_span: float | None = None) -> Path:
-    """Line plot of (x, y) series, with optional labelled horizontal reference lines; the y axis spans at
-    least ``min_span`` (centred on the data), so that differences below it do not fill the plot."""
-    fig, ax = plt.subplots(figsize=(6.0, 3.6))
-    for label, (x, y) in series.items():
-        ax.plot(x, y, marker="o", markersize=3, label=label)
+def _finish(ax, title: str, xlabel: str, ylabel: str, hlines: dict[str, float] | None,
+            min_span: float | None) -> None:
+    """Labelled horizontal reference lines, a y span of at least ``min_span`` (centred on the data), axis labels,
+    title, grid and legend."""
     for label, y in (hlines or {}).items():
         ax.axhline(y, linestyle="--", linewidth=1, color="grey")
         ax.annotate(label, (ax.get_xlim()[0], y), fontsize=7, color="grey", va="bottom")
@@ -56,6 +53,16 @@ def lines(path: str | Path, series: dict[str, tuple[list[float], list[float]]], 
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
+
+
+def lines(path: str | Path, series: dict[str, tuple[list[float], list[float]]], title: str, xlabel: str,
+          ylabel: str, hlines: dict[str, float] | None = None, min_span: float | None = None) -> Path:
+    """Line plot of (x, y) series, with optional labelled horizontal reference lines; the y axis spans at
+    least ``min_span`` (centred on the data), so that differences below it do not fill the plot."""
+    fig, ax = plt.subplots(figsize=(6.0, 3.6))
+    for label, (x, y) in series.items():
+        ax.plot(x, y, marker="o", markersize=3, label=label)
+    _finish(ax, title, xlabel, ylabel, hlines, min_span)
     return _save(fig, Path(path))
 
 
@@ -68,17 +75,5 @@ def bands(path: str | Path, groups: dict[str, tuple[list[float], list[float], li
     for label, (x, mean, lo, hi) in groups.items():
         line, = ax.plot(x, mean, marker="o", markersize=3, label=label)
         ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2, linewidth=0)
-    for label, y in (hlines or {}).items():
-        ax.axhline(y, linestyle="--", linewidth=1, color="grey")
-        ax.annotate(label, (ax.get_xlim()[0], y), fontsize=7, color="grey", va="bottom")
-    if min_span:
-        lo_, hi_ = ax.get_ylim()
-        if hi_ - lo_ < min_span:
-            mid = (lo_ + hi_) / 2
-            ax.set_ylim(mid - min_span / 2, mid + min_span / 2)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.set_title(title, fontsize=10)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    _finish(ax, title, xlabel, ylabel, hlines, min_span)
     return _save(fig, Path(path))
