@@ -51,6 +51,8 @@ MIN_SIZE = 0.05  # metres: lower bound of the posterior w, l, h
 _YAW_Z = 6
 #: what the network's output is added to: nothing ("constant", the paper) or the per-track EKF gain ("ekf")
 GAIN_PRIORS = ("constant", "ekf")
+#: which classes a tracker runs through the network (GRUKFConfig.network_classes)
+NETWORK_CLASSES = ("all", "ss_model")
 
 
 @dataclass(frozen=True)
@@ -75,6 +77,9 @@ class GRUKFConfig:
     gain_prior: "constant" (the network's output is the gain; it starts at the EKF's mean gain) or "ekf" (the
     output is a residual added to the per-track EKF gain K_ekf; it starts at zero; the network then carries the
     EKF's per-class Q, R, P0 as buffers ``ekf_Q``, ``ekf_R``, ``ekf_P0``; see the module docstring).
+    network_classes: which classes a tracker runs through the network: "all" (the paper) or "ss_model" (only the
+    classes whose model in the tracker preset's motion config is ``ss_model``; the others keep the preset's EKF
+    with their own model; a grutrack option). It changes no weight; the tracker and the trainer read it.
     """
 
     ss_model: str = "CTRA"
@@ -89,6 +94,7 @@ class GRUKFConfig:
     aux_inputs: bool = False
     ss_params: dict = field(default_factory=dict)   # the SS model's constructor parameters (motion config)
     gain_prior: str = "constant"   # "constant": K = network output; "ekf": K = K_ekf + network output
+    network_classes: str = "all"   # "all" or "ss_model" (the other classes run the preset's EKF)
 
     @property
     def table_shape(self) -> tuple[int, int, int]:
@@ -158,6 +164,9 @@ class GRUKalmanNet(nn.Module):
         self.ss = make_torch_model(cfg.ss_model, **cfg.ss_params)
         if cfg.gain_prior not in GAIN_PRIORS:
             raise ValueError(f"gain_prior must be one of {', '.join(GAIN_PRIORS)}, got {cfg.gain_prior!r}")
+        if cfg.network_classes not in NETWORK_CLASSES:
+            raise ValueError(f"network_classes must be one of {', '.join(NETWORK_CLASSES)}, "
+                             f"got {cfg.network_classes!r}")
         with torch.device("meta"):      # allocated without drawing from any generator, initialised below
             self._build(cfg)
         self.to_empty(device="cpu")

@@ -46,8 +46,7 @@ def build_tracker(name: str = "ekf", config: str | Path | None = None,
         device = resolve_device(device)   # a device this machine lacks is refused before the model is read
         if config is None:  # the default preset writes what the network was trained to give (see grukf.yaml)
             cfg = replace(cfg, matched_box=checkpoint_matched_box(checkpoint))
-        return Tracker(cfg, [grukf_group(load_network(checkpoint), len(index), device, class_index=index)],
-                       _association(cfg))
+        return Tracker(cfg, network_groups(load_network(checkpoint), cfg, index, device), _association(cfg))
     return Tracker(cfg, _baseline_groups(name, cfg, index), _association(cfg))
 
 
@@ -70,13 +69,35 @@ def _association(cfg: TrackerConfig):
 
 
 def grukf_group(net, n_labels: int, device: str = "auto", train: bool = False,
-                class_index: np.ndarray | None = None) -> TrackGroup:
-    """One track group for every label, run by the GRU-Kalman filter ``net``; ``class_index`` (n_labels,) int
-    maps a dataset label to the tracking class the network's per-class gain uses (default: identity)."""
+                class_index: np.ndarray | None = None, members: np.ndarray | None = None) -> TrackGroup:
+    """One track group run by the GRU-Kalman filter ``net`` for the labels ``members`` (n_labels,) bool (default:
+    every label); ``class_index`` (n_labels,) int maps a dataset label to the tracking class the network's
+    per-class gain uses (default: identity)."""
     from grutrack.tracking.grukf_backend import GRUKFBackend
 
-    return TrackGroup(GRUKFBackend(net, device, train=train, class_index=class_index),
-                      np.ones(n_labels, dtype=bool))
+    members = np.ones(n_labels, dtype=bool) if members is None else np.asarray(members, dtype=bool)
+    return TrackGroup(GRUKFBackend(net, device, train=train, class_index=class_index), members)
+
+
+def network_members(arch, cfg: TrackerConfig, index: np.ndarray) -> np.ndarray:
+    """(n_labels,) bool: the labels a network of architecture ``arch`` (a ``GRUKFConfig``) filters under the
+    preset ``cfg`` (already re-indexed by dataset label; ``index`` (n_labels,) the tracking class of each label).
+    ``arch.network_classes`` "all": every label; "ss_model": the labels whose model in the preset's motion
+    config (with its ``model_override``) is the network's SS model ``arch.ss_model``."""
+    if arch.network_classes == "all":
+        return np.ones(len(index), dtype=bool)
+    from grutrack.motion.defaults import load_motion_config
+
+    motion = load_motion_config(cfg.motion_config, cfg.model_override or None)
+    return np.array([motion[TRACKING_CLASSES[c]]["model"].lower() == arch.ss_model.lower() for c in index])
+
+
+def network_groups(net, cfg: TrackerConfig, index: np.ndarray, device: str = "auto") -> list[TrackGroup]:
+    """The track groups of a GRU-KF tracker: the network's group for :func:`network_members` and the preset's
+    EKF groups (:func:`ekf_groups`) for the other labels (none with ``network_classes: all``)."""
+    members = network_members(net.cfg, cfg, index)
+    rest = ekf_groups(cfg, index, only=~members) if not members.all() else []
+    return [grukf_group(net, len(index), device, class_index=index, members=members), *rest]
 
 
 def param_index(param_classes: tuple[str, ...] | None) -> np.ndarray:
@@ -103,12 +124,14 @@ def remap_config(cfg: TrackerConfig, index: np.ndarray) -> TrackerConfig:
                    geometry_window=cfg.geometry_window[index])
 
 
-def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None, backend_cls=None) -> list[TrackGroup]:
+def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None, backend_cls=None,
+               only: np.ndarray | None = None) -> list[TrackGroup]:
     """One track group per state-space model in use, each with per-label (n_labels, d, d) Q, R, P0 tables.
 
     ``index`` (n_labels,) maps dataset labels to tracking classes (identity for nuScenes). Labels of other
     groups keep zero rows in a group's tables; they are never indexed there. ``backend_cls``: a
     ``KalmanBackend`` subclass to use instead (AB3DMOT's velocity-free start), default ``KalmanBackend``.
+    ``only`` (n_labels,) bool: groups for these labels alone (default: every label).
     """
     index = np.arange(len(TRACKING_CLASSES)) if index is None else index
     from grutrack.motion.defaults import load_motion_config
@@ -119,6 +142,8 @@ def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None, backend_cls=
     groups = []
     for model_name in sorted({m["model"] for m in motion.values()}):
         members = np.array([motion[TRACKING_CLASSES[i]]["model"] == model_name for i in index])
+        if only is not None:
+            members &= np.asarray(only, dtype=bool)
         if not members.any():
             continue
         first = motion[TRACKING_CLASSES[index[int(np.argmax(members))]]]

@@ -27,6 +27,7 @@ class TrainConfig:
     yaw_flip: bool
     aux_inputs: bool
     gain_prior: str
+    network_classes: str
     tracker_preset: str
     motion_config: str
     gt_match_distance: float

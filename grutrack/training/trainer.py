@@ -29,7 +29,7 @@ from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig, MEAS_PLANAR, STATE_
 from grutrack.motion.torch_models import wrap_angle_t
 from grutrack.tracking.config import TrackerConfig, load_tracker_config
 from grutrack.tracking.ekf_backend import KalmanBackend, KFState
-from grutrack.tracking.factory import grukf_group, param_index, remap_config
+from grutrack.tracking.factory import ekf_groups, grukf_group, network_members, param_index, remap_config
 from grutrack.tracking.grukf_backend import GRUKFBackend, resolve_device
 from grutrack.tracking.tracker import GroupUpdate, Tracker, TrackGroup
 from grutrack.motion.checkpoint import load_weights, read_checkpoint, save_checkpoint
@@ -198,16 +198,26 @@ class SceneLoss:
 def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
               cfg: TrainConfig, device: torch.device, index: np.ndarray) -> SceneLoss:
     """Track one scene with gradients on; returns its collected loss. ``index`` (n_labels,): the tracking
-    class each label of the scene's vocabulary takes its parameters (and the network its class gain) from."""
+    class each label of the scene's vocabulary takes its parameters (and the network its class gain) from.
+    With ``network_classes: ss_model`` the other labels run the preset's EKF groups and give no loss terms."""
     gru = grukf_group(net, len(index), device, train=True, class_index=index).backend
     backend = PairedBackend(gru, ekf_backend(cfg, index))
-    tracker = Tracker(tracker_cfg, [TrackGroup(backend, np.ones(len(index), dtype=bool))])
+    tracker = Tracker(tracker_cfg, _groups(backend, net.cfg, tracker_cfg, index))
     loss = SceneLoss(cfg, device)
     for frame in scene.frames:
         _, updates = tracker.step_with_updates(dets[frame.token], frame.timestamp)
         for u in updates:
-            loss.add(u, backend, frame.gt)
+            if u.group == 0:      # the network's group (the others are the preset's EKF)
+                loss.add(u, backend, frame.gt)
     return loss
+
+
+def _groups(backend, arch: GRUKFConfig, tracker_cfg: TrackerConfig, index: np.ndarray) -> list[TrackGroup]:
+    """Group 0: ``backend`` for the labels the network filters (:func:`network_members`); then the preset's EKF
+    groups for the other labels (none with ``network_classes: all``)."""
+    members = network_members(arch, tracker_cfg, index)
+    rest = ekf_groups(tracker_cfg, index, only=~members) if not members.all() else []
+    return [TrackGroup(backend, members), *rest]
 
 
 def ekf_gain(backend: KalmanBackend, s: KFState, rows: np.ndarray) -> np.ndarray:
@@ -243,13 +253,13 @@ def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: Tra
     shape = _arch(cfg).table_shape
     total = np.zeros((*shape, ekf.model.dim_x, 9))
     count = np.zeros(shape, dtype=np.int64)
-    tracker = Tracker(tracker_cfg, [TrackGroup(ekf, np.ones(len(index), dtype=bool))])
+    tracker = Tracker(tracker_cfg, _groups(ekf, _arch(cfg), tracker_cfg, index))
     with threadpool_limits(limits=1, user_api="blas"):   # tiny batched solves: threads only add stalls
         for scene in scenes:
             tracker.reset()
             for frame in scene.frames:
                 for u in tracker.step_with_updates(dets[frame.token], frame.timestamp)[1]:
-                    if not len(u.rows):
+                    if u.group != 0 or not len(u.rows):
                         continue
                     rows = u.rows
                     c = index[u.labels[rows]] if cfg.class_gain else np.zeros(len(rows), dtype=np.int64)
@@ -289,7 +299,8 @@ def _arch(cfg: TrainConfig) -> GRUKFConfig:
     params = load_motion_config(cfg.motion_config, cfg.ss_model)[TRACKING_CLASSES[0]]["params"]
     return GRUKFConfig(ss_model=cfg.ss_model, ss_params=dict(params), four_gru=cfg.four_gru,
                        class_gain=cfg.class_gain, age_bins=cfg.age_bins, gap_bins=cfg.gap_bins,
-                       yaw_flip=cfg.yaw_flip, aux_inputs=cfg.aux_inputs, gain_prior=cfg.gain_prior)
+                       yaw_flip=cfg.yaw_flip, aux_inputs=cfg.aux_inputs, gain_prior=cfg.gain_prior,
+                       network_classes=cfg.network_classes)
 
 
 @dataclass

@@ -5,11 +5,13 @@ from __future__ import annotations
 import contextlib
 import io
 
+import numpy as np
+
 from grutrack.classes import TRACKING_CLASSES
 from grutrack.data.scene import BoxSet, Scene
 from grutrack.export.nuscenes_json import build_submission
 from grutrack.tracking.config import TrackerConfig
-from grutrack.tracking.factory import grukf_group
+from grutrack.tracking.factory import network_groups
 from grutrack.tracking.tracker import Tracker, track_scenes
 
 
@@ -24,7 +26,8 @@ def make_validator(nusc, split: str, scenes: list[Scene], dets: dict[str, BoxSet
     def validate(net) -> float:
         was_training = net.training
         net.eval()
-        run = track_scenes(Tracker(tracker_cfg, [grukf_group(net, len(TRACKING_CLASSES), device)]), scenes, dets)
+        groups = network_groups(net, tracker_cfg, np.arange(len(TRACKING_CLASSES)), device)
+        run = track_scenes(Tracker(tracker_cfg, groups), scenes, dets)
         net.train(was_training)
         sub = build_submission(run.results, tokens, tracker_cfg.max_boxes_per_sample)
         with contextlib.redirect_stdout(io.StringIO()):

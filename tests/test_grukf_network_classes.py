@@ -1,0 +1,112 @@
+"""GRU-KF training key ``network_classes``: with ``ss_model`` the network filters only the classes whose model in the
+tracker preset is its SS model (CTRA: bus, car, pedestrian, truck in the ``ekf`` preset) and the preset's EKF the
+others (bicycle and motorcycle: Bicycle; trailer: CA), in tracking and in training."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from grutrack.classes import TRACKING_CLASSES
+from grutrack.data.scene import Scene
+from grutrack.errors import ConfigError
+from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
+
+#: the ekf preset's classes run with CTRA (grutrack/configs/motion/grutrack_nusc.yaml)
+CTRA_CLASSES = ("bus", "car", "pedestrian", "truck")
+
+
+@pytest.fixture(scope="module")
+def scenes_and_dets(nusc_mini, tmp_path_factory):
+    """Three mini_train scenes (first 15 frames) with simulated CenterPoint-like detections (SYNTHETIC, seed 5)."""
+    from grutrack.data.detection_sim import simulate_nuscenes
+    from grutrack.data.nusc_detections import load_detections
+    from grutrack.data.nuscenes import load_scenes
+
+    scenes = [Scene(s.name, s.token, s.frames[:15]) for s in load_scenes(nusc_mini, "mini_train", with_gt=True)[:3]]
+    p = tmp_path_factory.mktemp("dets") / "dets.json"
+    p.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5, nusc=nusc_mini)))
+    return scenes, load_detections(p, [f.token for s in scenes for f in s.frames])
+
+
+def _trainer(scenes, dets, out, **over):
+    from grutrack.training.config import load_train_config
+    from grutrack.training.trainer import Trainer
+
+    cfg = load_train_config("grukf", {"epochs": 1, "checkpoint_every": 0, "device": "cpu", "lr": 1e-3, **over})
+    return Trainer(cfg, scenes, dets, out, progress=False)
+
+
+def _boxes_by_label(results) -> dict[str, np.ndarray]:
+    """Every written box (M, 9), by class name, in frame order."""
+    out = {}
+    for c, name in enumerate(TRACKING_CLASSES):
+        rows = [r.boxes[r.labels == c] for r in results.values()]
+        out[name] = np.concatenate(rows) if rows else np.zeros((0, 9))
+    return out
+
+
+def test_untrained_ekf_prior_with_network_classes_ss_model_is_the_ekf_preset(scenes_and_dets, tmp_path):
+    from grutrack.tracking.factory import build_tracker
+    from grutrack.tracking.tracker import track_scenes
+
+    scenes, dets = scenes_and_dets
+    over = {"gain_prior": "ekf", "yaw_flip": True, "motion_config": "grutrack_nusc"}
+    ck = _trainer(scenes, dets, tmp_path / "hyb", network_classes="ss_model", **over).save("model.pt")
+    ck_all = _trainer(scenes, dets, tmp_path / "all", **over).save("model.pt")
+    hyb = build_tracker("grukf", checkpoint=ck, device="cpu")
+    # the network's group takes the CTRA classes, the preset's Bicycle and CA groups the others
+    assert [TRACKING_CLASSES[i] for i in np.flatnonzero(hyb.groups[0].classes)] == list(CTRA_CLASSES)
+    rest = {type(g.backend.model).__name__: [TRACKING_CLASSES[i] for i in np.flatnonzero(g.classes)]
+            for g in hyb.groups[1:]}
+    assert rest == {"BicyclePiecewise": ["bicycle", "motorcycle"], "CA": ["trailer"]}
+    assert len(build_tracker("grukf", checkpoint=ck_all, device="cpu").groups) == 1
+
+    ekf = _boxes_by_label(track_scenes(build_tracker("ekf"), scenes, dets).results)
+    got = _boxes_by_label(track_scenes(hyb, scenes, dets).results)
+    every = _boxes_by_label(track_scenes(build_tracker("grukf", checkpoint=ck_all, device="cpu"), scenes,
+                                         dets).results)
+    assert len(ekf["car"]) > 100 and len(ekf["bicycle"]) + len(ekf["motorcycle"]) > 10
+    for name in TRACKING_CLASSES:       # untrained, the hybrid writes the preset's boxes for every class
+        assert got[name].shape == ekf[name].shape
+        np.testing.assert_allclose(got[name], ekf[name], atol=1e-8)
+    # with network_classes "all" the Bicycle classes run the network's CTRA and their boxes differ
+    two_wheel = np.concatenate([ekf["bicycle"], ekf["motorcycle"]])
+    other = np.concatenate([every["bicycle"], every["motorcycle"]])
+    assert two_wheel.shape != other.shape or np.abs(two_wheel - other).max() > 1e-3
+    np.testing.assert_allclose(every["car"], ekf["car"], atol=1e-8)
+
+
+def test_training_with_network_classes_ss_model_takes_loss_terms_of_the_network_classes_only(scenes_and_dets,
+                                                                                             tmp_path):
+    from grutrack.motion.checkpoint import load_network
+    from grutrack.training.trainer import run_scene
+
+    scenes, dets = scenes_and_dets
+    hyb = _trainer(scenes, dets, tmp_path / "hyb", network_classes="ss_model")
+    full = _trainer(scenes, dets, tmp_path / "all")
+    n_hyb = n_full = 0
+    for s in scenes:
+        a = run_scene(hyb.net, s, dets, hyb.tracker_cfg, hyb.cfg, hyb.device, hyb.index)
+        b = run_scene(full.net, s, dets, full.tracker_cfg, full.cfg, full.device, full.index)
+        n_hyb += a.gt_terms + a.pseudo_terms
+        n_full += b.gt_terms + b.pseudo_terms
+    # the GT boxes of bicycles, motorcycles and trailers give no terms (their tracks run the preset's EKF)
+    n_two_wheel = sum(int(np.isin(f.gt.labels, [0, 3, 5]).sum()) for s in scenes for f in s.frames)
+    assert n_two_wheel > 0 and 0 < n_hyb < n_full
+    final = hyb.run()
+    assert all(r.gt_terms > 0 for r in hyb.log.steps)
+    assert load_network(final).cfg.network_classes == "ss_model"
+
+
+def test_network_classes_is_a_named_option():
+    from grutrack.training.config import load_train_config
+
+    assert load_train_config("grukf").network_classes == "all"
+    assert GRUKFConfig().network_classes == "all"      # checkpoints written before the key: every class
+    with pytest.raises(ConfigError, match="'network_classes' must be 'all' or 'ss_model'"):
+        load_train_config("grukf", {"network_classes": "ctra"})
+    with pytest.raises(ValueError, match="network_classes"):
+        GRUKalmanNet(GRUKFConfig(network_classes="ctra"))
