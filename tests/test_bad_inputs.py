@@ -256,5 +256,6 @@ def test_yaml_exponent_without_a_point_is_a_number(tmp_path):
 def test_bad_training_flags_are_blamed_on_the_flag(tmp_path, capsys):
     base = ["train", "--dataroot", tmp_path, "--version", "v1.0-mini", "--split", "mini_train", "--detections",
             tmp_path / "d.json", "--out", tmp_path / "ck"]
-    fails(capsys, [*base, "--epochs", "0"], "grutrack train: error: --epochs must be an integer >= 1, got 0")
+    fails(capsys, [*base, "--epochs", "-1"], "grutrack train: error: --epochs must be an integer >= 0 (0: no step, the "
+          "initialised network), got -1")
     fails(capsys, [*base, "--val-every", "-1"], "--val-every must be an integer >= 0, got -1")

@@ -72,8 +72,9 @@ def test_tracker_errors_name_file_key_and_expectation(tmp_path, edit, message):
 def test_an_error_inside_a_list_is_stated_for_the_list_and_overrides_name_their_flag():
     with pytest.raises(ConfigError, match=r"grukf.yaml: 'loss_weights' must be 9 non-negative numbers, got \[1, -1,"):
         load_config("training", "grukf", {"loss_weights": [1, -1, 1, 1, 1, 1, 1, 1, 1]})
-    with pytest.raises(ConfigError, match=r"^--epochs must be an integer >= 1, got 0$"):
-        load_config("training", "grukf", {"epochs": 0}, flags={"epochs": "--epochs"})
+    with pytest.raises(ConfigError, match=r"^--epochs must be an integer >= 0 \(0: no step, the initialised "
+                                          r"network\), got -1$"):
+        load_config("training", "grukf", {"epochs": -1}, flags={"epochs": "--epochs"})
 
 
 def test_merge_is_key_by_key_and_copies():
