@@ -259,3 +259,21 @@ def test_bad_training_flags_are_blamed_on_the_flag(tmp_path, capsys):
     fails(capsys, [*base, "--epochs", "-1"], "grutrack train: error: --epochs must be an integer >= 0 (0: no step, the "
           "initialised network), got -1")
     fails(capsys, [*base, "--val-every", "-1"], "--val-every must be an integer >= 0, got -1")
+
+
+def test_a_closed_stdout_is_not_a_traceback(nusc_root, tmp_path):
+    """`grutrack simulate-detections ... | head -0`: the reader is gone before the summary line is printed; the
+    file is written, the command ends with 141 (SIGPIPE's status) and no traceback."""
+    import os
+    import subprocess
+    import sys
+
+    r, w = os.pipe()
+    os.close(r)                                          # nobody will read stdout
+    out = tmp_path / "d.json"
+    proc = subprocess.run([sys.executable, "-m", "grutrack", "simulate-detections", "--dataroot", str(nusc_root),
+                           "--version", "v1.0-mini", "--split", "mini_val", "--out", str(out)],
+                          stdout=w, stderr=subprocess.PIPE, text=True, timeout=300)
+    os.close(w)
+    assert proc.returncode == 141 and "Traceback" not in proc.stderr and proc.stderr.strip() == "", proc.stderr
+    assert out.stat().st_size > 10_000

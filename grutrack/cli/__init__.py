@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import importlib
 import sys
 
@@ -43,7 +44,13 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``grutrack`` console script; returns the exit status."""
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()          # a closed stdout shows here, not at interpreter exit
+        return status
+    except BrokenPipeError:
+        # the reader of stdout went away (e.g. `| head -1`); outputs are already written (atomically): say no more
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141                  # 128 + SIGPIPE, what a shell reports for a command killed by it
     except GrutrackError as exc:
         print(f"grutrack {args.command}: error: {exc}", file=sys.stderr)
         return 2
