@@ -149,11 +149,12 @@ def test_av2_report_through_the_same_rules_with_simulated_detections(demo_run, a
     assert (demo_run / "detections/simulated/av2/val/centerpoint_sim.feather").is_file()
     text = (demo_run / "reports/av2_val.md").read_text()
     assert "SYNTHETIC DETECTIONS" in text and "centerpoint_sim" in text
-    for run in ("greedy", "ab3dmot", "grukf"):
+    for run in ("greedy", "ab3dmot", "grukf", "ekf"):          # ekf: the config's extra Table I row
         doc = json.loads((demo_run / f"reports/metrics/av2_val/centerpoint_sim/{run}.json").read_text())
         assert doc["dataset"] == "av2" and doc["logs"] == 2 and 0.2 < doc["overall"]["hota"] < 1.0
         assert f"{100 * doc['overall']['hota']:.1f}" in text
         assert (demo_run / f"submissions/av2_val/centerpoint_sim/{run}.manifest.json").is_file()
+    assert re.search(r"^\| EKF \(not in the paper\) \|", text, re.M)
 
 
 def test_paper_numbers_change_reruns_only_the_report(demo_run):
