@@ -131,26 +131,22 @@ def main(argv=None) -> int:
         # Whole pipeline.
         t_fast_whole, fast_summary = _median_time(
             lambda: fast_tracking_eval(nusc, sub_path, args.split, cfg), args.repeat)
-        t_dev_whole = None
-        if not args.skip_devkit_whole:
-            def devkit_whole():
-                with contextlib.redirect_stderr(io.StringIO()):
-                    ev = TrackingEval(cfg, sub_path, args.split, os.path.join(tmp, "devkit"), args.version,
-                                      args.dataroot, verbose=False)
-                    return ev.main(render_curves=False)
-
-            t_dev_whole, dev_whole_summary = _median_time(devkit_whole, args.repeat_devkit)
-            diff_whole = _max_diff(dev_whole_summary, fast_summary)
-
         from grutrack.evaluation.devkit_plugin import FastTrackingEval
 
-        def plugin_whole():
-            with contextlib.redirect_stderr(io.StringIO()):
-                ev = FastTrackingEval(cfg, sub_path, args.split, os.path.join(tmp, "plugin"), args.version,
-                                      args.dataroot, verbose=False)
-                return ev.main(render_curves=False)
+        def whole(cls, folder):
+            """``cls(...).main()``: the devkit's pipeline (it loads NuScenes itself) with its or our accumulation."""
+            def run():
+                with contextlib.redirect_stderr(io.StringIO()):
+                    ev = cls(cfg, sub_path, args.split, os.path.join(tmp, folder), args.version, args.dataroot,
+                             verbose=False)
+                    return ev.main(render_curves=False)
+            return run
 
-        t_plugin_whole, plugin_summary = _median_time(plugin_whole, args.repeat)
+        t_dev_whole = None
+        if not args.skip_devkit_whole:
+            t_dev_whole, dev_whole_summary = _median_time(whole(TrackingEval, "devkit"), args.repeat_devkit)
+            diff_whole = _max_diff(dev_whole_summary, fast_summary)
+        t_plugin_whole, plugin_summary = _median_time(whole(FastTrackingEval, "plugin"), args.repeat)
         diff_plugin = _max_diff(plugin_summary, fast_summary)
 
     def line(label, t, fmt="%.2f"):

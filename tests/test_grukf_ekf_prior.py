@@ -3,14 +3,12 @@ per-track EKF gain, so the untrained network is the EKF; the option survives a c
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 
-from grutrack.data.scene import Scene
 from grutrack.errors import ConfigError
 from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
 
@@ -18,14 +16,9 @@ from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
 @pytest.fixture(scope="module")
 def scenes_and_dets(nusc_mini, tmp_path_factory):
     """Two mini_train scenes (first 12 frames) with simulated CenterPoint-like detections (SYNTHETIC, seed 5)."""
-    from grutrack.data.detection_sim import simulate_nuscenes
-    from grutrack.data.nusc_detections import load_detections
-    from grutrack.data.nuscenes import load_scenes
+    from support.grukf_data import mini_train_scenes_and_dets
 
-    scenes = [Scene(s.name, s.token, s.frames[:12]) for s in load_scenes(nusc_mini, "mini_train", with_gt=True)[:2]]
-    p = tmp_path_factory.mktemp("dets") / "dets.json"
-    p.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5, nusc=nusc_mini)))
-    return scenes, load_detections(p, [f.token for s in scenes for f in s.frames])
+    return mini_train_scenes_and_dets(nusc_mini, tmp_path_factory.mktemp("dets"), 2, 12)
 
 
 def _trainer(scenes, dets, out, **over):

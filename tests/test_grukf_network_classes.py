@@ -4,13 +4,11 @@ others (bicycle and motorcycle: Bicycle; trailer: CA), in tracking and in traini
 
 from __future__ import annotations
 
-import json
 
 import numpy as np
 import pytest
 
 from grutrack.classes import TRACKING_CLASSES
-from grutrack.data.scene import Scene
 from grutrack.errors import ConfigError
 from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
 
@@ -21,14 +19,9 @@ CTRA_CLASSES = ("bus", "car", "pedestrian", "truck")
 @pytest.fixture(scope="module")
 def scenes_and_dets(nusc_mini, tmp_path_factory):
     """Three mini_train scenes (first 15 frames) with simulated CenterPoint-like detections (SYNTHETIC, seed 5)."""
-    from grutrack.data.detection_sim import simulate_nuscenes
-    from grutrack.data.nusc_detections import load_detections
-    from grutrack.data.nuscenes import load_scenes
+    from support.grukf_data import mini_train_scenes_and_dets
 
-    scenes = [Scene(s.name, s.token, s.frames[:15]) for s in load_scenes(nusc_mini, "mini_train", with_gt=True)[:3]]
-    p = tmp_path_factory.mktemp("dets") / "dets.json"
-    p.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5, nusc=nusc_mini)))
-    return scenes, load_detections(p, [f.token for s in scenes for f in s.frames])
+    return mini_train_scenes_and_dets(nusc_mini, tmp_path_factory.mktemp("dets"), 3, 15)
 
 
 def _trainer(scenes, dets, out, **over):
