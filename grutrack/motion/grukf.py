@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
+import contextlib
 import functools
 import math
 
@@ -114,15 +115,73 @@ def _fc(i: int, o: int) -> nn.Sequential:
 _EPS = 1e-6   # added to the L2 norm of each input before dividing by it (zero rows stay zero)
 
 
-def _fc_apply(fc: nn.Sequential, x: torch.Tensor) -> torch.Tensor:
+class DeferredWeightGrads:
+    """The weight gradients of Linear layers summed over a whole scene in one product per layer.
+
+    A layer used in every frame of a scene gets, from autograd, one full weight gradient per frame,
+    ``dL/dW = sum_t G_t^T X_t`` built as a separate (out, in) matrix each frame and accumulated into ``W.grad``
+    (G_t (K_t, out) the gradient of the layer's output, X_t (K_t, in) its input, K_t the tracks of frame t). For
+    the GRU-KF's output layer (181 -> 724 -> 90) those per-frame matrices of a few tracks each are most of the
+    backward pass. Here the layer runs on its detached weight and bias (autograd computes only the gradient of
+    the input), a hook on its output keeps (X_t, G_t), and :meth:`apply` adds ``G^T X`` and ``sum_t G_t`` with G, X
+    the frames' rows stacked: the same gradient, one matrix product per layer and scene.
+    """
+
+    def __init__(self):
+        self._pairs: dict[tuple[nn.Parameter, nn.Parameter], list[tuple[torch.Tensor, torch.Tensor]]] = {}
+
+    def linear(self, lin: nn.Linear, x: torch.Tensor) -> torch.Tensor:
+        """``F.linear(x, lin.weight, lin.bias)`` (K, out), its weight gradient deferred (:meth:`linear_params`)."""
+        return self.linear_params(lin.weight, lin.bias, x)
+
+    def linear_params(self, weight: nn.Parameter, bias: nn.Parameter, x: torch.Tensor) -> torch.Tensor:
+        """``x W^T + b`` (K, out) for x (K, in), W (out, in), b (out,), the gradient of W and b deferred; an input
+        without a graph (the first frame's features) takes the ordinary path."""
+        if not (x.requires_grad and weight.requires_grad and torch.is_grad_enabled()):
+            return F.linear(x, weight, bias)
+        y = F.linear(x, weight.detach(), bias.detach())
+        pairs, xd = self._pairs.setdefault((weight, bias), []), x.detach()
+        y.register_hook(lambda g: pairs.append((xd, g)))
+        return y
+
+    def apply(self) -> None:
+        """Add the kept frames' weight and bias gradients to the parameters' ``.grad`` (after ``backward()``)."""
+        for (weight, bias), pairs in self._pairs.items():
+            if not pairs:
+                continue
+            X = torch.cat([p[0] for p in pairs])
+            G = torch.cat([p[1] for p in pairs])
+            for param, grad in ((weight, G.t().mm(X)), (bias, G.sum(0))):
+                if param.grad is None:
+                    param.grad = grad
+                else:
+                    param.grad.add_(grad)
+        self._pairs.clear()
+
+
+def _linear(x: torch.Tensor, lin: nn.Linear, deferred: DeferredWeightGrads | None) -> torch.Tensor:
+    """``lin(x)`` through ``torch.nn.functional`` (with ``deferred``: its weight gradient deferred)."""
+    return F.linear(x, lin.weight, lin.bias) if deferred is None else deferred.linear(lin, x)
+
+
+def _fc_apply(fc: nn.Sequential, x: torch.Tensor, deferred: DeferredWeightGrads | None = None) -> torch.Tensor:
     """``fc(x)`` for an :func:`_fc` block (Linear then ReLU), through ``torch.nn.functional``."""
-    lin = fc._modules["0"]
-    return torch.relu(F.linear(x, lin.weight, lin.bias))
+    return torch.relu(_linear(x, fc._modules["0"], deferred))
 
 
-def _gru(cell: nn.GRUCell, x: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
-    """``cell(x, h)`` for batched (N, ·) inputs: the operator GRUCell.forward calls."""
-    return torch.gru_cell(x, h, cell.weight_ih, cell.weight_hh, cell.bias_ih, cell.bias_hh)
+def _gru(cell: nn.GRUCell, x: torch.Tensor, h: torch.Tensor,
+         deferred: DeferredWeightGrads | None = None) -> torch.Tensor:
+    """``cell(x, h)`` for batched (N, ·) inputs: the operator GRUCell.forward calls; with ``deferred``, the same
+    equations written out (torch's CPU composite of ``gru_cell``) with the two input products' weight gradients
+    deferred: ``r = sigma(W_ir x + b_ir + W_hr h + b_hr)``, ``z = sigma(W_iz x + b_iz + W_hz h + b_hz)``,
+    ``n = tanh(W_in x + b_in + r * (W_hn h + b_hn))``, ``h' = (h - n) * z + n``."""
+    if deferred is None:
+        return torch.gru_cell(x, h, cell.weight_ih, cell.weight_hh, cell.bias_ih, cell.bias_hh)
+    i_r, i_z, i_n = deferred.linear_params(cell.weight_ih, cell.bias_ih, x).chunk(3, 1)
+    h_r, h_z, h_n = deferred.linear_params(cell.weight_hh, cell.bias_hh, h).chunk(3, 1)
+    r, z = torch.sigmoid(h_r + i_r), torch.sigmoid(h_z + i_z)
+    n = torch.tanh(i_n + h_n * r)
+    return (h - n) * z + n
 
 
 @functools.lru_cache(maxsize=None)
@@ -161,6 +220,7 @@ class GRUKalmanNet(nn.Module):
         global generator), see :meth:`reset_parameters`."""
         super().__init__()
         self.cfg = cfg
+        self.deferred: DeferredWeightGrads | None = None   # set while training a scene (see deferring_weight_grads)
         self.ss = make_torch_model(cfg.ss_model, **cfg.ss_params)
         if cfg.gain_prior not in GAIN_PRIORS:
             raise ValueError(f"gain_prior must be one of {', '.join(GAIN_PRIORS)}, got {cfg.gain_prior!r}")
@@ -223,6 +283,17 @@ class GRUKalmanNet(nn.Module):
             nn.init.zeros_(self.fc_gain[2].bias)
             if self.cfg.has_table:
                 nn.init.zeros_(self.gain_table)
+
+    @contextlib.contextmanager
+    def deferring_weight_grads(self):
+        """Context for one training step: the Linear layers' weight gradients are kept per frame and summed by
+        the :class:`DeferredWeightGrads` it yields; call its ``apply()`` after ``backward()``. Same gradient as
+        without, fewer and larger matrix products."""
+        self.deferred = DeferredWeightGrads()
+        try:
+            yield self.deferred
+        finally:
+            self.deferred = None
 
     def set_gain_prior(self, K0: torch.Tensor, K_table: torch.Tensor | None = None,
                        generator: torch.Generator | None = None) -> None:
@@ -304,24 +375,25 @@ class GRUKalmanNet(nn.Module):
         aux = [aux.to(dt)] if self.cfg.aux_inputs else []
         if aux:
             f_obs = torch.cat([f_obs, *aux], dim=1)
-        h_q = _gru(self.gru_q, _fc_apply(self.fc_fwd_update, f_upd), hidden["q"])
-        h_sigma = _gru(self.gru_sigma, torch.cat([h_q, _fc_apply(self.fc_fwd_evol, f_evol)], dim=1), hidden["sigma"])
-        s_in = [_fc_apply(self.fc_sigma_to_s, h_sigma), _fc_apply(self.fc_obs, f_obs)]
+        d = self.deferred
+        h_q = _gru(self.gru_q, _fc_apply(self.fc_fwd_update, f_upd, d), hidden["q"], d)
+        h_sigma = _gru(self.gru_sigma, torch.cat([h_q, _fc_apply(self.fc_fwd_evol, f_evol, d)], dim=1),
+                       hidden["sigma"], d)
+        s_in = [_fc_apply(self.fc_sigma_to_s, h_sigma, d), _fc_apply(self.fc_obs, f_obs, d)]
         new = {"q": h_q}
         if self.cfg.four_gru:
-            h_r = _gru(self.gru_r, _fc_apply(self.fc_r_in, f[:, :n]), hidden["r"])
+            h_r = _gru(self.gru_r, _fc_apply(self.fc_r_in, f[:, :n], d), hidden["r"], d)
             s_in.append(h_r)
             new["r"] = h_r
-        h_s = _gru(self.gru_s, torch.cat(s_in, dim=1), hidden["s"])
+        h_s = _gru(self.gru_s, torch.cat(s_in, dim=1), hidden["s"], d)
         g0, g2 = self.fc_gain._modules["0"], self.fc_gain._modules["2"]
-        K = F.linear(torch.relu(F.linear(torch.cat([h_sigma, h_s, *aux], dim=1), g0.weight, g0.bias)),
-                     g2.weight, g2.bias)
+        K = _linear(torch.relu(_linear(torch.cat([h_sigma, h_s, *aux], dim=1), g0, d)), g2, d)
         if self.cfg.has_table:
             if cells is None:
                 raise ValueError("this GRU-KF's gain table needs the class, update count and gap of every track")
             K = K + self.gain_table[cells]
-        back = _fc_apply(self.fc_back1, torch.cat([h_s, K], dim=1))
-        new["sigma"] = _fc_apply(self.fc_back2, torch.cat([h_sigma, back], dim=1))
+        back = _fc_apply(self.fc_back1, torch.cat([h_s, K], dim=1), d)
+        new["sigma"] = _fc_apply(self.fc_back2, torch.cat([h_sigma, back], dim=1), d)
         new["s"] = h_s
         return K.reshape(-1, self.m, self.n), new
 

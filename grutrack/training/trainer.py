@@ -501,16 +501,19 @@ class Trainer:
         t0 = time.perf_counter()
         self.net.train()
         index, tracker_cfg = self._setup(scene.vocabulary)
-        loss = run_scene(self.net, scene, self.dets, tracker_cfg, self.cfg, self.device, index)
-        value = loss.value()
-        if not torch.isfinite(value):
-            self._diverged(scene, f"the loss is {value.item()}")
-        gain = float(loss.max_abs_gain)
-        if gain > MAX_ABS_GAIN:
-            self._diverged(scene, f"the gain diverged (max |K| = {gain:.3g} > {MAX_ABS_GAIN:g})")
-        self.opt.zero_grad()
+        with self.net.deferring_weight_grads() as deferred:
+            loss = run_scene(self.net, scene, self.dets, tracker_cfg, self.cfg, self.device, index)
+            value = loss.value()
+            if not torch.isfinite(value):
+                self._diverged(scene, f"the loss is {value.item()}")
+            gain = float(loss.max_abs_gain)
+            if gain > MAX_ABS_GAIN:
+                self._diverged(scene, f"the gain diverged (max |K| = {gain:.3g} > {MAX_ABS_GAIN:g})")
+            self.opt.zero_grad()
+            if value.requires_grad:
+                value.backward()
+                deferred.apply()
         if value.requires_grad:
-            value.backward()
             if not all(torch.isfinite(p.grad).all() for p in self.net.parameters() if p.grad is not None):
                 self.opt.zero_grad()
                 self._diverged(scene, "a gradient is NaN or infinite")
