@@ -11,6 +11,7 @@ AdamW step per scene; cosine annealing over all steps.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import signal
 import sys
@@ -47,13 +48,22 @@ LOG_EVERY_S = 30.0
 def ekf_backend(cfg: TrainConfig, index: np.ndarray) -> KalmanBackend:
     """The parallel EKF: the training SS model for every label, with the motion config's Q, R, P0 of the
     tracking class each label takes its parameters from (``index`` (n_labels,), :func:`param_index`)."""
+    return _ekf_backend(cfg.motion_config, cfg.ss_model, tuple(int(c) for c in index))
+
+
+@functools.lru_cache(maxsize=16)
+def _ekf_backend(motion_config: str, ss_model: str, index: tuple[int, ...]) -> KalmanBackend:
+    """:func:`ekf_backend`, made once per process and settings (run once per training scene; the backend keeps
+    no state of its own)."""
     from grutrack.classes import TRACKING_CLASSES
     from grutrack.motion.defaults import load_motion_config
     from grutrack.motion.models import make_model
 
-    motion = load_motion_config(cfg.motion_config, cfg.ss_model)
+    motion = load_motion_config(motion_config, ss_model)
     first = motion[TRACKING_CLASSES[0]]
     tables = {k: np.stack([motion[TRACKING_CLASSES[c]][k] for c in index]) for k in ("Q", "R", "P0")}
+    for t in tables.values():
+        t.flags.writeable = False
     return KalmanBackend(make_model(first["model"], **first["params"]), tables["Q"], tables["R"], tables["P0"])
 
 
