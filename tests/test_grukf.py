@@ -377,7 +377,8 @@ def test_nan_loss_stops_training_and_keeps_last_good_checkpoint(small_training_s
 
     def poisoned(*a, **k):
         loss = real(*a, **k)
-        loss.total = loss.total * float("nan")
+        value = loss.value
+        loss.value = lambda: value() * float("nan")
         return loss
 
     monkeypatch.setattr(tr, "run_scene", poisoned)

@@ -21,8 +21,8 @@ def _grads(t, scene, deferred: bool) -> dict[str, torch.Tensor]:
     t.net.zero_grad(set_to_none=True)
     if deferred:
         with t.net.deferring_weight_grads() as d:
-            run_scene(t.net, scene, t.dets, t.tracker_cfg, t.cfg, t.device, t.index).value().backward()
-            d.apply()
+            loss = run_scene(t.net, scene, t.dets, t.tracker_cfg, t.cfg, t.device, t.index).value()
+            d.backward(loss, list(t.net.parameters()))
     else:
         run_scene(t.net, scene, t.dets, t.tracker_cfg, t.cfg, t.device, t.index).value().backward()
     return {k: p.grad.clone() for k, p in t.net.named_parameters() if p.grad is not None}

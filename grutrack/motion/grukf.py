@@ -123,12 +123,14 @@ class DeferredWeightGrads:
     (G_t (K_t, out) the gradient of the layer's output, X_t (K_t, in) its input, K_t the tracks of frame t). For
     the GRU-KF's output layer (181 -> 724 -> 90) those per-frame matrices of a few tracks each are most of the
     backward pass. Here the layer runs on its detached weight and bias (autograd computes only the gradient of
-    the input), a hook on its output keeps (X_t, G_t), and :meth:`apply` adds ``G^T X`` and ``sum_t G_t`` with G, X
-    the frames' rows stacked: the same gradient, one matrix product per layer and scene.
+    the input) and its input and output are kept; :meth:`backward` asks autograd for the outputs' gradients G_t
+    beside the parameters' and adds ``G^T X`` and ``sum_t G_t`` with G, X the frames' rows stacked: the same
+    gradient, one matrix product per layer and scene.
     """
 
     def __init__(self):
-        self._pairs: dict[tuple[nn.Parameter, nn.Parameter], list[tuple[torch.Tensor, torch.Tensor]]] = {}
+        #: (weight, bias) -> the frames' (input X_t detached, output Y_t with its graph)
+        self._uses: dict[tuple[nn.Parameter, nn.Parameter], list[tuple[torch.Tensor, torch.Tensor]]] = {}
 
     def linear(self, lin: nn.Linear, x: torch.Tensor) -> torch.Tensor:
         """``F.linear(x, lin.weight, lin.bias)`` (K, out), its weight gradient deferred (:meth:`linear_params`)."""
@@ -140,23 +142,28 @@ class DeferredWeightGrads:
         if not (x.requires_grad and weight.requires_grad and torch.is_grad_enabled()):
             return F.linear(x, weight, bias)
         y = F.linear(x, weight.detach(), bias.detach())
-        pairs, xd = self._pairs.setdefault((weight, bias), []), x.detach()
-        y.register_hook(lambda g: pairs.append((xd, g)))
+        self._uses.setdefault((weight, bias), []).append((x.detach(), y))
         return y
 
-    def apply(self) -> None:
-        """Add the kept frames' weight and bias gradients to the parameters' ``.grad`` (after ``backward()``)."""
-        for (weight, bias), pairs in self._pairs.items():
-            if not pairs:
-                continue
-            X = torch.cat([p[0] for p in pairs])
-            G = torch.cat([p[1] for p in pairs])
-            for param, grad in ((weight, G.t().mm(X)), (bias, G.sum(0))):
-                if param.grad is None:
-                    param.grad = grad
-                else:
-                    param.grad.add_(grad)
-        self._pairs.clear()
+    def backward(self, loss: torch.Tensor, params: list[nn.Parameter]) -> None:
+        """``loss.backward()`` for ``params`` (their ``.grad`` set or accumulated), the deferred layers' weight
+        and bias gradients included: one autograd pass for the parameters and the kept outputs."""
+        uses = [(key, x, y) for key, pairs in self._uses.items() for x, y in pairs]
+        leaves = [p for p in params if p.requires_grad]
+        grads = torch.autograd.grad(loss, [y for _, _, y in uses] + leaves, allow_unused=True)
+        acc: dict[tuple[nn.Parameter, nn.Parameter], tuple[list, list]] = {}
+        for (key, x, _), g in zip(uses, grads[:len(uses)]):
+            if g is not None:
+                xs, gs = acc.setdefault(key, ([], []))
+                xs.append(x)
+                gs.append(g)
+        extra = [(p, g) for p, g in zip(leaves, grads[len(uses):]) if g is not None]
+        for (weight, bias), (xs, gs) in acc.items():
+            G = torch.cat(gs)
+            extra += [(weight, G.t().mm(torch.cat(xs))), (bias, G.sum(0))]
+        for param, grad in extra:
+            param.grad = grad if param.grad is None else param.grad + grad
+        self._uses.clear()
 
 
 def _linear(x: torch.Tensor, lin: nn.Linear, deferred: DeferredWeightGrads | None) -> torch.Tensor:
@@ -286,9 +293,9 @@ class GRUKalmanNet(nn.Module):
 
     @contextlib.contextmanager
     def deferring_weight_grads(self):
-        """Context for one training step: the Linear layers' weight gradients are kept per frame and summed by
-        the :class:`DeferredWeightGrads` it yields; call its ``apply()`` after ``backward()``. Same gradient as
-        without, fewer and larger matrix products."""
+        """Context for one training step: the Linear layers' and GRU cells' weight gradients are kept per frame
+        and summed by the :class:`DeferredWeightGrads` it yields; call its ``backward(loss, parameters)`` instead
+        of ``loss.backward()``. Same gradient as without, fewer and larger matrix products."""
         self.deferred = DeferredWeightGrads()
         try:
             yield self.deferred
