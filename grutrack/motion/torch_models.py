@@ -9,6 +9,7 @@ turn rate and zero speed, and within 1e-9 m of the closed form for the turns of 
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -22,6 +23,31 @@ _GL_WEIGHTS = np.array([0.3478548451374538, 0.6521451548625461, 0.65214515486254
 def wrap_angle_t(a: torch.Tensor) -> torch.Tensor:
     """Wrap radians to [-pi, pi) (differentiable almost everywhere)."""
     return torch.remainder(a + math.pi, 2 * math.pi) - math.pi
+
+
+@functools.lru_cache(maxsize=None)
+def _ctra_bases(dtype: torch.dtype, device: torch.device) -> tuple[torch.Tensor, ...]:
+    """dt-free parts of :func:`_ctra_tables` (made once per dtype and device): I, D (10, 10); M0, M1 (4, 8); W1
+    (8, 10), so that A^T = I + dt D, M = M0 + dt M1, W = dt W1."""
+    D = np.zeros((10, 10))
+    D[7, 6] = D[9, 8] = 1.0               # (A^T)[7, 6]: v' gets a dt; (A^T)[9, 8]: yaw' gets omega dt
+    M0, M1 = np.zeros((4, 8)), np.zeros((4, 8))
+    M0[0, :4], M0[2, 4:] = 1.0, 1.0
+    M1[1, :4], M1[3, 4:] = _GL_NODES, _GL_NODES
+    W1 = np.zeros((8, 10))
+    W1[:4, 0], W1[4:, 1] = _GL_WEIGHTS, _GL_WEIGHTS
+    with torch.inference_mode(False):   # normal tensors: training saves what is made from them
+        return tuple(torch.tensor(a, dtype=dtype, device=device) for a in (np.eye(10), D, M0, M1, W1))
+
+
+def _ctra_tables(dt: float, dtype: torch.dtype, device: torch.device
+                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Constant matrices of :meth:`TorchCTRA.f` over ``dt`` seconds: A^T (10, 10) the linear part; M (4, 8) taking
+    ``[v, a, yaw, omega]`` to the speeds ``v + a t_i`` and headings ``yaw + omega t_i`` at the 4 quadrature nodes
+    ``t_i`` in [0, dt]; W (8, 10) taking ``[speed_i cos_i | speed_i sin_i]`` to ``sum_i w_i (.)`` in state columns
+    x (0) and y (1)."""
+    eye, D, M0, M1, W1 = _ctra_bases(dtype, device)
+    return eye + dt * D, M0 + dt * M1, dt * W1
 
 
 class TorchCTRA:
@@ -40,15 +66,16 @@ class TorchCTRA:
         return x
 
     def f(self, x: torch.Tensor, dt: float) -> torch.Tensor:
-        """Transition (N, 10) -> (N, 10) over dt seconds."""
-        v, a, yaw, om = x[:, 6:7], x[:, 7:8], x[:, 8:9], x[:, 9:10]
-        t = torch.as_tensor(_GL_NODES * dt, dtype=x.dtype, device=x.device)[None, :]
-        wts = torch.as_tensor(_GL_WEIGHTS * dt, dtype=x.dtype, device=x.device)[None, :]
-        speed, heading = v + a * t, yaw + om * t
-        dx = (wts * speed * torch.cos(heading)).sum(1)
-        dy = (wts * speed * torch.sin(heading)).sum(1)
-        return torch.cat([(x[:, 0] + dx)[:, None], (x[:, 1] + dy)[:, None], x[:, 2:6], v + a * dt, a,
-                          yaw + om * dt, om], dim=1)
+        """Transition (N, 10) -> (N, 10) over dt seconds:
+        ``x' = A x + [dx, dy, 0, ...]`` with A the linear part (``v' = v + a dt``, ``yaw' = yaw + omega dt``, the
+        rest kept) and the arc ``(dx, dy) = integral_0^dt (v + a t) (cos, sin)(yaw + omega t) dt``, by quadrature
+        at the nodes t_i: ``[speed_i | heading_i] = [v, a, yaw, omega] M`` and ``(dx, dy) = sum_i w_i speed_i
+        (cos, sin)(heading_i)``, each step one small matrix product (a handful of autograd nodes per frame)."""
+        A_T, M, W = _ctra_tables(float(dt), x.dtype, x.device)
+        sh = x[:, 6:10].mm(M)                                        # (N, 8): speeds, headings at the nodes
+        speed, heading = sh[:, :4], sh[:, 4:]
+        arc = torch.cat([torch.cos(heading), torch.sin(heading)], dim=1) * speed.repeat(1, 2)   # (N, 8)
+        return torch.addmm(x.mm(A_T), arc, W)                         # A x + (dx, dy) in columns 0, 1
 
     def h(self, x: torch.Tensor) -> torch.Tensor:
         """Measurement (N, 10) -> (N, 9) ``[x, y, z, w, l, h, yaw, v cos yaw, v sin yaw]``."""
