@@ -192,27 +192,51 @@ def _gru(cell: nn.GRUCell, x: torch.Tensor, h: torch.Tensor,
 
 
 @functools.lru_cache(maxsize=None)
-def _pair_columns(pairs: tuple[tuple[int, int], ...], device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
-    """The first and second columns of the planar pairs as index tensors on ``device`` (made once; normal
-    tensors even when first asked for under ``torch.inference_mode``, so that training can save them)."""
+def _rotation_masks(pairs: tuple[tuple[int, int], ...], d: int, dtype: torch.dtype, device: torch.device
+                    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Constants of :func:`rotate_pairs` for (N, d) rows (made once; normal tensors even when first asked for
+    under ``torch.inference_mode``, so that training can save them): ``in_pair`` (1, d) bool, ``sign`` (1, d)
+    +1 at each pair's first column, -1 at its second, 0 elsewhere, ``swap`` (d,) int64 the column order with each
+    pair's columns exchanged."""
     with torch.inference_mode(False):
-        return (torch.tensor([p[0] for p in pairs], device=device),
-                torch.tensor([p[1] for p in pairs], device=device))
+        in_pair, sign, swap = torch.zeros(1, d, dtype=torch.bool), torch.zeros(1, d, dtype=dtype), torch.arange(d)
+        for i, j in pairs:
+            in_pair[0, i] = in_pair[0, j] = True
+            sign[0, i], sign[0, j] = 1.0, -1.0
+            swap[i], swap[j] = j, i
+        return in_pair.to(device), sign.to(device), swap.to(device)
+
+
+def rotate_pairs(v: torch.Tensor, c: torch.Tensor, s: torch.Tensor, pairs: tuple[tuple[int, int], ...]
+                 ) -> torch.Tensor:
+    """Rotate the planar column pairs (i, j) of v (N, d) by -angle, given ``c, s`` (N, 1) = cos, sin of the angle:
+    ``[v_i, v_j] <- [c v_i + s v_j, -s v_i + c v_j]``, other columns unchanged. As ``v * C + v[:, swap] * S`` with
+    C = c on the pairs' columns and 1 elsewhere, S = +-s on them and 0 elsewhere: five operators for all pairs."""
+    in_pair, sign, swap = _rotation_masks(pairs, v.shape[1], v.dtype, v.device)
+    return torch.addcmul(v * torch.where(in_pair, c, 1.0), v.index_select(1, swap), s * sign)
 
 
 def to_heading_frame(v: torch.Tensor, yaw: torch.Tensor, pairs: tuple[tuple[int, int], ...]) -> torch.Tensor:
     """Rotate the planar column pairs (i, j) of v (N, d) by -yaw (N,) into the heading frame:
-    ``[v_i, v_j] <- [c v_i + s v_j, -s v_i + c v_j]`` with ``c, s = cos yaw, sin yaw``; other columns unchanged.
-    All pairs at once (two column gathers, two column writes), not one autograd node per column."""
-    ii, jj = _pair_columns(pairs, v.device)
-    c, s = torch.cos(yaw)[:, None], torch.sin(yaw)[:, None]
-    a, b = v.index_select(1, ii), v.index_select(1, jj)
-    return v.index_copy(1, ii, c * a + s * b).index_copy(1, jj, -s * a + c * b)
+    ``[v_i, v_j] <- [c v_i + s v_j, -s v_i + c v_j]`` with ``c, s = cos yaw, sin yaw``; other columns unchanged
+    (:func:`rotate_pairs`)."""
+    return rotate_pairs(v, torch.cos(yaw)[:, None], torch.sin(yaw)[:, None], pairs)
 
 
 def from_heading_frame(v: torch.Tensor, yaw: torch.Tensor, pairs: tuple[tuple[int, int], ...]) -> torch.Tensor:
     """Inverse of :func:`to_heading_frame`."""
     return to_heading_frame(v, -yaw, pairs)
+
+
+def wrap_offset(a: torch.Tensor, flip: bool = False) -> torch.Tensor:
+    """What to subtract from angles ``a`` (radians, any shape) to wrap them to [-pi, pi) (with ``flip``: and to
+    turn by pi those then beyond pi/2, a reversed heading), as a tensor without a graph: subtracting it wraps
+    with derivative 1, as ``remainder`` has, in one autograd node."""
+    with torch.no_grad():
+        w = wrap_angle_t(a)
+        if flip:
+            w = torch.where(w.abs() > 0.5 * math.pi, wrap_angle_t(w + math.pi), w)
+        return a - w
 
 
 MEAS_PLANAR = ((0, 1), (7, 8))   # (x, y), (vx, vy) in the measurement
@@ -350,10 +374,13 @@ class GRUKalmanNet(nn.Module):
         return h
 
     def _layout(self, device: torch.device) -> dict[str, torch.Tensor]:
-        """Index tensors (on ``device``, made once) of the four inputs side by side (K, 2n + 2m):
-        ``[obs_diff (n), innovation (n), fwd_evol (m), fwd_update (m)]``: ``angles`` their yaw columns,
-        ``pairs`` (i, j) the planar column pairs in the heading frame (x, y and vx, vy of the measurements; x, y
-        of the states), ``part`` the input each column belongs to (0..3)."""
+        """Constants (on ``device``, made once) of the four inputs side by side (K, D = 2n + 2m):
+        ``[obs_diff (n), innovation (n), fwd_evol (m), fwd_update (m)]``: ``diff`` (3n + 3m, D) the +-1 matrix
+        taking ``[y, y_prev, h(x^-), x_{n-1|n-1}, x_{n-2|n-2}, x_{n-1|n-2}]`` to them; ``angles`` their yaw
+        columns; ``flip`` (1, 4) which of those are measurement-space residuals; ``pairs`` (i, j) the planar
+        column pairs in the heading frame (x, y and vx, vy of the measurements; x, y of the states); ``part``
+        (D, 4) the input each column belongs to (one-hot); ``lower`` (1, m) the posterior's lower bounds (sizes
+        at MIN_SIZE, -inf elsewhere); ``yaw`` the state's yaw column."""
         cache = self.__dict__.setdefault("_layout_cache", {})
         if device not in cache:
             n, m, yi = self.n, self.m, self.ss.yaw_index
@@ -361,9 +388,26 @@ class GRUKalmanNet(nn.Module):
             pairs = tuple((o + i, o + j) for o, planar in zip(starts, (MEAS_PLANAR, MEAS_PLANAR, STATE_PLANAR,
                                                                        STATE_PLANAR)) for i, j in planar)
             with torch.inference_mode(False):   # normal tensors: training saves them for the backward pass
-                cache[device] = {"angles": torch.tensor([_YAW_Z, n + _YAW_Z, 2 * n + yi, 2 * n + m + yi],
-                                                        device=device), "pairs": pairs,
-                                 "part": torch.tensor([0] * n + [1] * n + [2] * m + [3] * m, device=device)}
+                sizes = (n, n, m, m)
+                diff = torch.zeros(3 * n + 3 * m, 2 * n + 2 * m, dtype=torch.float64)
+                eye_n, eye_m = torch.eye(n, dtype=torch.float64), torch.eye(m, dtype=torch.float64)
+                # rows: y [0, n), y_prev [n, 2n), h(x^-) [2n, 3n), post1 [3n, 3n+m), post2 [.., 3n+2m), prior1
+                diff[0:n, 0:n], diff[n:2 * n, 0:n] = eye_n, -eye_n                                # y - y_prev
+                diff[0:n, n:2 * n], diff[2 * n:3 * n, n:2 * n] = eye_n, -eye_n                    # y - h(x^-)
+                p1, p2, q1 = 3 * n, 3 * n + m, 3 * n + 2 * m
+                diff[p1:p1 + m, 2 * n:2 * n + m], diff[p2:p2 + m, 2 * n:2 * n + m] = eye_m, -eye_m  # post1 - post2
+                diff[p1:p1 + m, 2 * n + m:], diff[q1:q1 + m, 2 * n + m:] = eye_m, -eye_m         # post1 - prior1
+                part = torch.zeros(2 * n + 2 * m, 4, dtype=torch.float64)
+                for k, (o, size) in enumerate(zip(starts, sizes)):
+                    part[o:o + size, k] = 1.0
+                lower = torch.full((1, m), -math.inf, dtype=torch.float64)
+                lower[0, 3:6] = MIN_SIZE
+                cache[device] = {"diff": diff.to(device), "pairs": pairs, "part": part.to(device),
+                                 "angles": torch.tensor([_YAW_Z, n + _YAW_Z, 2 * n + yi, 2 * n + m + yi],
+                                                        device=device),
+                                 "flip": torch.tensor([[True, True, False, False]], device=device),
+                                 "yaw": torch.tensor([yi], device=device),
+                                 "lower": lower.to(device)}
         return cache[device]
 
     def gain(self, feats: torch.Tensor, hidden: dict[str, torch.Tensor],
@@ -427,18 +471,19 @@ class GRUKalmanNet(nn.Module):
         """
         n, m, yi = self.n, self.m, self.ss.yaw_index
         lay = self._layout(x_prior.device)
-        yaw = x_prior[:, yi]
-        raw = torch.cat([y - y_prev, y - self.ss.h(x_prior), x_post_prev - x_post_prev2, x_post_prev - x_prior_prev],
-                        dim=1)
-        ang = wrap_angle_t(raw.index_select(1, lay["angles"]))
+        yaw = x_prior[:, yi:yi + 1]
+        c, s = torch.cos(yaw), torch.sin(yaw)
+        raw = torch.cat([y, y_prev, self.ss.h(x_prior), x_post_prev, x_post_prev2, x_prior_prev], dim=1).mm(
+            lay["diff"])                                            # the four differences (exact: +-1 entries)
+        ang = raw.detach().index_select(1, lay["angles"])
+        off = wrap_offset(ang)
         if self.cfg.yaw_flip:   # the measurement-space yaw residuals (observation difference, innovation)
-            flip = torch.where(ang.abs() > 0.5 * math.pi, wrap_angle_t(ang + math.pi), ang)
-            ang = torch.cat([flip[:, :2], ang[:, 2:]], dim=1)
-        wrapped = raw.index_copy(1, lay["angles"], ang)
-        raw = to_heading_frame(wrapped, yaw, lay["pairs"])
-        norms = torch.stack([raw[:, :n].norm(dim=1), raw[:, n:2 * n].norm(dim=1),
-                             raw[:, 2 * n:2 * n + m].norm(dim=1), raw[:, 2 * n + m:].norm(dim=1)], dim=1)
-        feats = raw / (norms + _EPS).index_select(1, lay["part"])
+            off = torch.where(lay["flip"], wrap_offset(ang, flip=True), off)
+        wrapped = raw - torch.zeros_like(raw).index_copy_(1, lay["angles"], off)
+        raw = rotate_pairs(wrapped, c, s, lay["pairs"])
+        # per-input L2 norms (K, 4) as one product; a zero input (no graph behind it) keeps a zero gradient
+        norms = raw.square().mm(lay["part"]).clamp_min(1e-300).sqrt()
+        feats = raw / (norms + _EPS).mm(lay["part"].t())
         aux = None
         if self.cfg.aux_inputs:
             if counts is None:
@@ -447,17 +492,16 @@ class GRUKalmanNet(nn.Module):
                                 "fwd_evol": raw[:, 2 * n:2 * n + m], "fwd_update": raw[:, 2 * n + m:]}, counts)
         innov_h = raw[:, n:2 * n]
         K, new_hidden = self.gain(feats, hidden, cells, aux)
-        delta = torch.einsum("kmn,kn->km", K.to(innov_h.dtype), innov_h)
-        delta = from_heading_frame(delta, yaw, STATE_PLANAR)
+        delta = torch.bmm(K.to(innov_h.dtype), innov_h[:, :, None])[:, :, 0]
+        delta = rotate_pairs(delta, c, -s, STATE_PLANAR)             # back to the global frame
         if self.cfg.gain_prior == "ekf":
             if K_prior is None:
                 raise ValueError("this GRU-KF's EKF gain prior needs every track's EKF gain")
             innov = wrapped[:, n:2 * n]                                                    # global frame
-            delta = delta + torch.einsum("kmn,kn->km", K_prior.to(innov.dtype), innov)   # K_ekf r
-        x = x_prior + delta
+            delta = delta + torch.bmm(K_prior.to(innov.dtype), innov[:, :, None])[:, :, 0]   # K_ekf r
         # sizes stay physical (a learned gain can overshoot); the yaw is wrapped
-        x = torch.cat([x[:, :3], x[:, 3:6].clamp_min(MIN_SIZE), x[:, 6:yi], wrap_angle_t(x[:, yi:yi + 1]),
-                       x[:, yi + 1:]], 1)
+        x = torch.clamp(x_prior + delta, min=lay["lower"])
+        x = x - torch.zeros_like(x).index_copy_(1, lay["yaw"], wrap_offset(x.detach()[:, yi:yi + 1]))
         return x, new_hidden, K
 
     def _yaw_res(self, r: torch.Tensor) -> torch.Tensor:
