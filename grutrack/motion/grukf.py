@@ -422,7 +422,7 @@ class GRUKalmanNet(nn.Module):
         dt = self.fc_gain[2].weight.dtype
         n, m = self.n, self.m
         f = feats.to(dt)
-        f_obs, f_evol, f_upd = f[:, :2 * n], f[:, 2 * n:2 * n + m], f[:, 2 * n + m:]
+        f_obs, f_evol, f_upd = f.split([2 * n, m, m], dim=1)
         aux = [aux.to(dt)] if self.cfg.aux_inputs else []
         if aux:
             f_obs = torch.cat([f_obs, *aux], dim=1)

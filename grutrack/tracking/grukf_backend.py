@@ -15,7 +15,7 @@ form, the network's per-class Q, R, P0), linearised at the GRU-KF's own (detache
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -46,36 +46,54 @@ def resolve_device(device: str = "auto", what: str = "--device") -> torch.device
     return dev
 
 
+#: the measurement columns of a track row (``GRUState.rows``: y_prev) and the gain column
+_MEAS = 9
+
+
 @dataclass
 class GRUState:
-    """N tracks: x current state (posterior after an update, prior after a predict) (N, m) float64; y_prev
-    last measurement (N, 9); post1 / post2 the last two posteriors, prior1 the prior of the last update
-    (N, m); gain_abs_max (N,) float64 the largest |K| entry of each track's last gain (0 before its first
-    update; no autograd graph); hidden GRU states {name: (N, hidden)}; labels (N,) int64, n_updates (N,) int64
-    the updates each track has had and since (N,) int64 the frames predicted since its last update or birth
-    (numpy); P (N, m, m) float64 numpy, the EKF covariance of each track (``gain_prior="ekf"`` only, else
-    None)."""
+    """N tracks, their tensors packed in two arrays (one row gather and one row write per update, whatever the
+    number of fields): ``rows`` (N, 4m + 10) float64 = ``[x | y_prev | post1 | post2 | prior1 | gain_abs_max]``
+    with x the current state (posterior after an update, prior after a predict) (m), y_prev the last
+    measurement (9), post1 / post2 the last two posteriors and prior1 the prior of the last update (m each),
+    gain_abs_max the largest |K| entry of the track's last gain (0 before its first update; no autograd graph);
+    ``hid`` (N, H) the GRU hidden states side by side (network dtype; see :meth:`GRUKFBackend.hidden`); labels
+    (N,) int64, n_updates (N,) int64 the updates each track has had and since (N,) int64 the frames predicted
+    since its last update or birth (numpy); P (N, m, m) float64 numpy, the EKF covariance of each track
+    (``gain_prior="ekf"`` only, else None)."""
 
-    x: torch.Tensor
-    y_prev: torch.Tensor
-    post1: torch.Tensor
-    post2: torch.Tensor
-    prior1: torch.Tensor
-    gain_abs_max: torch.Tensor
-    hidden: dict
+    rows: torch.Tensor
+    hid: torch.Tensor
     labels: np.ndarray
     n_updates: np.ndarray
     since: np.ndarray
     P: np.ndarray | None = None
 
-    def map(self, fn_t, fn_np) -> "GRUState":
-        """Apply fn_t to every tensor, fn_np to the numpy arrays (labels, n_updates, since, P)."""
-        kw = {}
-        for f in fields(self):
-            v = getattr(self, f.name)
-            kw[f.name] = (None if v is None else {k: fn_t(t) for k, t in v.items()} if isinstance(v, dict)
-                          else fn_np(v) if isinstance(v, np.ndarray) else fn_t(v))
-        return GRUState(**kw)
+    @property
+    def m(self) -> int:
+        """State dimension."""
+        return (self.rows.shape[1] - _MEAS - 1) // 4
+
+    @property
+    def x(self) -> torch.Tensor:
+        """Current state (N, m) (a view of ``rows``)."""
+        return self.rows[:, :self.m]
+
+    @property
+    def gain_abs_max(self) -> torch.Tensor:
+        """(N,) float64: the largest |K| entry of each track's last gain."""
+        return self.rows[:, -1].detach()
+
+    def with_x(self, x: torch.Tensor, P: np.ndarray | None) -> "GRUState":
+        """The tracks with state ``x`` (N, m) and covariance ``P``, one more frame since their last update."""
+        return GRUState(torch.cat([x, self.rows[:, self.m:]], dim=1), self.hid, self.labels, self.n_updates,
+                        self.since + 1, P)
+
+    def take(self, r: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """(x, y_prev, post1, post2, prior1, hid) of tracks ``r`` (K,) int64: two row gathers."""
+        m = self.m
+        x, y_prev, post1, post2, prior1, _ = self.rows.index_select(0, r).split([m, _MEAS, m, m, m, 1], dim=1)
+        return x, y_prev, post1, post2, prior1, self.hid.index_select(0, r)
 
 
 class GRUKFBackend:
@@ -93,6 +111,8 @@ class GRUKFBackend:
         self.net.to(self.device)
         self.train = train
         self.ss = net.ss
+        h = net.init_hidden(0, self.device)   # names and widths of the hidden states, in their packed order
+        self._hidden_layout = (tuple(h), tuple(v.shape[1] for v in h.values()))
         self.kf = None
         if net.cfg.gain_prior == "ekf":   # the prior EKF: same SS model, the network's noise tables (numpy)
             from grutrack.motion.kalman import BatchKalmanFilter
@@ -122,8 +142,15 @@ class GRUKFBackend:
             x = self.ss.init_state(zt)
             zero = np.zeros(len(z), dtype=np.int64)
             P = None if self.kf is None else self.P0[self._classes(labels)].copy()   # P = P0 of the class
-            return GRUState(x, zt, x, x, x, zt.new_zeros(len(z)), self.net.init_hidden(len(z), self.device),
-                            labels.copy(), zero, zero, P)
+            rows = torch.cat([x, zt, x, x, x, zt.new_zeros(len(z), 1)], dim=1)
+            hid = torch.cat(list(self.net.init_hidden(len(z), self.device).values()), dim=1)
+            return GRUState(rows, hid, labels.copy(), zero, zero, P)
+
+    def hidden(self, hid: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The network's hidden states {name: (K, size)} from packed rows ``hid`` (K, H) (one split)."""
+        names, sizes = self._hidden_layout
+        return dict(zip(names, hid.split(sizes, dim=1)))
+
 
     def _cells(self, s: GRUState, rows: np.ndarray):
         """The gain-table cells of tracks ``rows`` at this update (None when the network has no table)."""
@@ -148,8 +175,7 @@ class GRUKFBackend:
         if self.kf is not None:   # P^- = F P F^T + Q, F at the posterior
             _, P = self.kf.predict(self._np(s.x), s.P, self.Q[self._classes(s.labels)], dt)
         with self._ctx():
-            return GRUState(self.ss.f(s.x, dt), s.y_prev, s.post1, s.post2, s.prior1, s.gain_abs_max, s.hidden,
-                            s.labels, s.n_updates, s.since + 1, P)
+            return s.with_x(self.ss.f(s.x, dt), P)
 
     @staticmethod
     def _np(t: torch.Tensor) -> np.ndarray:
@@ -178,21 +204,14 @@ class GRUKFBackend:
         with self._ctx():
             r = torch.as_tensor(rows, device=self.device, dtype=torch.long)
             y = self._t(z)
-
-            def take(t: torch.Tensor) -> torch.Tensor:
-                return t.index_select(0, r)
-
-            def put(t: torch.Tensor, v: torch.Tensor) -> torch.Tensor:   # a copy of t with rows r set to v
-                return t.index_copy(0, r, v.to(t.dtype))
-
-            prior, post1 = take(s.x), take(s.post1)
+            prior, y_prev, post1, post2, prior1, hid = s.take(r)
             K_ekf, P = self._ekf_gain(s, rows, z)
-            post, hid, K = self.net.correct(prior, y, take(s.y_prev), post1, take(s.prior1), take(s.post2),
-                                            {k: take(v) for k, v in s.hidden.items()},
-                                            self._cells(s, rows), self._counts(s, rows), K_prior=K_ekf)
-            return GRUState(put(s.x, post), put(s.y_prev, y), put(s.post1, post), put(s.post2, post1),
-                            put(s.prior1, prior), put(s.gain_abs_max, K.detach().abs().amax(dim=(1, 2))),
-                            {k: put(s.hidden[k], hid[k]) for k in s.hidden}, s.labels,
+            post, new_hidden, K = self.net.correct(prior, y, y_prev, post1, prior1, post2, self.hidden(hid),
+                                                   self._cells(s, rows), self._counts(s, rows), K_prior=K_ekf)
+            gain = K.detach().abs().amax(dim=(1, 2)).to(post.dtype)[:, None]
+            new_rows = torch.cat([post, y, post, post1, prior, gain], dim=1)
+            new_hid = torch.cat([new_hidden[k] for k in self._hidden_layout[0]], dim=1).to(s.hid.dtype)
+            return GRUState(s.rows.index_copy(0, r, new_rows), s.hid.index_copy(0, r, new_hid), s.labels,
                             _incremented(s.n_updates, rows), _zeroed(s.since, rows), P)
 
     def measure(self, s: GRUState) -> torch.Tensor:
@@ -211,7 +230,8 @@ class GRUKFBackend:
         idx = np.flatnonzero(index) if np.asarray(index).dtype == bool else np.asarray(index)
         with self._ctx():
             it = torch.as_tensor(idx, device=self.device, dtype=torch.long)
-            return s.map(lambda t: t.index_select(0, it), lambda a: a[idx])
+            return GRUState(s.rows.index_select(0, it), s.hid.index_select(0, it), s.labels[idx], s.n_updates[idx],
+                            s.since[idx], None if s.P is None else s.P[idx])
 
     def concat(self, a: GRUState, b: GRUState) -> GRUState:
         """Tracks of a then b."""
@@ -220,9 +240,7 @@ class GRUKFBackend:
 
     @staticmethod
     def _concat(a: GRUState, b: GRUState) -> GRUState:
-        return GRUState(*(torch.cat([getattr(a, n), getattr(b, n)]) for n in ("x", "y_prev", "post1", "post2",
-                                                                             "prior1", "gain_abs_max")),
-                        {k: torch.cat([a.hidden[k], b.hidden[k]]) for k in a.hidden},
+        return GRUState(torch.cat([a.rows, b.rows]), torch.cat([a.hid, b.hid]),
                         *(np.concatenate([getattr(a, n), getattr(b, n)]) for n in ("labels", "n_updates", "since")),
                         None if a.P is None else np.concatenate([a.P, b.P]))
 
