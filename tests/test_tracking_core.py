@@ -143,7 +143,7 @@ def test_step_with_updates_reports_each_groups_correction_before_the_lifecycle()
     bike = CLASS_INDEX["bicycle"]
     frames = [[(_box(0, 0, vx=10.0), CAR), (_box(30, 5), bike)], [(_box(5.1, 0, vx=10.0), CAR), (_box(30, 5.2), bike)],
               [(_box(10, 0, vx=10.0), CAR)], [], [(_box(20.2, 0, vx=10.0), CAR)]]
-    plain, recording = build_tracker("ekf"), build_tracker("ekf")
+    plain, recording, silent = build_tracker("ekf"), build_tracker("ekf"), build_tracker("ekf")
     car_group = int(recording.group_of_class[CAR])
     bike_group = int(recording.group_of_class[bike])
     assert car_group != bike_group
@@ -154,6 +154,10 @@ def test_step_with_updates_reports_each_groups_correction_before_the_lifecycle()
         out, updates = recording.step_with_updates(d, 1_000_000 + 500_000 * i)
         ref = plain.step(d, 1_000_000 + 500_000 * i)
         assert np.array_equal(out.boxes, ref.boxes) and np.array_equal(out.ids, ref.ids)  # same tracking
+        nothing, same = silent.step_with_updates(d, 1_000_000 + 500_000 * i, output=False)   # as training runs it
+        assert nothing is None
+        assert [(u.group, u.rows.tolist(), u.ids.tolist(), u.hits.tolist(), u.posterior.x.tolist()) for u in same] == \
+            [(u.group, u.rows.tolist(), u.ids.tolist(), u.hits.tolist(), u.posterior.x.tolist()) for u in updates]
         reports.append({u.group: u for u in updates})
     assert reports[0] == {}                               # no track existed at the first predict
     assert sorted(reports[1]) == sorted([car_group, bike_group])

@@ -186,14 +186,18 @@ class Tracker:
         """
         return self._step(dets, timestamp, None)
 
-    def step_with_updates(self, dets: BoxSet, timestamp: int) -> tuple[BoxSet, list[GroupUpdate]]:
+    def step_with_updates(self, dets: BoxSet, timestamp: int, output: bool = True
+                          ) -> tuple[BoxSet | None, list[GroupUpdate]]:
         """:meth:`step`, also returning a :class:`GroupUpdate` per group that had tracks (training reads the
-        filter states of the tracks corrected in this frame from them)."""
+        filter states of the tracks corrected in this frame from them). ``output=False``: the same tracking
+        without forming the frame's output boxes (returned as None; training reads only the updates)."""
         updates: list[GroupUpdate] = []
-        return self._step(dets, timestamp, updates), updates
+        return self._step(dets, timestamp, updates, output), updates
 
-    def _step(self, dets: BoxSet, timestamp: int, updates: list[GroupUpdate] | None) -> BoxSet:
-        """:meth:`step`; appends the groups' :class:`GroupUpdate` s to ``updates`` unless it is None."""
+    def _step(self, dets: BoxSet, timestamp: int, updates: list[GroupUpdate] | None,
+              output: bool = True) -> BoxSet | None:
+        """:meth:`step`; appends the groups' :class:`GroupUpdate` s to ``updates`` unless it is None; forms no
+        output (returns None) without ``output``."""
         dt = 0.0 if self.last_timestamp is None else (timestamp - self.last_timestamp) * 1e-6
         if self.cfg.time_step is not None and self.last_timestamp is not None:
             dt = self.cfg.time_step  # a fixed prediction step (preset motion.time_step), e.g. Poly-MOT's 0.5 s
@@ -205,9 +209,9 @@ class Tracker:
         trk_boxes = np.concatenate([g.backend.boxes(g.state) if len(g) else empty_boxes() for g in self.groups])
         trk_labels = np.concatenate([g.labels for g in self.groups])
         m = self.associate(dets, trk_boxes, trk_labels, dt)
-        out = self._update_groups(dets, m.dets, m.tracks, updates)
-        out.append(self._births(dets, m.unmatched_dets))
-        return _concat_boxsets(out)
+        out = self._update_groups(dets, m.dets, m.tracks, updates, output)
+        out.append(self._births(dets, m.unmatched_dets, output))
+        return _concat_boxsets(out) if output else None
 
     def _predict(self, dt: float) -> None:
         for g in self.groups:
@@ -216,9 +220,9 @@ class Tracker:
                 g.misses += 1
 
     def _update_groups(self, dets: BoxSet, mdets: np.ndarray, mtracks: np.ndarray,
-                       updates: list[GroupUpdate] | None) -> list[BoxSet]:
-        """Correct matched tracks, decay the others, kill the expired; return each group's output (and append
-        each group's :class:`GroupUpdate` to ``updates`` unless it is None)."""
+                       updates: list[GroupUpdate] | None, output: bool = True) -> list[BoxSet]:
+        """Correct matched tracks, decay the others, kill the expired; return each group's output (none without
+        ``output``) (and append each group's :class:`GroupUpdate` to ``updates`` unless it is None)."""
         out, offset = [], 0
         for gi, g in enumerate(self.groups):
             n = len(g)
@@ -239,10 +243,11 @@ class Tracker:
                              g.score_count, *self._life, cfg.score_update == "multiply",
                              cfg.termination == "average_score", self._punish, self.frame_count, matched,
                              alive, emit)
-            boxes = g.backend.boxes(g.state)
-            if self.cfg.matched_box == "detection" and len(rows):
-                boxes[rows, :6] = dets.boxes[drows, :6]  # detection centre and size; filter yaw, velocity
-            out.append(BoxSet(boxes[emit], g.scores[emit], g.labels[emit], g.ids[emit]))
+            if output:
+                boxes = g.backend.boxes(g.state)
+                if self.cfg.matched_box == "detection" and len(rows):
+                    boxes[rows, :6] = dets.boxes[drows, :6]  # detection centre and size; filter yaw, velocity
+                out.append(BoxSet(boxes[emit], g.scores[emit], g.labels[emit], g.ids[emit]))
             g.keep(alive)
         return out
 
@@ -251,8 +256,9 @@ class Tracker:
         need = self.cfg.min_hits[labels]
         return (hits >= need) | (self.frame_count <= need)
 
-    def _births(self, dets: BoxSet, new: np.ndarray) -> BoxSet:
-        """Start a track for every unmatched detection; returns their boxes as this frame's output."""
+    def _births(self, dets: BoxSet, new: np.ndarray, output: bool = True) -> BoxSet:
+        """Start a track for every unmatched detection; returns their boxes as this frame's output (none without
+        ``output``)."""
         out = []
         ids = np.arange(self.next_id, self.next_id + len(new), dtype=np.int64)
         self.next_id += len(new)
@@ -262,6 +268,8 @@ class Tracker:
             if sel.any():
                 d = new[sel]
                 g.add(dets.boxes[d], dets.labels[d], dets.scores[d], ids[sel])
+                if not output:
+                    continue
                 show = self._confirmed(np.ones(len(d), dtype=np.int64), dets.labels[d])
                 out.append(BoxSet(g.backend.boxes(g.state)[-len(d):][show], dets.scores[d][show],
                                   dets.labels[d][show], ids[sel][show]))

@@ -230,7 +230,7 @@ def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_
     tracker = Tracker(tracker_cfg, _groups(backend, net.cfg, tracker_cfg, index))
     loss = SceneLoss(cfg, device)
     for frame in scene.frames:
-        _, updates = tracker.step_with_updates(dets[frame.token], frame.timestamp)
+        _, updates = tracker.step_with_updates(dets[frame.token], frame.timestamp, output=False)
         for u in updates:
             if u.group == 0:      # the network's group (the others are the preset's EKF)
                 loss.add(u, backend, frame.gt)
@@ -283,7 +283,7 @@ def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: Tra
         for scene in scenes:
             tracker.reset()
             for frame in scene.frames:
-                for u in tracker.step_with_updates(dets[frame.token], frame.timestamp)[1]:
+                for u in tracker.step_with_updates(dets[frame.token], frame.timestamp, output=False)[1]:
                     if u.group != 0 or not len(u.rows):
                         continue
                     rows = u.rows
