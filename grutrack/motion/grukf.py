@@ -184,11 +184,13 @@ def _gru(cell: nn.GRUCell, x: torch.Tensor, h: torch.Tensor,
     ``n = tanh(W_in x + b_in + r * (W_hn h + b_hn))``, ``h' = (h - n) * z + n``."""
     if deferred is None:
         return torch.gru_cell(x, h, cell.weight_ih, cell.weight_hh, cell.bias_ih, cell.bias_hh)
-    i_r, i_z, i_n = deferred.linear_params(cell.weight_ih, cell.bias_ih, x).chunk(3, 1)
-    h_r, h_z, h_n = deferred.linear_params(cell.weight_hh, cell.bias_hh, h).chunk(3, 1)
-    r, z = torch.sigmoid(h_r + i_r), torch.sigmoid(h_z + i_z)
-    n = torch.tanh(i_n + h_n * r)
-    return (h - n) * z + n
+    gi = deferred.linear_params(cell.weight_ih, cell.bias_ih, x)       # [i_r, i_z, i_n]  (N, 3H)
+    gh = deferred.linear_params(cell.weight_hh, cell.bias_hh, h)       # [h_r, h_z, h_n]
+    H = h.shape[1]
+    (i_rz, i_n), (h_rz, h_n) = gi.split([2 * H, H], 1), gh.split([2 * H, H], 1)
+    r, z = torch.sigmoid(i_rz + h_rz).chunk(2, 1)
+    n = torch.tanh(torch.addcmul(i_n, r, h_n))
+    return torch.lerp(n, h, z)                                         # n + z (h - n)
 
 
 @functools.lru_cache(maxsize=None)

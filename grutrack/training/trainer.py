@@ -172,7 +172,8 @@ class SceneLoss:
 
     def _add_rows(self, pred: torch.Tensor, rows: np.ndarray, target: np.ndarray, scale: float) -> None:
         """Terms of ``pred[rows]`` ((k,) row indices of pred (K, 9)) against ``target`` (k, 9)."""
-        self._pred.append(pred.index_select(0, torch.as_tensor(rows, device=pred.device)))
+        whole = len(rows) == len(pred) and bool((rows == np.arange(len(rows))).all())
+        self._pred.append(pred if whole else pred.index_select(0, torch.as_tensor(rows, device=pred.device)))
         self._target.append(np.asarray(target, dtype=np.float64))
         self._scale.append(np.full(len(rows), scale))
 
