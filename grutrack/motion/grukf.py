@@ -187,7 +187,7 @@ def _gru(cell: nn.GRUCell, x: torch.Tensor, h: torch.Tensor,
     gi = deferred.linear_params(cell.weight_ih, cell.bias_ih, x)       # [i_r, i_z, i_n]  (N, 3H)
     gh = deferred.linear_params(cell.weight_hh, cell.bias_hh, h)       # [h_r, h_z, h_n]
     H = h.shape[1]
-    (i_rz, i_n), (h_rz, h_n) = gi.split([2 * H, H], 1), gh.split([2 * H, H], 1)
+    (i_rz, i_n), (h_rz, h_n) = gi.split_with_sizes([2 * H, H], 1), gh.split_with_sizes([2 * H, H], 1)
     r, z = torch.sigmoid(i_rz + h_rz).chunk(2, 1)
     n = torch.tanh(torch.addcmul(i_n, r, h_n))
     return torch.lerp(n, h, z)                                         # n + z (h - n)
@@ -424,7 +424,7 @@ class GRUKalmanNet(nn.Module):
         dt = self.fc_gain[2].weight.dtype
         n, m = self.n, self.m
         f = feats.to(dt)
-        f_obs, f_evol, f_upd = f.split([2 * n, m, m], dim=1)
+        f_obs, f_evol, f_upd = f.split_with_sizes([2 * n, m, m], 1)
         aux = [aux.to(dt)] if self.cfg.aux_inputs else []
         if aux:
             f_obs = torch.cat([f_obs, *aux], dim=1)

@@ -72,13 +72,13 @@ class TorchCTRA:
         at the nodes t_i: ``[speed_i | heading_i] = [v, a, yaw, omega] M`` and ``(dx, dy) = sum_i w_i speed_i
         (cos, sin)(heading_i)``, each step one small matrix product (a handful of autograd nodes per frame)."""
         A_T, M, W = _ctra_tables(float(dt), x.dtype, x.device)
-        speed, heading = x[:, 6:10].mm(M).split(4, dim=1)            # (N, 4) each: at the nodes
-        arc = torch.cat([torch.cos(heading), torch.sin(heading)], dim=1) * speed.repeat(1, 2)   # (N, 8)
+        speed, heading = x[:, 6:10].mm(M).chunk(2, 1)                 # (N, 4) each: at the nodes
+        arc = torch.cat([speed * torch.cos(heading), speed * torch.sin(heading)], dim=1)   # (N, 8)
         return torch.addmm(x.mm(A_T), arc, W)                         # A x + (dx, dy) in columns 0, 1
 
     def h(self, x: torch.Tensor) -> torch.Tensor:
         """Measurement (N, 10) -> (N, 9) ``[x, y, z, w, l, h, yaw, v cos yaw, v sin yaw]``."""
-        box, v, _, yaw, _ = x.split([6, 1, 1, 1, 1], dim=1)
+        box, v, _, yaw, _ = x.split_with_sizes([6, 1, 1, 1, 1], 1)
         return torch.cat([box, yaw, v * torch.cos(yaw), v * torch.sin(yaw)], dim=1)
 
 

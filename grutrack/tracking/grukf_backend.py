@@ -92,7 +92,7 @@ class GRUState:
     def take(self, r: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """(x, y_prev, post1, post2, prior1, hid) of tracks ``r`` (K,) int64: two row gathers."""
         m = self.m
-        x, y_prev, post1, post2, prior1, _ = self.rows.index_select(0, r).split([m, _MEAS, m, m, m, 1], dim=1)
+        x, y_prev, post1, post2, prior1, _ = self.rows.index_select(0, r).split_with_sizes([m, _MEAS, m, m, m, 1], 1)
         return x, y_prev, post1, post2, prior1, self.hid.index_select(0, r)
 
 
@@ -149,7 +149,7 @@ class GRUKFBackend:
     def hidden(self, hid: torch.Tensor) -> dict[str, torch.Tensor]:
         """The network's hidden states {name: (K, size)} from packed rows ``hid`` (K, H) (one split)."""
         names, sizes = self._hidden_layout
-        return dict(zip(names, hid.split(sizes, dim=1)))
+        return dict(zip(names, hid.split_with_sizes(list(sizes), 1)))
 
 
     def _cells(self, s: GRUState, rows: np.ndarray):
