@@ -389,6 +389,26 @@ def test_nan_loss_stops_training_and_keeps_last_good_checkpoint(small_training_s
     assert ck["train_state"]["step"] == 1
 
 
+def test_a_non_finite_gradient_stops_training_before_the_step(small_training_set, tmp_path, monkeypatch):
+    from grutrack.motion import grukf
+    from grutrack.training.trainer import TrainingDiverged
+
+    scenes, dets = small_training_set
+    t = _trainer(scenes, dets, tmp_path, epochs=2)
+    t.run(max_steps=1)
+    good = {k: v.clone() for k, v in t.net.state_dict().items()}
+    real = grukf.DeferredWeightGrads.backward
+
+    def poisoned(self, loss, params):
+        real(self, loss, params)
+        params[3].grad[0] = float("inf")
+
+    monkeypatch.setattr(grukf.DeferredWeightGrads, "backward", poisoned)
+    with pytest.raises(TrainingDiverged, match="a gradient is NaN or infinite"):
+        t.run()
+    assert all(torch.equal(t.net.state_dict()[k], good[k]) for k in good)   # the step was not applied
+
+
 def test_diverging_gain_stops_training(small_training_set, tmp_path):
     from grutrack.training.trainer import TrainingDiverged
 
