@@ -68,6 +68,9 @@ class GRUState:
     n_updates: np.ndarray
     since: np.ndarray
     P: np.ndarray | None = None
+    #: after an update: the posterior (K, m) of the K tracks just corrected, in the order of their rows (with
+    #: its graph in training; the same values as their rows of x); None otherwise
+    corrected: torch.Tensor | None = None
 
     @property
     def m(self) -> int:
@@ -212,11 +215,16 @@ class GRUKFBackend:
             new_rows = torch.cat([post, y, post, post1, prior, gain], dim=1)
             new_hid = torch.cat([new_hidden[k] for k in self._hidden_layout[0]], dim=1).to(s.hid.dtype)
             return GRUState(s.rows.index_copy(0, r, new_rows), s.hid.index_copy(0, r, new_hid), s.labels,
-                            _incremented(s.n_updates, rows), _zeroed(s.since, rows), P)
+                            _incremented(s.n_updates, rows), _zeroed(s.since, rows), P, corrected=post)
 
     def measure(self, s: GRUState) -> torch.Tensor:
         """h(x) (N, 9) as a tensor (keeps the graph in training)."""
         return self.ss.h(s.x)
+
+    def measure_corrected(self, s: GRUState) -> torch.Tensor:
+        """h(x) (K, 9) of the K tracks the update that made ``s`` corrected, in the order of their rows (keeps the
+        graph in training)."""
+        return self.ss.h(s.corrected)
 
     def boxes(self, s: GRUState) -> np.ndarray:
         """Canonical boxes (N, 9) float64 of the current state."""

@@ -132,8 +132,7 @@ class PairedBackend:
     def posterior(self, u: GroupUpdate) -> tuple[torch.Tensor, np.ndarray]:
         """The corrected tracks' GRU-KF measurement-space posterior (K, 9) tensor (with its graph) and EKF
         posterior (K, 9) numpy array."""
-        r = torch.as_tensor(u.rows, dtype=torch.long, device=self.gru.device)
-        return self.gru.measure(u.posterior[0])[r], self.ekf.model.h(u.posterior[1].x[u.rows])
+        return self.gru.measure_corrected(u.posterior[0]), self.ekf.model.h(u.posterior[1].x[u.rows])
 
     def prior(self, u: GroupUpdate) -> torch.Tensor:
         """Every track's GRU-KF measurement-space prior (N, 9) tensor (the box the association used)."""
