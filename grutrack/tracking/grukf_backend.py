@@ -71,6 +71,8 @@ class GRUState:
     #: after an update: the posterior (K, m) of the K tracks just corrected, in the order of their rows (with
     #: its graph in training; the same values as their rows of x); None otherwise
     corrected: torch.Tensor | None = None
+    #: after an update: the largest |K| entry (K, 1) float64 of each corrected track's gain (no graph); None otherwise
+    corrected_gain: torch.Tensor | None = None
 
     @property
     def m(self) -> int:
@@ -116,6 +118,7 @@ class GRUKFBackend:
         self.ss = net.ss
         h = net.init_hidden(0, self.device)   # names and widths of the hidden states, in their packed order
         self._hidden_layout = (tuple(h), tuple(v.shape[1] for v in h.values()))
+        self._hidden_dtype = next(iter(h.values())).dtype
         self.kf = None
         if net.cfg.gain_prior == "ekf":   # the prior EKF: same SS model, the network's noise tables (numpy)
             from grutrack.motion.kalman import BatchKalmanFilter
@@ -146,7 +149,7 @@ class GRUKFBackend:
             zero = np.zeros(len(z), dtype=np.int64)
             P = None if self.kf is None else self.P0[self._classes(labels)].copy()   # P = P0 of the class
             rows = torch.cat([x, zt, x, x, x, zt.new_zeros(len(z), 1)], dim=1)
-            hid = torch.cat(list(self.net.init_hidden(len(z), self.device).values()), dim=1)
+            hid = torch.zeros(len(z), sum(self._hidden_layout[1]), dtype=self._hidden_dtype, device=self.device)
             return GRUState(rows, hid, labels.copy(), zero, zero, P)
 
     def hidden(self, hid: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -215,7 +218,8 @@ class GRUKFBackend:
             new_rows = torch.cat([post, y, post, post1, prior, gain], dim=1)
             new_hid = torch.cat([new_hidden[k] for k in self._hidden_layout[0]], dim=1).to(s.hid.dtype)
             return GRUState(s.rows.index_copy(0, r, new_rows), s.hid.index_copy(0, r, new_hid), s.labels,
-                            _incremented(s.n_updates, rows), _zeroed(s.since, rows), P, corrected=post)
+                            _incremented(s.n_updates, rows), _zeroed(s.since, rows), P, corrected=post,
+                            corrected_gain=gain)
 
     def measure(self, s: GRUState) -> torch.Tensor:
         """h(x) (N, 9) as a tensor (keeps the graph in training)."""

@@ -140,9 +140,8 @@ class PairedBackend:
 
     def max_abs_gain(self, u: GroupUpdate) -> torch.Tensor:
         """The largest |K| entry of the gains the GRU-KF applied in this update (0-d tensor; 0 when none)."""
-        g = u.posterior[0].gain_abs_max
-        r = torch.as_tensor(u.rows, dtype=torch.long, device=g.device)
-        return g[r].max() if len(u.rows) else g.new_zeros(())
+        s = u.posterior[0]
+        return s.corrected_gain.max() if len(u.rows) else s.rows.new_zeros(())
 
 
 def _residual(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
