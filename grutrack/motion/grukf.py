@@ -131,6 +131,8 @@ class DeferredWeightGrads:
     def __init__(self):
         #: (weight, bias) -> the frames' (input X_t detached, output Y_t with its graph)
         self._uses: dict[tuple[nn.Parameter, nn.Parameter], list[tuple[torch.Tensor, torch.Tensor]]] = {}
+        #: (weight, bias) -> their detached tensors (made once per scene: the weights do not change within it)
+        self._detached: dict[tuple[nn.Parameter, nn.Parameter], tuple[torch.Tensor, torch.Tensor]] = {}
 
     def linear(self, lin: nn.Linear, x: torch.Tensor) -> torch.Tensor:
         """``F.linear(x, lin.weight, lin.bias)`` (K, out), its weight gradient deferred (:meth:`linear_params`)."""
@@ -141,8 +143,12 @@ class DeferredWeightGrads:
         without a graph (the first frame's features) takes the ordinary path."""
         if not (x.requires_grad and weight.requires_grad and torch.is_grad_enabled()):
             return F.linear(x, weight, bias)
-        y = F.linear(x, weight.detach(), bias.detach())
-        self._uses.setdefault((weight, bias), []).append((x.detach(), y))
+        key = (weight, bias)
+        wb = self._detached.get(key)
+        if wb is None:
+            wb = self._detached[key] = (weight.detach(), bias.detach())
+        y = F.linear(x, *wb)
+        self._uses.setdefault(key, []).append((x.detach(), y))
         return y
 
     def backward(self, loss: torch.Tensor, params: list[nn.Parameter]) -> None:
@@ -164,6 +170,7 @@ class DeferredWeightGrads:
         for param, grad in extra:
             param.grad = grad if param.grad is None else param.grad + grad
         self._uses.clear()
+        self._detached.clear()
 
 
 def _linear(x: torch.Tensor, lin: nn.Linear, deferred: DeferredWeightGrads | None) -> torch.Tensor:
