@@ -482,7 +482,7 @@ class GRUKalmanNet(nn.Module):
         lay = self._layout(x_prior.device)
         yaw = x_prior[:, yi:yi + 1]
         c, s = torch.cos(yaw), torch.sin(yaw)
-        raw = torch.cat([y, y_prev, self.ss.h(x_prior), x_post_prev, x_post_prev2, x_prior_prev], dim=1).mm(
+        raw = torch.cat([y, y_prev, self.ss.h_at(x_prior, c, s), x_post_prev, x_post_prev2, x_prior_prev], dim=1).mm(
             lay["diff"])                                            # the four differences (exact: +-1 entries)
         ang = raw.detach().index_select(1, lay["angles"])
         off = wrap_offset(ang)

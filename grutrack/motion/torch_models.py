@@ -81,6 +81,11 @@ class TorchCTRA:
         box, v, _, yaw, _ = x.split_with_sizes([6, 1, 1, 1, 1], 1)
         return torch.cat([box, yaw, v * torch.cos(yaw), v * torch.sin(yaw)], dim=1)
 
+    def h_at(self, x: torch.Tensor, c: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
+        """:meth:`h` given ``c, s`` (N, 1) = cos, sin of the state's yaw (when the caller has them already)."""
+        box, v, _, yaw, _ = x.split_with_sizes([6, 1, 1, 1, 1], 1)
+        return torch.cat([box, yaw, v * c, v * s], dim=1)
+
 
 class TorchBicycle:
     """Kinematic bicycle, state ``[x, y, z, w, l, h, v, a, yaw, delta]`` (see
@@ -125,6 +130,10 @@ class TorchBicycle:
         dy = ds[:, 0] * (wts * torch.sin(heading)).sum(1)
         return torch.cat([(x[:, 0] + dx)[:, None], (x[:, 1] + dy)[:, None], x[:, 2:6], v + a * dt, a,
                           yaw + k * ds, x[:, 9:10]], dim=1)
+
+    def h_at(self, x: torch.Tensor, c: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
+        """:meth:`h` (the velocity is along yaw + beta, so cos, sin of the yaw ``c, s`` are not used)."""
+        return self.h(x)
 
     def h(self, x: torch.Tensor) -> torch.Tensor:
         """Measurement (N, 10) -> (N, 9): the box centre, size, yaw, velocity along yaw + beta."""
