@@ -20,25 +20,17 @@ class StickyGTAssociation:
         self.max_distance = max_distance
         self.held: dict[int, str] = {}   # track id -> GT instance id
 
-    def _held(self, track_ids: np.ndarray) -> np.ndarray:
-        """(K,) object: the instance each track holds, "" where it holds none."""
-        return np.array([self.held.get(int(t), "") for t in track_ids], dtype=object)
-
     def held_rows(self, track_ids: np.ndarray, gt_ids: np.ndarray) -> np.ndarray:
         """GT row per track (K,) int64 of the instance each track already holds, -1 where it holds none or
         its instance is absent from this frame (no new matching)."""
-        return self._held_rows(self._held(track_ids), np.asarray(gt_ids, dtype=object))
+        return self._held_rows(track_ids, {g: i for i, g in enumerate(gt_ids)})
 
-    @staticmethod
-    def _held_rows(held: np.ndarray, gt_ids: np.ndarray) -> np.ndarray:
-        """Row of ``gt_ids`` (G,) holding each held instance (K,) object, -1 where absent or none."""
-        out = np.full(len(held), -1, dtype=np.int64)
-        gt_set = set(gt_ids.tolist())   # a set lookup per track: np.isin sorts object arrays (slow per frame)
-        present = np.fromiter((h != "" and h in gt_set for h in held), dtype=bool, count=len(held))
-        if present.any():
-            order = np.argsort(gt_ids)
-            out[present] = order[np.searchsorted(gt_ids[order], held[present])]
-        return out
+    def _held_rows(self, track_ids: np.ndarray, row_of: dict) -> np.ndarray:
+        """Row (via ``row_of``: instance id -> row of this frame's GT) of the instance each track (K,) holds, -1
+        where it holds none or its instance is absent (dictionary lookups: a few tens of tracks per frame)."""
+        held = self.held
+        return np.fromiter((row_of.get(held.get(t), -1) for t in track_ids.tolist()), dtype=np.int64,
+                           count=len(track_ids))
 
     def match(self, track_ids: np.ndarray, track_xy: np.ndarray, track_labels: np.ndarray,
               gt_ids: np.ndarray, gt_xy: np.ndarray, gt_labels: np.ndarray) -> np.ndarray:
@@ -48,11 +40,12 @@ class StickyGTAssociation:
         gt_labels (G,).
         """
         # rows of the current GT list holding each track's instance (sticky tracks whose instance is present)
-        held, gt_ids = self._held(track_ids), np.asarray(gt_ids, dtype=object)
-        out = self._held_rows(held, gt_ids)
+        row_of = {g: i for i, g in enumerate(gt_ids)}
+        out = self._held_rows(track_ids, row_of)
         held_set = set(self.held.values())
         taken = np.fromiter((g in held_set for g in gt_ids), dtype=bool, count=len(gt_ids))
-        ft = np.flatnonzero(held == "")
+        free = np.fromiter((int(t) not in self.held for t in track_ids.tolist()), dtype=bool, count=len(track_ids))
+        ft = np.flatnonzero(free)
         free_gt = np.flatnonzero(~taken)
         if len(ft) == 0 or len(free_gt) == 0:
             return out
