@@ -444,12 +444,13 @@ def test_gain_table_cells_start_at_given_gains_and_are_looked_up_per_track():
     prior[:, 8] = 0.0                                                     # heading along global x
     y = TorchCTRA().h(prior)
     y[:, 0] += 1.0
-    labels = torch.tensor([2, 2, 2, 4])
-    n_upd = torch.tensor([5, 5, 5, 5])
-    gaps = torch.tensor([1, 2, 9, 1])                                     # 9 -> the last gap bin
+    labels = np.array([2, 2, 2, 4])
+    n_upd = np.array([5, 5, 5, 5])
+    gaps = np.array([1, 2, 9, 1])                                         # 9 -> the last gap bin
+    cells = net.table_index(labels, n_upd, gaps)
+    assert cells.tolist() == [(2 * 2 + 1) * 3 + 0, (2 * 2 + 1) * 3 + 1, (2 * 2 + 1) * 3 + 2, (4 * 2 + 1) * 3 + 0]
     with torch.no_grad():
-        x, _, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(4),
-                           net.table_index(labels, n_upd, gaps))
+        x, _, _ = net.correct(prior, y, y, prior, prior, prior, net.init_hidden(4), torch.as_tensor(cells))
     step = (x[:, 0] - prior[:, 0]).numpy()
     # class 4 had no update in the table (NaN cells): it starts at the shared prior (zero gain here)
     assert np.allclose(step, [0.2, 0.4, 0.6, 0.0], atol=1e-9)
@@ -501,7 +502,7 @@ def test_backend_maps_dataset_labels_to_tracking_classes():
     be = GRUKFBackend(net, "cpu", class_index=np.array([2, 2, 4]))   # e.g. three AV2 categories
     s = be.initiate(TorchCTRA().h(torch.tensor(_states(3))).numpy(), np.array([0, 1, 2]))
     cells = be._cells(be.predict(s, 0.5), np.array([0, 1, 2]))
-    assert cells[0].tolist() == [2, 2, 4]
+    assert cells.tolist() == [2, 2, 4]   # flat cells of a (class, 1 age bin, 1 gap bin) table: the class
 
 
 def test_ekf_gain_table_grows_after_missed_frames(small_training_set):

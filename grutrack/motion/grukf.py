@@ -39,6 +39,7 @@ import contextlib
 import functools
 import math
 
+import numpy as np
 import torch
 from torch import nn
 from torch.nn import functional as F
@@ -361,16 +362,16 @@ class GRUKalmanNet(nn.Module):
             for buf, v in ((self.ekf_Q, Q), (self.ekf_R, R), (self.ekf_P0, P0)):
                 buf.copy_(torch.as_tensor(v, dtype=torch.float64).reshape(buf.shape))
 
-    def table_index(self, labels: torch.Tensor, n_updates: torch.Tensor, gaps: torch.Tensor
-                    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Cells of the gain table (three (K,) int64 index tensors) for tracks of classes ``labels`` (K,) at
-        their ``n_updates``-th update (K,) (1 = the first after birth), ``gaps`` (K,) frames after their last
-        update (1 = the previous frame)."""
-        zero = torch.zeros_like(labels)
-        c = labels if self.cfg.class_gain else zero
-        a = n_updates.clamp(1, self.cfg.age_bins) - 1 if self.cfg.age_bins > 0 else zero
-        g = gaps.clamp(1, self.cfg.gap_bins) - 1 if self.cfg.gap_bins > 0 else zero
-        return c, a, g
+    def table_index(self, labels: np.ndarray, n_updates: np.ndarray, gaps: np.ndarray) -> np.ndarray:
+        """Flat cells of the gain table ((K,) int64 row of ``gain_table`` viewed as (cells, m * n)) for tracks of
+        classes ``labels`` (K,) at their ``n_updates``-th update (K,) (1 = the first after birth), ``gaps`` (K,)
+        frames after their last update (1 = the previous frame); the last age and gap bins take larger values."""
+        C, A, G = self.cfg.table_shape
+        zero = np.zeros(len(labels), dtype=np.int64)
+        c = np.asarray(labels, dtype=np.int64) if self.cfg.class_gain else zero
+        a = np.clip(n_updates, 1, self.cfg.age_bins) - 1 if self.cfg.age_bins > 0 else zero
+        g = np.clip(gaps, 1, self.cfg.gap_bins) - 1 if self.cfg.gap_bins > 0 else zero
+        return (c * A + a) * G + g
 
     def init_hidden(self, n_tracks: int, device=None) -> dict[str, torch.Tensor]:
         """Zero hidden states for new tracks (N, hidden) each."""
@@ -420,7 +421,7 @@ class GRUKalmanNet(nn.Module):
         return cache[device]
 
     def gain(self, feats: torch.Tensor, hidden: dict[str, torch.Tensor],
-             cells: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None,
+             cells: torch.Tensor | None = None,
              aux: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Gain K (N, m, n) from the four normalised inputs side by side, ``feats`` (N, 2n + 2m) =
         ``[obs_diff, innovation, fwd_evol, fwd_update]`` (see :meth:`_layout`), and the hidden states (and, with
@@ -451,7 +452,7 @@ class GRUKalmanNet(nn.Module):
         if self.cfg.has_table:
             if cells is None:
                 raise ValueError("this GRU-KF's gain table needs the class, update count and gap of every track")
-            K = K + self.gain_table[cells]
+            K = K + self.gain_table.view(-1, K.shape[1]).index_select(0, cells)
         back = _fc_apply(self.fc_back1, torch.cat([h_s, K], dim=1), d)
         new["sigma"] = _fc_apply(self.fc_back2, torch.cat([h_sigma, back], dim=1), d)
         new["s"] = h_s
@@ -459,12 +460,12 @@ class GRUKalmanNet(nn.Module):
 
     def correct(self, x_prior: torch.Tensor, y: torch.Tensor, y_prev: torch.Tensor, x_post_prev: torch.Tensor,
                 x_prior_prev: torch.Tensor, x_post_prev2: torch.Tensor, hidden: dict[str, torch.Tensor],
-                cells: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None,
+                cells: torch.Tensor | None = None,
                 counts: torch.Tensor | None = None, K_prior: torch.Tensor | None = None
                 ) -> tuple[torch.Tensor, dict[str, torch.Tensor], torch.Tensor]:
         """One update of K tracks (all (K, ·) float64): prior x^-_n, measurement y_n, previous measurement,
         previous posterior x_{n-1|n-1}, previous prior x_{n-1|n-2}, posterior before that x_{n-2|n-2};
-        ``cells``: the tracks' cells of the gain table (:meth:`table_index`; only with a table); ``counts``
+        ``cells`` (K,) int64: the tracks' cells of the gain table (:meth:`table_index`; only with a table); ``counts``
         (K, 2): each track's update count at this update (1 = the first) and frames since its last update
         (only with ``aux_inputs``); ``K_prior`` (K, m, 9) float64: the EKF gain ``P^- H^T S^-1`` of each track,
         global frame (only with ``gain_prior="ekf"``). Returns the posterior (K, m), the new hidden states and

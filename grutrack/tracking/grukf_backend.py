@@ -162,10 +162,8 @@ class GRUKFBackend:
         """The gain-table cells of tracks ``rows`` at this update (None when the network has no table)."""
         if not self.net.cfg.has_table:
             return None
-        cls = self._classes(s.labels[rows])
-        t = [torch.as_tensor(a, device=self.device, dtype=torch.long)
-             for a in (cls, s.n_updates[rows] + 1, np.maximum(s.since[rows], 1))]
-        return self.net.table_index(*t)
+        cells = self.net.table_index(self._classes(s.labels[rows]), s.n_updates[rows] + 1, np.maximum(s.since[rows], 1))
+        return torch.as_tensor(cells, device=self.device)
 
     def _counts(self, s: GRUState, rows: np.ndarray) -> torch.Tensor | None:
         """(K, 2) update count at this update and frames since the last one of tracks ``rows`` (None unless
