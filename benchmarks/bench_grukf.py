@@ -5,6 +5,14 @@ Input: real nuScenes mini_train ground truth (../shared/data) with simulated Cen
 the tracking loop's frames/s with the trained network.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_grukf.py [--steps 8 --repeat 3 --device auto]
+
+``--paper-scale``: training on the paper-scale source mix instead, the real mini_train motion (simulated
+CenterPoint-like detections) plus a SYNTHETIC demo_all of 700 scenes x 40 frames (nuScenes train's size, detections
+simulated with the same profile), as ``grutrack train --source`` builds it; prints the time to prepare the data,
+the training throughput over --steps steps (one per scene, scenes in the run's shuffled order) and the time an
+epoch of the mix takes at that throughput.
+
+    .venv/bin/python benchmarks/bench_grukf.py --paper-scale --steps 40 --repeat 1
 """
 
 from __future__ import annotations
@@ -44,8 +52,14 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=8)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--device", default="auto")
+    ap.add_argument("--paper-scale", action="store_true",
+                    help="train on mini_train + a 700-scene SYNTHETIC demo (the paper's scale), see the docstring")
+    ap.add_argument("--demo-scenes", type=int, default=700, help=argparse.SUPPRESS)
     args = ap.parse_args()
     torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
+    if args.paper_scale:
+        paper_scale(args)
+        return
     nusc = open_nuscenes(args.dataroot, "v1.0-mini")
     train = load_scenes(nusc, "mini_train", with_gt=True)
     val = load_scenes(nusc, "mini_val")
@@ -72,6 +86,40 @@ def main() -> None:
           f"(runs: {', '.join(f'{v:.1f}' for v in fps)} frames/s)")
     print(f"tracking with the GRU-KF: median {statistics.median(track_fps):.1f} frames/s "
           f"(runs: {', '.join(f'{v:.1f}' for v in track_fps)})")
+
+
+def paper_scale(args) -> None:
+    """Training throughput and time per epoch on the paper-scale source mix (see the module docstring)."""
+    from grutrack.tracking.config import load_tracker_config
+    from grutrack.training.sources import load_source, merge
+
+    cfg = load_train_config("grukf", {"device": args.device, "checkpoint_every": 0, "epochs": 100})
+    yaw = load_tracker_config(cfg.tracker_preset).measured_yaw
+    entries = [{"dataset": "nuscenes", "dataroot": args.dataroot, "version": "v1.0-mini", "split": "mini_train",
+                "profile": "centerpoint", "seed": 1},
+               {"dataset": "demo", "scenes": args.demo_scenes, "frames_per_scene": 40, "split": "demo_all",
+                "profile": "centerpoint", "seed": 1}]
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        loaded = [load_source(e, yaw, Path(tmp) / "sources", f"source {i}") for i, e in enumerate(entries)]
+        scenes, dets = merge(loaded)
+        prepare = time.perf_counter() - t0
+        frames_per_epoch = sum(len(s) for s in scenes)
+        fps = []
+        for r in range(args.repeat):
+            t = Trainer(cfg, scenes, dets, Path(tmp) / f"run{r}", progress=False)
+            done: list[int] = []
+            step = t._step
+            t._step = lambda scene: (done.append(len(scene)), step(scene))[1]
+            t0 = time.perf_counter()
+            t.run(max_steps=args.steps)
+            fps.append(sum(done) / (time.perf_counter() - t0))
+    f = statistics.median(fps)
+    print(f"paper-scale source mix: {len(scenes)} scenes, {frames_per_epoch} frames per epoch (mini_train, real motion, "
+          f"simulated detections; demo_all, SYNTHETIC); data prepared in {prepare:.1f} s")
+    print(f"device {t.device}, torch threads {torch.get_num_threads()}: training median {f:.1f} frames/s over "
+          f"{args.steps} steps (runs: {', '.join(f'{v:.1f}' for v in fps)}); an epoch ({len(scenes)} steps) "
+          f"{frames_per_epoch / f / 60:.1f} min")
 
 
 if __name__ == "__main__":
