@@ -46,7 +46,7 @@ def resolve_device(device: str = "auto", what: str = "--device") -> torch.device
     return dev
 
 
-#: the measurement columns of a track row (``GRUState.rows``: y_prev) and the gain column
+#: width of the last-measurement block (y_prev) of a track row (``GRUState.rows``)
 _MEAS = 9
 
 
@@ -156,7 +156,6 @@ class GRUKFBackend:
         """The network's hidden states {name: (K, size)} from packed rows ``hid`` (K, H) (one split)."""
         names, sizes = self._hidden_layout
         return dict(zip(names, hid.split_with_sizes(list(sizes), 1)))
-
 
     def _cells(self, s: GRUState, rows: np.ndarray):
         """The gain-table cells of tracks ``rows`` at this update (None when the network has no table)."""
