@@ -616,3 +616,26 @@ def test_heading_frame_rotation_against_the_matrix_form_and_its_inverse():
     assert torch.allclose(from_heading_frame(out, yaw, MEAS_PLANAR), v, atol=1e-12)
     out.sum().backward()
     assert v.grad is not None and yaw.grad is not None and torch.isfinite(yaw.grad).all()
+
+
+def test_scene_loss_is_the_mean_of_the_weighted_squared_residuals():
+    # a scene's terms are collected per frame and formed at once: the value is the same sum as term by term
+    from grutrack.training.config import load_train_config
+    from grutrack.training.trainer import SceneLoss
+
+    weights = [1.0, 2.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0]
+    loss = SceneLoss(load_train_config("grukf", {"loss_weights": weights}), torch.device("cpu"))
+    post = torch.zeros(2, 9, dtype=torch.float64, requires_grad=True)    # a frame's corrected tracks
+    prior = torch.zeros(3, 9, dtype=torch.float64, requires_grad=True)   # every track's predicted box
+    target = np.zeros((3, 9))
+    target[0, 0], target[1, 1], target[2, 6] = 0.5, 0.25, 2 * np.pi - 0.1   # yaw residual wraps to 0.1
+    loss._add_rows(post, None, target[:2], 1.0)              # posterior terms, every row
+    loss._add_rows(prior, np.array([2]), target[2:], 0.5)    # a prediction term of row 2, weight 0.5
+    loss.gt_terms, loss.prediction_terms = 2, 1
+    expected = (0.5 ** 2 + 2.0 * 0.25 ** 2 + 0.5 * 3.0 * 0.1 ** 2) / 3
+    value = loss.value()
+    assert float(value.detach()) == pytest.approx(expected, rel=1e-12)
+    value.backward()
+    assert float(post.grad[0, 0]) == pytest.approx(2 * (0.0 - 0.5) / 3, rel=1e-12)   # d/dpred of the first term
+    assert float(prior.grad[2, 6]) == pytest.approx(0.5 * 3.0 * 2 * 0.1 / 3, rel=1e-9)
+    assert float(prior.grad[:2].abs().sum()) == 0.0                                   # rows without a term

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import math
 import signal
 import sys
 import threading
@@ -168,12 +169,11 @@ class SceneLoss:
         self.max_abs_gain = torch.zeros((), dtype=torch.float64, device=device)   # no sync per frame on a GPU
         self.gt_terms = self.pseudo_terms = self.prediction_terms = 0
 
-    def _add_rows(self, pred: torch.Tensor, rows: np.ndarray, target: np.ndarray, scale: float) -> None:
-        """Terms of ``pred[rows]`` ((k,) row indices of pred (K, 9)) against ``target`` (k, 9)."""
-        whole = len(rows) == len(pred) and bool((rows == np.arange(len(rows))).all())
-        self._pred.append(pred if whole else pred.index_select(0, torch.as_tensor(rows, device=pred.device)))
+    def _add_rows(self, pred: torch.Tensor, rows: np.ndarray | None, target: np.ndarray, scale: float) -> None:
+        """Terms of ``pred[rows]`` ((k,) row indices of pred (K, 9); None: every row) against ``target`` (k, 9)."""
+        self._pred.append(pred if rows is None else pred.index_select(0, torch.as_tensor(rows, device=pred.device)))
         self._target.append(np.asarray(target, dtype=np.float64))
-        self._scale.append(np.full(len(rows), scale))
+        self._scale.append(np.full(len(target), scale))
 
     def add(self, u: GroupUpdate, backend: PairedBackend, gt: BoxSet) -> None:
         """Add the terms of one group's update in a frame with ground truth ``gt``: posterior terms of the
@@ -203,7 +203,7 @@ class SceneLoss:
         # semi-supervised: every corrected track has a term, to its GT box or to the EKF posterior
         target = ekf.copy()
         target[has] = gt.boxes[match[has]]
-        self._add_rows(pred, np.arange(len(has)), target, 1.0)
+        self._add_rows(pred, None, target, 1.0)
         self.gt_terms += int(has.sum())
         self.pseudo_terms += int((~has).sum())
 
@@ -539,7 +539,8 @@ class Trainer:
                 deferred.backward(value, list(self.net.parameters()))
         if value.requires_grad:
             grads = [p.grad for p in self.net.parameters() if p.grad is not None]
-            if grads and not bool(torch.isfinite(torch.nn.utils.get_total_norm(grads))):   # one norm for all
+            # the largest |entry| over all gradients (the inf-norm: no overflow of a large finite gradient)
+            if grads and not bool(torch.isfinite(torch.nn.utils.get_total_norm(grads, norm_type=math.inf))):
                 self.opt.zero_grad()
                 self._diverged(scene, "a gradient is NaN or infinite")
             self.opt.step()
