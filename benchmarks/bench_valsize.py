@@ -23,7 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _reference import REPO, interleaved, python, reference_checkout, run_measured  # noqa: E402
+from _reference import REPO, concurrent, interleaved, python, reference_checkout, run_measured  # noqa: E402
 
 DENSE_DRIVER = """
 import sys
@@ -97,6 +97,9 @@ def main(argv=None) -> int:
     ap.add_argument("--frames-per-scene", type=int, default=40)
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--skip", action="append", default=[], help="skip: ekf, grukf, fast, devkit")
+    ap.add_argument("--concurrent", action="append", default=[], metavar="ROW",
+                    help="run the two checkouts' commands of this row (ekf, grukf, fast, devkit) at the same time, "
+                         "one per core, instead of one after the other (the devkit at full size: hours otherwise)")
     args = ap.parse_args(argv)
     py = python()
     with tempfile.TemporaryDirectory(prefix="grutrack-valsize-") as tmp_, reference_checkout(args.reference) as ref:
@@ -111,12 +114,16 @@ def main(argv=None) -> int:
             return str(tmp / f"{name}_{'ref' if r == ref else 'cur'}.json")
 
         rows = []
-        s = interleaved(lambda r: run_measured([py, "-m", "grutrack", "track", *common, "--detections",
+
+        def measured(row):
+            return concurrent if row in args.concurrent else interleaved
+
+        s = measured("ekf")(lambda r: run_measured([py, "-m", "grutrack", "track", *common, "--detections",
                                                 str(paths["dets"]), "--out", out(r, "ekf"), "--no-progress"], r),
                         roots, args.repeat)
         _done(rows, "track, EKF", s)
         if "grukf" not in args.skip:
-            s = interleaved(lambda r: run_measured(
+            s = measured("grukf")(lambda r: run_measured(
                 [py, "-m", "grutrack", "track", *common, "--detections", str(paths["dets"]), "--tracker", "grukf",
                  "--checkpoint", str(checkpoint[r]), "--device", "cpu", "--out", out(r, "grukf"),
                  "--no-progress"], r), roots, args.repeat)
@@ -124,7 +131,7 @@ def main(argv=None) -> int:
         for ev in ("fast", "devkit"):
             if ev in args.skip:
                 continue
-            s = interleaved(lambda r: run_measured([py, "-m", "grutrack", "evaluate", *common, "--submission",
+            s = measured(ev)(lambda r: run_measured([py, "-m", "grutrack", "evaluate", *common, "--submission",
                                                     out(r, "ekf"), "--out", out(r, f"m_{ev}"), "--evaluator", ev],
                                                    r), roots, args.repeat)
             _done(rows, f"evaluate, {ev}", s)
@@ -133,7 +140,8 @@ def main(argv=None) -> int:
 
     frames = args.scenes * args.frames_per_scene
     print(f"\nSYNTHETIC demo split: {args.scenes} scenes, {frames} frames, {n_dets} SIMULATED detections "
-          f"({n_dets / frames:.1f} per frame); medians of {args.repeat} run(s); thread variables unset")
+          f"({n_dets / frames:.1f} per frame); medians of {args.repeat} run(s); thread variables unset"
+          + (f"; run side by side (one per core): {', '.join(args.concurrent)}" if args.concurrent else ""))
     print(f"{'command':<18}{'':>3}{'wall s':>10}{'CPU s':>10}{'peak MiB':>10}   |{'wall s':>10}{'CPU s':>10}"
           f"{'peak MiB':>10}{'wall x':>8}")
     print(f"{'':<21}{'reference ' + (args.reference or '-'):>30}   |{'current':>30}")
