@@ -52,7 +52,9 @@ cfg = load_train_config("grukf", {"device": "cpu", "checkpoint_every": 0, "epoch
 t = Trainer(cfg, scenes, d, out, progress=False)
 frames = []
 step = Trainer._step
-Trainer._step = lambda self, scene: (frames.append(len(scene)), step(self, scene))[1]   # both checkouts have it
+# both checkouts have it: one scene (older commits) or the step's list of scenes
+Trainer._step = lambda self, sc: (frames.append(sum(map(len, sc)) if isinstance(sc, list) else len(sc)),
+                                  step(self, sc))[1]
 t0 = time.perf_counter()
 t.run(max_steps=steps)
 dt = time.perf_counter() - t0

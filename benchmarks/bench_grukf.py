@@ -13,6 +13,9 @@ the training throughput over --steps steps (one per scene, scenes in the run's s
 epoch of the mix takes at that throughput.
 
     .venv/bin/python benchmarks/bench_grukf.py --paper-scale --steps 40 --repeat 1
+
+``--scenes-per-step K``: K scenes per optimizer step, the network batched over them (training config
+``scenes_per_step``; a step is then K scenes, frames/s counts the frames of all of them).
 """
 
 from __future__ import annotations
@@ -46,6 +49,12 @@ def _dets(nusc, split, seed, scenes, tmp):
     return load_detections(path, [f.token for s in scenes for f in s.frames])
 
 
+def _frames_of_steps(t: Trainer, scenes) -> int:
+    """The frames of the scenes of the steps trainer ``t`` has taken (its log names them, ``a+b`` for several)."""
+    length = {s.name: len(s) for s in scenes}
+    return sum(length[name] for row in t.log.steps for name in row.scene.split("+"))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dataroot", default=str(DEFAULT_DATA))
@@ -55,6 +64,7 @@ def main() -> None:
     ap.add_argument("--paper-scale", action="store_true",
                     help="train on mini_train + a 700-scene SYNTHETIC demo (the paper's scale), see the docstring")
     ap.add_argument("--demo-scenes", type=int, default=700, help=argparse.SUPPRESS)
+    ap.add_argument("--scenes-per-step", type=int, default=1, help="training config scenes_per_step")
     args = ap.parse_args()
     torch.set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
     if args.paper_scale:
@@ -65,23 +75,23 @@ def main() -> None:
     val = load_scenes(nusc, "mini_val")
     with tempfile.TemporaryDirectory() as tmp:
         dtrain, dval = _dets(nusc, "mini_train", 1, train, tmp), _dets(nusc, "mini_val", 2, val, tmp)
-        cfg = load_train_config("grukf", {"device": args.device, "checkpoint_every": 0, "epochs": 100})
+        cfg = load_train_config("grukf", {"device": args.device, "checkpoint_every": 0, "epochs": 100,
+                                          "scenes_per_step": args.scenes_per_step})
         fps, sps = [], []
         for r in range(args.repeat):
             t = Trainer(cfg, train, dtrain, Path(tmp) / f"run{r}", progress=False)
             t0 = time.perf_counter()
             t.run(max_steps=args.steps)
             dt = time.perf_counter() - t0
-            frames = sum(len(train[i]) for i in t.state.order[:args.steps]) if t.state.order else 0
-            frames = frames or sum(len(s) for s in train) * args.steps // len(train)
-            fps.append(frames / dt)
-            sps.append(args.steps / dt)
+            fps.append(_frames_of_steps(t, train) / dt)
+            sps.append(sum(len(row.scene.split("+")) for row in t.log.steps) / dt)
         ckpt = t.save("bench.pt")
         track_fps = []
         for _ in range(args.repeat):
             run = track_scenes(build_tracker("grukf", checkpoint=ckpt, device=args.device), val, dval)
             track_fps.append(run.fps)
-    print(f"device {t.device}, torch threads {torch.get_num_threads()}, {args.steps} training steps per run")
+    print(f"device {t.device}, torch threads {torch.get_num_threads()}, {args.steps} training steps per run, "
+          f"{args.scenes_per_step} scene(s) per step")
     print(f"training: median {statistics.median(fps):.1f} frames/s, {statistics.median(sps):.2f} scenes/s "
           f"(runs: {', '.join(f'{v:.1f}' for v in fps)} frames/s)")
     print(f"tracking with the GRU-KF: median {statistics.median(track_fps):.1f} frames/s "
@@ -93,7 +103,8 @@ def paper_scale(args) -> None:
     from grutrack.tracking.config import load_tracker_config
     from grutrack.training.sources import load_source, merge
 
-    cfg = load_train_config("grukf", {"device": args.device, "checkpoint_every": 0, "epochs": 100})
+    cfg = load_train_config("grukf", {"device": args.device, "checkpoint_every": 0, "epochs": 100,
+                                      "scenes_per_step": args.scenes_per_step})
     yaw = load_tracker_config(cfg.tracker_preset).measured_yaw
     entries = [{"dataset": "nuscenes", "dataroot": args.dataroot, "version": "v1.0-mini", "split": "mini_train",
                 "profile": "centerpoint", "seed": 1},
@@ -111,13 +122,13 @@ def paper_scale(args) -> None:
             t0 = time.perf_counter()
             t.run(max_steps=args.steps)
             dt = time.perf_counter() - t0
-            length = {s.name: len(s) for s in scenes}
-            fps.append(sum(length[row.scene] for row in t.log.steps) / dt)   # the frames of the steps taken
+            fps.append(_frames_of_steps(t, scenes) / dt)
     f = statistics.median(fps)
     print(f"paper-scale source mix: {len(scenes)} scenes, {frames_per_epoch} frames per epoch (mini_train, real motion, "
           f"simulated detections; demo_all, SYNTHETIC); data prepared in {prepare:.1f} s")
     print(f"device {t.device}, torch threads {torch.get_num_threads()}: training median {f:.1f} frames/s over "
-          f"{args.steps} steps (runs: {', '.join(f'{v:.1f}' for v in fps)}); an epoch ({len(scenes)} steps) "
+          f"{args.steps} steps of {args.scenes_per_step} scene(s) (runs: {', '.join(f'{v:.1f}' for v in fps)}); an "
+          f"epoch ({t.total_steps // cfg.epochs} steps) "
           f"{frames_per_epoch / f / 60:.1f} min")
 
 

@@ -69,14 +69,15 @@ def _association(cfg: TrackerConfig):
 
 
 def grukf_group(net, n_labels: int, device: str = "auto", train: bool = False,
-                class_index: np.ndarray | None = None, members: np.ndarray | None = None) -> TrackGroup:
+                class_index: np.ndarray | None = None, members: np.ndarray | None = None,
+                correct=None) -> TrackGroup:
     """One track group run by the GRU-Kalman filter ``net`` for the labels ``members`` (n_labels,) bool (default:
     every label); ``class_index`` (n_labels,) int maps a dataset label to the tracking class the network's
-    per-class gain uses (default: identity)."""
+    per-class gain uses (default: identity); ``correct``: see :class:`GRUKFBackend`."""
     from grutrack.tracking.grukf_backend import GRUKFBackend
 
     members = np.ones(n_labels, dtype=bool) if members is None else np.asarray(members, dtype=bool)
-    return TrackGroup(GRUKFBackend(net, device, train=train, class_index=class_index), members)
+    return TrackGroup(GRUKFBackend(net, device, train=train, class_index=class_index, correct=correct), members)
 
 
 def network_members(arch, cfg: TrackerConfig, index: np.ndarray) -> np.ndarray:

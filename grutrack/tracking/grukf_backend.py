@@ -105,12 +105,15 @@ class GRUKFBackend:
     """Batched GRU-KF over the tracks of one group (every class shares the network and SS model).
 
     ``class_index`` (n_labels,) int: the tracking class (row of the network's per-class gain) of each dataset
-    label; None = the labels are the tracking classes.
+    label; None = the labels are the tracking classes. ``correct``: what runs the network's update (default
+    ``net.correct``; training several scenes per step passes one that batches the scenes' calls,
+    :mod:`grutrack.training.lockstep`).
     """
 
     def __init__(self, net: GRUKalmanNet, device: torch.device | str = "auto", train: bool = False,
-                 class_index: np.ndarray | None = None):
+                 class_index: np.ndarray | None = None, correct=None):
         self.net = net
+        self.correct = net.correct if correct is None else correct
         self.class_index = None if class_index is None else np.asarray(class_index, dtype=np.int64)
         self.device = resolve_device(device) if isinstance(device, str) else device
         self.net.to(self.device)
@@ -209,7 +212,7 @@ class GRUKFBackend:
             y = self._t(z)
             prior, y_prev, post1, post2, prior1, hid = s.take(r)
             K_ekf, P = self._ekf_gain(s, rows, z)
-            post, new_hidden, K = self.net.correct(prior, y, y_prev, post1, prior1, post2, self.hidden(hid),
+            post, new_hidden, K = self.correct(prior, y, y_prev, post1, prior1, post2, self.hidden(hid),
                                                    self._cells(s, rows), self._counts(s, rows), K_prior=K_ekf)
             gain = K.detach().abs().amax(dim=(1, 2)).to(post.dtype)[:, None]
             new_rows = torch.cat([post, y, post, post1, prior, gain], dim=1)

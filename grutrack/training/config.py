@@ -38,6 +38,7 @@ class TrainConfig:
     val_every: int
     checkpoint_every: int
     sources: tuple = ()          # extra training sources (grutrack/training/sources.py), mappings
+    scenes_per_step: int = 1     # scenes per optimizer step (1: the paper's), the network batched over them
 
 
 #: fields holding real numbers: a string that reads as one is taken as that number (PyYAML reads ``1e-5``, which

@@ -66,8 +66,8 @@ class ResamplingTrainer(Trainer):
             return self.given
         return self.resampler(profiles[(epoch - 1) % len(profiles)], resample_seed(self.cfg.seed, epoch))
 
-    def _step(self, scene: Scene) -> None:
+    def _step(self, scenes: list[Scene]) -> None:
         if self.state.epoch != self._dets_epoch:
             self.dets = self.detections_for(self.state.epoch)
             self._dets_epoch = self.state.epoch
-        super()._step(scene)
+        super()._step(scenes)

@@ -220,20 +220,57 @@ class SceneLoss:
 
 
 def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
-              cfg: TrainConfig, device: torch.device, index: np.ndarray) -> SceneLoss:
+              cfg: TrainConfig, device: torch.device, index: np.ndarray, lockstep=None, slot: int = 0) -> SceneLoss:
     """Track one scene with gradients on; returns its collected loss. ``index`` (n_labels,): the tracking
     class each label of the scene's vocabulary takes its parameters (and the network its class gain) from.
-    With ``network_classes: ss_model`` the other labels run the preset's EKF groups and give no loss terms."""
-    gru = grukf_group(net, len(index), device, train=True, class_index=index).backend
+    With ``network_classes: ss_model`` the other labels run the preset's EKF groups and give no loss terms.
+    ``lockstep``: a :class:`~grutrack.training.lockstep.LockstepCorrect` this scene (its ``slot``) shares the
+    network's calls with (several scenes per step); None: the network is called directly."""
+    correct = None if lockstep is None else lockstep.bind(slot)
+    gru = grukf_group(net, len(index), device, train=True, class_index=index, correct=correct).backend
     backend = PairedBackend(gru, ekf_backend(cfg, index))
     tracker = Tracker(tracker_cfg, _groups(backend, net.cfg, tracker_cfg, index))
     loss = SceneLoss(cfg, device)
     for frame in scene.frames:
         _, updates = tracker.step_with_updates(dets[frame.token], frame.timestamp, output=False)
+        if lockstep is not None:
+            lockstep.frame_done(slot)
         for u in updates:
             if u.group == 0:      # the network's group (the others are the preset's EKF)
                 loss.add(u, backend, frame.gt)
     return loss
+
+
+def run_scenes(net: GRUKalmanNet, jobs: list[tuple], cfg: TrainConfig, dets: dict[str, BoxSet],
+               device: torch.device) -> list[SceneLoss]:
+    """:func:`run_scene` for several scenes at once, the network called once per frame for all of them
+    (:mod:`grutrack.training.lockstep`); ``jobs``: [(scene, label index, tracker config)]. One thread per scene;
+    the first scene's failure is raised here (the others stop at their next network call)."""
+    from grutrack.training.lockstep import LockstepAborted, LockstepCorrect
+
+    lock = LockstepCorrect(net.correct, len(jobs))
+    losses: list[SceneLoss | None] = [None] * len(jobs)
+    errors: list[BaseException | None] = [None] * len(jobs)
+
+    def work(slot: int) -> None:
+        scene, index, tracker_cfg = jobs[slot]
+        try:
+            losses[slot] = run_scene(net, scene, dets, tracker_cfg, cfg, device, index, lock, slot)
+        except BaseException as exc:   # noqa: BLE001 - handed to the caller's thread below
+            errors[slot] = exc
+            lock.abort(exc)
+        finally:
+            lock.leave(slot)
+
+    threads = [threading.Thread(target=work, args=(i,), name=f"grukf-scene-{i}") for i in range(len(jobs))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    failed = [e for e in errors if e is not None]
+    if failed:   # the cause, not the other scenes' LockstepAborted
+        raise next((e for e in failed if not isinstance(e, LockstepAborted)), failed[0])
+    return losses
 
 
 def _groups(backend, arch: GRUKFConfig, tracker_cfg: TrackerConfig, index: np.ndarray) -> list[TrackGroup]:
@@ -354,8 +391,9 @@ def _set_rng_state(np_rng: np.random.Generator, torch_rng: torch.Generator, st: 
 
 
 class Trainer:
-    """Runs :func:`run_scene` over the training scenes, one optimizer step per scene, with logging,
-    validation every ``val_every`` steps and resumable checkpoints in ``out_dir``."""
+    """Runs :func:`run_scene` over the training scenes, one optimizer step per scene (per ``scenes_per_step``
+    scenes: their losses averaged, the network batched over them, :func:`run_scenes`), with logging, validation
+    every ``val_every`` steps and resumable checkpoints in ``out_dir``."""
 
     def __init__(self, cfg: TrainConfig, scenes: list[Scene], dets: dict[str, BoxSet], out_dir: str | Path,
                  validate=None, progress: bool = True, source: dict | None = None):
@@ -383,7 +421,7 @@ class Trainer:
         self.net.to(self.device)
         # foreach: the update of all parameters in a few multi-tensor operators (same AdamW, one Python loop less)
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, foreach=True)
-        self.total_steps = cfg.epochs * len(scenes)
+        self.total_steps = cfg.epochs * -(-len(scenes) // cfg.scenes_per_step)   # ceil: a short last step
         self.sched = torch.optim.lr_scheduler.CosineAnnealingLR(self.opt, T_max=max(self.total_steps, 1))
         self.state = TrainState()
         self.log = TrainingLog()
@@ -463,8 +501,9 @@ class Trainer:
             while self.state.epoch < self.cfg.epochs and (max_steps is None or done < max_steps):
                 if self.state.order is None:
                     self.state.order = [int(i) for i in self.np_rng.permutation(len(self.scenes))]
-                self._step(self.scenes[self.state.order[self.state.index]])
-                self._advance()
+                batch = self.state.order[self.state.index:self.state.index + self.cfg.scenes_per_step]
+                self._step([self.scenes[i] for i in batch])
+                self._advance(len(batch))
                 done += 1
                 bar.update(1)
                 if self._interrupted:
@@ -480,10 +519,10 @@ class Trainer:
         final = self.save("model.pt") if self.state.epoch >= self.cfg.epochs else self.out / "last.pt"
         return final
 
-    def _advance(self) -> None:
-        """Move the position past the step just taken (into the next epoch after its last scene), so that a
-        checkpoint written now resumes with the next step."""
-        self.state.index += 1
+    def _advance(self, n: int = 1) -> None:
+        """Move the position past the ``n`` scenes of the step just taken (into the next epoch after its last
+        scene), so that a checkpoint written now resumes with the next step."""
+        self.state.index += n
         if self.state.index >= len(self.state.order):
             self.state.epoch, self.state.index, self.state.order = self.state.epoch + 1, 0, None
 
@@ -515,25 +554,36 @@ class Trainer:
 
         return ctx()
 
-    def _diverged(self, scene: Scene, what: str) -> None:
-        """Keep the last good state (the step was not applied) as last.pt and stop with a clear message."""
+    def _diverged(self, scene: str, what: str) -> None:
+        """Keep the last good state (the step was not applied) as last.pt and stop with a clear message
+        (``scene``: the step's scene name(s))."""
         path = self.save()
-        raise TrainingDiverged(f"training stopped at step {self.state.step + 1} (scene {scene.name}): {what}; "
+        raise TrainingDiverged(f"training stopped at step {self.state.step + 1} (scene {scene}): {what}; "
                                f"the last good checkpoint is {path} (lower lr in the training config, then "
                                f"--resume)")
 
-    def _step(self, scene: Scene) -> None:
+    def _scene_losses(self, scenes: list[Scene]) -> list[SceneLoss]:
+        """The collected loss of each scene of a step (graphs kept): one scene directly, several in lockstep."""
+        jobs = [(sc, *self._setup(sc.vocabulary)) for sc in scenes]
+        if len(jobs) == 1:
+            sc, index, tracker_cfg = jobs[0]
+            return [run_scene(self.net, sc, self.dets, tracker_cfg, self.cfg, self.device, index)]
+        return run_scenes(self.net, jobs, self.cfg, self.dets, self.device)
+
+    def _step(self, scenes: list[Scene]) -> None:
+        """One optimizer step on ``scenes`` (one, the paper's setting, or ``scenes_per_step``): the mean of their
+        scene losses."""
         t0 = time.perf_counter()
         self.net.train()
-        index, tracker_cfg = self._setup(scene.vocabulary)
+        name = "+".join(sc.name for sc in scenes)
         with self.net.deferring_weight_grads() as deferred:
-            loss = run_scene(self.net, scene, self.dets, tracker_cfg, self.cfg, self.device, index)
-            value = loss.value()
+            losses = self._scene_losses(scenes)
+            value = torch.stack([lo.value() for lo in losses]).mean()
             if not torch.isfinite(value):
-                self._diverged(scene, f"the loss is {value.item()}")
-            gain = float(loss.max_abs_gain)
+                self._diverged(name, f"the loss is {value.item()}")
+            gain = max(float(lo.max_abs_gain) for lo in losses)
             if gain > MAX_ABS_GAIN:
-                self._diverged(scene, f"the gain diverged (max |K| = {gain:.3g} > {MAX_ABS_GAIN:g})")
+                self._diverged(name, f"the gain diverged (max |K| = {gain:.3g} > {MAX_ABS_GAIN:g})")
             self.opt.zero_grad()
             if value.requires_grad:
                 deferred.backward(value, list(self.net.parameters()))
@@ -542,14 +592,15 @@ class Trainer:
             # the largest |entry| over all gradients (the inf-norm: no overflow of a large finite gradient)
             if grads and not bool(torch.isfinite(torch.nn.utils.get_total_norm(grads, norm_type=math.inf))):
                 self.opt.zero_grad()
-                self._diverged(scene, "a gradient is NaN or infinite")
+                self._diverged(name, "a gradient is NaN or infinite")
             self.opt.step()
         lr = self.opt.param_groups[0]["lr"]
         self.sched.step()
         self.state.step += 1
-        row = TrainingStep(step=self.state.step, epoch=self.state.epoch, scene=scene.name,
-                           loss=round(float(value.detach()), 8), gt_terms=loss.gt_terms,
-                           pseudo_terms=loss.pseudo_terms, prediction_terms=loss.prediction_terms, lr=lr,
+        row = TrainingStep(step=self.state.step, epoch=self.state.epoch, scene=name,
+                           loss=round(float(value.detach()), 8), gt_terms=sum(lo.gt_terms for lo in losses),
+                           pseudo_terms=sum(lo.pseudo_terms for lo in losses),
+                           prediction_terms=sum(lo.prediction_terms for lo in losses), lr=lr,
                            seconds=round(time.perf_counter() - t0, 4))
         if self.validate is not None and self.cfg.val_every and self.state.step % self.cfg.val_every == 0:
             self.net.eval()
