@@ -222,3 +222,37 @@ def test_simulate_on_demo_split(tmp_path):
     assert main(["simulate-detections", "--dataroot", str(root), "--split", "demo_val", "--out", str(out)]) == 0
     data = json.loads(out.read_text())
     assert len(data["results"]) == 10 and sum(len(v) for v in data["results"].values()) > 50
+
+
+def test_velocity_under_reported_per_object_over_its_life():
+    """``vel_track_fail_prob``: a failing object's velocity is scaled by one factor in every frame (a function of
+    seed, profile and instance id); the others, and profiles without the key, are drawn exactly as before."""
+    import dataclasses
+
+    prof = ds.load_profile("centerpoint")
+    car = prof.classes["car"]
+    fail = dataclasses.replace(prof, classes={**prof.classes, "car": dataclasses.replace(
+        car, vel_track_fail_prob=0.5, vel_track_fail_scale=0.2)})
+    frames = []
+    for k in range(3):   # the same 40 moving cars, 7 m apart, in three frames (same identities)
+        gt = _frame(n=40, seed=k)
+        gt.boxes[:, 0], gt.boxes[:, 1] = 10.0 + 7.0 * (np.arange(40) % 5) + k, -24.5 + 7.0 * (np.arange(40) // 5)
+        gt.boxes[:, 7:9] = [8.0, 0.0]
+        gt.instance_ids[:] = np.array([f"car{i}" for i in range(len(gt))], dtype=object)
+        frames.append(gt)
+    factors = []
+    for gt in frames:
+        base = ds.simulate_frame(gt, prof, ds.frame_rng(3, prof.name, gt.token), seed=3)
+        out = ds.simulate_frame(gt, fail, ds.frame_rng(3, prof.name, gt.token), seed=3)
+        assert np.array_equal(out.boxes[:, :7], base.boxes[:, :7]) and np.array_equal(out.scores, base.scores)
+        ratio = np.hypot(*out.boxes[:, 7:9].T) / np.hypot(*base.boxes[:, 7:9].T)
+        u = ds.object_uniforms(3, prof.name, gt.instance_ids)
+        factors.append(np.where(u[:, 0] < 0.5, u[:, 1] * 0.2, 1.0))
+        hit = base.is_tp & (base.names == "car")
+        # each detected car: its object's factor (matched by the nearest GT centre)
+        near = np.argmin(np.hypot(*(base.boxes[hit, None, :2] - gt.boxes[None, :, :2]).transpose(2, 0, 1)), axis=1)
+        np.testing.assert_allclose(ratio[hit], factors[-1][near], rtol=1e-9)
+        assert 0.3 < np.mean(ratio[hit] < 0.25) < 0.7
+    assert all(np.array_equal(f, factors[0]) for f in factors)     # one factor per object over its life
+    other_seed = ds.object_uniforms(4, prof.name, frames[0].instance_ids)
+    assert not np.array_equal(other_seed, ds.object_uniforms(3, prof.name, frames[0].instance_ids))

@@ -117,6 +117,8 @@ class ClassProfile:
     vel_sigma_rel: float = 0.1         # velocity noise growth, fraction of the speed
     vel_tail_prob: float = 0.03        # probability of a heavy-tailed velocity error
     vel_tail_scale_mps: float = 1.5    # Laplace scale of that error
+    vel_track_fail_prob: float = 0.0   # probability that an object's velocity is under-reported its whole life
+    vel_track_fail_scale: float = 0.3  # ... then its (noisy) velocity times u, u ~ U(0, this) drawn per object
     confusion: dict = field(default_factory=dict)  # {other detection class: probability}
     confusion_logit_penalty: float = 1.0  # score logit lowered for a confused label
     duplicate_prob: float = 0.05       # probability that a detection has a duplicate
@@ -229,6 +231,26 @@ def frame_rng(seed: int, profile_name: str, token: str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(seed) & 0xFFFFFFFF, *words]))
 
 
+def object_uniforms(seed: int, profile_name: str, instance_ids) -> np.ndarray:
+    """(N, 2) uniforms in [0, 1) fixed per object over its life: a function of (seed, profile name, instance id)
+    only (no draw from a frame's stream, so profiles without per-object effects simulate as before)."""
+    out = np.empty((len(instance_ids), 2))
+    for i, inst in enumerate(instance_ids):
+        d = hashlib.md5(f"{int(seed)}|{profile_name}|{inst}".encode()).digest()
+        out[i] = int.from_bytes(d[:8], "little") / 2.0**64, int.from_bytes(d[8:], "little") / 2.0**64
+    return out
+
+
+def _under_reported_velocity(boxes: np.ndarray, cls: np.ndarray, u: np.ndarray, tab: _Tables) -> np.ndarray:
+    """Boxes (K, 9) whose objects fail (``u[:, 0] < vel_track_fail_prob``) with their velocity scaled by
+    ``u[:, 1] * vel_track_fail_scale`` (the same factor in every frame of the object): a detector that
+    persistently reports a moving object as nearly static."""
+    fail = u[:, 0] < tab.vel_track_fail_prob[cls]
+    out = boxes.copy()
+    out[fail, VX:VY + 1] *= (u[fail, 1] * tab.vel_track_fail_scale[cls[fail]])[:, None]
+    return out
+
+
 def _sigmoid(x: np.ndarray) -> np.ndarray:
     return 1.0 / (1.0 + np.exp(-x))
 
@@ -319,10 +341,11 @@ def _free_fps(ego: np.ndarray, det_range: float, tab: _Tables, rng: np.random.Ge
 
 
 def simulate_frame(gt: GTFrame, profile: DetectorProfile, rng: np.random.Generator,
-                   tables: _Tables | None = None) -> DetFrame:
+                   tables: _Tables | None = None, seed: int = 0) -> DetFrame:
     """Detections of one frame sampled from its ground truth.
 
-    gt: canonical GT arrays; profile: the simulated detector; rng: this frame's stream (:func:`frame_rng`).
+    gt: canonical GT arrays; profile: the simulated detector; rng: this frame's stream (:func:`frame_rng`);
+    seed: the run's seed, for effects fixed per object over its life (:func:`object_uniforms`).
     Returns boxes (M, 9), scores (M,) and names (M,), sorted by decreasing score, at most
     ``max_boxes_per_sample``, all with score >= ``score_threshold``. ``tables`` caches the profile's arrays.
     """
@@ -333,6 +356,9 @@ def simulate_frame(gt: GTFrame, profile: DetectorProfile, rng: np.random.Generat
     hit = rng.random(len(cls)) < detection_probability(cls, dist, pts, tab, profile.detection_range_m)
     idx = np.flatnonzero(hit)
     tp_boxes = _noisy_boxes(gt.boxes[idx], cls[idx], dist[idx], tab, rng)
+    if tab.vel_track_fail_prob[cls[idx]].any():
+        u = object_uniforms(seed, profile.name, np.asarray(gt.instance_ids, dtype=object)[idx])
+        tp_boxes = _under_reported_velocity(tp_boxes, cls[idx], u, tab)
     tp_cls = _sample_cdf(tab.confusion_cdf[cls[idx]], rng.random(len(idx)))
     tp_logit = _tp_scores(cls[idx], pts[idx], tab, rng) - tab.confusion_logit_penalty[cls[idx]] * (tp_cls != cls[idx])
 
@@ -363,7 +389,7 @@ def simulate_frame(gt: GTFrame, profile: DetectorProfile, rng: np.random.Generat
 def simulate(frames: Iterable[GTFrame], profile: DetectorProfile, seed: int) -> list[DetFrame]:
     """Simulate every frame with its own stream (see :func:`frame_rng`)."""
     tab = _Tables(profile)
-    return [simulate_frame(f, profile, frame_rng(seed, profile.name, f.token), tab) for f in frames]
+    return [simulate_frame(f, profile, frame_rng(seed, profile.name, f.token), tab, seed) for f in frames]
 
 
 # ----------------------------------------------------------------------------------------------------------------
