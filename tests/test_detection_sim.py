@@ -52,12 +52,24 @@ def _frame(n: int = 400, pts: float = 50.0, seed: int = 0) -> ds.GTFrame:
 # ---------------------------------------------------------------------------------------------------- profiles
 
 def test_shipped_profiles_load():
-    assert {"centerpoint", "pointpillars"} <= set(ds.available_profiles())
-    for name in ("centerpoint", "pointpillars"):
+    assert {"centerpoint", "pointpillars", "centerpoint_velfail"} <= set(ds.available_profiles())
+    for name in ds.available_profiles():
         prof = ds.load_profile(name)
         assert set(prof.classes) == set(ds.DETECTION_CLASSES)
         assert set(prof.reference["ap"]) == set(ds.DETECTION_CLASSES)
         assert 0 < prof.max_boxes_per_sample <= 500
+
+
+def test_velfail_profile_is_centerpoint_with_velocity_failures():
+    """centerpoint_velfail: CenterPoint's statistics for every class, plus velocity failing over whole tracks."""
+    import dataclasses
+
+    cp, vf = ds.load_profile("centerpoint"), ds.load_profile("centerpoint_velfail")
+    assert (vf.detection_range_m, vf.score_threshold, vf.max_boxes_per_sample, vf.reference) == \
+        (cp.detection_range_m, cp.score_threshold, cp.max_boxes_per_sample, cp.reference)
+    for c in ds.DETECTION_CLASSES:
+        assert vf.classes[c].vel_track_fail_prob == 0.3 and cp.classes[c].vel_track_fail_prob == 0.0
+        assert dataclasses.replace(vf.classes[c], vel_track_fail_prob=0.0) == cp.classes[c]
 
 
 def test_unknown_profile_name():
