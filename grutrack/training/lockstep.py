@@ -80,7 +80,7 @@ class LockstepCorrect:
         """Scene ``slot`` has no more frames: the rounds no longer wait for it."""
         with self._cond:
             self._active.discard(slot)
-            if self._waiting and set(self._waiting) >= self._active:
+            if self._error is None and self._waiting and set(self._waiting) >= self._active:
                 self._run_round()
 
     def abort(self, exc: BaseException) -> None:
