@@ -55,6 +55,19 @@ def _frames_of_steps(t: Trainer, scenes) -> int:
     return sum(length[name] for row in t.log.steps for name in row.scene.split("+"))
 
 
+def _timed_trainings(cfg, scenes, dets, tmp, args) -> tuple[Trainer, list[float], list[float]]:
+    """``args.repeat`` fresh trainings of ``args.steps`` steps: the last trainer, frames/s and scenes/s of each."""
+    fps, sps = [], []
+    for r in range(args.repeat):
+        t = Trainer(cfg, scenes, dets, Path(tmp) / f"run{r}", progress=False)
+        t0 = time.perf_counter()
+        t.run(max_steps=args.steps)
+        dt = time.perf_counter() - t0
+        fps.append(_frames_of_steps(t, scenes) / dt)
+        sps.append(sum(len(row.scene.split("+")) for row in t.log.steps) / dt)
+    return t, fps, sps
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dataroot", default=str(DEFAULT_DATA))
@@ -77,14 +90,7 @@ def main() -> None:
         dtrain, dval = _dets(nusc, "mini_train", 1, train, tmp), _dets(nusc, "mini_val", 2, val, tmp)
         cfg = load_train_config("grukf", {"device": args.device, "checkpoint_every": 0, "epochs": 100,
                                           "scenes_per_step": args.scenes_per_step})
-        fps, sps = [], []
-        for r in range(args.repeat):
-            t = Trainer(cfg, train, dtrain, Path(tmp) / f"run{r}", progress=False)
-            t0 = time.perf_counter()
-            t.run(max_steps=args.steps)
-            dt = time.perf_counter() - t0
-            fps.append(_frames_of_steps(t, train) / dt)
-            sps.append(sum(len(row.scene.split("+")) for row in t.log.steps) / dt)
+        t, fps, sps = _timed_trainings(cfg, train, dtrain, tmp, args)
         ckpt = t.save("bench.pt")
         track_fps = []
         for _ in range(args.repeat):
@@ -116,13 +122,7 @@ def paper_scale(args) -> None:
         scenes, dets = merge(loaded)
         prepare = time.perf_counter() - t0
         frames_per_epoch = sum(len(s) for s in scenes)
-        fps = []
-        for r in range(args.repeat):
-            t = Trainer(cfg, scenes, dets, Path(tmp) / f"run{r}", progress=False)
-            t0 = time.perf_counter()
-            t.run(max_steps=args.steps)
-            dt = time.perf_counter() - t0
-            fps.append(_frames_of_steps(t, scenes) / dt)
+        t, fps, _ = _timed_trainings(cfg, scenes, dets, tmp, args)
     f = statistics.median(fps)
     print(f"paper-scale source mix: {len(scenes)} scenes, {frames_per_epoch} frames per epoch (mini_train, real motion, "
           f"simulated detections; demo_all, SYNTHETIC); data prepared in {prepare:.1f} s")
