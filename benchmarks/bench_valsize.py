@@ -96,8 +96,9 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", type=int, default=150)
     ap.add_argument("--frames-per-scene", type=int, default=40)
     ap.add_argument("--repeat", type=int, default=1)
-    ap.add_argument("--skip", action="append", default=[], help="skip: ekf, grukf, fast, devkit")
-    ap.add_argument("--concurrent", action="append", default=[], metavar="ROW",
+    ap.add_argument("--skip", action="append", default=[], choices=("grukf", "fast", "devkit"),
+                    help="skip a row (the EKF tracks are needed by the evaluation rows)")
+    ap.add_argument("--concurrent", action="append", default=[], choices=("ekf", "grukf", "fast", "devkit"),
                     help="run the two checkouts' commands of this row (ekf, grukf, fast, devkit) at the same time, "
                          "one per core, instead of one after the other (the devkit at full size: hours otherwise)")
     args = ap.parse_args(argv)

@@ -120,6 +120,10 @@ def test_trainer_takes_scenes_per_step(scenes_and_dets, tmp_path):
     t2.resume(tmp_path / "a" / "last.pt")
     t2.run()
     assert t2.state.step == 4 and len(t2.log.steps[-1].scene.split("+")) == 1
+    whole = _trainer(scenes, dets, tmp_path / "b", epochs=2, scenes_per_step=2)
+    whole.run()                                   # the same 4 steps without the interruption: the same weights
+    ref = whole.net.state_dict()
+    assert all(torch.equal(t2.net.state_dict()[k], ref[k]) for k in ref)
 
 
 def test_scenes_per_step_is_validated():

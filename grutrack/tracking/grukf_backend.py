@@ -213,7 +213,7 @@ class GRUKFBackend:
             prior, y_prev, post1, post2, prior1, hid = s.take(r)
             K_ekf, P = self._ekf_gain(s, rows, z)
             post, new_hidden, K = self.correct(prior, y, y_prev, post1, prior1, post2, self.hidden(hid),
-                                                   self._cells(s, rows), self._counts(s, rows), K_prior=K_ekf)
+                                               self._cells(s, rows), self._counts(s, rows), K_prior=K_ekf)
             gain = K.detach().abs().amax(dim=(1, 2)).to(post.dtype)[:, None]
             new_rows = torch.cat([post, y, post, post1, prior, gain], dim=1)
             new_hid = torch.cat([new_hidden[k] for k in self._hidden_layout[0]], dim=1).to(s.hid.dtype)

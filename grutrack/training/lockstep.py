@@ -60,7 +60,6 @@ class LockstepCorrect:
         self._asked: set[int] = set()                  # slots that asked in their current frame
         self._round = 0
         self._error: BaseException | None = None
-        self.calls = 0                                  # network calls made (one per round with a request)
 
     def bind(self, slot: int) -> Callable:
         """``correct`` for scene ``slot``: blocks until the round's batched call has run; returns its rows."""
@@ -123,8 +122,7 @@ class LockstepCorrect:
         n_args = len(asks[0][1][0])
         args = [_cat([a[i] for _, (a, _) in asks]) for i in range(n_args)]
         kwargs = {k: _cat([kw[k] for _, (_, kw) in asks]) for k in asks[0][1][1]}
-        with torch.enable_grad():     # grad mode is per thread: the arriving thread may be outside the backend's
+        with torch.enable_grad():   # grad mode is per thread: the last to arrive may be outside its backend's context
             outs = self._correct(*args, **kwargs)
-        self.calls += 1
         split = [_split(o, sizes) for o in outs]
         return {slot: tuple(s[i] for s in split) for i, (slot, _) in enumerate(asks)}

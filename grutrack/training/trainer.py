@@ -262,7 +262,9 @@ def run_scenes(net: GRUKalmanNet, jobs: list[tuple], cfg: TrainConfig, dets: dic
         finally:
             lock.leave(slot)
 
-    threads = [threading.Thread(target=work, args=(i,), name=f"grukf-scene-{i}") for i in range(len(jobs))]
+    # daemon: a second Ctrl-C (raised in this thread's join) does not wait for the scenes to finish
+    threads = [threading.Thread(target=work, args=(i,), name=f"grukf-scene-{i}", daemon=True)
+               for i in range(len(jobs))]
     for t in threads:
         t.start()
     for t in threads:
