@@ -12,6 +12,8 @@ is between its evaluation and rendering).
 - :class:`Manifest`: the provenance record ``grutrack submit`` writes beside a submission
   (``x.json`` -> ``x.manifest.json``).
 - :class:`TrainingLog`: ``train_log.csv`` of ``grutrack train``, one :class:`TrainingStep` per optimiser step.
+- :class:`ValidationRecord`: ``validation.json`` beside it: what was validated, the reference tracker's AMOTA on
+  the same scenes and which step ``model.pt`` holds.
 
 Readers raise :class:`~grutrack.errors.InputFormatError` naming the file and what was expected.
 """
@@ -269,3 +271,36 @@ class TrainingLog:
     def validated(self) -> list[TrainingStep]:
         """The steps after which validation ran."""
         return [s for s in self.steps if s.val_amota is not None]
+
+
+@dataclass
+class ValidationRecord:
+    """``validation.json`` of ``grutrack train``: the validation scenes (a split, or scenes held out of the
+    training split: ``held_out``), the AMOTA of the reference tracker (the training's tracker preset with its own EKF) on them,
+    the selection rule and the step whose network ``model.pt`` holds with its validation AMOTA. Without
+    validation only ``rule`` ("last") and ``selected_step`` are set."""
+
+    rule: str
+    selected_step: int
+    split: str | None = None
+    scenes: list[str] = field(default_factory=list)
+    held_out: bool = False               # the scenes are part of the training split, held out of training
+    reference: str | None = None
+    reference_amota: float | None = None
+    selected_amota: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def write(self, path: str | Path) -> None:
+        write_json_atomic(path, self.to_dict(), indent=2)
+
+    @classmethod
+    def read(cls, path: str | Path) -> ValidationRecord:
+        d = read_json(path, "validation record")
+        if not isinstance(d, dict) or "rule" not in d or "selected_step" not in d:
+            raise InputFormatError(f"{path}: a validation record needs the fields 'rule' and 'selected_step'")
+        try:
+            return cls(**{f.name: d[f.name] for f in fields(cls) if f.name in d})
+        except TypeError as exc:
+            raise InputFormatError(f"{path}: not a validation record ({exc})") from exc

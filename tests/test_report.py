@@ -225,3 +225,31 @@ def test_bad_row_arguments_exit_2_with_one_line(tmp_path, capsys, flag, value, m
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0], err
     assert not (tmp_path / "r.md").exists()
+
+
+def test_demo_report_draws_the_learning_curve_with_the_reference_line(tmp_path, monkeypatch):
+    from types import SimpleNamespace
+
+    from grutrack.documents import TrainingLog, ValidationRecord
+    from grutrack.report import demo, figures
+
+    (tmp_path / "log.csv").write_text("step,epoch,scene,loss,gt_terms,pseudo_terms,lr,val_amota,seconds\n"
+                                      "0,0,(before training),nan,0,0,nan,0.80,0\n1,0,s,0.5,3,1,1e-3,,1.0\n"
+                                      "2,0,s,0.4,3,1,1e-3,0.83,1.0\n3,1,s,0.3,3,1,1e-3,0.82,1.0\n")
+    rec = ValidationRecord(rule="best_val_amota", selected_step=2, split="demo_train", scenes=["a", "b"],
+                           held_out=True, reference="tracker preset 'ekf' (its EKF)", reference_amota=0.81,
+                           selected_amota=0.83)
+    rec.write(tmp_path / "validation.json")
+    drawn = []
+    monkeypatch.setattr(figures, "lines", lambda path, series, *a, **k: drawn.append((series, k)) or Path(path))
+    inp = SimpleNamespace(figures=tmp_path / "fig", out=tmp_path / "r.md")
+    text = "\n".join(demo._learning_curve(inp, "g", TrainingLog.read(tmp_path / "log.csv"),
+                                          tmp_path / "validation.json"))
+    series, kw = drawn[0]
+    assert series == {"GRU-KF": ([0, 2, 3], [0.80, 0.83, 0.82])}
+    assert kw["hlines"] == {"tracker preset 'ekf' (its EKF): 0.810": 0.81}
+    assert ("Validated on 2 scenes held out of demo_train (a, b), not trained on; step 0 is the network before "
+            "training. model.pt holds step 2 (the step of best validation AMOTA, AMOTA 0.830); tracker preset "
+            "'ekf' (its EKF) on the same scenes: 0.810.") in text
+    # a training without validation draws no curve
+    assert demo._learning_curve(inp, "g", TrainingLog.read(tmp_path / "log.csv"), tmp_path / "none.json") == []

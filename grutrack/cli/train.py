@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from grutrack.tracking.config import load_tracker_config
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer, TrainingInterrupted
-    from grutrack.training.validation import make_validator
+    from grutrack.training.validation import Validator, make_validator
 
     overrides = {k: v for k, v in (("mode", args.mode), ("epochs", args.epochs), ("val_every", args.val_every),
                                    ("seed", args.seed)) if v is not None}
@@ -77,6 +77,12 @@ def run(args: argparse.Namespace) -> int:
     validate = None
     source = {"dataset": ds.name, "dataroot": str(Path(args.dataroot).resolve()), "version": args.version,
               "split": args.split, "detections": str(Path(args.detections).resolve())}
+    held = _held_out(cfg, args, ds.name, scenes) if not args.val_split else []
+    if held:
+        names = {sc.name for sc in held}
+        scenes = [sc for sc in scenes if sc.name not in names]
+        source["validation_scenes"] = sorted(names)
+        print(f"validating on {len(held)} scenes held out of {args.split}: {', '.join(sorted(names))}")
     if ds.name != "nuscenes":
         source["rate_hz"] = args.rate
     from grutrack.training.resample import DetectionResampler
@@ -99,11 +105,14 @@ def run(args: argparse.Namespace) -> int:
                                     source=source)
     else:
         trainer = Trainer(cfg, scenes, dets, args.out, progress=not args.no_progress, source=source)
+    val_cfg = replace(trainer.tracker_cfg, matched_box=cfg.matched_box)
     if args.val_split:
         val_scenes = ds.scenes(args.val_split)
         val_dets = ds.load_detections(args.val_detections, args.val_split, val_scenes, yaw).boxes
-        validate = make_validator(ds.tables, args.val_split, val_scenes, val_dets,
-                                  replace(trainer.tracker_cfg, matched_box=cfg.matched_box), cfg.device)
+        validate = make_validator(ds.tables, args.val_split, val_scenes, val_dets, val_cfg, cfg.device)
+    elif held:
+        validate = Validator(ds.tables, args.split, held, dets, val_cfg, cfg.device, held_out=True,
+                             reference_name=f"tracker preset '{cfg.tracker_preset}' (its EKF)")
     trainer.validate = validate
     if args.resume:
         trainer.resume(Path(args.out) / "last.pt")
@@ -114,9 +123,35 @@ def run(args: argparse.Namespace) -> int:
         print(f"grutrack train: {exc}", file=sys.stderr)
         return 130
     last = trainer.log.steps[-1] if trainer.log.steps else None
-    print(f"wrote {final} after {trainer.state.step} steps (loss {last.loss if last else None}, "
-          f"val AMOTA {(last.val_amota if last else None) or 'n/a'}); log: {Path(args.out) / 'train_log.csv'}")
+    print(f"wrote {final} after {trainer.state.step} steps (last loss {last.loss if last else None}); log: "
+          f"{Path(args.out) / 'train_log.csv'}")
+    if validate is not None and final.name == "model.pt":
+        from grutrack.documents import ValidationRecord
+
+        rec = ValidationRecord.read(Path(args.out) / "validation.json")
+        chosen = "the last step" if rec.rule == "last" else "the step of best validation AMOTA"
+        amota = "n/a" if rec.selected_amota is None else f"{rec.selected_amota:.4f}"
+        print(f"model.pt holds step {rec.selected_step} ({chosen}): validation AMOTA {amota}; "
+              f"{rec.reference} on the same scenes: {rec.reference_amota:.4f}")
     return 0
+
+
+def _held_out(cfg, args: argparse.Namespace, dataset: str, scenes: list) -> list:
+    """The training split's scenes held out for validation (``validation_scenes``), or [] when there are none:
+    the config asks for none, or the data is not nuScenes-format (said in one line on stderr)."""
+    from grutrack.training.validation import held_out_scenes
+
+    n = cfg.validation_scenes
+    if n == 0:
+        return []
+    if dataset != "nuscenes":
+        print(f"grutrack train: note: validation_scenes {n} is for nuScenes-format data; training on every "
+              f"{dataset} scene of {args.split} without validation (model.pt: the last step)", file=sys.stderr)
+        return []
+    if n >= len(scenes):
+        raise ConfigError(f"{cfg_name(args.config)}: validation_scenes {n} would leave no training scene (split "
+                          f"'{args.split}' has {len(scenes)}); expected fewer, or 0 with --val-split")
+    return held_out_scenes(scenes, n)
 
 
 def cfg_name(config_arg: str) -> str:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from grutrack.report import figures
-from grutrack.documents import TrainingLog
+from grutrack.documents import TrainingLog, ValidationRecord
 from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import (header, image, per_class_table, provenance, runs_table, table, num,
                                       training_provenance, worst_scene_strips)
@@ -64,7 +64,30 @@ def _training_sections(inp: ReportInputs) -> list[str]:
                 f"{last.step} steps over {last.epoch + 1} epoch(s); last scene loss {last.loss:.4g}"
                 + (f"; last validation AMOTA {val[-1].val_amota:.3f}" if val else "") + ".", "",
                 image(path, inp.out.parent, f"training loss of {label}")]
+        out += _learning_curve(inp, label, tl, Path(log).parent / "validation.json")
     return out
+
+
+def _learning_curve(inp: ReportInputs, label: str, tl: TrainingLog, record_path: Path) -> list[str]:
+    """Validation AMOTA against step (step 0: the network before training) with the reference tracker's AMOTA on
+    the same scenes as a line, and which step model.pt holds; nothing when the training was not validated."""
+    val = tl.validated()
+    if not val or not record_path.is_file():
+        return []
+    rec = ValidationRecord.read(record_path)
+    ref = {f"{rec.reference}: {rec.reference_amota:.3f}": rec.reference_amota} \
+        if rec.reference_amota is not None else None
+    path = figures.lines(inp.figures / f"learning_curve_{label}.png",
+                         {"GRU-KF": ([r.step for r in val], [r.val_amota for r in val])},
+                         f"Validation AMOTA of '{label}' (SYNTHETIC demo)", "step", "AMOTA", hlines=ref,
+                         min_span=0.02)
+    where = f"{len(rec.scenes)} scenes held out of {rec.split}" if rec.held_out else f"the {rec.split} split"
+    chosen = ("the last step" if rec.rule == "last" else "the step of best validation AMOTA")
+    amota = "n/a" if rec.selected_amota is None else f"{rec.selected_amota:.3f}"
+    text = (f"Validated on {where} ({', '.join(rec.scenes)}), not trained on; step 0 is the network before "
+            f"training. model.pt holds step {rec.selected_step} ({chosen}, AMOTA {amota})"
+            + (f"; {rec.reference} on the same scenes: {rec.reference_amota:.3f}." if ref else "."))
+    return ["", text, "", image(path, inp.out.parent, f"validation AMOTA of {label}")]
 
 
 def _no_step(cfg_path: Path) -> str:

@@ -11,6 +11,7 @@ AdamW step per scene; cosine annealing over all steps.
 
 from __future__ import annotations
 
+import copy
 import functools
 import hashlib
 import math
@@ -25,7 +26,7 @@ import numpy as np
 import torch
 
 from grutrack.data.scene import NUSCENES_VOCABULARY, BoxSet, Scene
-from grutrack.documents import TrainingLog, TrainingStep
+from grutrack.documents import TrainingLog, TrainingStep, ValidationRecord
 from grutrack.errors import ConfigError, GrutrackError, InputFormatError
 from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig, MEAS_PLANAR, STATE_PLANAR
 from grutrack.motion.torch_models import wrap_angle_t
@@ -405,7 +406,8 @@ class Trainer:
         self._interrupted = False
         self._log_written = time.monotonic()
         self.out = Path(out_dir)
-        self.validate = validate            # callable(net) -> AMOTA, or None
+        self.validate = validate            # callable(net) -> AMOTA (a validation.Validator), or None
+        self._best: tuple[int, float] | None = None     # (step, val AMOTA) of best.pt (select_checkpoint)
         self.progress = progress
         self.device = resolve_device(cfg.device, "training config 'device'")
         vocab = scenes[0].vocabulary if scenes else NUSCENES_VOCABULARY
@@ -437,10 +439,11 @@ class Trainer:
         return self._setups[vocab]
 
     # -- checkpoints ------------------------------------------------------------------------------------
-    def save(self, name: str = "last.pt") -> Path:
-        """Write a resumable checkpoint (and the CSV log) into the output folder."""
+    def save(self, name: str = "last.pt", net: GRUKalmanNet | None = None, extra: dict | None = None) -> Path:
+        """Write a resumable checkpoint (and the CSV log) into the output folder (``net``: other weights than
+        the training network's, e.g. the selected step's for model.pt; ``extra``: more fields)."""
         path = self.out / name
-        save_checkpoint(path, self.net, {
+        save_checkpoint(path, self.net if net is None else net, {**(extra or {}), 
             "optimizer": self.opt.state_dict(), "scheduler": self.sched.state_dict(),
             "rng": _rng_state(self.np_rng, self.torch_rng), "train_state": asdict(self.state),
             "train_config": asdict(self.cfg), "log": [s.to_row() for s in self.log.steps],
@@ -459,6 +462,17 @@ class Trainer:
         _set_rng_state(self.np_rng, self.torch_rng, ck["rng"])
         self.state = TrainState(**ck["train_state"])
         self.log = TrainingLog([TrainingStep.from_row(r, str(path)) for r in ck["log"]])
+        self._best = self._resumed_best()
+
+    def _resumed_best(self) -> tuple[int, float] | None:
+        """The (step, AMOTA) best.pt holds when it is the best validated step of the resumed log, else None (a
+        best.pt from beyond the resumed step is rewritten when that step is validated again)."""
+        val = self.log.validated()
+        if self.cfg.select_checkpoint != "best_val_amota" or not val or not (self.out / "best.pt").is_file():
+            return None
+        top = max(val, key=lambda r: (r.val_amota, -r.step))
+        held = read_checkpoint(self.out / "best.pt").get("selected", {})
+        return (top.step, top.val_amota) if held.get("step") == top.step else None
 
     def _check_resumable(self, path: str | Path, ck: dict) -> None:
         """Refuse to resume ``ck`` unless it was written by a run of the same data and settings."""
@@ -496,6 +510,8 @@ class Trainer:
         from tqdm import tqdm
 
         self.out.mkdir(parents=True, exist_ok=True)
+        if self.validate is not None and self.state.step == 0 and not self.log.steps:
+            self._validate_start()
         done = 0
         bar = tqdm(total=self.total_steps, initial=self.state.step, unit="step", desc="training GRU-KF",
                    disable=not self.progress)
@@ -517,9 +533,51 @@ class Trainer:
         if self.state.epoch >= self.cfg.epochs and self.validate is not None and \
                 self.log.steps and self.log.steps[-1].val_amota is None:
             self.log.steps[-1].val_amota = round(float(self.validate(self.net)), 6)
+            self._consider(self.log.steps[-1])
         self.save()
-        final = self.save("model.pt") if self.state.epoch >= self.cfg.epochs else self.out / "last.pt"
-        return final
+        return self._write_model() if self.state.epoch >= self.cfg.epochs else self.out / "last.pt"
+
+    # -- validation and the selected checkpoint --------------------------------------------------------------
+    def _validate_start(self) -> None:
+        """Validate the network before any step: row 0 of the log (loss NaN), a candidate for model.pt."""
+        self.net.eval()
+        row = TrainingStep(step=0, epoch=0, scene="(before training)", loss=math.nan,
+                           val_amota=round(float(self.validate(self.net)), 6), seconds=0.0)
+        self.log.steps.append(row)
+        self._consider(row)
+
+    def _consider(self, row: TrainingStep) -> None:
+        """With ``select_checkpoint: best_val_amota``: keep the network just validated as best.pt when its AMOTA
+        is above every earlier one's."""
+        if self.cfg.select_checkpoint != "best_val_amota" or row.val_amota is None:
+            return
+        if self._best is None or row.val_amota > self._best[1]:
+            self._best = (row.step, row.val_amota)
+            save_checkpoint(self.out / "best.pt", self.net, {
+                "train_config": asdict(self.cfg), "selected": {"step": row.step, "val_amota": row.val_amota}})
+
+    def _write_model(self) -> Path:
+        """model.pt (the selected step's network with the final run's records) and validation.json."""
+        v = self.validate
+        record = ValidationRecord(rule="last", selected_step=self.state.step,
+                                  split=getattr(v, "split", None), scenes=list(getattr(v, "scene_names", [])),
+                                  held_out=bool(getattr(v, "held_out", False)),
+                                  reference=getattr(v, "reference_name", None))
+        val = self.log.validated()
+        if val:
+            record.selected_amota = val[-1].val_amota if val[-1].step == self.state.step else None
+            ref = getattr(v, "reference_amota", None)
+            record.reference_amota = None if ref is None else round(float(ref()), 6)
+        net = None
+        if self._best is not None:
+            step, amota = self._best
+            net = copy.deepcopy(self.net)
+            load_weights(net, read_checkpoint(self.out / "best.pt", map_location=self.device), self.out / "best.pt")
+            record.rule, record.selected_step, record.selected_amota = "best_val_amota", step, amota
+        path = self.save("model.pt", net, {"selected": {"rule": record.rule, "step": record.selected_step,
+                                                         "val_amota": record.selected_amota}})
+        record.write(self.out / "validation.json")
+        return path
 
     def _advance(self, n: int = 1) -> None:
         """Move the position past the ``n`` scenes of the step just taken (into the next epoch after its last
@@ -607,6 +665,7 @@ class Trainer:
         if self.validate is not None and self.cfg.val_every and self.state.step % self.cfg.val_every == 0:
             self.net.eval()
             row.val_amota = round(float(self.validate(self.net)), 6)
+            self._consider(row)
         self.log.steps.append(row)
         if self.state.step == 1 or time.monotonic() - self._log_written >= LOG_EVERY_S:
             self._write_log()   # progress shows in train_log.csv from the first step on

@@ -1,8 +1,10 @@
-"""Validation during training: track a split with the current network and score it (AMOTA)."""
+"""Validation during training: track the validation scenes with the current network and score them (AMOTA), and
+the tracker preset's own EKF once on the same scenes as the reference line of the learning curve."""
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 
 import numpy as np
@@ -11,27 +13,76 @@ from grutrack.classes import TRACKING_CLASSES
 from grutrack.data.scene import BoxSet, Scene
 from grutrack.export.nuscenes_json import build_submission
 from grutrack.tracking.config import TrackerConfig
-from grutrack.tracking.factory import network_groups
+from grutrack.tracking.factory import ekf_groups, network_groups
 from grutrack.tracking.tracker import Tracker, track_scenes
 
 
-def make_validator(nusc, split: str, scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
-                   device: str = "auto"):
-    """A callable(net) -> overall AMOTA of the GRU-KF tracker on nuScenes(-format) ``split`` (official
-    semantics, computed by grutrack's exact fast evaluator); labels are the 7 tracking classes."""
-    from grutrack.evaluation.fast_amota import fast_tracking_eval
+class Validator:
+    """callable(net) -> overall AMOTA of the GRU-KF tracker on ``scenes`` of nuScenes(-format) ``split`` (official
+    semantics, grutrack's exact fast evaluator; labels are the 7 tracking classes). With ``held_out`` the scenes are
+    part of ``split`` held out of training and only their tracks and ground truth are scored.
 
-    tokens = [f.token for s in scenes for f in s.frames]
+    ``split``, ``scene_names``, ``reference_name`` and :meth:`reference_amota` (the AMOTA of ``tracker_cfg``'s own
+    EKF on the same scenes, computed once) describe it in ``validation.json``."""
 
-    def validate(net) -> float:
+    def __init__(self, nusc, split: str, scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
+                 device: str = "auto", held_out: bool = False, reference_name: str = "ekf"):
+        self.nusc, self.split, self.scenes, self.dets = nusc, split, scenes, dets
+        self.tracker_cfg, self.device, self.held_out = tracker_cfg, device, held_out
+        self.scene_names = [sc.name for sc in scenes]
+        self.reference_name = reference_name
+
+    def __call__(self, net) -> float:
         was_training = net.training
         net.eval()
-        groups = network_groups(net, tracker_cfg, np.arange(len(TRACKING_CLASSES)), device)
-        run = track_scenes(Tracker(tracker_cfg, groups), scenes, dets)
-        net.train(was_training)
-        sub = build_submission(run.results, tokens, tracker_cfg.max_boxes_per_sample)
-        with contextlib.redirect_stdout(io.StringIO()):
-            summary = fast_tracking_eval(nusc, sub, split)
-        return float(summary["amota"])
+        groups = network_groups(net, self.tracker_cfg, np.arange(len(TRACKING_CLASSES)), self.device)
+        try:
+            return self._score(Tracker(self.tracker_cfg, groups))
+        finally:
+            net.train(was_training)
 
-    return validate
+    @functools.lru_cache(maxsize=1)
+    def reference_amota(self) -> float:
+        """AMOTA of the tracker preset with its own EKF motion models on the validation scenes."""
+        return self._score(Tracker(self.tracker_cfg, ekf_groups(self.tracker_cfg,
+                                                                np.arange(len(TRACKING_CLASSES)))))
+
+    def _score(self, tracker: Tracker) -> float:
+        from grutrack.evaluation.fast_amota import evaluate_tracks, fast_tracking_eval, load_tracks
+
+        tokens = [f.token for s in self.scenes for f in s.frames]
+        sub = build_submission(track_scenes(tracker, self.scenes, self.dets).results, tokens,
+                               self.tracker_cfg.max_boxes_per_sample)
+        with contextlib.redirect_stdout(io.StringIO()):
+            if not self.held_out:
+                return float(fast_tracking_eval(self.nusc, sub, self.split)["amota"])
+            keep = {sc.token for sc in self.scenes}
+            others = {s["token"] for s in self.nusc.sample if s["scene_token"] in _split_scene_tokens(
+                self.nusc, self.split)} - set(tokens)
+            sub["results"].update({t: [] for t in others})     # the devkit's loader wants every sample of the split
+            gt, pred, _ = load_tracks(self.nusc, sub, self.split)
+            metrics, _ = evaluate_tracks({k: v for k, v in gt.items() if k in keep},
+                                         {k: v for k, v in pred.items() if k in keep})
+        return float(metrics.serialize()["amota"])
+
+
+def _split_scene_tokens(nusc, split: str) -> set[str]:
+    """Tokens of the scenes of ``split`` (a devkit split or a custom one of the dataset's splits.json)."""
+    from grutrack.data.nuscenes import split_scene_names
+
+    names = set(split_scene_names(nusc, split))
+    return {s["token"] for s in nusc.scene if s["name"] in names}
+
+
+def make_validator(nusc, split: str, scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
+                   device: str = "auto") -> Validator:
+    """A :class:`Validator` of a whole validation split."""
+    return Validator(nusc, split, scenes, dets, tracker_cfg, device)
+
+
+def held_out_scenes(scenes: list[Scene], n: int) -> list[Scene]:
+    """``n`` of ``scenes``, evenly spaced in name order (the middle scene of each of n equal runs)."""
+    ordered = sorted(scenes, key=lambda sc: sc.name)
+    if n <= 0:
+        return []
+    return [ordered[int((i + 0.5) * len(ordered) / n)] for i in range(n)]

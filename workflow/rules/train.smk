@@ -29,6 +29,7 @@ rule train:
         model="checkpoints/{training}/model.pt",
         log_csv="checkpoints/{training}/train_log.csv",
         config="checkpoints/{training}/training.yaml",
+        validation="checkpoints/{training}/validation.json",
     params:
         training=lambda w: jq(_training(w)),
         base=lambda w: _training(w)["config"],

@@ -1,0 +1,161 @@
+"""Checkpoint selection on validation AMOTA (``select_checkpoint``), the untrained network's validation (step 0),
+the reference tracker's AMOTA in ``validation.json`` and validation scenes held out of the training split
+(``validation_scenes``)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+
+from grutrack.documents import TrainingLog, ValidationRecord
+from grutrack.motion.checkpoint import read_checkpoint
+
+
+@pytest.fixture(scope="module")
+def small_training_set(nusc_mini, tmp_path_factory):
+    """Two mini_train scenes of 12 frames with SYNTHETIC CenterPoint-like detections (seed 5)."""
+    from support.grukf_data import mini_train_scenes_and_dets
+
+    return mini_train_scenes_and_dets(nusc_mini, tmp_path_factory.mktemp("dets"), 2, 12)
+
+
+class ScriptedValidator:
+    """A validator whose AMOTA is a fixed pseudo-random function of the network's weights (so a resumed run sees
+    the values of an uninterrupted one); it keeps the weights of every call."""
+
+    split, scene_names, reference_name = "mini_val", ["scene-a", "scene-b"], "tracker preset 'ekf' (its EKF)"
+
+    def __init__(self):
+        self.seen: list[tuple[float, dict]] = []
+
+    def __call__(self, net) -> float:
+        s = sum(float(p.detach().double().sum()) for p in net.parameters())
+        value = round(0.5 + (abs(s) * 7919.0) % 0.4, 6)
+        self.seen.append((value, {k: v.clone() for k, v in net.state_dict().items()}))
+        return value
+
+    def reference_amota(self) -> float:
+        return 0.75
+
+
+def _trainer(scenes, dets, out, validate=None, **over):
+    from grutrack.training.config import load_train_config
+    from grutrack.training.trainer import Trainer
+
+    cfg = load_train_config("grukf", {"epochs": 3, "checkpoint_every": 0, "device": "cpu", "lr": 3e-3,
+                                      "gain_prior": "ekf", "val_every": 1, **over})
+    return Trainer(cfg, scenes, dets, out, validate=validate, progress=False)
+
+
+def _same(a: dict, b: dict) -> bool:
+    return set(a) == set(b) and all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_model_pt_holds_the_best_validated_step_and_last_pt_the_last(small_training_set, tmp_path):
+    scenes, dets = small_training_set
+    v = ScriptedValidator()
+    t = _trainer(scenes, dets, tmp_path, v, select_checkpoint="best_val_amota")
+    final = t.run()
+    log = TrainingLog.read(tmp_path / "train_log.csv")
+    # the untrained network is validated first (step 0), then every step
+    assert [r.step for r in log.validated()] == list(range(0, 7))
+    values = [r.val_amota for r in log.validated()]
+    assert values == [x for x, _ in v.seen]
+    best = values.index(max(values))            # the earliest of equals
+    assert len(set(values)) > 1, "the scripted values must differ for the test to mean anything"
+    model, last = read_checkpoint(final), read_checkpoint(tmp_path / "last.pt")
+    assert _same(model["model"], v.seen[best][1])
+    assert _same(last["model"], v.seen[-1][1])
+    assert model["selected"] == {"rule": "best_val_amota", "step": best, "val_amota": max(values)}
+    rec = ValidationRecord.read(tmp_path / "validation.json")
+    assert (rec.rule, rec.selected_step, rec.selected_amota) == ("best_val_amota", best, max(values))
+    assert (rec.reference_amota, rec.split, rec.scenes) == (0.75, "mini_val", ["scene-a", "scene-b"])
+    # the loss of step 0 is not a number (no step was taken); readers keep it
+    assert log.steps[0].scene == "(before training)" and log.steps[0].loss != log.steps[0].loss
+
+
+def test_select_last_writes_the_last_step_and_says_so(small_training_set, tmp_path):
+    scenes, dets = small_training_set
+    v = ScriptedValidator()
+    final = _trainer(scenes, dets, tmp_path, v, select_checkpoint="last").run()
+    assert _same(read_checkpoint(final)["model"], v.seen[-1][1])
+    assert not (tmp_path / "best.pt").exists()
+    rec = json.loads((tmp_path / "validation.json").read_text())
+    assert rec["rule"] == "last" and rec["selected_step"] == 6 and rec["selected_amota"] == v.seen[-1][0]
+
+
+def test_without_validation_the_record_names_the_last_step(small_training_set, tmp_path):
+    scenes, dets = small_training_set
+    final = _trainer(scenes, dets, tmp_path, None, select_checkpoint="best_val_amota", epochs=1).run()
+    rec = ValidationRecord.read(tmp_path / "validation.json")
+    assert (rec.rule, rec.selected_step, rec.reference_amota) == ("last", 2, None)
+    assert read_checkpoint(final)["train_state"]["step"] == 2
+    assert [r.step for r in TrainingLog.read(tmp_path / "train_log.csv").steps] == [1, 2]
+
+
+def test_a_resumed_run_selects_what_the_uninterrupted_run_selects(small_training_set, tmp_path):
+    scenes, dets = small_training_set
+    a = _trainer(scenes, dets, tmp_path / "a", ScriptedValidator(), select_checkpoint="best_val_amota")
+    a.run()
+    b = _trainer(scenes, dets, tmp_path / "b", ScriptedValidator(), select_checkpoint="best_val_amota")
+    b.run(max_steps=4)
+    c = _trainer(scenes, dets, tmp_path / "b", ScriptedValidator(), select_checkpoint="best_val_amota")
+    c.resume(tmp_path / "b" / "last.pt")
+    c.run()
+    ma, mb = read_checkpoint(tmp_path / "a" / "model.pt"), read_checkpoint(tmp_path / "b" / "model.pt")
+    assert ma["selected"] == mb["selected"] and _same(ma["model"], mb["model"])
+    assert (tmp_path / "a" / "validation.json").read_text() == (tmp_path / "b" / "validation.json").read_text()
+
+
+def test_held_out_scenes_are_evenly_spaced_in_name_order():
+    from types import SimpleNamespace
+
+    from grutrack.training.validation import held_out_scenes
+
+    scenes = [SimpleNamespace(name=f"scene-{i:04d}") for i in (7, 3, 1, 9, 5, 8, 2, 4)]
+    assert [s.name for s in held_out_scenes(scenes, 2)] == ["scene-0003", "scene-0008"]
+    assert [s.name for s in held_out_scenes(scenes, 1)] == ["scene-0005"]
+    assert held_out_scenes(scenes, 0) == []
+    assert len({s.name for s in held_out_scenes(scenes, 8)}) == 8
+
+
+def test_cli_holds_scenes_out_of_training_and_validates_on_them(nusc_mini, nusc_root, tmp_path, capsys):
+    import yaml
+
+    from grutrack.cli import main
+    from grutrack.data.detection_sim import simulate_nuscenes
+    from grutrack.config_loader import read_config
+
+    dets = tmp_path / "d.json"
+    dets.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5,
+                                                 nusc=nusc_mini)))
+    cfg, _ = read_config("training", "grukf")
+    cfg.update(validation_scenes=2, select_checkpoint="best_val_amota", val_every=3, lr=3e-3, gain_prior="ekf",
+               network_classes="ss_model", yaw_flip=True, motion_config="grutrack_nusc")
+    (tmp_path / "t.yaml").write_text(yaml.safe_dump(cfg))
+    argv = ["train", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_train",
+            "--detections", str(dets), "--config", str(tmp_path / "t.yaml"), "--out", str(tmp_path / "ck"),
+            "--epochs", "1", "--no-progress"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    held = ["scene-0655", "scene-1094"]
+    assert f"validating on 2 scenes held out of mini_train: {', '.join(held)}" in out
+    log = TrainingLog.read(tmp_path / "ck" / "train_log.csv")
+    assert len([r for r in log.steps if r.step > 0]) == 6 and not {r.scene for r in log.steps} & set(held)
+    rec = ValidationRecord.read(tmp_path / "ck" / "validation.json")
+    assert rec.scenes == held and rec.split == "mini_train" and rec.held_out
+    assert 0.5 < rec.reference_amota < 1.0
+    # with gain_prior ekf and the preset's motion config for the network's classes, the untrained GRU-KF is the
+    # preset's EKF: its validation AMOTA (step 0) is the reference's up to float32 rounding
+    assert log.steps[0].step == 0 and log.steps[0].val_amota == pytest.approx(rec.reference_amota, abs=2e-3)
+    best = max(log.validated(), key=lambda r: (r.val_amota, -r.step))
+    assert (rec.selected_step, rec.selected_amota) == (best.step, best.val_amota)
+    assert f"model.pt holds step {best.step} (" in out
+    # every scene held out is refused
+    cfg["validation_scenes"] = 8
+    (tmp_path / "t.yaml").write_text(yaml.safe_dump(cfg))
+    assert main(argv[:-5] + ["--out", str(tmp_path / "ck2"), "--epochs", "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "t.yaml: validation_scenes 8 would leave no training scene (split 'mini_train' has 8)" in err
