@@ -569,6 +569,7 @@ def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(nusc_min
 
     from grutrack.cli import main
     from grutrack.data.detection_sim import simulate_nuscenes
+    from grutrack.documents import TrainingLog
     from grutrack.training import trainer as tr
     from grutrack.motion.checkpoint import read_checkpoint
 
@@ -590,7 +591,8 @@ def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(nusc_min
     err = capsys.readouterr().err
     assert "grutrack train: interrupted after step 2; resumable checkpoint" in err and "Traceback" not in err
     assert read_checkpoint(tmp_path / "ck" / "last.pt")["train_state"]["step"] == 2
-    assert len((tmp_path / "ck" / "train_log.csv").read_text().splitlines()) == 3
+    # the default config validates on scenes held out of the split: step 0 (before training), then steps 1, 2
+    assert [r.step for r in TrainingLog.read(tmp_path / "ck" / "train_log.csv").steps] == [0, 1, 2]
     assert '"split": "mini_train"' in (tmp_path / "ck" / "training.yaml").read_text()
     monkeypatch.setattr(tr, "run_scene", real)
     assert main([*argv[:-2], "2", "--no-progress", "--resume"]) == 2

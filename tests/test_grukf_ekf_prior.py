@@ -25,7 +25,8 @@ def _trainer(scenes, dets, out, **over):
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer
 
-    cfg = load_train_config("grukf", {"epochs": 1, "checkpoint_every": 0, "device": "cpu", "lr": 1e-3,
+    cfg = load_train_config("paper", {"epochs": 1, "checkpoint_every": 0, "device": "cpu", "lr": 1e-3,
+                                      "gap_bins": 5,
                                       "gain_prior": "ekf", "yaw_flip": True, **over})
     return Trainer(cfg, scenes, dets, out, progress=False)
 
@@ -116,4 +117,5 @@ def test_ekf_prior_needs_the_ekf_gain_and_is_a_named_option():
         GRUKalmanNet(GRUKFConfig(gain_prior="kalman"))
     with pytest.raises(ConfigError, match="'gain_prior' must be 'constant' or 'ekf'"):
         load_train_config("grukf", {"gain_prior": "kalman"})
-    assert load_train_config("grukf").gain_prior == "constant"
+    assert load_train_config("paper").gain_prior == "constant"            # the paper's form
+    assert load_train_config("grukf").gain_prior == "ekf"                 # the default recipe

@@ -28,7 +28,8 @@ def _trainer(scenes, dets, out, **over):
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer
 
-    cfg = load_train_config("grukf", {"epochs": 1, "checkpoint_every": 0, "device": "cpu", "lr": 1e-3, **over})
+    cfg = load_train_config("paper", {"epochs": 1, "checkpoint_every": 0, "device": "cpu", "lr": 1e-3,
+                                      "gap_bins": 5, **over})
     return Trainer(cfg, scenes, dets, out, progress=False)
 
 
@@ -97,7 +98,8 @@ def test_training_with_network_classes_ss_model_takes_loss_terms_of_the_network_
 def test_network_classes_is_a_named_option():
     from grutrack.training.config import load_train_config
 
-    assert load_train_config("grukf").network_classes == "all"
+    assert load_train_config("paper").network_classes == "all"            # the paper: one network for all
+    assert load_train_config("grukf").network_classes == "ss_model"       # the default recipe
     assert GRUKFConfig().network_classes == "all"      # checkpoints written before the key: every class
     with pytest.raises(ConfigError, match="'network_classes' must be 'all' or 'ss_model'"):
         load_train_config("grukf", {"network_classes": "ctra"})

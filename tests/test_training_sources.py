@@ -33,10 +33,12 @@ def test_training_over_nuscenes_av2_and_a_generated_demo(nusc_root, av2_root, mi
                   "--source", f"{{dataset: av2, dataroot: {av2_root}, split: val, profile: centerpoint, seed: 2}}",
                   "--source", "{dataset: demo, scenes: 3, frames_per_scene: 8, split: demo_all, "
                               "profile: pointpillars}") == 0
-    assert "training on 13 scenes, 411 frames from 3 sources" in capsys.readouterr().out
-    scenes = [row["scene"] for row in csv.DictReader((out / "train_log.csv").open())]
-    assert len(scenes) == len(set(scenes)) == 13
-    assert sum(s.startswith("scene-") for s in scenes) == 8                       # mini_train
+    # the default config holds two scenes of the command's split out for validation (never trained on)
+    assert "training on 11 scenes, 330 frames from 3 sources" in capsys.readouterr().out
+    scenes = [row["scene"] for row in csv.DictReader((out / "train_log.csv").open()) if row["step"] != "0"]
+    assert len(scenes) == len(set(scenes)) == 11
+    assert sum(s.startswith("scene-") for s in scenes) == 6                       # mini_train less the held out
+    assert not {"scene-0655", "scene-1094"} & set(scenes)
     assert sum(s.startswith("demo-scene-") for s in scenes) == 3                  # the generated demo
     assert sum(len(s) == 36 and s.count("-") == 4 for s in scenes) == 2          # the two AV2 log ids
     data = next(ln for ln in (out / "training.yaml").read_text().splitlines() if ln.startswith("# data "))
@@ -50,7 +52,7 @@ def test_config_sources_and_resampling_cover_every_source(nusc_root, mini_train_
     from grutrack.training.config import load_train_config
     from grutrack.training.sources import load_source, merge, merged_resampler
 
-    cfg = dict(yaml.safe_load((Path(__file__).resolve().parents[1] / "grutrack/configs/training/grukf.yaml")
+    cfg = dict(yaml.safe_load((Path(__file__).resolve().parents[1] / "grutrack/configs/training/paper.yaml")
                               .read_text()))
     cfg["sources"] = [{"dataset": "demo", "scenes": 2, "frames_per_scene": 6, "split": "demo_all",
                        "profile": "centerpoint", "seed": 4}]

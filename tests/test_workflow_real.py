@@ -68,11 +68,14 @@ def mini_run(tmp_path_factory, nusc_root, pointpillars_mini_val):
         "datasets": {"nuscenes": {"dataroot": str(nusc_root), "version": "v1.0-mini"}},
         "detectors": {"pointpillars": {"kind": "local", "format": "nuscenes_json", "member": None,
                                        "files": {"mini_val": str(pointpillars_mini_val)}}},
-        # smallest training the config allows: one epoch (8 steps) on mini_train, simulated detections
+        # smallest training the config allows: one epoch (6 steps) on mini_train with 2 scenes held out for
+        # validation (validated before the first step and after the 3rd and 6th), simulated detections
         "trainings": {
-            "nusc_grukf": {"split": "mini_train", "detector": "centerpoint_sim", "overrides": {"epochs": 1}},
+            "nusc_grukf": {"split": "mini_train", "detector": "centerpoint_sim",
+                           "overrides": {"epochs": 1, "validation_scenes": 2, "val_every": 3}},
             "nusc_grukf_bicycle": {"split": "mini_train", "detector": "centerpoint_sim",
-                                   "overrides": {"epochs": 1, "ss_model": "BICYCLE"}},
+                                   "overrides": {"epochs": 1, "ss_model": "BICYCLE", "validation_scenes": 2,
+                                                 "val_every": 3}},
         },
         # the nusc_val experiment (all 8 runs of Tables III and IV) on mini_val with the PointPillars detections
         "experiments": {"nusc_val": {"split": "mini_val", "detectors": ["pointpillars"]}},
@@ -161,7 +164,7 @@ KILL_CFG = """
 datasets:
   demo: {scenes: 3, frames_per_scene: 12}
 trainings:
-  demo_grukf: {overrides: {epochs: 25, checkpoint_every: 1}}
+  demo_grukf: {overrides: {epochs: 25, checkpoint_every: 1, validation_scenes: 1}}
 """
 TRAIN_OUTPUTS = ("checkpoints/demo_grukf/model.pt", "checkpoints/demo_grukf/train_log.csv",
                  "checkpoints/demo_grukf/training.yaml")
@@ -229,7 +232,7 @@ def test_killed_rule_is_incomplete_and_a_rerun_finishes_it(tmp_path):
     ck = read_checkpoint(tmp_path / TRAIN_OUTPUTS[0], map_location="cpu")
     assert ck["train_state"]["epoch"] == 25
     rows = list(csv.DictReader((tmp_path / TRAIN_OUTPUTS[1]).open()))
-    assert [int(r["step"]) for r in rows] == list(range(1, len(rows) + 1)) and rows
+    assert [int(r["step"]) for r in rows] == list(range(0, len(rows))) and rows    # step 0: before training
     assert yaml.safe_load((tmp_path / TRAIN_OUTPUTS[2]).read_text())["epochs"] == 25
     after = subprocess.run(_snakemake_cmd("-n"), cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
     assert after.returncode == 0 and planned(after) == {}, after.stdout[-2000:] + after.stderr[-2000:]
