@@ -2,13 +2,14 @@
 mini_val motion with detections from several generating processes (SYNTHETIC simulated sets) and the real
 PointPillars file. Official AMOTA / AMOTP via the exact fast evaluator.
 
-    PYTHONPATH=. .venv/bin/python scripts/grukf_suite.py --out reports/grukf_suite \
-        --train paper=gap_bins:0,resample_profiles:[],aux_inputs:false,lr:1.0e-5,epochs:2 --train default= \
-        --constant-gain constant_gain
+    PYTHONPATH=. .venv/bin/python scripts/grukf_suite.py --out reports/grukf_suite --more-sets \
+        --train paper=config:paper --constant-gain constant_gain --checkpoint default=CK/model.pt
 
-Training: mini_train GT with simulated CenterPoint-like detections (seed 1), the shipped training config with the
-given overrides (``key:value`` pairs, YAML values). ``--constant-gain NAME``: the network before any step with no
-gain table (K = the EKF's mean gain on the training data, the same for every track and frame). Evaluation sets
+Training: mini_train GT with simulated CenterPoint-like detections (seed 1), a shipped training config (``config:``
+NAME, default grukf) with the given overrides (``key:value`` pairs, YAML values), every step kept (no validation
+here: a default-recipe checkpoint with its held-out validation and selection comes from ``grutrack train`` and
+``--checkpoint``). ``--constant-gain NAME``: the paper's network before any step, with no gain table (K = the
+EKF's mean gain on the training data, the same for every track and frame). Evaluation sets
 (mini_val, seeds never used in training): centerpoint seed 11, pointpillars seed 12, the heavy-tail profile
 (docs/results/grukf_eval/heavytail.yaml) seed 13, and the real PointPillars detections. Writes suite.csv and
 suite.md (a markdown table) into --out; trained checkpoints go to --out/<name>/.
@@ -146,19 +147,21 @@ def main() -> None:
     resampler = DetectionResampler(NuScenesDataset(DatasetOptions(args.dataroot, "v1.0-mini")), "mini_train",
                                    tr_scenes)
     if args.constant_gain:
-        cfg = load_train_config("grukf", {"device": "cpu", "gap_bins": 0, "class_gain": False, "age_bins": 0})
+        cfg = load_train_config("paper", {"device": "cpu", "gap_bins": 0, "class_gain": False, "age_bins": 0})
         t = ResamplingTrainer(cfg, tr_scenes, tr_dets, out / args.constant_gain, resampler, progress=False)
         models.append((args.constant_gain, {"gap_bins": 0, "steps": 0}, t.save("model.pt")))
     for spec in args.untrained:
         name, _, over = spec.partition("=")
         over = _overrides(over)
-        cfg = load_train_config("grukf", {"device": "cpu", **over})
+        cfg = load_train_config(over.get("config", "grukf"), {"device": "cpu", **{k: v for k, v in over.items()
+                                                                               if k != "config"}})
         t = ResamplingTrainer(cfg, tr_scenes, tr_dets, out / name, resampler, progress=False)
         models.append((name, {**over, "steps": 0}, t.save("model.pt")))
     for spec in args.train:
         name, _, over = spec.partition("=")
         over = _overrides(over)
-        cfg = load_train_config("grukf", {"device": "cpu", **over})
+        cfg = load_train_config(over.get("config", "grukf"), {"device": "cpu", **{k: v for k, v in over.items()
+                                                                               if k != "config"}})
         t0 = time.perf_counter()
         ck = ResamplingTrainer(cfg, tr_scenes, tr_dets, out / name, resampler, progress=False).run()
         print(f"trained {name} {over} in {time.perf_counter() - t0:.0f} s", flush=True)

@@ -1,15 +1,15 @@
-"""The GRU-KF against the EKF trackers, on real nuScenes mini motion: trained with the shipped training config
-on mini_train ground truth with simulated CenterPoint-like detections (seed 1), evaluated on mini_val with simulated
-detections of other seeds (2, 11) and with the real PointPillars detections (official semantics via the exact
-fast evaluator, equal to the devkit's TrackingEval to 1e-15). The GRU-KF writes its posterior for matched tracks.
+"""The GRU-KF against the EKF trackers, on real nuScenes mini motion: trained by `grutrack train` with the default
+recipe (grutrack/configs/training/grukf.yaml: 2 mini_train scenes held out for validation, 72 steps on the other 6
+with detections resampled every epoch, model.pt the step of best validation AMOTA) on mini_train ground truth with
+simulated CenterPoint-like detections (seed 1), evaluated on mini_val with simulated detections of other seeds (2,
+11) and with the real PointPillars detections (official semantics via the exact fast evaluator, equal to the
+devkit's TrackingEval to 1e-15). The GRU-KF writes its posterior for matched tracks.
 
-What holds (measured): on the simulated sets its mean AMOTA is above Poly-MOT's EKF (`polymot`, the paper's
-baseline: 0.897 vs 0.868), and on the real file too (0.180 vs 0.168).
-What does not hold: the default `ekf` preset (Fast-Poly's multiplicative score update, bicycles and motorcycles
-coasting two frames, the velocity noise of grutrack_nusc) scores a higher mean AMOTA on the simulated sets (0.906
-vs 0.897; the GRU-KF runs with the same preset's lifecycle), a lower mean AMOTP (0.377 vs 0.397) and a higher
-AMOTA on the real file (0.184 vs 0.180); the bounds against `ekf` below are regression guards at those measured
-gaps, not the paper's claim."""
+Measured (docs/results/grukf_eval/README.md, "The default recipe"): on the simulated sets its mean AMOTA is the
+default `ekf` preset's within a few thousandths and above Poly-MOT's EKF (`polymot`, the paper's baseline), its mean
+AMOTP a few millimetres below the preset's; on the real file it is above Poly-MOT's and below the preset's. The
+bounds below are regression guards at those measured gaps, not the paper's claim (the learned filter beating the
+EKF), which is not reproduced."""
 
 from __future__ import annotations
 
@@ -43,15 +43,18 @@ def _score(nusc, tracker, scenes, dets) -> dict:
 
 
 @pytest.fixture(scope="module")
-def trained(nusc_mini, tmp_path_factory):
-    from grutrack.training.config import load_train_config
-    from grutrack.training.trainer import Trainer
+def trained(nusc_root, tmp_path_factory):
+    from grutrack.cli import main
+    from grutrack.documents import ValidationRecord
 
     tmp = tmp_path_factory.mktemp("grukf_real")
-    scenes = load_scenes(nusc_mini, "mini_train", with_gt=True)
-    dets = _simulated(nusc_mini, "mini_train", 1, [f.token for s in scenes for f in s.frames], tmp)
-    cfg = load_train_config("grukf", {"device": "cpu"})
-    return Trainer(cfg, scenes, dets, tmp / "ck", progress=False).run(), tmp
+    dets = tmp / "mini_train_s1.json"
+    common = ["--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_train"]
+    assert main(["simulate-detections", *common, "--profile", "centerpoint", "--seed", "1", "--out", str(dets)]) == 0
+    assert main(["train", *common, "--detections", str(dets), "--out", str(tmp / "ck"), "--no-progress"]) == 0
+    rec = ValidationRecord.read(tmp / "ck" / "validation.json")
+    assert rec.rule == "best_val_amota" and rec.held_out and len(rec.scenes) == 2
+    return tmp / "ck" / "model.pt", tmp
 
 
 def test_grukf_amota_at_least_the_ekf_on_simulated_detections(nusc_mini, trained):
@@ -67,9 +70,9 @@ def test_grukf_amota_at_least_the_ekf_on_simulated_detections(nusc_mini, trained
         polymot.append(_score(nusc_mini, build_tracker("ekf", "polymot"), scenes, dets))
         gru.append(_score(nusc_mini, build_tracker("grukf", checkpoint=checkpoint, device="cpu"), scenes, dets))
     mean = lambda rows, k: sum(r[k] for r in rows) / len(rows)  # noqa: E731
-    assert mean(gru, "amota") >= mean(polymot, "amota"), (gru, polymot)
-    assert mean(gru, "amota") >= mean(ekf, "amota") - 0.015, (gru, ekf)
-    assert mean(gru, "amotp") <= mean(ekf, "amotp") + 0.02, (gru, ekf)
+    assert mean(gru, "amota") >= mean(polymot, "amota") + 0.01, (gru, polymot)
+    assert mean(gru, "amota") >= mean(ekf, "amota") - 0.005, (gru, ekf)
+    assert mean(gru, "amotp") <= mean(ekf, "amotp") + 0.005, (gru, ekf)
 
 
 def test_grukf_above_polymot_ekf_on_real_pointpillars(nusc_mini, pointpillars_mini_val, trained):
@@ -81,4 +84,4 @@ def test_grukf_above_polymot_ekf_on_real_pointpillars(nusc_mini, pointpillars_mi
     ekf = _score(nusc_mini, build_tracker("ekf"), scenes, dets)
     gru = _score(nusc_mini, build_tracker("grukf", checkpoint=checkpoint, device="cpu"), scenes, dets)
     assert gru["amota"] >= polymot["amota"] + 0.005, (gru["amota"], polymot["amota"])
-    assert gru["amota"] >= ekf["amota"] - 0.006, (gru["amota"], ekf["amota"])
+    assert gru["amota"] >= ekf["amota"] - 0.01, (gru["amota"], ekf["amota"])

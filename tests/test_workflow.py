@@ -25,6 +25,7 @@ datasets:
   demo: {scenes: 3, frames_per_scene: 12}
 trainings:
   demo_grukf: {overrides: {epochs: 1, validation_scenes: 1}}
+  demo_grukf_last: {overrides: {epochs: 1, validation_scenes: 1}}
 # a leaderboard-style experiment on the demo (no evaluation; a validated zip and the Table II report)
 experiments:
   demo_lb:
@@ -78,7 +79,7 @@ def demo_run(tmp_path_factory):
 def test_demo_report_tables_match_metrics_json(demo_run):
     text = (demo_run / "reports/demo_val.md").read_text()
     assert "SYNTHETIC" in text and "No comparison between the two is implied" in text
-    for run in ("ekf", "grukf", "constant_gain"):
+    for run in ("ekf", "grukf", "grukf_last", "constant_gain"):
         doc = json.loads((demo_run / f"reports/metrics/demo_val/centerpoint_sim/{run}.json").read_text())
         o = doc["overall"]
         row = re.search(rf"^\| {run} \| (.+) \|$", text, re.M).group(1).split(" | ")
@@ -89,6 +90,12 @@ def test_demo_report_tables_match_metrics_json(demo_run):
     assert "## Training 'demo_constant_gain'\n\nNo training step: the network as initialised, whose gain is one " \
            "constant" in text
     assert re.search(r"^\| demo_constant_gain \| .* \| no step \(the initialised network\) \|", text, re.M)
+    # the default recipe's learning curve on the scene held out of demo_train, with the EKF's line
+    assert re.search(r"Validated on 1 scene held out of demo_train \(demo-scene-\d+\), not trained on; step 0 is "
+                     r"the network before training\. model\.pt holds step [01] \(the step of best validation AMOTA, "
+                     r"AMOTA 0\.\d{3}\); tracker preset 'ekf' \(its EKF\) on the same scenes: 0\.\d{3}\.", text)
+    assert "model.pt holds step 1 (the last step" in text                      # demo_grukf_last
+    assert "figures/demo_val/learning_curve_demo_grukf.png" in text
     assert "config hash" in text and "grutrack 0.1.0" in text and "centerpoint_sim.json" in text
     links = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", text)
     assert links

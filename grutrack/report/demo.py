@@ -81,7 +81,8 @@ def _learning_curve(inp: ReportInputs, label: str, tl: TrainingLog, record_path:
                          {"GRU-KF": ([r.step for r in val], [r.val_amota for r in val])},
                          f"Validation AMOTA of '{label}' (SYNTHETIC demo)", "step", "AMOTA", hlines=ref,
                          min_span=0.02)
-    where = f"{len(rec.scenes)} scenes held out of {rec.split}" if rec.held_out else f"the {rec.split} split"
+    n = len(rec.scenes)
+    where = f"{n} scene{'s' if n != 1 else ''} held out of {rec.split}" if rec.held_out else f"the {rec.split} split"
     chosen = ("the last step" if rec.rule == "last" else "the step of best validation AMOTA")
     amota = "n/a" if rec.selected_amota is None else f"{rec.selected_amota:.3f}"
     text = (f"Validated on {where} ({', '.join(rec.scenes)}), not trained on; step 0 is the network before "
