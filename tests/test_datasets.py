@@ -139,7 +139,11 @@ def test_train_on_av2_then_track_av2_with_the_model(av2_root, tmp_path, capsys):
                  '{"epochs": 2, "device": "cpu", "resample_profiles": ["pointpillars"]}', "--out", str(cfg)]) == 0
     assert main(["train", *common, "--detections", str(dets), "--config", str(cfg), "--out", str(ck),
                  "--no-progress"]) == 0
-    assert "after 4 steps" in capsys.readouterr().out            # 2 logs x 2 epochs
+    out = capsys.readouterr()
+    assert "after 4 steps" in out.out            # 2 logs x 2 epochs
+    # the default recipe's held-out validation is nuScenes-format only: said in one line, all logs trained on
+    assert ("note: validation_scenes 2 is for nuScenes-format data; training on every av2 scene of val without "
+            "validation (model.pt: the last step)") in out.err
     assert main(["track", *common, "--detections", str(dets), "--tracker", "grukf", "--checkpoint",
                  str(ck / "model.pt"), "--out", str(tmp_path / "t.pkl"), "--no-progress"]) == 0
     assert main(["train", *common, "--detections", str(dets), "--out", str(tmp_path / "ck2"), "--val-split",
