@@ -443,7 +443,7 @@ class Trainer:
         """Write a resumable checkpoint (and the CSV log) into the output folder (``net``: other weights than
         the training network's, e.g. the selected step's for model.pt; ``extra``: more fields)."""
         path = self.out / name
-        save_checkpoint(path, self.net if net is None else net, {**(extra or {}), 
+        save_checkpoint(path, self.net if net is None else net, {**(extra or {}),
             "optimizer": self.opt.state_dict(), "scheduler": self.sched.state_dict(),
             "rng": _rng_state(self.np_rng, self.torch_rng), "train_state": asdict(self.state),
             "train_config": asdict(self.cfg), "log": [s.to_row() for s in self.log.steps],
