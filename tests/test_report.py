@@ -253,3 +253,16 @@ def test_demo_report_draws_the_learning_curve_with_the_reference_line(tmp_path, 
             "'ekf' (its EKF) on the same scenes: 0.810.") in text
     # a training without validation draws no curve
     assert demo._learning_curve(inp, "g", TrainingLog.read(tmp_path / "log.csv"), tmp_path / "none.json") == []
+
+
+def test_semi_supervised_summary_counts_step_0_as_a_step():
+    """A log validated before its first step (step 0) that is already within 1 % of its best says step 0."""
+    from grutrack.documents import TrainingStep
+    from grutrack.report.semi_supervised import _summary, first_step_reaching, first_step_within
+
+    rows = [TrainingStep(0, 0, "(before training)", float("nan"), val_amota=0.870),
+            TrainingStep(1, 0, "s", 0.5, val_amota=0.860), TrainingStep(2, 0, "s", 0.4, val_amota=0.875)]
+    assert first_step_within(rows) == 0 and first_step_reaching(rows) == 0
+    assert "| a | 2 | 1 | 0.875 | 0.875 (step 2) | 0 |" in _summary({"a": rows})
+    rows[0].val_amota = 0.80
+    assert first_step_within(rows) == 2

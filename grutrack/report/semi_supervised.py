@@ -160,9 +160,14 @@ def _summary(logs: dict[str, list[TrainingStep]]) -> str:
         rows.append([label, str(log[-1].step) if log else DASH, str(log[-1].epoch + 1) if log else DASH,
                      f"{val[-1].val_amota:.3f}" if val else DASH,
                      f"{best.val_amota:.3f} (step {best.step})" if best else DASH,
-                     str(first_step_within(log) or DASH)])
+                     _step_text(first_step_within(log))])
     return table(["training", "steps", "epochs", "last val AMOTA", "best val AMOTA", "first step ≥ 99 % of best"],
                  rows)
+
+
+def _step_text(step: int | None) -> str:
+    """A step number (0: the network before training, validated first), or a dash when there is none."""
+    return DASH if step is None else str(step)
 
 
 def _paper(paper: dict) -> str:
