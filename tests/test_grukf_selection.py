@@ -159,3 +159,21 @@ def test_cli_holds_scenes_out_of_training_and_validates_on_them(nusc_mini, nusc_
     assert main(argv[:-5] + ["--out", str(tmp_path / "ck2"), "--epochs", "1", "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "t.yaml: validation_scenes 8 would leave no training scene (split 'mini_train' has 8)" in err
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("validation_scenes", -1, "'validation_scenes' must be an integer from 0 to 1000, got -1"),
+    ("validation_scenes", 2.5, "'validation_scenes' must be an integer from 0 to 1000, got 2.5"),
+    ("select_checkpoint", "best", "'select_checkpoint' must be 'last' or 'best_val_amota', got 'best'"),
+])
+def test_bad_selection_settings_are_refused_naming_the_key(key, value, message):
+    from grutrack.errors import ConfigError
+    from grutrack.training.config import load_train_config
+
+    with pytest.raises(ConfigError, match=message):
+        load_train_config("grukf", {key: value})
+    # the two shipped configs: the default recipe selects on held-out validation, the paper's keeps the last step
+    assert (load_train_config("grukf").validation_scenes, load_train_config("grukf").select_checkpoint) == \
+        (2, "best_val_amota")
+    assert (load_train_config("paper").validation_scenes, load_train_config("paper").select_checkpoint) == \
+        (0, "last")
