@@ -285,6 +285,7 @@ class ValidationRecord:
     split: str | None = None
     scenes: list[str] = field(default_factory=list)
     held_out: bool = False               # the scenes are part of the training split, held out of training
+    detection_sets: list[str] = field(default_factory=list)   # AMOTA is the mean over these detection sets
     reference: str | None = None
     reference_amota: float | None = None
     selected_amota: float | None = None

@@ -146,6 +146,8 @@ def test_cli_holds_scenes_out_of_training_and_validates_on_them(nusc_mini, nusc_
     assert len([r for r in log.steps if r.step > 0]) == 6 and not {r.scene for r in log.steps} & set(held)
     rec = ValidationRecord.read(tmp_path / "ck" / "validation.json")
     assert rec.scenes == held and rec.split == "mini_train" and rec.held_out
+    # validated with the command's detections and one simulated set per resampling profile (AMOTA their mean)
+    assert rec.detection_sets == ["given", "centerpoint", "pointpillars", "centerpoint_velfail"]
     assert 0.5 < rec.reference_amota < 1.0
     # with gain_prior ekf and the preset's motion config for the network's classes, the untrained GRU-KF is the
     # preset's EKF: its validation AMOTA (step 0) is the reference's up to float32 rounding

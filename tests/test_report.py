@@ -237,8 +237,8 @@ def test_demo_report_draws_the_learning_curve_with_the_reference_line(tmp_path, 
                                       "0,0,(before training),nan,0,0,nan,0.80,0\n1,0,s,0.5,3,1,1e-3,,1.0\n"
                                       "2,0,s,0.4,3,1,1e-3,0.83,1.0\n3,1,s,0.3,3,1,1e-3,0.82,1.0\n")
     rec = ValidationRecord(rule="best_val_amota", selected_step=2, split="demo_train", scenes=["a", "b"],
-                           held_out=True, reference="tracker preset 'ekf' (its EKF)", reference_amota=0.81,
-                           selected_amota=0.83)
+                           held_out=True, detection_sets=["given", "velfail"],
+                           reference="tracker preset 'ekf' (its EKF)", reference_amota=0.81, selected_amota=0.83)
     rec.write(tmp_path / "validation.json")
     drawn = []
     monkeypatch.setattr(figures, "lines", lambda path, series, *a, **k: drawn.append((series, k)) or Path(path))
@@ -248,7 +248,8 @@ def test_demo_report_draws_the_learning_curve_with_the_reference_line(tmp_path, 
     series, kw = drawn[0]
     assert series == {"GRU-KF": ([0, 2, 3], [0.80, 0.83, 0.82])}
     assert kw["hlines"] == {"tracker preset 'ekf' (its EKF): 0.810": 0.81}
-    assert ("Validated on 2 scenes held out of demo_train (a, b), not trained on; step 0 is the network before "
+    assert ("Validated on 2 scenes held out of demo_train (a, b) with 2 detection sets (given, velfail; AMOTA their "
+            "mean), not trained on; step 0 is the network before "
             "training. model.pt holds step 2 (the step of best validation AMOTA, AMOTA 0.830); tracker preset "
             "'ekf' (its EKF) on the same scenes: 0.810.") in text
     # a training without validation draws no curve

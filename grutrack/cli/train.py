@@ -111,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
         val_dets = ds.load_detections(args.val_detections, args.val_split, val_scenes, yaw).boxes
         validate = make_validator(ds.tables, args.val_split, val_scenes, val_dets, val_cfg, cfg.device)
     elif held:
-        validate = Validator(ds.tables, args.split, held, dets, val_cfg, cfg.device, held_out=True,
+        validate = Validator(ds.tables, args.split, held, _validation_sets(cfg, ds, args.split, held, dets, yaw),
+                             val_cfg, cfg.device, held_out=True,
                              reference_name=f"tracker preset '{cfg.tracker_preset}' (its EKF)")
     trainer.validate = validate
     if args.resume:
@@ -152,6 +153,19 @@ def _held_out(cfg, args: argparse.Namespace, dataset: str, scenes: list) -> list
         raise ConfigError(f"{cfg_name(args.config)}: validation_scenes {n} would leave no training scene (split "
                           f"'{args.split}' has {len(scenes)}); expected fewer, or 0 with --val-split")
     return held_out_scenes(scenes, n)
+
+
+def _validation_sets(cfg, ds, split: str, held: list, dets: dict, yaw: str) -> dict:
+    """Detection sets of the held-out scenes: the command's detections and, with ``resample_profiles``, one set
+    simulated with each profile (seed ``resample_seed(seed, 0)``, which training never draws: epoch 0 trains on the
+    command's detections), so that validation sees every kind of detector error the training does."""
+    from grutrack.training.resample import DetectionResampler, resample_seed
+
+    sets = {"given": dets}
+    sim = DetectionResampler(ds, split, held, yaw)
+    for profile in cfg.resample_profiles:
+        sets[Path(profile).stem] = sim(profile, resample_seed(cfg.seed, 0))
+    return sets
 
 
 def cfg_name(config_arg: str) -> str:

@@ -85,7 +85,9 @@ def _learning_curve(inp: ReportInputs, label: str, tl: TrainingLog, record_path:
     where = f"{n} scene{'s' if n != 1 else ''} held out of {rec.split}" if rec.held_out else f"the {rec.split} split"
     chosen = ("the last step" if rec.rule == "last" else "the step of best validation AMOTA")
     amota = "n/a" if rec.selected_amota is None else f"{rec.selected_amota:.3f}"
-    text = (f"Validated on {where} ({', '.join(rec.scenes)}), not trained on; step 0 is the network before "
+    sets = (f" with {len(rec.detection_sets)} detection sets ({', '.join(rec.detection_sets)}; AMOTA their mean)"
+            if len(rec.detection_sets) > 1 else "")
+    text = (f"Validated on {where} ({', '.join(rec.scenes)}){sets}, not trained on; step 0 is the network before "
             f"training. model.pt holds step {rec.selected_step} ({chosen}, AMOTA {amota})"
             + (f"; {rec.reference} on the same scenes: {rec.reference_amota:.3f}." if ref else "."))
     return ["", text, "", image(path, inp.out.parent, f"validation AMOTA of {label}")]

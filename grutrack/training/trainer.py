@@ -562,6 +562,7 @@ class Trainer:
         record = ValidationRecord(rule="last", selected_step=self.state.step,
                                   split=getattr(v, "split", None), scenes=list(getattr(v, "scene_names", [])),
                                   held_out=bool(getattr(v, "held_out", False)),
+                                  detection_sets=list(getattr(v, "detection_sets", [])),
                                   reference=getattr(v, "reference_name", None))
         val = self.log.validated()
         if val:

@@ -22,14 +22,21 @@ class Validator:
     semantics, grutrack's exact fast evaluator; labels are the 7 tracking classes). With ``held_out`` the scenes are
     part of ``split`` held out of training and only their tracks and ground truth are scored.
 
-    ``split``, ``scene_names``, ``reference_name`` and :meth:`reference_amota` (the AMOTA of ``tracker_cfg``'s own
-    EKF on the same scenes, computed once) describe it in ``validation.json``."""
+    ``dets``: the detections by frame token, or several sets ``{name: detections}`` (e.g. one per detector
+    profile the training draws from): the AMOTA is then the mean over the sets, so that a step which fails on one
+    kind of detector error is not selected for its score on another.
 
-    def __init__(self, nusc, split: str, scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
+    ``split``, ``scene_names``, ``detection_sets``, ``reference_name`` and :meth:`reference_amota` (the AMOTA of
+    ``tracker_cfg``'s own EKF on the same scenes and sets, computed once) describe it in ``validation.json``."""
+
+    def __init__(self, nusc, split: str, scenes: list[Scene], dets: dict, tracker_cfg: TrackerConfig,
                  device: str = "auto", held_out: bool = False, reference_name: str = "ekf"):
-        self.nusc, self.split, self.scenes, self.dets = nusc, split, scenes, dets
+        first = next(iter(dets.values()), None) if dets else None
+        self.sets = dets if isinstance(first, dict) else {"given": dets}
+        self.nusc, self.split, self.scenes = nusc, split, scenes
         self.tracker_cfg, self.device, self.held_out = tracker_cfg, device, held_out
         self.scene_names = [sc.name for sc in scenes]
+        self.detection_sets = list(self.sets)
         self.reference_name = reference_name
 
     def __call__(self, net) -> float:
@@ -48,10 +55,14 @@ class Validator:
                                                                 np.arange(len(TRACKING_CLASSES)))))
 
     def _score(self, tracker: Tracker) -> float:
+        """Mean AMOTA of ``tracker`` over the detection sets."""
+        return float(np.mean([self._score_set(tracker, d) for d in self.sets.values()]))
+
+    def _score_set(self, tracker: Tracker, dets: dict[str, BoxSet]) -> float:
         from grutrack.evaluation.fast_amota import evaluate_tracks, fast_tracking_eval, load_tracks
 
         tokens = [f.token for s in self.scenes for f in s.frames]
-        sub = build_submission(track_scenes(tracker, self.scenes, self.dets).results, tokens,
+        sub = build_submission(track_scenes(tracker, self.scenes, dets).results, tokens,
                                self.tracker_cfg.max_boxes_per_sample)
         with contextlib.redirect_stdout(io.StringIO()):
             if not self.held_out:
