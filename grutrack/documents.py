@@ -276,9 +276,9 @@ class TrainingLog:
 @dataclass
 class ValidationRecord:
     """``validation.json`` of ``grutrack train``: the validation scenes (a split, or scenes held out of the
-    training split: ``held_out``), the AMOTA of the reference tracker (the training's tracker preset with its own EKF) on them,
-    the selection rule and the step whose network ``model.pt`` holds with its validation AMOTA. Without
-    validation only ``rule`` ("last") and ``selected_step`` are set."""
+    training split: ``held_out``) and detection sets, the AMOTA of the reference tracker (the training's tracker
+    preset with its own EKF) on them, the selection rule and the step whose network ``model.pt`` holds with its
+    validation AMOTA. Without validation only ``rule`` ("last") and ``selected_step`` are set."""
 
     rule: str
     selected_step: int
@@ -301,6 +301,12 @@ class ValidationRecord:
         d = read_json(path, "validation record")
         if not isinstance(d, dict) or "rule" not in d or "selected_step" not in d:
             raise InputFormatError(f"{path}: a validation record needs the fields 'rule' and 'selected_step'")
+        if d["rule"] not in ("last", "best_val_amota") or not isinstance(d["selected_step"], int):
+            raise InputFormatError(f"{path}: 'rule' must be 'last' or 'best_val_amota' and 'selected_step' an "
+                                   f"integer, got {d['rule']!r} and {d['selected_step']!r}")
+        for key in ("reference_amota", "selected_amota"):
+            if not isinstance(d.get(key), (int, float, type(None))) or isinstance(d.get(key), bool):
+                raise InputFormatError(f"{path}: '{key}' must be a number or null, got {d.get(key)!r}")
         try:
             return cls(**{f.name: d[f.name] for f in fields(cls) if f.name in d})
         except TypeError as exc:

@@ -108,3 +108,20 @@ def test_bad_training_logs(tmp_path, text, expect):
     p.write_text(text)
     with pytest.raises(InputFormatError, match=expect):
         TrainingLog.read(p)
+
+
+@pytest.mark.parametrize("text, message", [
+    ('{"selected_step": 3}', "needs the fields 'rule' and 'selected_step'"),
+    ('{"rule": "best", "selected_step": 3}', "'rule' must be 'last' or 'best_val_amota'"),
+    ('{"rule": "last", "selected_step": "3"}', "'selected_step' an integer, got 'last' and '3'"),
+    ('{"rule": "last", "selected_step": 3, "reference_amota": "0.8"}', "'reference_amota' must be a number or null"),
+])
+def test_a_bad_validation_record_names_the_file_and_field(tmp_path, text, message):
+    from grutrack.documents import ValidationRecord
+
+    (tmp_path / "validation.json").write_text(text)
+    with pytest.raises(InputFormatError, match=message):
+        ValidationRecord.read(tmp_path / "validation.json")
+    rec = ValidationRecord(rule="last", selected_step=4, reference_amota=0.8)
+    rec.write(tmp_path / "ok.json")
+    assert ValidationRecord.read(tmp_path / "ok.json") == rec

@@ -4,7 +4,6 @@ the tracker preset's own EKF once on the same scenes as the reference line of th
 from __future__ import annotations
 
 import contextlib
-import functools
 import io
 
 import numpy as np
@@ -38,6 +37,8 @@ class Validator:
         self.scene_names = [sc.name for sc in scenes]
         self.detection_sets = list(self.sets)
         self.reference_name = reference_name
+        self._reference: float | None = None
+        self._others: set[str] | None = None     # held out: the split's other samples (empty in submissions)
 
     def __call__(self, net) -> float:
         was_training = net.training
@@ -48,11 +49,12 @@ class Validator:
         finally:
             net.train(was_training)
 
-    @functools.lru_cache(maxsize=1)
     def reference_amota(self) -> float:
-        """AMOTA of the tracker preset with its own EKF motion models on the validation scenes."""
-        return self._score(Tracker(self.tracker_cfg, ekf_groups(self.tracker_cfg,
-                                                                np.arange(len(TRACKING_CLASSES)))))
+        """AMOTA of the tracker preset with its own EKF motion models on the validation scenes (computed once)."""
+        if self._reference is None:
+            groups = ekf_groups(self.tracker_cfg, np.arange(len(TRACKING_CLASSES)))
+            self._reference = self._score(Tracker(self.tracker_cfg, groups))
+        return self._reference
 
     def _score(self, tracker: Tracker) -> float:
         """Mean AMOTA of ``tracker`` over the detection sets."""
@@ -68,9 +70,10 @@ class Validator:
             if not self.held_out:
                 return float(fast_tracking_eval(self.nusc, sub, self.split)["amota"])
             keep = {sc.token for sc in self.scenes}
-            others = {s["token"] for s in self.nusc.sample if s["scene_token"] in _split_scene_tokens(
-                self.nusc, self.split)} - set(tokens)
-            sub["results"].update({t: [] for t in others})     # the devkit's loader wants every sample of the split
+            if self._others is None:
+                in_split = _split_scene_tokens(self.nusc, self.split)
+                self._others = {s["token"] for s in self.nusc.sample if s["scene_token"] in in_split} - set(tokens)
+            sub["results"].update({t: [] for t in self._others})   # the loader wants every sample of the split
             gt, pred, _ = load_tracks(self.nusc, sub, self.split)
             metrics, _ = evaluate_tracks({k: v for k, v in gt.items() if k in keep},
                                          {k: v for k, v in pred.items() if k in keep})
