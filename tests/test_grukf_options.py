@@ -140,6 +140,7 @@ def test_resampling_trainer_draws_fresh_detections_after_the_first_epoch(tmp_pat
         return {"fresh": (profile, seed)}
 
     cfg = load_train_config("grukf", {"resample_profiles": ["centerpoint", "pointpillars"], "seed": 3,
+                                      "resample_mix": "epoch",
                                       "device": "cpu"})
     t = ResamplingTrainer.__new__(ResamplingTrainer)       # the data-free part: which detections per epoch
     t.cfg, t.given, t.resampler = cfg, given, resampler
@@ -148,3 +149,38 @@ def test_resampling_trainer_draws_fresh_detections_after_the_first_epoch(tmp_pat
     assert t.detections_for(2) == {"fresh": ("pointpillars", resample_seed(3, 2))}
     assert t.detections_for(3) == {"fresh": ("centerpoint", resample_seed(3, 3))}
     assert len({s for _, s in calls}) == 3 and all(s >= 100_000 for _, s in calls)
+
+
+def test_scene_mix_gives_every_epoch_every_profile_and_every_scene_every_profile(tmp_path):
+    """resample_mix scene: scene i in epoch e has profile (e - 1 + i) mod len, drawn with the epoch's seed; over
+    len(profiles) epochs every scene meets every profile; epoch 0 stays the given detections."""
+    from types import SimpleNamespace
+
+    from grutrack.training.resample import ResamplingTrainer, resample_seed
+
+    profiles = ["centerpoint", "pointpillars", "centerpoint_velfail"]
+    scenes = [SimpleNamespace(sample_tokens=[f"s{i}f{j}" for j in range(3)]) for i in range(5)]
+    calls = []
+
+    def resampler(profile, seed):
+        calls.append((profile, seed))
+        return {f"s{i}f{j}": (profile, seed) for i in range(6) for j in range(3)}   # s5: not a training scene
+
+    cfg = load_train_config("grukf", {"resample_profiles": profiles, "resample_mix": "scene", "seed": 2,
+                                      "device": "cpu"})
+    t = ResamplingTrainer.__new__(ResamplingTrainer)
+    t.cfg, t.given, t.resampler, t.scenes = cfg, {"given": 1}, resampler, scenes
+    assert t.detections_for(0) == {"given": 1}
+    seen = {i: set() for i in range(5)}
+    for epoch in (1, 2, 3):
+        dets = t.detections_for(epoch)
+        assert set(dets) == {f"s{i}f{j}" for i in range(5) for j in range(3)}
+        for i in range(5):
+            got = {dets[f"s{i}f{j}"] for j in range(3)}
+            assert got == {(profiles[(epoch - 1 + i) % 3], resample_seed(2, epoch))}
+            seen[i] |= got
+        assert {p for p, _ in dets.values()} == set(profiles)          # every epoch mixes all three
+    assert all({p for p, _ in v} == set(profiles) for v in seen.values())
+    assert load_train_config("grukf").resample_mix == "scene" and load_train_config("paper").resample_mix == "epoch"
+    with pytest.raises(ConfigError, match="'resample_mix' must be 'epoch' or 'scene'"):
+        load_train_config("grukf", {"resample_mix": "frame"})

@@ -41,6 +41,7 @@ class TrainConfig:
     scenes_per_step: int = 1     # scenes per optimizer step (1: the paper's), the network batched over them
     validation_scenes: int = 0   # training-split scenes held out for validation when no --val-split is given
     select_checkpoint: str = "last"   # model.pt: "last" step or the "best_val_amota" validated step
+    resample_mix: str = "epoch"  # resampled profiles take turns by "epoch" or are mixed over the "scene"s
 
 
 #: fields holding real numbers: a string that reads as one is taken as that number (PyYAML reads ``1e-5``, which

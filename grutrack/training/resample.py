@@ -2,8 +2,14 @@
 
 A few real scenes give many distinct training sequences when every epoch draws new detections from their ground
 truth with the detector simulator (:mod:`grutrack.data.detection_sim`): epoch 0 uses the detections the
-training was given, epoch e >= 1 detections simulated with profile ``profiles[(e - 1) % len(profiles)]`` and
-seed ``RESAMPLE_SEED_BASE * (seed + 1) + e`` (deterministic, so a resumed run sees the same detections).
+training was given, epoch e >= 1 detections simulated with seed ``RESAMPLE_SEED_BASE * (seed + 1) + e``
+(deterministic, so a resumed run sees the same detections) and, by ``resample_mix``:
+
+- ``epoch``: profile ``profiles[(e - 1) % len(profiles)]`` for every scene (the profiles take turns by epoch; the
+  last epochs' profile is what the network learns last);
+- ``scene``: every profile in every epoch, scene i (its position in the training list) taking
+  ``profiles[(e - 1 + i) % len(profiles)]``, so that every epoch mixes the detectors' error kinds and every scene
+  meets every profile once in ``len(profiles)`` epochs.
 """
 
 from __future__ import annotations
@@ -60,11 +66,20 @@ class ResamplingTrainer(Trainer):
         self._dets_epoch = 0
 
     def detections_for(self, epoch: int) -> dict[str, BoxSet]:
-        """The detections of ``epoch``: the given ones for epoch 0, fresh simulated ones afterwards."""
-        profiles = self.cfg.resample_profiles
+        """The detections of ``epoch`` by frame token: the given ones for epoch 0, fresh simulated ones afterwards
+        (one profile for every scene, or one per scene; module docstring)."""
+        profiles, seed = self.cfg.resample_profiles, resample_seed(self.cfg.seed, epoch)
         if epoch == 0 or not profiles:
             return self.given
-        return self.resampler(profiles[(epoch - 1) % len(profiles)], resample_seed(self.cfg.seed, epoch))
+        if self.cfg.resample_mix == "epoch" or len(profiles) == 1:
+            return self.resampler(profiles[(epoch - 1) % len(profiles)], seed)
+        out: dict[str, BoxSet] = {}
+        for k, profile in enumerate(profiles):
+            drawn = self.resampler(profile, seed)
+            for i in range(len(self.scenes)):
+                if (epoch - 1 + i) % len(profiles) == k:
+                    out.update((t, drawn[t]) for t in self.scenes[i].sample_tokens if t in drawn)
+        return out
 
     def _step(self, scenes: list[Scene]) -> None:
         if self.state.epoch != self._dets_epoch:
