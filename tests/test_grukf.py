@@ -586,7 +586,8 @@ def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(nusc_min
 
     monkeypatch.setattr(tr, "run_scene", ctrl_c_in_step_2)
     argv = ["train", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_train",
-            "--detections", str(dets), "--out", str(tmp_path / "ck"), "--epochs", "1", "--no-progress"]
+            "--no-config-sources", "--detections", str(dets), "--out", str(tmp_path / "ck"), "--epochs", "1",
+            "--no-progress"]
     assert main(argv) == 130
     err = capsys.readouterr().err
     assert "grutrack train: interrupted after step 2; resumable checkpoint" in err and "Traceback" not in err

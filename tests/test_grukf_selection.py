@@ -133,7 +133,7 @@ def test_cli_holds_scenes_out_of_training_and_validates_on_them(nusc_mini, nusc_
                                                  nusc=nusc_mini)))
     cfg, _ = read_config("training", "grukf")
     cfg.update(validation_scenes=2, select_checkpoint="best_val_amota", val_every=3, lr=3e-3, gain_prior="ekf",
-               network_classes="ss_model", yaw_flip=True, motion_config="grutrack_nusc")
+               network_classes="ss_model", yaw_flip=True, motion_config="grutrack_nusc", sources=[])
     (tmp_path / "t.yaml").write_text(yaml.safe_dump(cfg))
     argv = ["train", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_train",
             "--detections", str(dets), "--config", str(tmp_path / "t.yaml"), "--out", str(tmp_path / "ck"),

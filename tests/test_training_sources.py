@@ -29,7 +29,7 @@ def _train(nusc_root, dets, out, *extra) -> int:
 def test_training_over_nuscenes_av2_and_a_generated_demo(nusc_root, av2_root, mini_train_dets, tmp_path, capsys):
     """One epoch visits every scene of every source once; the data line of training.yaml names the sources."""
     out = tmp_path / "ck"
-    assert _train(nusc_root, mini_train_dets, out,
+    assert _train(nusc_root, mini_train_dets, out, "--no-config-sources",
                   "--source", f"{{dataset: av2, dataroot: {av2_root}, split: val, profile: centerpoint, seed: 2}}",
                   "--source", "{dataset: demo, scenes: 3, frames_per_scene: 8, split: demo_all, "
                               "profile: pointpillars}") == 0
@@ -44,6 +44,19 @@ def test_training_over_nuscenes_av2_and_a_generated_demo(nusc_root, av2_root, mi
     data = next(ln for ln in (out / "training.yaml").read_text().splitlines() if ln.startswith("# data "))
     assert '"sources": [{"dataroot": "' in data and '"dataset": "demo"' in data
     assert (out / "sources" / "demo_n3_f8_s0" / "v1.0-demo").is_dir() and (out / "model.pt").is_file()
+    # --no-config-sources left out the default recipe's 700-scene demo, and training.yaml says so
+    assert yaml.safe_load((out / "training.yaml").read_text())["sources"] == []
+    assert not (out / "sources" / "demo_n700_f40_s0").exists()
+
+
+def test_the_default_recipe_brings_its_paper_scale_source():
+    """The default config trains at the paper's scale by itself: the command's split plus a 700-scene, 40-frame
+    SYNTHETIC demo with simulated detections; the paper's configuration has no extra source."""
+    from grutrack.training.config import load_train_config
+
+    assert load_train_config("grukf").sources == ({"dataset": "demo", "scenes": 700, "frames_per_scene": 40,
+                                                    "split": "demo_all", "profile": "centerpoint", "seed": 1},)
+    assert load_train_config("paper").sources == ()
 
 
 def test_config_sources_and_resampling_cover_every_source(nusc_root, mini_train_dets, tmp_path):
@@ -91,5 +104,5 @@ def test_bad_sources_are_refused_before_any_data_is_read(nusc_root, tmp_path, ca
 def test_the_same_split_twice_is_refused(nusc_root, mini_train_dets, tmp_path, capsys):
     src = (f"{{dataset: nuscenes, dataroot: {nusc_root}, version: v1.0-mini, split: mini_train, "
            f"detections: {mini_train_dets}}}")
-    assert _train(nusc_root, mini_train_dets, tmp_path / "ck", "--source", src) == 2
+    assert _train(nusc_root, mini_train_dets, tmp_path / "ck", "--no-config-sources", "--source", src) == 2
     assert "repeats frames of an earlier source (323 frames" in capsys.readouterr().err

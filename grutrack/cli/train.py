@@ -40,6 +40,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "val, profile: centerpoint, seed: 1}' or '{dataset: demo, scenes: 700, "
                         "frames_per_scene: 40, split: demo_all, profile: centerpoint}' (repeatable; added to the "
                         "config's sources; see grutrack/training/sources.py)")
+    p.add_argument("--no-config-sources", action="store_true",
+                   help="leave out the config's sources (the default recipe's 700-scene SYNTHETIC demo): train on "
+                        "--split and any --source only, e.g. a quick run or real data at the paper's scale")
     p.add_argument("--resume", action="store_true", help="continue from --out/last.pt")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -56,6 +59,8 @@ def run(args: argparse.Namespace) -> int:
 
     overrides = {k: v for k, v in (("mode", args.mode), ("epochs", args.epochs), ("val_every", args.val_every),
                                    ("seed", args.seed)) if v is not None}
+    if args.no_config_sources:
+        overrides["sources"] = []
     cfg = load_train_config(args.config, overrides, flags={k: "--" + k.replace("_", "-") for k in overrides})
     apply_thread_policy()
     if (args.val_split is None) != (args.val_detections is None):
