@@ -1,16 +1,17 @@
 """The GRU-KF against the EKF trackers, on real nuScenes mini motion: trained by `grutrack train` with the default
-recipe (grutrack/configs/training/grukf.yaml: 2 mini_train scenes held out for validation, 72 steps on the other 6
-with detections resampled every epoch, model.pt the step of best validation AMOTA) on mini_train ground truth with
-simulated CenterPoint-like detections (seed 1), evaluated on mini_val with simulated detections of other seeds (2,
-11) and with the real PointPillars detections (official semantics via the exact fast evaluator, equal to the
-devkit's TrackingEval to 1e-15). The GRU-KF writes its posterior for matched tracks.
+recipe as shipped (grutrack/configs/training/grukf.yaml: mini_train plus the recipe's 700-scene SYNTHETIC demo
+source, 3 epochs with detections resampled and mixed over three profiles, 2 mini_train scenes held out for
+validation, model.pt the step of best validation AMOTA; about 10 minutes) on mini_train ground truth with simulated
+CenterPoint-like detections (seed 1), evaluated on mini_val with simulated detections of other seeds (2, 11) and
+with the real PointPillars detections (official semantics via the exact fast evaluator, equal to the devkit's
+TrackingEval to 1e-15). The GRU-KF writes its posterior for matched tracks.
 
-Measured (docs/results/grukf_eval/README.md, "The default recipe"): on the simulated sets its mean AMOTA is the
-default `ekf` preset's within a few thousandths (0.9034 vs 0.9060) and above Poly-MOT's EKF (`polymot`, the paper's
-baseline, 0.8680), its mean AMOTP within a few millimetres of the preset's (0.381 vs 0.377 m); on the real file it
-is above Poly-MOT's and below the preset's (0.1792 vs 0.1676 and 0.1842). The
-bounds below are regression guards at those measured gaps, not the paper's claim (the learned filter beating the
-EKF), which is not reproduced."""
+Measured (docs/results/grukf_eval/README.md, "The default recipe at the paper's scale"; training detections of
+seeds 1 and 7): on the simulated sets the mean AMOTA is the default `ekf` preset's or above (0.9060 and 0.9100 vs
+0.9060) and above Poly-MOT's EKF (`polymot`, the paper's baseline, 0.8680), the mean AMOTP 0.014-0.018 m below the
+preset's (0.363 and 0.359 vs 0.377 m; the issue's bar asks 0.02); on the real file at or above the preset's (0.1935
+and 0.1860 vs 0.1842). The bounds below guard those relations with a margin for CPU arithmetic: AMOTA not more than
+0.003 below the preset's, AMOTP at least 0.01 m below it, the real file within the issue's 0.002."""
 
 from __future__ import annotations
 
@@ -55,10 +56,13 @@ def trained(nusc_root, tmp_path_factory):
     assert main(["train", *common, "--detections", str(dets), "--out", str(tmp / "ck"), "--no-progress"]) == 0
     rec = ValidationRecord.read(tmp / "ck" / "validation.json")
     assert rec.rule == "best_val_amota" and rec.held_out and len(rec.scenes) == 2
+    assert len(rec.detection_sets) == 4                  # the given detections and one set per profile
+    data = next(ln for ln in (tmp / "ck" / "training.yaml").read_text().splitlines() if ln.startswith("# data "))
+    assert '"scenes": 700' in data                       # trained at the paper's scale, brought in by the config
     return tmp / "ck" / "model.pt", tmp
 
 
-def test_grukf_amota_at_least_the_ekf_on_simulated_detections(nusc_mini, trained):
+def test_grukf_amota_at_least_and_amotp_below_the_ekf_on_simulated_detections(nusc_mini, trained):
     checkpoint, tmp = trained
     scenes = load_scenes(nusc_mini, "mini_val")
     tokens = [f.token for s in scenes for f in s.frames]
@@ -72,11 +76,11 @@ def test_grukf_amota_at_least_the_ekf_on_simulated_detections(nusc_mini, trained
         gru.append(_score(nusc_mini, build_tracker("grukf", checkpoint=checkpoint, device="cpu"), scenes, dets))
     mean = lambda rows, k: sum(r[k] for r in rows) / len(rows)  # noqa: E731
     assert mean(gru, "amota") >= mean(polymot, "amota") + 0.01, (gru, polymot)
-    assert mean(gru, "amota") >= mean(ekf, "amota") - 0.005, (gru, ekf)
-    assert mean(gru, "amotp") <= mean(ekf, "amotp") + 0.01, (gru, ekf)
+    assert mean(gru, "amota") >= mean(ekf, "amota") - 0.003, (gru, ekf)
+    assert mean(gru, "amotp") <= mean(ekf, "amotp") - 0.01, (gru, ekf)
 
 
-def test_grukf_above_polymot_ekf_on_real_pointpillars(nusc_mini, pointpillars_mini_val, trained):
+def test_grukf_at_least_the_ekf_on_real_pointpillars(nusc_mini, pointpillars_mini_val, trained):
     checkpoint, _ = trained
     scenes = load_scenes(nusc_mini, "mini_val")
     tokens = [f.token for s in scenes for f in s.frames]
@@ -85,4 +89,4 @@ def test_grukf_above_polymot_ekf_on_real_pointpillars(nusc_mini, pointpillars_mi
     ekf = _score(nusc_mini, build_tracker("ekf"), scenes, dets)
     gru = _score(nusc_mini, build_tracker("grukf", checkpoint=checkpoint, device="cpu"), scenes, dets)
     assert gru["amota"] >= polymot["amota"] + 0.005, (gru["amota"], polymot["amota"])
-    assert gru["amota"] >= ekf["amota"] - 0.01, (gru["amota"], ekf["amota"])
+    assert gru["amota"] >= ekf["amota"] - 0.002, (gru["amota"], ekf["amota"])
