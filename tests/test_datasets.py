@@ -135,8 +135,8 @@ def test_train_on_av2_then_track_av2_with_the_model(av2_root, tmp_path, capsys):
     dets, ck = tmp_path / "dets.feather", tmp_path / "ck"
     assert main(["simulate-detections", *common, "--seed", "4", "--out", str(dets)]) == 0
     cfg = tmp_path / "train.yaml"
-    assert main(["resolve-config", "training", "--base", "grukf", "--overrides",
-                 '{"epochs": 2, "device": "cpu", "resample_profiles": ["pointpillars"], "sources": []}', "--out", str(cfg)]) == 0
+    over = '{"epochs": 2, "device": "cpu", "resample_profiles": ["pointpillars"], "sources": []}'
+    assert main(["resolve-config", "training", "--base", "grukf", "--overrides", over, "--out", str(cfg)]) == 0
     assert main(["train", *common, "--detections", str(dets), "--config", str(cfg), "--out", str(ck),
                  "--no-progress"]) == 0
     out = capsys.readouterr()
