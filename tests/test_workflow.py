@@ -24,8 +24,8 @@ TINY = """
 datasets:
   demo: {scenes: 3, frames_per_scene: 12}
 trainings:
-  demo_grukf: {overrides: {epochs: 1, validation_scenes: 1}}
-  demo_grukf_last: {overrides: {epochs: 1, validation_scenes: 1}}
+  demo_grukf: {overrides: {sources: [], epochs: 1, validation_scenes: 1}}
+  demo_grukf_last: {overrides: {sources: [], epochs: 1, validation_scenes: 1}}
 # a leaderboard-style experiment on the demo (no evaluation; a validated zip and the Table II report)
 experiments:
   demo_lb:
