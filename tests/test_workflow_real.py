@@ -164,7 +164,7 @@ KILL_CFG = """
 datasets:
   demo: {scenes: 3, frames_per_scene: 12}
 trainings:
-  demo_grukf: {overrides: {epochs: 25, checkpoint_every: 1, validation_scenes: 1}}
+  demo_grukf: {overrides: {sources: [], epochs: 25, checkpoint_every: 1, validation_scenes: 1}}
 """
 TRAIN_OUTPUTS = ("checkpoints/demo_grukf/model.pt", "checkpoints/demo_grukf/train_log.csv",
                  "checkpoints/demo_grukf/training.yaml")
