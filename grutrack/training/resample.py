@@ -74,11 +74,11 @@ class ResamplingTrainer(Trainer):
         if self.cfg.resample_mix == "epoch" or len(profiles) == 1:
             return self.resampler(profiles[(epoch - 1) % len(profiles)], seed)
         out: dict[str, BoxSet] = {}
+        n = len(profiles)
         for k, profile in enumerate(profiles):
             drawn = self.resampler(profile, seed)
-            for i in range(len(self.scenes)):
-                if (epoch - 1 + i) % len(profiles) == k:
-                    out.update((t, drawn[t]) for t in self.scenes[i].sample_tokens if t in drawn)
+            for i in range((k - epoch + 1) % n, len(self.scenes), n):      # the scenes with (e - 1 + i) % n == k
+                out.update((t, drawn[t]) for t in self.scenes[i].sample_tokens if t in drawn)
         return out
 
     def _step(self, scenes: list[Scene]) -> None:
