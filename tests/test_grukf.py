@@ -33,6 +33,27 @@ def test_torch_ss_models_match_numpy():
     assert np.abs(diff[ok]).max() < 1e-6 and ok.mean() > 0.5
 
 
+def test_torch_piecewise_bicycle_matches_numpy_in_both_branches():
+    """The piecewise form (Poly-MOT's; the ekf preset's bicycle_form) equals the numpy model, turning (constant
+    speed, a reset to 0) and straight (|beta| <= 1e-3: v + a dt, yaw kept)."""
+    from grutrack.motion.models import BicyclePiecewise
+    from grutrack.motion.torch_models import TorchBicyclePiecewise, make_torch_model
+
+    x = _states(2000, seed=5)
+    x[::3, 9] = np.random.default_rng(1).uniform(-1e-3, 1e-3, len(x[::3]))     # straight rows
+    ref, tm = BicyclePiecewise(), make_torch_model("bicycle", form="piecewise")
+    assert isinstance(tm, TorchBicyclePiecewise)
+    got = tm.f(torch.tensor(x), 0.5).numpy()
+    beta = np.arctan2(0.5 * np.sin(x[:, 9]), np.cos(x[:, 9]))
+    ok = np.abs(np.sin(beta) / (0.4 * x[:, 4]) * x[:, 6] * 0.5) < 1.0  # turns of less than a radian per frame
+    assert np.abs(ref.f(x, 0.5) - got)[ok].max() < 1e-6 and ok.mean() > 0.5
+    straight = np.abs(beta) <= 1e-3
+    assert straight.sum() > 500 and np.all(got[straight, 8] == x[straight, 8])
+    assert np.all(got[~straight, 7] == 0.0)
+    with pytest.raises(ValueError, match="form"):
+        make_torch_model("CTRA", form="piecewise")
+
+
 @pytest.mark.parametrize("wheelbase_ratio, front_ratio", [(0.8, 0.5), (0.6, 0.3), (0.95, 0.7)])
 def test_torch_bicycle_matches_numpy_at_any_parameters(wheelbase_ratio, front_ratio):
     """f, h and the initial state of the torch Bicycle equal the numpy model's at non-default parameters too

@@ -101,7 +101,64 @@ def test_network_classes_is_a_named_option():
     assert load_train_config("paper").network_classes == "all"            # the paper: one network for all
     assert load_train_config("grukf").network_classes == "ss_model"       # the default recipe
     assert GRUKFConfig().network_classes == "all"      # checkpoints written before the key: every class
-    with pytest.raises(ConfigError, match="'network_classes' must be 'all' or 'ss_model'"):
+    with pytest.raises(ConfigError, match="'network_classes' must be 'all', 'ss_model' or 'own_model'"):
         load_train_config("grukf", {"network_classes": "ctra"})
     with pytest.raises(ValueError, match="network_classes"):
         GRUKalmanNet(GRUKFConfig(network_classes="ctra"))
+
+
+def test_untrained_ekf_prior_with_network_classes_own_model_runs_each_class_with_its_own_model(scenes_and_dets,
+                                                                                             tmp_path):
+    """own_model: one network group per SS model (CTRA, Bicycle in the preset's piecewise form), the weights
+    shared; untrained, each is the EKF of its classes' own model and noise, so the boxes are the preset's."""
+    from grutrack.tracking.factory import build_tracker
+    from grutrack.tracking.tracker import track_scenes
+
+    scenes, dets = scenes_and_dets
+    over = {"gain_prior": "ekf", "yaw_flip": True, "motion_config": "grutrack_nusc"}
+    ck = _trainer(scenes, dets, tmp_path / "own", network_classes="own_model", **over).save("model.pt")
+    own = build_tracker("grukf", checkpoint=ck, device="cpu")
+    nets = [(g.backend.ss.name, [TRACKING_CLASSES[i] for i in np.flatnonzero(g.classes)]) for g in own.groups[:2]]
+    assert nets == [("CTRA", list(CTRA_CLASSES)), ("Bicycle", ["bicycle", "motorcycle"])]
+    assert own.groups[0].backend.net is own.groups[1].backend.net            # one network, two SS models
+    assert [type(g.backend.model).__name__ for g in own.groups[2:]] == ["CA"]
+
+    ekf = _boxes_by_label(track_scenes(build_tracker("ekf"), scenes, dets).results)
+    got = _boxes_by_label(track_scenes(own, scenes, dets).results)
+    for name in TRACKING_CLASSES:
+        assert got[name].shape == ekf[name].shape
+        np.testing.assert_allclose(got[name], ekf[name], atol=1e-6, err_msg=name)
+    assert len(ekf["bicycle"]) + len(ekf["motorcycle"]) > 10
+
+
+def test_training_with_network_classes_own_model_takes_loss_terms_of_both_models(scenes_and_dets, tmp_path):
+    from grutrack.motion.checkpoint import load_network
+    from grutrack.training.trainer import run_scene
+
+    scenes, dets = scenes_and_dets
+    over = {"gain_prior": "ekf", "motion_config": "grutrack_nusc"}
+    own = _trainer(scenes, dets, tmp_path / "own", network_classes="own_model", **over)
+    hyb = _trainer(scenes, dets, tmp_path / "hyb", network_classes="ss_model", **over)
+    n_own = n_hyb = 0
+    for s in scenes:
+        a = run_scene(own.net, s, dets, own.tracker_cfg, own.cfg, own.device, own.index)
+        b = run_scene(hyb.net, s, dets, hyb.tracker_cfg, hyb.cfg, hyb.device, hyb.index)
+        n_own += a.gt_terms + a.pseudo_terms
+        n_hyb += b.gt_terms + b.pseudo_terms
+    assert n_own > n_hyb > 0            # the bicycles' and motorcycles' tracks add terms
+    own.run()
+    net = load_network(tmp_path / "own" / "model.pt")
+    assert net.cfg.network_classes == "own_model"
+    assert net.cfg.model_params["BICYCLE"]["form"] == "piecewise"      # the ekf preset's form of the model
+    # the Bicycle classes keep their own noise in the network's EKF prior (not CTRA's)
+    from grutrack.motion.defaults import load_motion_config
+
+    motion = load_motion_config("grutrack_nusc")
+    np.testing.assert_array_equal(net.ekf_P0[TRACKING_CLASSES.index("bicycle")].numpy(), motion["bicycle"]["P0"])
+
+
+def test_network_classes_own_model_refuses_several_scenes_per_step():
+    from grutrack.training.config import load_train_config
+
+    with pytest.raises(ConfigError, match="'scenes_per_step' must be 1 with network_classes 'own_model'"):
+        load_train_config("grukf", {"network_classes": "own_model", "scenes_per_step": 2})

@@ -54,7 +54,9 @@ _YAW_Z = 6
 #: what the network's output is added to: nothing ("constant", the paper) or the per-track EKF gain ("ekf")
 GAIN_PRIORS = ("constant", "ekf")
 #: which classes a tracker runs through the network (GRUKFConfig.network_classes)
-NETWORK_CLASSES = ("all", "ss_model")
+NETWORK_CLASSES = ("all", "ss_model", "own_model")
+#: SS models with the state layout ``[x, y, z, w, l, h, v, a, yaw, *]`` one network can serve (``own_model``)
+NETWORK_MODELS = ("CTRA", "BICYCLE")
 
 
 @dataclass(frozen=True)
@@ -81,7 +83,13 @@ class GRUKFConfig:
     EKF's per-class Q, R, P0 as buffers ``ekf_Q``, ``ekf_R``, ``ekf_P0``; see the module docstring).
     network_classes: which classes a tracker runs through the network: "all" (the paper) or "ss_model" (only the
     classes whose model in the tracker preset's motion config is ``ss_model``; the others keep the preset's EKF
-    with their own model; a grutrack option). It changes no weight; the tracker and the trainer read it.
+    with their own model; a grutrack option) or "own_model" (every class whose preset model is one of
+    :data:`NETWORK_MODELS`, each through the network with its own SS model and noise: one track group per model,
+    the weights shared; the others, e.g. CA, keep the preset's EKF). It changes no weight; the tracker and the
+    trainer read it.
+    model_params: constructor parameters of the other SS models an ``own_model`` network runs
+    (``{model name: params}``, the training motion config's, and ``form``: "arc" or "piecewise", the tracker
+    preset's form of that model, so that the untrained network is the preset's EKF for those classes too).
     """
 
     ss_model: str = "CTRA"
@@ -96,7 +104,14 @@ class GRUKFConfig:
     aux_inputs: bool = False
     ss_params: dict = field(default_factory=dict)   # the SS model's constructor parameters (motion config)
     gain_prior: str = "constant"   # "constant": K = network output; "ekf": K = K_ekf + network output
-    network_classes: str = "all"   # "all" or "ss_model" (the other classes run the preset's EKF)
+    network_classes: str = "all"   # "all", "ss_model" or "own_model" (see above)
+    model_params: dict = field(default_factory=dict)   # own_model: {model name: constructor parameters}
+
+    def torch_model(self, name: str | None = None):
+        """The torch SS model ``name`` (default ``ss_model``) with its parameters (:mod:`torch_models`)."""
+        if name is None or name.upper() == self.ss_model.upper():
+            return make_torch_model(self.ss_model, **self.ss_params)
+        return make_torch_model(name, **self.model_params.get(name.upper(), {}))
 
     @property
     def table_shape(self) -> tuple[int, int, int]:
@@ -262,7 +277,7 @@ class GRUKalmanNet(nn.Module):
         super().__init__()
         self.cfg = cfg
         self.deferred: DeferredWeightGrads | None = None   # set while training a scene (see deferring_weight_grads)
-        self.ss = make_torch_model(cfg.ss_model, **cfg.ss_params)
+        self.ss = cfg.torch_model()
         if cfg.gain_prior not in GAIN_PRIORS:
             raise ValueError(f"gain_prior must be one of {', '.join(GAIN_PRIORS)}, got {cfg.gain_prior!r}")
         if cfg.network_classes not in NETWORK_CLASSES:
@@ -461,15 +476,17 @@ class GRUKalmanNet(nn.Module):
     def correct(self, x_prior: torch.Tensor, y: torch.Tensor, y_prev: torch.Tensor, x_post_prev: torch.Tensor,
                 x_prior_prev: torch.Tensor, x_post_prev2: torch.Tensor, hidden: dict[str, torch.Tensor],
                 cells: torch.Tensor | None = None,
-                counts: torch.Tensor | None = None, K_prior: torch.Tensor | None = None
+                counts: torch.Tensor | None = None, K_prior: torch.Tensor | None = None, ss=None
                 ) -> tuple[torch.Tensor, dict[str, torch.Tensor], torch.Tensor]:
         """One update of K tracks (all (K, ·) float64): prior x^-_n, measurement y_n, previous measurement,
         previous posterior x_{n-1|n-1}, previous prior x_{n-1|n-2}, posterior before that x_{n-2|n-2};
         ``cells`` (K,) int64: the tracks' cells of the gain table (:meth:`table_index`; only with a table); ``counts``
         (K, 2): each track's update count at this update (1 = the first) and frames since its last update
         (only with ``aux_inputs``); ``K_prior`` (K, m, 9) float64: the EKF gain ``P^- H^T S^-1`` of each track,
-        global frame (only with ``gain_prior="ekf"``). Returns the posterior (K, m), the new hidden states and
-        the network's gain K (K, m, n) it applied (heading frame; the trainer checks it for divergence).
+        global frame (only with ``gain_prior="ekf"``); ``ss``: the tracks' torch SS model when it is not the
+        network's own (``network_classes: own_model``; same state layout). Returns the posterior (K, m), the new
+        hidden states and the network's gain K (K, m, n) it applied (heading frame; the trainer checks it for
+        divergence).
 
         ``x = x^- + K_prior r + Rs(yaw) dK r_h``: r the innovation (yaw wrapped), r_h = Rm(-yaw) r the same in
         the heading frame, dK (K, m, 9) the network's heading-frame gain (the whole gain with
@@ -479,11 +496,12 @@ class GRUKalmanNet(nn.Module):
         components wrapped, their planar pairs turned into the heading frame and each input L2-normalised by a
         few operators on the whole, not a chain of them per input (the same values).
         """
-        n, m, yi = self.n, self.m, self.ss.yaw_index
+        ss = self.ss if ss is None else ss
+        n, m, yi = self.n, self.m, ss.yaw_index
         lay = self._layout(x_prior.device)
         yaw = x_prior[:, yi:yi + 1]
         c, s = torch.cos(yaw), torch.sin(yaw)
-        raw = torch.cat([y, y_prev, self.ss.h_at(x_prior, c, s), x_post_prev, x_post_prev2, x_prior_prev], dim=1).mm(
+        raw = torch.cat([y, y_prev, ss.h_at(x_prior, c, s), x_post_prev, x_post_prev2, x_prior_prev], dim=1).mm(
             lay["diff"])                                            # the four differences (exact: +-1 entries)
         ang = raw.detach().index_select(1, lay["angles"])
         off = wrap_offset(ang)

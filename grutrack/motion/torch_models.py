@@ -143,12 +143,45 @@ class TorchBicycle:
                           v * torch.cos(yaw + beta), v * torch.sin(yaw + beta)], dim=1)
 
 
+class TorchBicyclePiecewise(TorchBicycle):
+    """The bicycle model in Poly-MOT's piecewise form (see :class:`grutrack.motion.models.BicyclePiecewise`):
+    turning (``|beta| > PIECEWISE_SWITCH``) the reference point runs the arc at constant speed, ``ds = v dt``,
+    v' = v, a' = 0; otherwise a straight line along the heading, ``ds = v dt + a dt^2 / 2``, v' = v + a dt, the
+    yaw unchanged. The branch is chosen on the detached slip angle (a piecewise function; its gradient is each
+    branch's)."""
+
+    def f(self, x: torch.Tensor, dt: float) -> torch.Tensor:
+        """Transition (N, 10) -> (N, 10) over dt seconds."""
+        from grutrack.motion.models import PIECEWISE_SWITCH
+
+        v, a, yaw = x[:, 6:7], x[:, 7:8], x[:, 8:9]
+        beta, lr = self._beta(x)
+        turning = beta.detach().abs() > PIECEWISE_SWITCH
+        ds = torch.where(turning, v * dt, v * dt + 0.5 * a * dt * dt)               # arc length over dt
+        psi = torch.where(turning, yaw + beta, yaw)
+        phi = torch.where(turning, torch.sin(beta) / lr * ds, torch.zeros_like(ds))  # heading change
+        u = torch.as_tensor(_GL_NODES, dtype=x.dtype, device=x.device)[None, :]
+        wts = torch.as_tensor(_GL_WEIGHTS, dtype=x.dtype, device=x.device)[None, :]
+        heading = psi + phi * u
+        dx = ds[:, 0] * (wts * torch.cos(heading)).sum(1)
+        dy = ds[:, 0] * (wts * torch.sin(heading)).sum(1)
+        return torch.cat([(x[:, 0] + dx)[:, None], (x[:, 1] + dy)[:, None], x[:, 2:6],
+                          torch.where(turning, v, v + a * dt), torch.where(turning, torch.zeros_like(a), a),
+                          yaw + phi, x[:, 9:10]], dim=1)
+
+
 TORCH_MODELS = {"CTRA": TorchCTRA, "BICYCLE": TorchBicycle}
+#: the piecewise forms (tracker preset ``motion.bicycle_form: piecewise``); CTRA's piecewise form has none here
+TORCH_PIECEWISE = {"BICYCLE": TorchBicyclePiecewise}
 
 
-def make_torch_model(name: str, **params):
-    """A torch SS model by name (CTRA or Bicycle, case-insensitive)."""
-    try:
-        return TORCH_MODELS[name.upper()](**params)
-    except KeyError:
-        raise ValueError(f"GRU-Kalman filter SS model must be one of CTRA, Bicycle; got {name!r}") from None
+def make_torch_model(name: str, form: str = "arc", **params):
+    """A torch SS model by name (CTRA or Bicycle, case-insensitive) in ``form`` "arc" (default) or "piecewise"
+    (Bicycle only)."""
+    key = name.upper()
+    if key not in TORCH_MODELS:
+        raise ValueError(f"GRU-Kalman filter SS model must be one of CTRA, Bicycle; got {name!r}")
+    if form not in ("arc", "piecewise") or (form == "piecewise" and key not in TORCH_PIECEWISE):
+        raise ValueError(f"GRU-Kalman filter SS model {name}: form must be 'arc'"
+                         f"{' or piecewise' if key in TORCH_PIECEWISE else ''}, got {form!r}")
+    return (TORCH_PIECEWISE[key] if form == "piecewise" else TORCH_MODELS[key])(**params)

@@ -70,35 +70,51 @@ def _association(cfg: TrackerConfig):
 
 def grukf_group(net, n_labels: int, device: str = "auto", train: bool = False,
                 class_index: np.ndarray | None = None, members: np.ndarray | None = None,
-                correct=None) -> TrackGroup:
+                correct=None, ss_model: str | None = None) -> TrackGroup:
     """One track group run by the GRU-Kalman filter ``net`` for the labels ``members`` (n_labels,) bool (default:
     every label); ``class_index`` (n_labels,) int maps a dataset label to the tracking class the network's
-    per-class gain uses (default: identity); ``correct``: see :class:`GRUKFBackend`."""
+    per-class gain uses (default: identity); ``correct``, ``ss_model``: see :class:`GRUKFBackend`."""
     from grutrack.tracking.grukf_backend import GRUKFBackend
 
     members = np.ones(n_labels, dtype=bool) if members is None else np.asarray(members, dtype=bool)
-    return TrackGroup(GRUKFBackend(net, device, train=train, class_index=class_index, correct=correct), members)
+    return TrackGroup(GRUKFBackend(net, device, train=train, class_index=class_index, correct=correct,
+                                   ss_model=ss_model), members)
+
+
+def network_models(arch, cfg: TrackerConfig, index: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """The network's track groups under the preset ``cfg`` (already re-indexed by dataset label; ``index``
+    (n_labels,) the tracking class of each label): ``[(SS model name, members (n_labels,) bool)]``, the network's
+    own model first, no empty group. ``arch.network_classes`` (``arch`` a ``GRUKFConfig``) "all": every label with
+    ``arch.ss_model``; "ss_model": the labels whose model in the preset's motion config (with its
+    ``model_override``) is ``arch.ss_model``; "own_model": the labels whose preset model is one of
+    :data:`~grutrack.motion.grukf.NETWORK_MODELS`, one group per model."""
+    if arch.network_classes == "all":
+        return [(arch.ss_model, np.ones(len(index), dtype=bool))]
+    from grutrack.motion.defaults import load_motion_config
+    from grutrack.motion.grukf import NETWORK_MODELS
+
+    motion = load_motion_config(cfg.motion_config, cfg.model_override or None)
+    model = np.array([motion[TRACKING_CLASSES[c]]["model"].upper() for c in index])
+    own = arch.ss_model.upper()
+    names = [own] + ([m for m in NETWORK_MODELS if m != own] if arch.network_classes == "own_model" else [])
+    groups = [(name if name != own else arch.ss_model, model == name) for name in names]
+    return [g for i, g in enumerate(groups) if i == 0 or g[1].any()]
 
 
 def network_members(arch, cfg: TrackerConfig, index: np.ndarray) -> np.ndarray:
-    """(n_labels,) bool: the labels a network of architecture ``arch`` (a ``GRUKFConfig``) filters under the
-    preset ``cfg`` (already re-indexed by dataset label; ``index`` (n_labels,) the tracking class of each label).
-    ``arch.network_classes`` "all": every label; "ss_model": the labels whose model in the preset's motion
-    config (with its ``model_override``) is the network's SS model ``arch.ss_model``."""
-    if arch.network_classes == "all":
-        return np.ones(len(index), dtype=bool)
-    from grutrack.motion.defaults import load_motion_config
-
-    motion = load_motion_config(cfg.motion_config, cfg.model_override or None)
-    return np.array([motion[TRACKING_CLASSES[c]]["model"].lower() == arch.ss_model.lower() for c in index])
+    """(n_labels,) bool: the labels a network of architecture ``arch`` filters under the preset ``cfg``, in any
+    of its groups (:func:`network_models`)."""
+    return np.logical_or.reduce([m for _, m in network_models(arch, cfg, index)])
 
 
 def network_groups(net, cfg: TrackerConfig, index: np.ndarray, device: str = "auto") -> list[TrackGroup]:
-    """The track groups of a GRU-KF tracker: the network's group for :func:`network_members` and the preset's
+    """The track groups of a GRU-KF tracker: the network's groups (:func:`network_models`) and the preset's
     EKF groups (:func:`ekf_groups`) for the other labels (none with ``network_classes: all``)."""
-    members = network_members(net.cfg, cfg, index)
+    models = network_models(net.cfg, cfg, index)
+    members = np.logical_or.reduce([m for _, m in models])
     rest = ekf_groups(cfg, index, only=~members) if not members.all() else []
-    return [grukf_group(net, len(index), device, class_index=index, members=members), *rest]
+    return [*(grukf_group(net, len(index), device, class_index=index, members=m, ss_model=name)
+              for name, m in models), *rest]
 
 
 def param_index(param_classes: tuple[str, ...] | None) -> np.ndarray:

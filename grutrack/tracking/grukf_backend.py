@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import functools
+
 import numpy as np
 import torch
 
@@ -102,23 +104,27 @@ class GRUState:
 
 
 class GRUKFBackend:
-    """Batched GRU-KF over the tracks of one group (every class shares the network and SS model).
+    """Batched GRU-KF over the tracks of one group (every class of the group shares the network and SS model).
 
     ``class_index`` (n_labels,) int: the tracking class (row of the network's per-class gain) of each dataset
     label; None = the labels are the tracking classes. ``correct``: what runs the network's update (default
     ``net.correct``; training several scenes per step passes one that batches the scenes' calls,
-    :mod:`grutrack.training.lockstep`).
+    :mod:`grutrack.training.lockstep`). ``ss_model``: the group's SS model when it is not the network's own
+    (``network_classes: own_model``: e.g. the Bicycle classes of a CTRA network; same state layout, the weights
+    shared).
     """
 
     def __init__(self, net: GRUKalmanNet, device: torch.device | str = "auto", train: bool = False,
-                 class_index: np.ndarray | None = None, correct=None):
+                 class_index: np.ndarray | None = None, correct=None, ss_model: str | None = None):
         self.net = net
-        self.correct = net.correct if correct is None else correct
+        own = ss_model is None or ss_model.upper() == net.cfg.ss_model.upper()
+        self.ss = net.ss if own else net.cfg.torch_model(ss_model)
+        correct = net.correct if correct is None else correct
+        self.correct = correct if own else functools.partial(correct, ss=self.ss)
         self.class_index = None if class_index is None else np.asarray(class_index, dtype=np.int64)
         self.device = resolve_device(device) if isinstance(device, str) else device
         self.net.to(self.device)
         self.train = train
-        self.ss = net.ss
         h = net.init_hidden(0, self.device)   # names and widths of the hidden states, in their packed order
         self._hidden_layout = (tuple(h), tuple(v.shape[1] for v in h.values()))
         self._hidden_dtype = next(iter(h.values())).dtype
@@ -127,8 +133,10 @@ class GRUKFBackend:
             from grutrack.motion.kalman import BatchKalmanFilter
             from grutrack.motion.models import make_model
 
-            self.kf = BatchKalmanFilter(make_model(net.cfg.ss_model, "arc", **net.cfg.ss_params),
-                                        yaw_flip=net.cfg.yaw_flip)
+            name = net.cfg.ss_model if own else ss_model
+            params = dict(net.cfg.ss_params if own else net.cfg.model_params.get(ss_model.upper(), {}))
+            form = params.pop("form", "arc")   # the torch model's form (:meth:`GRUKFConfig.torch_model`)
+            self.kf = BatchKalmanFilter(make_model(name, form, **params), yaw_flip=net.cfg.yaw_flip)
             self.Q, self.R, self.P0 = (getattr(net, k).detach().cpu().numpy().astype(np.float64)
                                        for k in ("ekf_Q", "ekf_R", "ekf_P0"))
 

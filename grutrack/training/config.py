@@ -7,6 +7,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 from grutrack.config_loader import read_config, validate
+from grutrack.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -84,4 +85,8 @@ def config_from_dict(raw: dict, source: str = "<dict>", flags: dict | None = Non
     vals["sources"] = tuple(dict(x) for x in raw.get("sources", []))
     for k in _FLOAT_FIELDS:
         vals[k] = float(raw[k])
+    if vals["network_classes"] == "own_model" and vals.get("scenes_per_step", 1) > 1:
+        where = (flags or {}).get("scenes_per_step", f"{source}: 'scenes_per_step'")
+        raise ConfigError(f"{where} must be 1 with network_classes 'own_model' (its groups of one model each call "
+                          f"the network separately), got {vals['scenes_per_step']!r}")
     return TrainConfig(**{k: vals[k] for k in names if k in vals})

@@ -28,11 +28,12 @@ import torch
 from grutrack.data.scene import NUSCENES_VOCABULARY, BoxSet, Scene
 from grutrack.documents import TrainingLog, TrainingStep, ValidationRecord
 from grutrack.errors import ConfigError, GrutrackError, InputFormatError
-from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig, MEAS_PLANAR, STATE_PLANAR
+from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig, MEAS_PLANAR, NETWORK_MODELS, STATE_PLANAR
 from grutrack.motion.torch_models import wrap_angle_t
 from grutrack.tracking.config import TrackerConfig, load_tracker_config
 from grutrack.tracking.ekf_backend import KalmanBackend, KFState
-from grutrack.tracking.factory import ekf_groups, grukf_group, network_members, param_index, remap_config
+from grutrack.tracking.factory import (ekf_groups, grukf_group, network_members, network_models, param_index,
+                                      remap_config)
 from grutrack.tracking.grukf_backend import GRUKFBackend, resolve_device
 from grutrack.tracking.tracker import GroupUpdate, Tracker, TrackGroup
 from grutrack.motion.checkpoint import load_weights, read_checkpoint, save_checkpoint
@@ -47,14 +48,16 @@ LOG_EVERY_S = 30.0
 
 
 
-def ekf_backend(cfg: TrainConfig, index: np.ndarray) -> KalmanBackend:
-    """The parallel EKF: the training SS model for every label, with the motion config's Q, R, P0 of the
-    tracking class each label takes its parameters from (``index`` (n_labels,), :func:`param_index`)."""
-    return _ekf_backend(cfg.motion_config, cfg.ss_model, tuple(int(c) for c in index))
+def ekf_backend(cfg: TrainConfig, index: np.ndarray, model: str | None = None) -> KalmanBackend:
+    """The parallel EKF: the training SS model (or ``model``, a network group's own, ``network_classes:
+    own_model``) for every label, with the motion config's Q, R, P0 of the tracking class each label takes its
+    parameters from (``index`` (n_labels,), :func:`param_index`) under that model."""
+    form = "arc" if model is None else _model_forms(cfg).get(model.upper(), "arc")
+    return _ekf_backend(cfg.motion_config, model or cfg.ss_model, tuple(int(c) for c in index), form)
 
 
 @functools.lru_cache(maxsize=16)
-def _ekf_backend(motion_config: str, ss_model: str, index: tuple[int, ...]) -> KalmanBackend:
+def _ekf_backend(motion_config: str, ss_model: str, index: tuple[int, ...], form: str = "arc") -> KalmanBackend:
     """:func:`ekf_backend`, made once per process and settings (run once per training scene; the backend keeps
     no state of its own)."""
     from grutrack.classes import TRACKING_CLASSES
@@ -64,7 +67,18 @@ def _ekf_backend(motion_config: str, ss_model: str, index: tuple[int, ...]) -> K
     motion = load_motion_config(motion_config, ss_model)
     first = motion[TRACKING_CLASSES[0]]
     tables = {k: np.stack([motion[TRACKING_CLASSES[c]][k] for c in index]) for k in ("Q", "R", "P0")}
-    return KalmanBackend(make_model(first["model"], **first["params"]), tables["Q"], tables["R"], tables["P0"])
+    return KalmanBackend(make_model(first["model"], form, **first["params"]), tables["Q"], tables["R"],
+                         tables["P0"])
+
+
+def _model_forms(cfg: TrainConfig) -> dict[str, str]:
+    """The tracker preset's form ("arc" or "piecewise") of each model an ``own_model`` network runs besides its
+    own (``{MODEL NAME: form}``; the network's own model is always the arc form)."""
+    if cfg.network_classes != "own_model":
+        return {}
+    preset = load_tracker_config(cfg.tracker_preset)
+    forms = {"CTRA": "arc", "BICYCLE": preset.bicycle_form}   # CTRA's piecewise form has no torch model
+    return {m: forms[m] for m in NETWORK_MODELS if m != cfg.ss_model.upper()}
 
 
 class TrainingDiverged(GrutrackError):
@@ -228,17 +242,18 @@ def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_
     ``lockstep``: a :class:`~grutrack.training.lockstep.LockstepCorrect` this scene (its ``slot``) shares the
     network's calls with (several scenes per step); None: the network is called directly."""
     correct = None if lockstep is None else lockstep.bind(slot)
-    gru = grukf_group(net, len(index), device, train=True, class_index=index, correct=correct).backend
-    backend = PairedBackend(gru, ekf_backend(cfg, index))
-    tracker = Tracker(tracker_cfg, _groups(backend, net.cfg, tracker_cfg, index))
+    backends = [PairedBackend(grukf_group(net, len(index), device, train=True, class_index=index, correct=correct,
+                                          ss_model=model).backend, ekf_backend(cfg, index, model))
+                for model, _ in network_models(net.cfg, tracker_cfg, index)]
+    tracker = Tracker(tracker_cfg, _groups(backends, net.cfg, tracker_cfg, index))
     loss = SceneLoss(cfg, device)
     for frame in scene.frames:
         _, updates = tracker.step_with_updates(dets[frame.token], frame.timestamp, output=False)
         if lockstep is not None:
             lockstep.frame_done(slot)
         for u in updates:
-            if u.group == 0:      # the network's group (the others are the preset's EKF)
-                loss.add(u, backend, frame.gt)
+            if u.group < len(backends):      # the network's groups (the others are the preset's EKF)
+                loss.add(u, backends[u.group], frame.gt)
     return loss
 
 
@@ -276,12 +291,13 @@ def run_scenes(net: GRUKalmanNet, jobs: list[tuple], cfg: TrainConfig, dets: dic
     return losses
 
 
-def _groups(backend, arch: GRUKFConfig, tracker_cfg: TrackerConfig, index: np.ndarray) -> list[TrackGroup]:
-    """Group 0: ``backend`` for the labels the network filters (:func:`network_members`); then the preset's EKF
-    groups for the other labels (none with ``network_classes: all``)."""
+def _groups(backends: list, arch: GRUKFConfig, tracker_cfg: TrackerConfig, index: np.ndarray) -> list[TrackGroup]:
+    """The network's groups first, ``backends[i]`` for the labels of the i-th (:func:`network_models`); then the
+    preset's EKF groups for the other labels (none with ``network_classes: all``)."""
+    models = network_models(arch, tracker_cfg, index)
     members = network_members(arch, tracker_cfg, index)
     rest = ekf_groups(tracker_cfg, index, only=~members) if not members.all() else []
-    return [TrackGroup(backend, members), *rest]
+    return [*(TrackGroup(b, m) for b, (_, m) in zip(backends, models)), *rest]
 
 
 def ekf_gain(backend: KalmanBackend, s: KFState, rows: np.ndarray) -> np.ndarray:
@@ -313,23 +329,24 @@ def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: Tra
     tracking class)."""
     from threadpoolctl import threadpool_limits
 
-    ekf = ekf_backend(cfg, index)
-    shape = _arch(cfg).table_shape
-    total = np.zeros((*shape, ekf.model.dim_x, 9))
+    arch = _arch(cfg)
+    ekfs = [ekf_backend(cfg, index, model) for model, _ in network_models(arch, tracker_cfg, index)]
+    shape = arch.table_shape
+    total = np.zeros((*shape, ekfs[0].model.dim_x, 9))
     count = np.zeros(shape, dtype=np.int64)
-    tracker = Tracker(tracker_cfg, _groups(ekf, _arch(cfg), tracker_cfg, index))
+    tracker = Tracker(tracker_cfg, _groups(ekfs, arch, tracker_cfg, index))
     with threadpool_limits(limits=1, user_api="blas"):   # tiny batched solves: threads only add stalls
         for scene in scenes:
             tracker.reset()
             for frame in scene.frames:
                 for u in tracker.step_with_updates(dets[frame.token], frame.timestamp, output=False)[1]:
-                    if u.group != 0 or not len(u.rows):
+                    if u.group >= len(ekfs) or not len(u.rows):
                         continue
                     rows = u.rows
                     c = index[u.labels[rows]] if cfg.class_gain else np.zeros(len(rows), dtype=np.int64)
                     a = np.minimum(u.hits[rows], shape[1]) - 1   # hits = 1 + the updates before this one
                     g = np.minimum(u.misses[rows], shape[2]) - 1  # misses = frames since the last update
-                    np.add.at(total, (c, a, g), ekf_gain(ekf, u.prior, rows))
+                    np.add.at(total, (c, a, g), ekf_gain(ekfs[u.group], u.prior, rows))
                     np.add.at(count, (c, a, g), 1)
     with np.errstate(invalid="ignore", divide="ignore"):
         table = total / count[..., None, None]
@@ -346,13 +363,24 @@ def init_gain_prior(net: GRUKalmanNet, cfg: TrainConfig, scenes: list[Scene], de
     stay zero, so the untrained GRU-KF is that EKF. ``generator``: draws the output layer's small starting
     weights (constant prior)."""
     if cfg.gain_prior == "ekf":
-        from grutrack.classes import TRACKING_CLASSES
-
-        ekf = ekf_backend(cfg, np.arange(len(TRACKING_CLASSES)))
-        net.set_ekf_noise(torch.as_tensor(ekf.Q), torch.as_tensor(ekf.R), torch.as_tensor(ekf.P0))
+        net.set_ekf_noise(*(torch.as_tensor(a) for a in ekf_noise(cfg)))
         return
     shared, table = mean_ekf_gain(scenes, dets, tracker_cfg, cfg, index)
     net.set_gain_prior(torch.as_tensor(shared), torch.as_tensor(table), generator=generator)
+
+
+def ekf_noise(cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The prior EKF's Q, P0 (n_classes, m, m) and R (n_classes, 9, 9) per tracking class, from the motion config:
+    every class under ``ss_model``; with ``network_classes: own_model`` a class whose own model is one of
+    :data:`NETWORK_MODELS` keeps that model's noise (the network runs it with that model)."""
+    from grutrack.classes import TRACKING_CLASSES
+    from grutrack.motion.defaults import load_motion_config
+
+    shared = load_motion_config(cfg.motion_config, cfg.ss_model)
+    own = load_motion_config(cfg.motion_config) if cfg.network_classes == "own_model" else {}
+    rows = [own[c] if c in own and own[c]["model"].upper() in NETWORK_MODELS else shared[c]
+            for c in TRACKING_CLASSES]
+    return tuple(np.stack([r[k] for r in rows]) for k in ("Q", "R", "P0"))
 
 
 def _arch(cfg: TrainConfig) -> GRUKFConfig:
@@ -360,11 +388,14 @@ def _arch(cfg: TrainConfig) -> GRUKFConfig:
     from grutrack.classes import TRACKING_CLASSES
     from grutrack.motion.defaults import load_motion_config
 
-    params = load_motion_config(cfg.motion_config, cfg.ss_model)[TRACKING_CLASSES[0]]["params"]
-    return GRUKFConfig(ss_model=cfg.ss_model, ss_params=dict(params), four_gru=cfg.four_gru,
+    def params(model: str) -> dict:
+        return dict(load_motion_config(cfg.motion_config, model)[TRACKING_CLASSES[0]]["params"])
+
+    others = {m: {**params(m), "form": form} for m, form in _model_forms(cfg).items()}
+    return GRUKFConfig(ss_model=cfg.ss_model, ss_params=params(cfg.ss_model), four_gru=cfg.four_gru,
                        class_gain=cfg.class_gain, age_bins=cfg.age_bins, gap_bins=cfg.gap_bins,
                        yaw_flip=cfg.yaw_flip, aux_inputs=cfg.aux_inputs, gain_prior=cfg.gain_prior,
-                       network_classes=cfg.network_classes)
+                       network_classes=cfg.network_classes, model_params=others)
 
 
 @dataclass
