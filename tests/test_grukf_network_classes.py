@@ -33,6 +33,15 @@ def _trainer(scenes, dets, out, **over):
     return Trainer(cfg, scenes, dets, out, progress=False)
 
 
+def _loss_terms(trainer, scenes, dets) -> int:
+    """Loss terms (ground truth and pseudo-label) of the untrained network of ``trainer`` over ``scenes``."""
+    from grutrack.training.trainer import run_scene
+
+    t = trainer
+    losses = [run_scene(t.net, s, dets, t.tracker_cfg, t.cfg, t.device, t.index) for s in scenes]
+    return sum(loss.gt_terms + loss.pseudo_terms for loss in losses)
+
+
 def _boxes_by_label(results) -> dict[str, np.ndarray]:
     """Every written box (M, 9), by class name, in frame order."""
     out = {}
@@ -76,17 +85,11 @@ def test_untrained_ekf_prior_with_network_classes_ss_model_is_the_ekf_preset(sce
 def test_training_with_network_classes_ss_model_takes_loss_terms_of_the_network_classes_only(scenes_and_dets,
                                                                                              tmp_path):
     from grutrack.motion.checkpoint import load_network
-    from grutrack.training.trainer import run_scene
 
     scenes, dets = scenes_and_dets
     hyb = _trainer(scenes, dets, tmp_path / "hyb", network_classes="ss_model")
     full = _trainer(scenes, dets, tmp_path / "all")
-    n_hyb = n_full = 0
-    for s in scenes:
-        a = run_scene(hyb.net, s, dets, hyb.tracker_cfg, hyb.cfg, hyb.device, hyb.index)
-        b = run_scene(full.net, s, dets, full.tracker_cfg, full.cfg, full.device, full.index)
-        n_hyb += a.gt_terms + a.pseudo_terms
-        n_full += b.gt_terms + b.pseudo_terms
+    n_hyb, n_full = _loss_terms(hyb, scenes, dets), _loss_terms(full, scenes, dets)
     # the GT boxes of bicycles, motorcycles and trailers give no terms (their tracks run the preset's EKF)
     n_two_wheel = sum(int(np.isin(f.gt.labels, [0, 3, 5]).sum()) for s in scenes for f in s.frames)
     assert n_two_wheel > 0 and 0 < n_hyb < n_full
@@ -133,18 +136,12 @@ def test_untrained_ekf_prior_with_network_classes_own_model_runs_each_class_with
 
 def test_training_with_network_classes_own_model_takes_loss_terms_of_both_models(scenes_and_dets, tmp_path):
     from grutrack.motion.checkpoint import load_network
-    from grutrack.training.trainer import run_scene
 
     scenes, dets = scenes_and_dets
     over = {"gain_prior": "ekf", "motion_config": "grutrack_nusc"}
     own = _trainer(scenes, dets, tmp_path / "own", network_classes="own_model", **over)
     hyb = _trainer(scenes, dets, tmp_path / "hyb", network_classes="ss_model", **over)
-    n_own = n_hyb = 0
-    for s in scenes:
-        a = run_scene(own.net, s, dets, own.tracker_cfg, own.cfg, own.device, own.index)
-        b = run_scene(hyb.net, s, dets, hyb.tracker_cfg, hyb.cfg, hyb.device, hyb.index)
-        n_own += a.gt_terms + a.pseudo_terms
-        n_hyb += b.gt_terms + b.pseudo_terms
+    n_own, n_hyb = _loss_terms(own, scenes, dets), _loss_terms(hyb, scenes, dets)
     assert n_own > n_hyb > 0            # the bicycles' and motorcycles' tracks add terms
     own.run()
     net = load_network(tmp_path / "own" / "model.pt")
