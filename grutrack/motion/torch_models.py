@@ -183,5 +183,5 @@ def make_torch_model(name: str, form: str = "arc", **params):
         raise ValueError(f"GRU-Kalman filter SS model must be one of CTRA, Bicycle; got {name!r}")
     if form not in ("arc", "piecewise") or (form == "piecewise" and key not in TORCH_PIECEWISE):
         raise ValueError(f"GRU-Kalman filter SS model {name}: form must be 'arc'"
-                         f"{' or piecewise' if key in TORCH_PIECEWISE else ''}, got {form!r}")
+                         f"{' or ' + repr('piecewise') if key in TORCH_PIECEWISE else ''}, got {form!r}")
     return (TORCH_PIECEWISE[key] if form == "piecewise" else TORCH_MODELS[key])(**params)
