@@ -1,0 +1,36 @@
+"""scripts/grukf_suite.py's many-seed summary: paired differences to the ekf row with standard errors."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+_SPEC = importlib.util.spec_from_file_location("grukf_suite", Path(__file__).parents[1] / "scripts/grukf_suite.py")
+suite = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(suite)
+
+
+def test_paired_difference_is_the_mean_and_standard_error_of_the_set_by_set_differences():
+    m, se = suite.paired_difference([0.40, 0.38, 0.41, 0.37], [0.42, 0.41, 0.42, 0.40])
+    d = np.array([-0.02, -0.03, -0.01, -0.03])
+    assert m == pytest.approx(d.mean())
+    assert se == pytest.approx(d.std(ddof=1) / 2.0)
+    assert suite.paired_difference([0.5], [0.4]) == (pytest.approx(0.1), 0.0)
+
+
+def test_difference_table_pairs_every_model_with_the_ekf_row_set_by_set():
+    sets = ["centerpoint_s21", "centerpoint_s22"]
+    rows = [{"model": "ekf", "centerpoint_s21_amota": 0.90, "centerpoint_s21_amotp": 0.40,
+             "centerpoint_s22_amota": 0.80, "centerpoint_s22_amotp": 0.50},
+            {"model": "grukf", "centerpoint_s21_amota": 0.91, "centerpoint_s21_amotp": 0.37,
+             "centerpoint_s22_amota": 0.80, "centerpoint_s22_amotp": 0.49}]
+    classes = {("ekf", sets[0]): {"car": 0.30, "bus": 0.5}, ("ekf", sets[1]): {"car": 0.32},
+               ("grukf", sets[0]): {"car": 0.28, "bus": 0.4}, ("grukf", sets[1]): {"car": 0.31}}
+    lines = suite._difference_table(rows, classes, sets)
+    assert "2 CenterPoint-like sets" in lines[0] and "SYNTHETIC" in lines[0]
+    assert lines[2] == "| model | AMOTA | AMOTP (m) | bus AMOTP | car AMOTP |"
+    ekf, grukf = lines[4], lines[5]
+    assert ekf == "| ekf | +0.0000 +- 0.0000 | +0.0000 +- 0.0000 | +0.000 | +0.000 |"
+    # AMOTA: +0.01, 0 -> mean 0.005, s.e. 0.005; AMOTP: -0.03, -0.01 -> -0.02 +- 0.01; bus only where both have it
+    assert grukf == "| grukf | +0.0050 +- 0.0050 | -0.0200 +- 0.0100 | -0.100 | -0.015 |"
