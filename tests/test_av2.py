@@ -545,3 +545,15 @@ def test_cli_dataset_options(av2_root, tmp_path, capsys):
     assert main(["evaluate", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--submission",
                  "x.pkl", "--out", str(tmp_path / "m.json"), "--evaluator", "fast"]) == 2
     assert "AV2 has the official evaluator only" in capsys.readouterr().err
+
+
+def test_official_module_imports_without_the_numpy_alias_warnings():
+    """av2's alias shim makes numpy warn once per alias on import; official_module() shows none of them, and any
+    other FutureWarning would still fail this (-W error)."""
+    import subprocess
+    import sys
+
+    code = ("from grutrack.evaluation.av2_eval import official_module; m = official_module(); "
+            "assert hasattr(m, 'TrackEvalDataset')")
+    r = subprocess.run([sys.executable, "-W", "error::FutureWarning", "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-2000:]

@@ -64,6 +64,7 @@ import multiprocessing
 import os
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -99,10 +100,14 @@ def has_maps(dataset_dir: Path, log_ids: list[str]) -> bool:
     return all(ok(lg) for lg in log_ids)
 
 
-def _official():
-    """The official tracking evaluation module (imports TrackEval with the numpy aliases it needs)."""
-    import av2.evaluation.tracking.eval as official
-
+def official_module():
+    """The official tracking evaluation module ``av2.evaluation.tracking.eval`` (it imports TrackEval with the
+    numpy aliases TrackEval needs). Its alias shim probes ``hasattr(np, "bool")`` and the like, which numpy 1.2x
+    answers with one FutureWarning per alias on every first import; those warnings, and only those (filtered by
+    the shim's module name), are not shown."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=FutureWarning, module=r"av2\.evaluation\.tracking\._numpy_compat")
+        import av2.evaluation.tracking.eval as official
     return official
 
 
@@ -129,7 +134,7 @@ def range_filter(predictions: dict, labels: dict, max_range_m: int) -> tuple[dic
     ``evaluate`` does it. The prediction frames get their label frame's ``ego_translation_m`` (in place)."""
     from av2.evaluation.tracking import utils
 
-    official = _official()
+    official = official_module()
     labels = official.filter_max_dist(labels, max_range_m)
     utils.annotate_frame_metadata(utils.ungroup_frames(predictions), utils.ungroup_frames(labels),
                                   ["ego_translation_m"])
@@ -145,14 +150,14 @@ def drivable_area_filter(predictions: dict, labels: dict, dataset_dir: Path) -> 
             held.setdefault(lg, []).extend(f for f in frames if len(f["translation_m"]))
     held = {lg: frames for lg, frames in held.items() if frames}
     if held:
-        _official().filter_drivable_area(held, str(dataset_dir))
+        official_module().filter_drivable_area(held, str(dataset_dir))
 
 
 def tune_score_thresholds(labels: dict, predictions: dict, classes: list[str], workers: int,
                           output_dir: str) -> tuple[dict, dict, dict]:
     """Step 3, the body of the official ``_tune_score_thresholds`` (HOTA objective, 10 thresholds, 2 m) with
     this module's pool: (threshold, tuned HOTA, recall-averaged HOTA), each ``{class: float}``."""
-    official = _official()
+    official = official_module()
     metric_class = official.SUBMETRIC_TO_METRIC_CLASS_NAME[OBJECTIVE]
     metrics_config = {"METRICS": [metric_class], "THRESHOLD": SIMILARITY_THRESHOLD, "PRINT_CONFIG": False}
     dataset_config = {**official.TrackEvalDataset.get_default_dataset_config(), "GT_TRACKS": {"tracker": labels},
@@ -211,7 +216,7 @@ def final_evaluation(labels: dict, predictions: dict, classes: list[str], config
 
     from av2.evaluation.tracking import utils
 
-    official = _official()
+    official = official_module()
 
     def frames(seqs):
         return {(f["seq_id"], f["timestamp_ns"]) for f in utils.ungroup_frames(seqs)}
@@ -261,7 +266,7 @@ def evaluate_sequences(predictions: dict, labels: dict, dataset_dir: str | Path 
     from av2.evaluation.tracking import utils
 
     workers = max(1, int(workers or default_workers()))
-    classes = list(_official().constants.AV2_CATEGORIES)
+    classes = list(official_module().constants.AV2_CATEGORIES)
     sink = contextlib.nullcontext() if verbose else contextlib.redirect_stdout(io.StringIO())
     errsink = contextlib.nullcontext() if verbose else contextlib.redirect_stderr(io.StringIO())
     with tempfile.TemporaryDirectory(prefix="grutrack-av2-eval-") as tmp, sink, errsink:

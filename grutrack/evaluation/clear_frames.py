@@ -119,8 +119,9 @@ def official_sequence_data(labels: dict, predictions: dict, classes: list[str]) 
         (:func:`grutrack.evaluation.av2_eval.evaluate_sequences` with ``keep_inputs``).
     :return: ``{log_id: {class: ClassSequence}}``.
     """
-    from av2.evaluation.tracking.eval import TrackEvalDataset
+    from grutrack.evaluation.av2_eval import official_module
 
+    TrackEvalDataset = official_module().TrackEvalDataset
     cfg = {**TrackEvalDataset.get_default_dataset_config(), "GT_TRACKS": {"t": labels},
            "PREDICTED_TRACKS": {"t": predictions}, "SEQ_IDS_TO_EVAL": list(labels), "CLASSES_TO_EVAL": classes,
            "TRACKERS_TO_EVAL": ["t"], "OUTPUT_FOLDER": None}
