@@ -159,3 +159,54 @@ def test_network_classes_own_model_refuses_several_scenes_per_step():
 
     with pytest.raises(ConfigError, match="'scenes_per_step' must be 1 with network_classes 'own_model'"):
         load_train_config("grukf", {"network_classes": "own_model", "scenes_per_step": 2})
+
+
+def test_training_classes_own_model_trains_on_the_two_wheelers_and_tracks_with_network_classes(scenes_and_dets,
+                                                                                               tmp_path):
+    """training_classes own_model with network_classes ss_model: training runs the Bicycle classes through the
+    network too (their loss terms), while validation and the checkpoint track them with the preset's EKF."""
+    from grutrack.motion.checkpoint import load_network
+    from grutrack.tracking.factory import build_tracker, network_members
+    from grutrack.tracking.tracker import track_scenes
+
+    scenes, dets = scenes_and_dets
+    over = {"gain_prior": "ekf", "yaw_flip": True, "motion_config": "grutrack_nusc", "network_classes": "ss_model"}
+    both = _trainer(scenes, dets, tmp_path / "both", training_classes="own_model", **over)
+    hyb = _trainer(scenes, dets, tmp_path / "hyb", **over)
+    own = _trainer(scenes, dets, tmp_path / "own", **{**over, "network_classes": "own_model"})
+    assert _loss_terms(both, scenes, dets) == _loss_terms(own, scenes, dets) > _loss_terms(hyb, scenes, dets)
+
+    untrained = build_tracker("grukf", checkpoint=both.save("untrained.pt"), device="cpu")
+    ekf = _boxes_by_label(track_scenes(build_tracker("ekf"), scenes, dets).results)
+    got = _boxes_by_label(track_scenes(untrained, scenes, dets).results)
+    for name in TRACKING_CLASSES:            # untrained it is the preset, as ss_model is
+        np.testing.assert_allclose(got[name], ekf[name], atol=1e-8, err_msg=name)
+
+    both.run()
+    net = load_network(tmp_path / "both" / "model.pt")
+    assert net.cfg.network_classes == "ss_model"
+    assert net.cfg.model_params["BICYCLE"]["form"] == "piecewise"
+    tracker = build_tracker("grukf", checkpoint=tmp_path / "both" / "model.pt", device="cpu")
+    members = network_members(net.cfg, tracker.cfg, np.arange(len(TRACKING_CLASSES)))
+    assert [TRACKING_CLASSES[i] for i in np.flatnonzero(members)] == list(CTRA_CLASSES)
+    # trained on the two-wheelers: its weights differ from the ss_model-only training of the same steps
+    hyb.run()
+    other = load_network(tmp_path / "hyb" / "model.pt")
+    assert any(not np.allclose(a.detach().numpy(), b.detach().numpy())
+               for a, b in zip(net.parameters(), other.parameters()))
+    trained = _boxes_by_label(track_scenes(tracker, scenes, dets).results)
+    for name in ("bicycle", "motorcycle", "trailer"):   # tracked with the preset's EKF all the same
+        np.testing.assert_allclose(trained[name], ekf[name], atol=1e-8, err_msg=name)
+
+
+def test_training_classes_own_model_is_refused_where_it_cannot_apply():
+    from grutrack.training.config import load_train_config
+
+    assert load_train_config("grukf").training_classes == "tracked"
+    assert load_train_config("paper").training_classes == "tracked"     # optional key, the paper's behaviour
+    with pytest.raises(ConfigError, match="'training_classes' must be 'tracked' or 'own_model'"):
+        load_train_config("grukf", {"training_classes": "all"})
+    with pytest.raises(ConfigError, match="'scenes_per_step' must be 1 with training_classes 'own_model'"):
+        load_train_config("grukf", {"training_classes": "own_model", "scenes_per_step": 2})
+    with pytest.raises(ConfigError, match="'training_classes' 'own_model' needs network_classes 'ss_model' or"):
+        load_train_config("grukf", {"training_classes": "own_model", "network_classes": "all"})

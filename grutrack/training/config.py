@@ -43,6 +43,7 @@ class TrainConfig:
     validation_scenes: int = 0   # training-split scenes held out for validation when no --val-split is given
     select_checkpoint: str = "last"   # model.pt: "last" step or the "best_val_amota" validated step
     resample_mix: str = "epoch"  # resampled profiles take turns by "epoch" or are mixed over the "scene"s
+    training_classes: str = "tracked"   # the classes whose tracks train the network: "tracked" or "own_model"
 
 
 #: fields holding real numbers: a string that reads as one is taken as that number (PyYAML reads ``1e-5``, which
@@ -85,8 +86,14 @@ def config_from_dict(raw: dict, source: str = "<dict>", flags: dict | None = Non
     vals["sources"] = tuple(dict(x) for x in raw.get("sources", []))
     for k in _FLOAT_FIELDS:
         vals[k] = float(raw[k])
-    if vals["network_classes"] == "own_model" and vals.get("scenes_per_step", 1) > 1:
+    own = "network_classes" if vals["network_classes"] == "own_model" else (
+        "training_classes" if vals.get("training_classes") == "own_model" else None)
+    if own and vals.get("scenes_per_step", 1) > 1:
         where = (flags or {}).get("scenes_per_step", f"{source}: 'scenes_per_step'")
-        raise ConfigError(f"{where} must be 1 with network_classes 'own_model' (its groups of one model each call "
+        raise ConfigError(f"{where} must be 1 with {own} 'own_model' (its groups of one model each call "
                           f"the network separately), got {vals['scenes_per_step']!r}")
+    if vals.get("training_classes") == "own_model" and vals["network_classes"] == "all":
+        where = (flags or {}).get("training_classes", f"{source}: 'training_classes'")
+        raise ConfigError(f"{where} 'own_model' needs network_classes 'ss_model' or 'own_model' (with 'all' every "
+                          f"class is tracked with the network's one SS model, not the one it would be trained with)")
     return TrainConfig(**{k: vals[k] for k in names if k in vals})

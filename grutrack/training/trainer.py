@@ -19,7 +19,7 @@ import signal
 import sys
 import threading
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import MISSING, asdict, dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -71,10 +71,22 @@ def _ekf_backend(motion_config: str, ss_model: str, index: tuple[int, ...], form
                          tables["P0"])
 
 
+def training_network_classes(cfg: TrainConfig) -> str:
+    """Which classes the network runs while training: ``network_classes``, or "own_model" with
+    ``training_classes: own_model`` (validation and the checkpoint keep ``network_classes``)."""
+    return "own_model" if cfg.training_classes == "own_model" else cfg.network_classes
+
+
+def training_arch(arch: GRUKFConfig, cfg: TrainConfig) -> GRUKFConfig:
+    """``arch`` with the classes the network runs while training (:func:`training_network_classes`)."""
+    kind = training_network_classes(cfg)
+    return arch if kind == arch.network_classes else replace(arch, network_classes=kind)
+
+
 def _model_forms(cfg: TrainConfig) -> dict[str, str]:
     """The tracker preset's form ("arc" or "piecewise") of each model an ``own_model`` network runs besides its
     own (``{MODEL NAME: form}``; the network's own model is always the arc form)."""
-    if cfg.network_classes != "own_model":
+    if training_network_classes(cfg) != "own_model":
         return {}
     preset = load_tracker_config(cfg.tracker_preset)
     forms = {"CTRA": "arc", "BICYCLE": preset.bicycle_form}   # CTRA's piecewise form has no torch model
@@ -238,14 +250,16 @@ def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_
               cfg: TrainConfig, device: torch.device, index: np.ndarray, lockstep=None, slot: int = 0) -> SceneLoss:
     """Track one scene with gradients on; returns its collected loss. ``index`` (n_labels,): the tracking
     class each label of the scene's vocabulary takes its parameters (and the network its class gain) from.
-    With ``network_classes: ss_model`` the other labels run the preset's EKF groups and give no loss terms.
+    With ``network_classes: ss_model`` the other labels run the preset's EKF groups and give no loss terms
+    (``training_classes: own_model``: the network runs them too, :func:`training_arch`).
     ``lockstep``: a :class:`~grutrack.training.lockstep.LockstepCorrect` this scene (its ``slot``) shares the
     network's calls with (several scenes per step); None: the network is called directly."""
     correct = None if lockstep is None else lockstep.bind(slot)
+    arch = training_arch(net.cfg, cfg)
     backends = [PairedBackend(grukf_group(net, len(index), device, train=True, class_index=index, correct=correct,
                                           ss_model=model).backend, ekf_backend(cfg, index, model))
-                for model, _ in network_models(net.cfg, tracker_cfg, index)]
-    tracker = Tracker(tracker_cfg, _groups(backends, net.cfg, tracker_cfg, index))
+                for model, _ in network_models(arch, tracker_cfg, index)]
+    tracker = Tracker(tracker_cfg, _groups(backends, arch, tracker_cfg, index))
     loss = SceneLoss(cfg, device)
     for frame in scene.frames:
         _, updates = tracker.step_with_updates(dets[frame.token], frame.timestamp, output=False)
@@ -329,7 +343,7 @@ def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: Tra
     tracking class)."""
     from threadpoolctl import threadpool_limits
 
-    arch = _arch(cfg)
+    arch = training_arch(_arch(cfg), cfg)
     ekfs = [ekf_backend(cfg, index, model) for model, _ in network_models(arch, tracker_cfg, index)]
     shape = arch.table_shape
     total = np.zeros((*shape, ekfs[0].model.dim_x, 9))
@@ -377,7 +391,7 @@ def ekf_noise(cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from grutrack.motion.defaults import load_motion_config
 
     shared = load_motion_config(cfg.motion_config, cfg.ss_model)
-    own = load_motion_config(cfg.motion_config) if cfg.network_classes == "own_model" else {}
+    own = load_motion_config(cfg.motion_config) if training_network_classes(cfg) == "own_model" else {}
     rows = [own[c] if c in own and own[c]["model"].upper() in NETWORK_MODELS else shared[c]
             for c in TRACKING_CLASSES]
     return tuple(np.stack([r[k] for r in rows]) for k in ("Q", "R", "P0"))
@@ -511,7 +525,9 @@ class Trainer:
             if key not in ck:
                 raise InputFormatError(f"{path}: not a resumable checkpoint (no '{key}'; model.pt files of old "
                                        f"versions cannot be resumed)")
-        old, new = ck["train_config"], asdict(self.cfg)
+        # a key the run's version did not have yet reads as its default (the behaviour that version had)
+        old = {**{f.name: f.default for f in fields(TrainConfig) if f.default is not MISSING}, **ck["train_config"]}
+        new = asdict(self.cfg)
         changed = [k for k in new if k not in RESUME_MAY_CHANGE and _plain(old.get(k)) != _plain(new[k])]
         if changed:
             diff = ", ".join(f"{k} {old.get(k)!r} -> {new[k]!r}" for k in changed)
