@@ -91,8 +91,9 @@ def main() -> None:
     val = load_scenes(nusc, "mini_val")
     with tempfile.TemporaryDirectory() as tmp:
         dtrain, dval = _dets(nusc, "mini_train", 1, train, tmp), _dets(nusc, "mini_val", 2, val, tmp)
-        cfg = load_train_config(args.config, {**_fixed(args.config), "device": args.device, "checkpoint_every": 0,
-                                              "epochs": 100, "scenes_per_step": args.scenes_per_step})
+        cfg = load_train_config(args.config, {**_fixed(args.config, args.scenes_per_step), "device": args.device,
+                                              "checkpoint_every": 0, "epochs": 100,
+                                              "scenes_per_step": args.scenes_per_step})
         t, fps, sps = _timed_trainings(cfg, train, dtrain, tmp, args)
         ckpt = t.save("bench.pt")
         track_fps = []
@@ -107,10 +108,12 @@ def main() -> None:
           f"(runs: {', '.join(f'{v:.1f}' for v in track_fps)})")
 
 
-def _fixed(config: str) -> dict:
+def _fixed(config: str, scenes_per_step: int = 1) -> dict:
     """Overrides of a training config: "paper" runs with the 5-bin gap table, the configuration the figures in
-    the README were measured with (the default of earlier versions)."""
-    return {"gap_bins": 5} if config == "paper" else {}
+    the README were measured with (the default of earlier versions); several scenes per step train the network
+    on the tracked classes only (``training_classes: own_model`` needs one scene per step)."""
+    return {**({"gap_bins": 5} if config == "paper" else {}),
+            **({"training_classes": "tracked"} if scenes_per_step > 1 else {})}
 
 
 def paper_scale(args) -> None:
@@ -118,8 +121,9 @@ def paper_scale(args) -> None:
     from grutrack.tracking.config import load_tracker_config
     from grutrack.training.sources import load_source, merge
 
-    cfg = load_train_config(args.config, {**_fixed(args.config), "device": args.device, "checkpoint_every": 0,
-                                          "epochs": 100, "scenes_per_step": args.scenes_per_step})
+    cfg = load_train_config(args.config, {**_fixed(args.config, args.scenes_per_step), "device": args.device,
+                                          "checkpoint_every": 0, "epochs": 100,
+                                          "scenes_per_step": args.scenes_per_step})
     yaw = load_tracker_config(cfg.tracker_preset).measured_yaw
     entries = [{"dataset": "nuscenes", "dataroot": args.dataroot, "version": "v1.0-mini", "split": "mini_train",
                 "profile": "centerpoint", "seed": 1},

@@ -26,7 +26,9 @@ def _trainer(scenes, dets, out, **over):
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer
 
-    cfg = load_train_config("grukf", {"epochs": 1, "checkpoint_every": 0, "device": "cpu", **over})
+    # training_classes tracked: several scenes per step need one network group (own_model training has two)
+    cfg = load_train_config("grukf", {"epochs": 1, "checkpoint_every": 0, "device": "cpu",
+                                      "training_classes": "tracked", **over})
     t = Trainer(cfg, scenes, dets, out, progress=False)
     with torch.no_grad():   # a trained-looking output layer: gradients reach every layer through K
         g = torch.Generator().manual_seed(3)

@@ -202,7 +202,7 @@ def test_training_classes_own_model_trains_on_the_two_wheelers_and_tracks_with_n
 def test_training_classes_own_model_is_refused_where_it_cannot_apply():
     from grutrack.training.config import load_train_config
 
-    assert load_train_config("grukf").training_classes == "tracked"
+    assert load_train_config("grukf").training_classes == "own_model"   # the default recipe
     assert load_train_config("paper").training_classes == "tracked"     # optional key, the paper's behaviour
     with pytest.raises(ConfigError, match="'training_classes' must be 'tracked' or 'own_model'"):
         load_train_config("grukf", {"training_classes": "all"})

@@ -6,12 +6,13 @@ CenterPoint-like detections (seed 1), evaluated on mini_val with simulated detec
 with the real PointPillars detections (official semantics via the exact fast evaluator, equal to the devkit's
 TrackingEval to 1e-15). The GRU-KF writes its posterior for matched tracks.
 
-Measured (docs/results/grukf_eval/README.md, "The default recipe at the paper's scale"; training detections of
-seeds 1 and 7): on the simulated sets the mean AMOTA is the default `ekf` preset's or above (0.9059 and 0.9101 vs
-0.9060) and above Poly-MOT's EKF (`polymot`, the paper's baseline, 0.8680), the mean AMOTP 0.007 and 0.019 m below
-the preset's (0.370 and 0.358 vs 0.377 m); the real file 0.1907 and 0.1791 (the preset 0.1842). This test trains
-with seed 1. The bounds guard those relations with a margin for CPU arithmetic: AMOTA not more than 0.003 below
-the preset's, AMOTP at least 0.004 m below it, the real file within 0.002 of it. The paper's claim as this project
+Measured (docs/results/grukf_eval/README.md, "Training on every class, tracking the CTRA classes"; training
+detections of seeds 1 and 7): on these two simulated sets the mean AMOTA is the default `ekf` preset's or above
+(0.9101 and 0.9079 vs 0.9060) and above Poly-MOT's EKF (`polymot`, the paper's baseline, 0.8680), the mean AMOTP
+0.026 and 0.014 m below the preset's (0.351 and 0.363 vs 0.377 m); the real file 0.1935 and 0.1794 (the preset
+0.1842). This test trains with seed 1. The bounds guard those relations with a margin for CPU arithmetic: AMOTA not
+more than 0.003 below the preset's, AMOTP at least 0.010 m below it (the recipe before training_classes: own_model
+reached 0.007 with this seed), the real file within 0.002 of it. The paper's claim as this project
 states it (AMOTP 0.02 m below on every seed) is not reached."""
 
 from __future__ import annotations
@@ -78,7 +79,7 @@ def test_grukf_amota_at_least_and_amotp_below_the_ekf_on_simulated_detections(nu
     mean = lambda rows, k: sum(r[k] for r in rows) / len(rows)  # noqa: E731
     assert mean(gru, "amota") >= mean(polymot, "amota") + 0.01, (gru, polymot)
     assert mean(gru, "amota") >= mean(ekf, "amota") - 0.003, (gru, ekf)
-    assert mean(gru, "amotp") <= mean(ekf, "amotp") - 0.004, (gru, ekf)
+    assert mean(gru, "amotp") <= mean(ekf, "amotp") - 0.010, (gru, ekf)
 
 
 def test_grukf_at_least_the_ekf_on_real_pointpillars(nusc_mini, pointpillars_mini_val, trained):
