@@ -210,3 +210,19 @@ def test_training_classes_own_model_is_refused_where_it_cannot_apply():
         load_train_config("grukf", {"training_classes": "own_model", "scenes_per_step": 2})
     with pytest.raises(ConfigError, match="'training_classes' 'own_model' needs network_classes 'ss_model' or"):
         load_train_config("grukf", {"training_classes": "own_model", "network_classes": "all"})
+
+
+def test_a_checkpoint_written_before_training_classes_resumes_with_its_default(scenes_and_dets, tmp_path):
+    """A run saved by a version without the key trained on the tracked classes: resuming it with the key at that
+    value is the same run; with the key changed it is refused, naming the key."""
+    import torch
+
+    scenes, dets = scenes_and_dets
+    t = _trainer(scenes, dets, tmp_path / "old", network_classes="ss_model")
+    path = t.save("last.pt")
+    ck = torch.load(path, weights_only=False)
+    del ck["train_config"]["training_classes"]
+    torch.save(ck, path)
+    _trainer(scenes, dets, tmp_path / "old", network_classes="ss_model").resume(path)
+    with pytest.raises(ConfigError, match="training_classes 'tracked' -> 'own_model'"):
+        _trainer(scenes, dets, tmp_path / "old", network_classes="ss_model", training_classes="own_model").resume(path)
