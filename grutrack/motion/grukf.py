@@ -87,7 +87,8 @@ class GRUKFConfig:
     :data:`NETWORK_MODELS`, each through the network with its own SS model and noise: one track group per model,
     the weights shared; the others, e.g. CA, keep the preset's EKF). It changes no weight; the tracker and the
     trainer read it.
-    model_params: constructor parameters of the other SS models an ``own_model`` network runs
+    model_params: constructor parameters of the other SS models an ``own_model`` network runs (or trains with,
+    ``training_classes: own_model`` of the training config)
     (``{model name: params}``, the training motion config's, and ``form``: "arc" or "piecewise", the tracker
     preset's form of that model, so that the untrained network is the preset's EKF for those classes too).
     """

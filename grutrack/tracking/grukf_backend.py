@@ -15,9 +15,8 @@ form, the network's per-class Q, R, P0), linearised at the GRU-KF's own (detache
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import functools
+from dataclasses import dataclass
 
 import numpy as np
 import torch

@@ -385,7 +385,8 @@ def init_gain_prior(net: GRUKalmanNet, cfg: TrainConfig, scenes: list[Scene], de
 
 def ekf_noise(cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The prior EKF's Q, P0 (n_classes, m, m) and R (n_classes, 9, 9) per tracking class, from the motion config:
-    every class under ``ss_model``; with ``network_classes: own_model`` a class whose own model is one of
+    every class under ``ss_model``; when the network runs ``own_model`` groups (``network_classes`` or
+    ``training_classes: own_model``, :func:`training_network_classes`) a class whose own model is one of
     :data:`NETWORK_MODELS` keeps that model's noise (the network runs it with that model)."""
     from grutrack.classes import TRACKING_CLASSES
     from grutrack.motion.defaults import load_motion_config
