@@ -204,7 +204,9 @@ class Manifest:
 @dataclass
 class TrainingStep:
     """One optimiser step of ``grutrack train``: its loss and how many terms of each kind made it, the learning
-    rate it ran with, the validation AMOTA when validated after it (else None), wall seconds of the step."""
+    rate it ran with, the validation AMOTA when validated after it (else None), wall seconds of the step, and the
+    AMOTA of each validation detection set (``val_amota_sets``, in ``validation.json``'s ``detection_sets`` order;
+    ``val_amota`` is their mean; written ``a;b;c`` in the CSV)."""
 
     step: int
     epoch: int
@@ -216,6 +218,7 @@ class TrainingStep:
     lr: float = math.nan
     val_amota: float | None = None
     seconds: float = math.nan
+    val_amota_sets: tuple[float, ...] | None = None
 
     @classmethod
     def from_row(cls, row: dict[str, str], where: str) -> TrainingStep:
@@ -226,7 +229,9 @@ class TrainingStep:
                        prediction_terms=int(row.get("prediction_terms") or 0),
                        lr=float(row.get("lr") or "nan"),
                        val_amota=float(row["val_amota"]) if row.get("val_amota") not in ("", None) else None,
-                       seconds=float(row.get("seconds") or "nan"))
+                       seconds=float(row.get("seconds") or "nan"),
+                       val_amota_sets=tuple(float(x) for x in row["val_amota_sets"].split(";"))
+                       if row.get("val_amota_sets") else None)
         except (TypeError, ValueError) as exc:
             raise InputFormatError(f"{where}: step {row.get('step')!r}: not a number where one is expected "
                                    f"({exc})") from exc
@@ -234,6 +239,7 @@ class TrainingStep:
     def to_row(self) -> dict[str, Any]:
         row = asdict(self)
         row["val_amota"] = "" if self.val_amota is None else self.val_amota
+        row["val_amota_sets"] = "" if self.val_amota_sets is None else ";".join(map(str, self.val_amota_sets))
         return row
 
 
@@ -273,6 +279,14 @@ class TrainingLog:
         return [s for s in self.steps if s.val_amota is not None]
 
 
+# select_checkpoint rules of the training config and validation.json -> how messages and reports name the step
+SELECTION_RULES = {
+    "last": "the last step",
+    "best_val_amota": "the step of best validation AMOTA",
+    "best_val_amota_1se": "the latest step within one standard error of the best validation AMOTA",
+}
+
+
 @dataclass
 class ValidationRecord:
     """``validation.json`` of ``grutrack train``: the validation scenes (a split, or scenes held out of the
@@ -289,6 +303,8 @@ class ValidationRecord:
     reference: str | None = None
     reference_amota: float | None = None
     selected_amota: float | None = None
+    reference_amota_sets: list[float] | None = None      # per detection set, in detection_sets order
+    selected_amota_sets: list[float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -301,12 +317,17 @@ class ValidationRecord:
         d = read_json(path, "validation record")
         if not isinstance(d, dict) or "rule" not in d or "selected_step" not in d:
             raise InputFormatError(f"{path}: a validation record needs the fields 'rule' and 'selected_step'")
-        if d["rule"] not in ("last", "best_val_amota") or not isinstance(d["selected_step"], int):
-            raise InputFormatError(f"{path}: 'rule' must be 'last' or 'best_val_amota' and 'selected_step' an "
-                                   f"integer, got {d['rule']!r} and {d['selected_step']!r}")
+        if d["rule"] not in SELECTION_RULES or not isinstance(d["selected_step"], int):
+            raise InputFormatError(f"{path}: 'rule' must be one of {', '.join(map(repr, SELECTION_RULES))} and "
+                                   f"'selected_step' an integer, got {d['rule']!r} and {d['selected_step']!r}")
         for key in ("reference_amota", "selected_amota"):
             if not isinstance(d.get(key), (int, float, type(None))) or isinstance(d.get(key), bool):
                 raise InputFormatError(f"{path}: '{key}' must be a number or null, got {d.get(key)!r}")
+        for key in ("reference_amota_sets", "selected_amota_sets"):
+            v = d.get(key)
+            if v is not None and not (isinstance(v, list) and all(
+                    isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+                raise InputFormatError(f"{path}: '{key}' must be a list of numbers or null, got {v!r}")
         try:
             return cls(**{f.name: d[f.name] for f in fields(cls) if f.name in d})
         except TypeError as exc:

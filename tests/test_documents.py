@@ -83,11 +83,13 @@ def test_manifest_without_its_records_is_refused(tmp_path):
 
 def test_training_log_round_trip(tmp_path):
     log = TrainingLog([TrainingStep(1, 0, "scene-0061", 0.5, 3, 1, 0, 1e-5, None, 0.2),
-                       TrainingStep(2, 0, "scene-0103", 0.4, 2, 2, 0, 1e-5, 0.8123, 0.3)])
+                       TrainingStep(2, 0, "scene-0103", 0.4, 2, 2, 0, 1e-5, 0.8123, 0.3, (0.9, 0.7246))])
     log.write(tmp_path / "train_log.csv")
     text = (tmp_path / "train_log.csv").read_text().splitlines()
-    assert text[0] == "step,epoch,scene,loss,gt_terms,pseudo_terms,prediction_terms,lr,val_amota,seconds"
+    assert text[0] == ("step,epoch,scene,loss,gt_terms,pseudo_terms,prediction_terms,lr,val_amota,seconds,"
+                       "val_amota_sets")
     assert text[1].split(",")[8] == ""                       # no validation after step 1: empty cell
+    assert text[2].split(",")[10] == "0.9;0.7246"             # the AMOTA of each validation detection set
     back = TrainingLog.read(tmp_path / "train_log.csv")
     assert back == log and [s.step for s in back.validated()] == [2]
 
@@ -112,7 +114,7 @@ def test_bad_training_logs(tmp_path, text, expect):
 
 @pytest.mark.parametrize("text, message", [
     ('{"selected_step": 3}', "needs the fields 'rule' and 'selected_step'"),
-    ('{"rule": "best", "selected_step": 3}', "'rule' must be 'last' or 'best_val_amota'"),
+    ('{"rule": "best", "selected_step": 3}', "'rule' must be one of 'last', 'best_val_amota', 'best_val_amota_1se'"),
     ('{"rule": "last", "selected_step": "3"}', "'selected_step' an integer, got 'last' and '3'"),
     ('{"rule": "last", "selected_step": 3, "reference_amota": "0.8"}', "'reference_amota' must be a number or null"),
 ])

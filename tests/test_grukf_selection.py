@@ -40,6 +40,30 @@ class ScriptedValidator:
         return 0.75
 
 
+class ScriptedSetsValidator(ScriptedValidator):
+    """A :class:`ScriptedValidator` that scores three detection sets (``scores``; the call is their mean): close
+    values, so that the one-standard-error rule has steps within one standard error of the best to choose."""
+
+    detection_sets = ["given", "centerpoint", "pointpillars"]
+
+    def scores(self, net):
+        import numpy as np
+
+        s = sum(float(p.detach().double().sum()) for p in net.parameters())
+        values = np.array([0.70 + (abs(s) * k) % 0.02 for k in (7919.0, 104729.0, 1299709.0)])
+        self.seen.append((round(float(values.mean()), 6), {k: v.clone() for k, v in net.state_dict().items()}))
+        return values
+
+    def __call__(self, net) -> float:
+        return float(self.scores(net).mean())
+
+    def reference_scores(self):
+        return [0.7, 0.71, 0.72]
+
+    def reference_amota(self) -> float:
+        return 0.71
+
+
 def _trainer(scenes, dets, out, validate=None, **over):
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer
@@ -109,6 +133,74 @@ def test_a_resumed_run_selects_what_the_uninterrupted_run_selects(small_training
     assert (tmp_path / "a" / "validation.json").read_text() == (tmp_path / "b" / "validation.json").read_text()
 
 
+def _step(step: int, sets: list[float] | None, amota: float | None = None):
+    from grutrack.documents import TrainingStep
+
+    mean = round(sum(sets) / len(sets), 6) if sets else amota
+    return TrainingStep(step=step, epoch=0, scene="s", loss=1.0, val_amota=mean,
+                        val_amota_sets=None if sets is None else tuple(sets))
+
+
+def _select(rule: str, rows) -> int:
+    from grutrack.training.selection import next_selection
+
+    best = chosen = None
+    for r in rows:
+        best, chosen = next_selection(rule, best, chosen, r)
+    return chosen.step
+
+
+def test_one_se_rule_takes_the_latest_step_the_sets_do_not_agree_is_worse():
+    from grutrack.training.selection import one_se
+
+    best = _step(2, [0.80, 0.60, 0.70, 0.50])
+    noisy = _step(4, [0.79, 0.62, 0.66, 0.49])      # mean 0.010 lower; the sets disagree: s.e. 0.0122
+    worse = _step(6, [0.78, 0.58, 0.68, 0.48])      # 0.020 lower on every set: s.e. 0
+    assert one_se(noisy, best) == pytest.approx(0.012247, abs=1e-6)
+    assert one_se(worse, best) == pytest.approx(0.0, abs=1e-12)
+    start = _step(0, [0.70, 0.55, 0.65, 0.45])
+    assert _select("best_val_amota_1se", [start, best, noisy]) == 4
+    assert _select("best_val_amota_1se", [start, best, noisy, worse]) == 4
+    assert _select("best_val_amota", [start, best, noisy, worse]) == 2
+    # a later new best is chosen by both rules, and later steps are measured against it
+    top = _step(8, [0.82, 0.64, 0.72, 0.52])
+    assert _select("best_val_amota_1se", [start, best, noisy, top, noisy]) == 8
+    # one set (or none recorded): no spread, the latest of the steps of equal best AMOTA
+    assert _select("best_val_amota_1se", [_step(0, [0.7]), _step(1, [0.8]), _step(2, [0.8]), _step(3, [0.79])]) == 2
+    assert _select("best_val_amota_1se", [_step(0, None, 0.7), _step(1, None, 0.8), _step(2, None, 0.8)]) == 2
+    assert _select("best_val_amota", [_step(0, None, 0.7), _step(1, None, 0.8), _step(2, None, 0.8)]) == 1
+
+
+def test_one_se_rule_in_training_writes_the_chosen_step_with_its_sets(small_training_set, tmp_path):
+    import numpy as np
+
+    from grutrack.training.selection import one_se
+
+    scenes, dets = small_training_set
+    v = ScriptedSetsValidator()
+    final = _trainer(scenes, dets, tmp_path, v, select_checkpoint="best_val_amota_1se").run()
+    val = TrainingLog.read(tmp_path / "train_log.csv").validated()
+    assert all(len(r.val_amota_sets) == 3 for r in val)
+    assert [r.val_amota for r in val] == [round(float(np.mean(r.val_amota_sets)), 6) for r in val]
+    # the rule written out over the whole curve: the latest step within one s.e. of the (earliest) best
+    best = max(val, key=lambda r: (r.val_amota, -r.step))
+    expected = max(r.step for r in val if r.val_amota >= best.val_amota - one_se(r, best))
+    assert expected != best.step, "the scripted curve must make the two rules differ for the test to mean anything"
+    assert _same(read_checkpoint(final)["model"], v.seen[expected][1])
+    rec = ValidationRecord.read(tmp_path / "validation.json")
+    assert (rec.rule, rec.selected_step) == ("best_val_amota_1se", expected)
+    assert rec.selected_amota_sets == list(val[expected].val_amota_sets)
+    assert rec.reference_amota_sets == [0.7, 0.71, 0.72]
+    # resumed half way, the same choice
+    b = _trainer(scenes, dets, tmp_path / "b", ScriptedSetsValidator(), select_checkpoint="best_val_amota_1se")
+    b.run(max_steps=3)
+    c = _trainer(scenes, dets, tmp_path / "b", ScriptedSetsValidator(), select_checkpoint="best_val_amota_1se")
+    c.resume(tmp_path / "b" / "last.pt")
+    c.run()
+    assert ValidationRecord.read(tmp_path / "b" / "validation.json") == rec
+    assert _same(read_checkpoint(tmp_path / "b" / "model.pt")["model"], v.seen[expected][1])
+
+
 def test_held_out_scenes_are_evenly_spaced_in_name_order():
     from types import SimpleNamespace
 
@@ -166,7 +258,8 @@ def test_cli_holds_scenes_out_of_training_and_validates_on_them(nusc_mini, nusc_
 @pytest.mark.parametrize("key, value, message", [
     ("validation_scenes", -1, "'validation_scenes' must be an integer from 0 to 1000, got -1"),
     ("validation_scenes", 2.5, "'validation_scenes' must be an integer from 0 to 1000, got 2.5"),
-    ("select_checkpoint", "best", "'select_checkpoint' must be 'last' or 'best_val_amota', got 'best'"),
+    ("select_checkpoint", "best",
+     "'select_checkpoint' must be 'last', 'best_val_amota' or 'best_val_amota_1se', got 'best'"),
 ])
 def test_bad_selection_settings_are_refused_naming_the_key(key, value, message):
     from grutrack.errors import ConfigError

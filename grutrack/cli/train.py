@@ -132,10 +132,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {final} after {trainer.state.step} steps (last loss {last.loss if last else None}); log: "
           f"{Path(args.out) / 'train_log.csv'}")
     if validate is not None and final.name == "model.pt":
-        from grutrack.documents import ValidationRecord
+        from grutrack.documents import SELECTION_RULES, ValidationRecord
 
         rec = ValidationRecord.read(Path(args.out) / "validation.json")
-        chosen = "the last step" if rec.rule == "last" else "the step of best validation AMOTA"
+        chosen = SELECTION_RULES[rec.rule]
         amota = "n/a" if rec.selected_amota is None else f"{rec.selected_amota:.4f}"
         print(f"model.pt holds step {rec.selected_step} ({chosen}): validation AMOTA {amota}; "
               f"{rec.reference} on the same scenes: {rec.reference_amota:.4f}")

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from grutrack.report import figures
-from grutrack.documents import TrainingLog, ValidationRecord
+from grutrack.documents import SELECTION_RULES, TrainingLog, ValidationRecord
 from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import (header, image, per_class_table, provenance, runs_table, table, num,
                                       training_provenance, worst_scene_strips)
@@ -83,7 +83,7 @@ def _learning_curve(inp: ReportInputs, label: str, tl: TrainingLog, record_path:
                          min_span=0.02)
     n = len(rec.scenes)
     where = f"{n} scene{'s' if n != 1 else ''} held out of {rec.split}" if rec.held_out else f"the {rec.split} split"
-    chosen = ("the last step" if rec.rule == "last" else "the step of best validation AMOTA")
+    chosen = SELECTION_RULES[rec.rule]
     amota = "n/a" if rec.selected_amota is None else f"{rec.selected_amota:.3f}"
     sets = (f" with {len(rec.detection_sets)} detection sets ({', '.join(rec.detection_sets)}; AMOTA their mean)"
             if len(rec.detection_sets) > 1 else "")

@@ -39,6 +39,7 @@ from grutrack.tracking.tracker import GroupUpdate, Tracker, TrackGroup
 from grutrack.motion.checkpoint import load_weights, read_checkpoint, save_checkpoint
 from grutrack.training.config import TrainConfig
 from grutrack.training.gt_association import StickyGTAssociation
+from grutrack.training.selection import next_selection
 
 #: a gain entry beyond this (a correction of 1000x the innovation) means the learned filter has diverged
 MAX_ABS_GAIN = 1e3
@@ -453,7 +454,9 @@ class Trainer:
         self._log_written = time.monotonic()
         self.out = Path(out_dir)
         self.validate = validate            # callable(net) -> AMOTA (a validation.Validator), or None
-        self._best: tuple[int, float] | None = None     # (step, val AMOTA) of best.pt (select_checkpoint)
+        # select_checkpoint: (the validated step of highest AMOTA so far, the step best.pt holds)
+        self._best: TrainingStep | None = None
+        self._chosen: TrainingStep | None = None
         self.progress = progress
         self.device = resolve_device(cfg.device, "training config 'device'")
         vocab = scenes[0].vocabulary if scenes else NUSCENES_VOCABULARY
@@ -508,17 +511,20 @@ class Trainer:
         _set_rng_state(self.np_rng, self.torch_rng, ck["rng"])
         self.state = TrainState(**ck["train_state"])
         self.log = TrainingLog([TrainingStep.from_row(r, str(path)) for r in ck["log"]])
-        self._best = self._resumed_best()
+        self._best, self._chosen = self._resumed_selection()
 
-    def _resumed_best(self) -> tuple[int, float] | None:
-        """The (step, AMOTA) best.pt holds when it is the best validated step of the resumed log, else None (a
-        best.pt from beyond the resumed step is rewritten when that step is validated again)."""
+    def _resumed_selection(self) -> tuple[TrainingStep | None, TrainingStep | None]:
+        """(best, chosen) of the resumed log replayed through :func:`next_selection` when best.pt holds the chosen
+        step, else (None, None) (a best.pt from beyond the resumed step is rewritten when that step is validated
+        again)."""
         val = self.log.validated()
-        if self.cfg.select_checkpoint != "best_val_amota" or not val or not (self.out / "best.pt").is_file():
-            return None
-        top = max(val, key=lambda r: (r.val_amota, -r.step))
+        if self.cfg.select_checkpoint == "last" or not val or not (self.out / "best.pt").is_file():
+            return None, None
+        best = chosen = None
+        for row in val:
+            best, chosen = next_selection(self.cfg.select_checkpoint, best, chosen, row)
         held = read_checkpoint(self.out / "best.pt").get("selected", {})
-        return (top.step, top.val_amota) if held.get("step") == top.step else None
+        return (best, chosen) if held.get("step") == chosen.step else (None, None)
 
     def _check_resumable(self, path: str | Path, ck: dict) -> None:
         """Refuse to resume ``ck`` unless it was written by a run of the same data and settings."""
@@ -580,8 +586,7 @@ class Trainer:
         bar.close()
         if self.state.epoch >= self.cfg.epochs and self.validate is not None and \
                 self.log.steps and self.log.steps[-1].val_amota is None:
-            self.log.steps[-1].val_amota = round(float(self.validate(self.net)), 6)
-            self._consider(self.log.steps[-1])
+            self._validate_into(self.log.steps[-1])
         self.save()
         return self._write_model() if self.state.epoch >= self.cfg.epochs else self.out / "last.pt"
 
@@ -589,18 +594,30 @@ class Trainer:
     def _validate_start(self) -> None:
         """Validate the network before any step: row 0 of the log (loss NaN), a candidate for model.pt."""
         self.net.eval()
-        row = TrainingStep(step=0, epoch=0, scene="(before training)", loss=math.nan,
-                           val_amota=round(float(self.validate(self.net)), 6), seconds=0.0)
+        row = TrainingStep(step=0, epoch=0, scene="(before training)", loss=math.nan, seconds=0.0)
+        self._validate_into(row)
         self.log.steps.append(row)
+
+    def _validate_into(self, row: TrainingStep) -> None:
+        """Validate the current network into ``row`` (``val_amota``, and ``val_amota_sets`` when the validator
+        scores each detection set: :meth:`Validator.scores`), then consider it for model.pt."""
+        scores = getattr(self.validate, "scores", None)
+        if scores is None:
+            row.val_amota = round(float(self.validate(self.net)), 6)
+        else:
+            per_set = np.asarray(scores(self.net), dtype=np.float64)
+            row.val_amota = round(float(per_set.mean()), 6)
+            row.val_amota_sets = tuple(round(float(x), 6) for x in per_set)
         self._consider(row)
 
     def _consider(self, row: TrainingStep) -> None:
-        """With ``select_checkpoint: best_val_amota``: keep the network just validated as best.pt when its AMOTA
-        is above every earlier one's."""
-        if self.cfg.select_checkpoint != "best_val_amota" or row.val_amota is None:
+        """With a ``select_checkpoint`` rule other than "last": keep the network just validated as best.pt when
+        the rule chooses it (:func:`next_selection`)."""
+        if self.cfg.select_checkpoint == "last" or row.val_amota is None:
             return
-        if self._best is None or row.val_amota > self._best[1]:
-            self._best = (row.step, row.val_amota)
+        self._best, chosen = next_selection(self.cfg.select_checkpoint, self._best, self._chosen, row)
+        if chosen is row:
+            self._chosen = row
             save_checkpoint(self.out / "best.pt", self.net, {
                 "train_config": asdict(self.cfg), "selected": {"step": row.step, "val_amota": row.val_amota}})
 
@@ -614,15 +631,22 @@ class Trainer:
                                   reference=getattr(v, "reference_name", None))
         val = self.log.validated()
         if val:
-            record.selected_amota = val[-1].val_amota if val[-1].step == self.state.step else None
+            last = val[-1] if val[-1].step == self.state.step else None
+            record.selected_amota = None if last is None else last.val_amota
+            record.selected_amota_sets = None if last is None or last.val_amota_sets is None else \
+                list(last.val_amota_sets)
+            per_set = getattr(v, "reference_scores", None)
+            if per_set is not None:
+                record.reference_amota_sets = [round(float(x), 6) for x in per_set()]
             ref = getattr(v, "reference_amota", None)
             record.reference_amota = None if ref is None else round(float(ref()), 6)
         net = None
-        if self._best is not None:
-            step, amota = self._best
+        if self._chosen is not None:
+            c = self._chosen
             net = copy.deepcopy(self.net)
             load_weights(net, read_checkpoint(self.out / "best.pt", map_location=self.device), self.out / "best.pt")
-            record.rule, record.selected_step, record.selected_amota = "best_val_amota", step, amota
+            record.rule, record.selected_step, record.selected_amota = self.cfg.select_checkpoint, c.step, c.val_amota
+            record.selected_amota_sets = None if c.val_amota_sets is None else list(c.val_amota_sets)
         path = self.save("model.pt", net, {"selected": {"rule": record.rule, "step": record.selected_step,
                                                          "val_amota": record.selected_amota}})
         record.write(self.out / "validation.json")
@@ -713,8 +737,7 @@ class Trainer:
                            seconds=round(time.perf_counter() - t0, 4))
         if self.validate is not None and self.cfg.val_every and self.state.step % self.cfg.val_every == 0:
             self.net.eval()
-            row.val_amota = round(float(self.validate(self.net)), 6)
-            self._consider(row)
+            self._validate_into(row)
         self.log.steps.append(row)
         if self.state.step == 1 or time.monotonic() - self._log_written >= LOG_EVERY_S:
             self._write_log()   # progress shows in train_log.csv from the first step on

@@ -25,8 +25,10 @@ class Validator:
     profile the training draws from): the AMOTA is then the mean over the sets, so that a step which fails on one
     kind of detector error is not selected for its score on another.
 
-    ``split``, ``scene_names``, ``detection_sets``, ``reference_name`` and :meth:`reference_amota` (the AMOTA of
-    ``tracker_cfg``'s own EKF on the same scenes and sets, computed once) describe it in ``validation.json``."""
+    :meth:`scores` gives the AMOTA of each set (the spread between sets is what the one-standard-error selection
+    rule reads). ``split``, ``scene_names``, ``detection_sets``, ``reference_name`` and :meth:`reference_scores`
+    (the AMOTA of ``tracker_cfg``'s own EKF on the same scenes and sets, computed once) describe it in
+    ``validation.json``."""
 
     def __init__(self, nusc, split: str, scenes: list[Scene], dets: dict, tracker_cfg: TrackerConfig,
                  device: str = "auto", held_out: bool = False, reference_name: str = "ekf"):
@@ -37,10 +39,15 @@ class Validator:
         self.scene_names = [sc.name for sc in scenes]
         self.detection_sets = list(self.sets)
         self.reference_name = reference_name
-        self._reference: float | None = None
+        self._reference: np.ndarray | None = None
         self._others: set[str] | None = None     # held out: the split's other samples (empty in submissions)
 
     def __call__(self, net) -> float:
+        """The mean of :meth:`scores` over the detection sets."""
+        return float(np.mean(self.scores(net)))
+
+    def scores(self, net) -> np.ndarray:
+        """(n_sets,) float64: AMOTA of the GRU-KF tracker with ``net`` on each detection set."""
         was_training = net.training
         net.eval()
         groups = network_groups(net, self.tracker_cfg, np.arange(len(TRACKING_CLASSES)), self.device)
@@ -50,15 +57,19 @@ class Validator:
             net.train(was_training)
 
     def reference_amota(self) -> float:
-        """AMOTA of the tracker preset with its own EKF motion models on the validation scenes (computed once)."""
+        """Mean AMOTA of the tracker preset with its own EKF motion models on the validation scenes."""
+        return float(np.mean(self.reference_scores()))
+
+    def reference_scores(self) -> np.ndarray:
+        """(n_sets,) float64: :meth:`reference_amota` per detection set (computed once)."""
         if self._reference is None:
             groups = ekf_groups(self.tracker_cfg, np.arange(len(TRACKING_CLASSES)))
             self._reference = self._score(Tracker(self.tracker_cfg, groups))
         return self._reference
 
-    def _score(self, tracker: Tracker) -> float:
-        """Mean AMOTA of ``tracker`` over the detection sets."""
-        return float(np.mean([self._score_set(tracker, d) for d in self.sets.values()]))
+    def _score(self, tracker: Tracker) -> np.ndarray:
+        """(n_sets,) float64: AMOTA of ``tracker`` on each detection set."""
+        return np.array([self._score_set(tracker, d) for d in self.sets.values()], dtype=np.float64)
 
     def _score_set(self, tracker: Tracker, dets: dict[str, BoxSet]) -> float:
         from grutrack.evaluation.fast_amota import evaluate_tracks, fast_tracking_eval, load_tracks
