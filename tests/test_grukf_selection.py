@@ -269,6 +269,6 @@ def test_bad_selection_settings_are_refused_naming_the_key(key, value, message):
         load_train_config("grukf", {key: value})
     # the two shipped configs: the default recipe selects on held-out validation, the paper's keeps the last step
     assert (load_train_config("grukf").validation_scenes, load_train_config("grukf").select_checkpoint) == \
-        (2, "best_val_amota")
+        (2, "best_val_amota_1se")
     assert (load_train_config("paper").validation_scenes, load_train_config("paper").select_checkpoint) == \
         (0, "last")
