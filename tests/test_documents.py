@@ -104,6 +104,7 @@ def test_training_log_of_an_older_version_reads_with_defaults(tmp_path):
 @pytest.mark.parametrize("text,expect", [
     ("step,epoch,loss\n1,0,0.5\n", "needs the columns step, epoch, loss, val_amota"),
     ("step,epoch,loss,val_amota\n1,0,abc,\n", "step '1': not a number"),
+    ("step,epoch,loss,val_amota,val_amota_sets\n2,0,0.5,0.7,0.6;x\n", "step '2': not a number"),
 ])
 def test_bad_training_logs(tmp_path, text, expect):
     p = tmp_path / "train_log.csv"
@@ -117,6 +118,10 @@ def test_bad_training_logs(tmp_path, text, expect):
     ('{"rule": "best", "selected_step": 3}', "'rule' must be one of 'last', 'best_val_amota', 'best_val_amota_1se'"),
     ('{"rule": "last", "selected_step": "3"}', "'selected_step' an integer, got 'last' and '3'"),
     ('{"rule": "last", "selected_step": 3, "reference_amota": "0.8"}', "'reference_amota' must be a number or null"),
+    ('{"rule": "last", "selected_step": 3, "selected_amota_sets": [0.8, "x"]}',
+     "'selected_amota_sets' must be a list of numbers or null"),
+    ('{"rule": "last", "selected_step": 3, "reference_amota_sets": 0.8}',
+     "'reference_amota_sets' must be a list of numbers or null"),
 ])
 def test_a_bad_validation_record_names_the_file_and_field(tmp_path, text, message):
     from grutrack.documents import ValidationRecord
@@ -124,6 +129,7 @@ def test_a_bad_validation_record_names_the_file_and_field(tmp_path, text, messag
     (tmp_path / "validation.json").write_text(text)
     with pytest.raises(InputFormatError, match=message):
         ValidationRecord.read(tmp_path / "validation.json")
-    rec = ValidationRecord(rule="last", selected_step=4, reference_amota=0.8)
+    rec = ValidationRecord(rule="best_val_amota_1se", selected_step=4, reference_amota=0.8,
+                           reference_amota_sets=[0.7, 0.9], selected_amota_sets=[0.75, 0.95])
     rec.write(tmp_path / "ok.json")
     assert ValidationRecord.read(tmp_path / "ok.json") == rec
