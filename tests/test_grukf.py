@@ -663,3 +663,34 @@ def test_scene_loss_is_the_mean_of_the_weighted_squared_residuals():
     assert float(post.grad[0, 0]) == pytest.approx(2 * (0.0 - 0.5) / 3, rel=1e-12)   # d/dpred of the first term
     assert float(prior.grad[2, 6]) == pytest.approx(0.5 * 3.0 * 2 * 0.1 / 3, rel=1e-9)
     assert float(prior.grad[:2].abs().sum()) == 0.0                                   # rows without a term
+
+
+def test_gt_term_gate_drops_held_instances_the_track_has_left():
+    # a sticky track whose GT box is farther than the gate gives no GT term in that frame (-1); 0 is no gate
+    from grutrack.data.scene import BoxSet
+    from grutrack.training.config import load_train_config
+    from grutrack.training.trainer import SceneLoss
+
+    gt_boxes = np.zeros((3, 9))
+    gt_boxes[:, 0] = [0.0, 10.0, 20.0]
+    gt = BoxSet(gt_boxes, np.ones(3), np.zeros(3, dtype=np.int64), np.array(["a", "b", "c"], dtype=object))
+    rows = np.array([0, 1, -1, 2])
+    xy = np.array([[0.5, 0.0], [13.0, 0.0], [50.0, 0.0], [20.0, 1.99]])   # 0.5 m, 3 m, no GT, 1.99 m
+    gated = SceneLoss(load_train_config("grukf", {"gt_term_gate": 2.0}), torch.device("cpu"))
+    assert gated._gated(rows, xy, gt).tolist() == [0, -1, -1, 2]
+    off = SceneLoss(load_train_config("grukf", {"gt_term_gate": 0.0}), torch.device("cpu"))
+    assert off._gated(rows, xy, gt).tolist() == rows.tolist()
+
+
+def test_gt_term_gate_turns_gated_terms_into_pseudo_labels(small_training_set, tmp_path):
+    # the first step tracks with the same (untrained) network: the terms are the same in number, a tight gate
+    # moves some of them from ground truth to the pseudo-label
+    scenes, dets = small_training_set
+    runs = {}
+    for gate in (0.0, 0.05):
+        t = _trainer(scenes, dets, tmp_path / f"g{gate}", epochs=1, gt_term_gate=gate, validation_scenes=0)
+        t.run(max_steps=1)
+        runs[gate] = t.log.steps[-1]
+    plain, tight = runs[0.0], runs[0.05]
+    assert plain.gt_terms + plain.pseudo_terms == tight.gt_terms + tight.pseudo_terms
+    assert 0 < tight.gt_terms < plain.gt_terms

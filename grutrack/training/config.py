@@ -44,11 +44,12 @@ class TrainConfig:
     select_checkpoint: str = "last"   # model.pt: "last", "best_val_amota" or "best_val_amota_1se" (selection.py)
     resample_mix: str = "epoch"  # resampled profiles take turns by "epoch" or are mixed over the "scene"s
     training_classes: str = "tracked"   # the classes whose tracks train the network: "tracked" or "own_model"
+    gt_term_gate: float = 0.0    # metres: a held GT farther than this from the track gives no GT term (0: off)
 
 
 #: fields holding real numbers: a string that reads as one is taken as that number (PyYAML reads ``1e-5``, which
 #: has no decimal point, as a string)
-_FLOAT_FIELDS = ("lr", "weight_decay", "gt_match_distance", "prediction_weight")
+_FLOAT_FIELDS = ("lr", "weight_decay", "gt_match_distance", "prediction_weight", "gt_term_gate")
 
 
 def _as_float(v):
@@ -85,7 +86,8 @@ def config_from_dict(raw: dict, source: str = "<dict>", flags: dict | None = Non
     vals["resample_profiles"] = tuple(str(x) for x in raw["resample_profiles"])
     vals["sources"] = tuple(dict(x) for x in raw.get("sources", []))
     for k in _FLOAT_FIELDS:
-        vals[k] = float(raw[k])
+        if k in raw:
+            vals[k] = float(raw[k])
     own = "network_classes" if vals["network_classes"] == "own_model" else (
         "training_classes" if vals.get("training_classes") == "own_model" else None)
     if own and vals.get("scenes_per_step", 1) > 1:

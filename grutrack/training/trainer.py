@@ -210,18 +210,32 @@ class SceneLoss:
             self._posterior_terms(u, backend, gt)
             self.max_abs_gain = torch.maximum(self.max_abs_gain, backend.max_abs_gain(u).to(self.max_abs_gain))
         if self.cfg.prediction_weight > 0 and len(gt):
-            held = self.assoc.held_rows(u.ids, gt.ids)
+            prior = backend.prior(u)
+            held = self._gated(self.assoc.held_rows(u.ids, gt.ids), prior.detach().cpu().numpy()[:, :2], gt)
             has = np.flatnonzero(held >= 0)
             if len(has):
-                self._add_rows(backend.prior(u), has, gt.boxes[held[has]], self.cfg.prediction_weight)
+                self._add_rows(prior, has, gt.boxes[held[has]], self.cfg.prediction_weight)
                 self.prediction_terms += len(has)
+
+    def _gated(self, rows: np.ndarray, xy: np.ndarray, gt: BoxSet) -> np.ndarray:
+        """``rows`` (K,) GT row per track (-1: none), with -1 where the track's BEV centre ``xy`` (K, 2) metres is
+        farther than ``gt_term_gate`` from its GT box's (0: no gate). The sticky association keeps a track's
+        instance after the track has moved onto another object; such a term measures an association error
+        of metres, not the filter's accuracy, and under a squared loss it outweighs every other term."""
+        gate = self.cfg.gt_term_gate
+        if gate <= 0 or not len(rows):
+            return rows
+        has = rows >= 0
+        far = np.zeros(len(rows), dtype=bool)
+        far[has] = np.hypot(*(xy[has] - gt.boxes[rows[has], :2]).T) > gate
+        return np.where(far, -1, rows)
 
     def _posterior_terms(self, u: GroupUpdate, backend: PairedBackend, gt: BoxSet) -> None:
         pred, ekf = backend.posterior(u)
         ids, labels = u.ids[u.rows], u.labels[u.rows]
         xy = pred.detach().cpu().numpy()[:, :2]
-        match = self.assoc.match(ids, xy, labels, gt.ids, gt.boxes[:, :2], gt.labels) if len(gt) else \
-            np.full(len(u.rows), -1)
+        match = self._gated(self.assoc.match(ids, xy, labels, gt.ids, gt.boxes[:, :2], gt.labels), xy, gt) \
+            if len(gt) else np.full(len(u.rows), -1)
         has = match >= 0
         if self.cfg.mode != "semi_supervised":
             if has.any():
