@@ -430,6 +430,27 @@ def test_a_non_finite_gradient_stops_training_before_the_step(small_training_set
     assert all(torch.equal(t.net.state_dict()[k], good[k]) for k in good)   # the step was not applied
 
 
+def test_a_singular_innovation_covariance_stops_training_with_the_last_good_checkpoint(small_training_set, tmp_path,
+                                                                                       monkeypatch):
+    # a network that has driven the filter's state far off makes the EKF gain prior's S = H P H^T + R singular
+    # (numpy's LinAlgError in the tracking of a scene): a diverged training, not a traceback
+    from grutrack.tracking.grukf_backend import GRUKFBackend
+    from grutrack.motion.checkpoint import read_checkpoint
+    from grutrack.training.trainer import TrainingDiverged
+
+    scenes, dets = small_training_set
+    t = _trainer(scenes, dets, tmp_path, epochs=2)
+    t.run(max_steps=1)
+
+    def singular(self, s, rows, z):
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    monkeypatch.setattr(GRUKFBackend, "_ekf_gain", singular)
+    with pytest.raises(TrainingDiverged, match=r"step 2 .*the filter's state diverged \(Singular matrix.*last.pt"):
+        t.run()
+    assert read_checkpoint(tmp_path / "last.pt")["train_state"]["step"] == 1
+
+
 def test_diverging_gain_stops_training(small_training_set, tmp_path):
     from grutrack.training.trainer import TrainingDiverged
 

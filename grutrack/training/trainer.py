@@ -724,7 +724,10 @@ class Trainer:
         self.net.train()
         name = "+".join(sc.name for sc in scenes)
         with self.net.deferring_weight_grads() as deferred:
-            losses = self._scene_losses(scenes)
+            try:
+                losses = self._scene_losses(scenes)
+            except np.linalg.LinAlgError as exc:   # S = H P^- H^T + R of the parallel EKF, at a diverged state
+                self._diverged(name, f"the filter's state diverged ({exc} in the EKF gain prior's update)")
             value = torch.stack([lo.value() for lo in losses]).mean()
             if not torch.isfinite(value):
                 self._diverged(name, f"the loss is {value.item()}")
