@@ -715,3 +715,15 @@ def test_gt_term_gate_turns_gated_terms_into_pseudo_labels(small_training_set, t
     plain, tight = runs[0.0], runs[0.05]
     assert plain.gt_terms + plain.pseudo_terms == tight.gt_terms + tight.pseudo_terms
     assert 0 < tight.gt_terms < plain.gt_terms
+
+
+def test_gt_term_gate_applies_to_the_prediction_terms(small_training_set, tmp_path):
+    # the prediction terms of tracks holding an instance are gated by their predicted centre likewise
+    scenes, dets = small_training_set
+    runs = {}
+    for gate in (0.0, 0.05):
+        t = _trainer(scenes, dets, tmp_path / f"p{gate}", epochs=1, gt_term_gate=gate, validation_scenes=0,
+                     prediction_weight=1.0)
+        t.run(max_steps=1)
+        runs[gate] = t.log.steps[-1].prediction_terms
+    assert 0 < runs[0.05] < runs[0.0]

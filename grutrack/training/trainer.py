@@ -211,7 +211,9 @@ class SceneLoss:
             self.max_abs_gain = torch.maximum(self.max_abs_gain, backend.max_abs_gain(u).to(self.max_abs_gain))
         if self.cfg.prediction_weight > 0 and len(gt):
             prior = backend.prior(u)
-            held = self._gated(self.assoc.held_rows(u.ids, gt.ids), prior.detach().cpu().numpy()[:, :2], gt)
+            held = self.assoc.held_rows(u.ids, gt.ids)
+            if self.cfg.gt_term_gate > 0:
+                held = self._gated(held, prior.detach().cpu().numpy()[:, :2], gt)
             has = np.flatnonzero(held >= 0)
             if len(has):
                 self._add_rows(prior, has, gt.boxes[held[has]], self.cfg.prediction_weight)
