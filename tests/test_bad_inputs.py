@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from grutrack.cli import main
+from grutrack.config_loader import config_path
 
 
 def fails(capsys, argv: list[str], *fragments: str) -> str:
@@ -259,6 +260,13 @@ def test_bad_training_flags_are_blamed_on_the_flag(tmp_path, capsys):
     fails(capsys, [*base, "--epochs", "-1"], "grutrack train: error: --epochs must be an integer >= 0 (0: no step, the "
           "initialised network), got -1")
     fails(capsys, [*base, "--val-every", "-1"], "--val-every must be an integer >= 0, got -1")
+    # a bad value of a config key: the file and the key, what was expected
+    for value, got in (("-1.0", "got -1.0"), ("far", "got 'far'")):
+        cfg = tmp_path / f"gate{got[-3:-1]}.yaml"
+        cfg.write_text(config_path("training", "grukf").read_text().replace("gt_term_gate: 0.0",
+                                                                          f"gt_term_gate: {value}"))
+        fails(capsys, [*base, "--config", cfg], f"{cfg}: 'gt_term_gate' must be a distance in metres (0 for no "
+              f"gate)", got)
 
 
 def test_a_closed_stdout_is_not_a_traceback(nusc_root, tmp_path):
