@@ -686,6 +686,41 @@ def test_scene_loss_is_the_mean_of_the_weighted_squared_residuals():
     assert float(prior.grad[:2].abs().sum()) == 0.0                                   # rows without a term
 
 
+def test_centre_huber_delta_bounds_the_centre_terms_only():
+    # x, y residuals beyond the delta cost 2 d |r| - d^2 (gradient 2 d sign r), within it r^2; the other
+    # components stay squared; 0 is the squared loss
+    from grutrack.training.config import load_train_config
+    from grutrack.training.trainer import SceneLoss
+
+    target = np.zeros((1, 9))
+    target[0, [0, 1, 6, 7]] = [3.0, -0.5, 2.0, 4.0]           # x 3 m off, y 0.5 m, yaw 2 rad, vx 4 m/s
+    values = {}
+    for d in (0.0, 1.0):
+        loss = SceneLoss(load_train_config("grukf", {"centre_huber_delta": d}), torch.device("cpu"))
+        post = torch.zeros(1, 9, dtype=torch.float64, requires_grad=True)
+        loss._add_rows(post, None, target, 1.0)
+        loss.gt_terms = 1
+        value = loss.value()
+        value.backward()
+        values[d] = (float(value.detach()), post.grad[0].tolist())
+    assert values[0.0][0] == pytest.approx(9.0 + 0.25 + 4.0 + 16.0, rel=1e-12)
+    assert values[1.0][0] == pytest.approx((2 * 3.0 - 1.0) + 0.25 + 4.0 + 16.0, rel=1e-12)
+    grad = values[1.0][1]
+    assert grad[0] == pytest.approx(-2.0) and grad[1] == pytest.approx(1.0)     # bounded; within d: 2 r
+    assert grad[6] == pytest.approx(-4.0) and grad[7] == pytest.approx(-8.0)    # squared as before
+    assert values[0.0][1][0] == pytest.approx(-6.0)
+
+
+def test_lr_min_is_the_learning_rate_of_the_last_step(small_training_set, tmp_path):
+    # the cosine schedule ends at lr_min (0: at 0); the first step runs at lr
+    scenes, dets = small_training_set
+    for lr_min in (0.0, 2e-4):
+        t = _trainer(scenes, dets, tmp_path / f"lr{lr_min}", epochs=1, lr_min=lr_min, validation_scenes=0)
+        t.run()
+        assert t.log.steps[0].lr == pytest.approx(1e-3)
+        assert t.opt.param_groups[0]["lr"] == pytest.approx(lr_min, abs=1e-12)
+
+
 def test_gt_term_gate_drops_held_instances_the_track_has_left():
     # a sticky track whose GT box is farther than the gate gives no GT term in that frame (-1); 0 is no gate
     from grutrack.data.scene import BoxSet

@@ -45,11 +45,14 @@ class TrainConfig:
     resample_mix: str = "epoch"  # resampled profiles take turns by "epoch" or are mixed over the "scene"s
     training_classes: str = "tracked"   # the classes whose tracks train the network: "tracked" or "own_model"
     gt_term_gate: float = 0.0    # metres: a held GT farther than this from the track gives no GT term (0: off)
+    centre_huber_delta: float = 0.0   # metres: x, y residuals beyond it cost linearly, not squared (0: squared)
+    lr_min: float = 0.0          # the cosine schedule's floor: the learning rate of the last step
 
 
 #: fields holding real numbers: a string that reads as one is taken as that number (PyYAML reads ``1e-5``, which
 #: has no decimal point, as a string)
-_FLOAT_FIELDS = ("lr", "weight_decay", "gt_match_distance", "prediction_weight", "gt_term_gate")
+_FLOAT_FIELDS = ("lr", "weight_decay", "gt_match_distance", "prediction_weight", "gt_term_gate",
+                 "centre_huber_delta", "lr_min")
 
 
 def _as_float(v):

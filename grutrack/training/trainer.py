@@ -260,7 +260,18 @@ class SceneLoss:
         pred = torch.cat(self._pred)
         target = torch.as_tensor(np.concatenate(self._target), device=pred.device)
         scale = torch.as_tensor(np.concatenate(self._scale), device=pred.device)
-        return ((_residual(pred, target) ** 2 * self.w).sum(1) * scale).sum() / max(n, 1)
+        return ((self._cost(_residual(pred, target)) * self.w).sum(1) * scale).sum() / max(n, 1)
+
+    def _cost(self, r: torch.Tensor) -> torch.Tensor:
+        """Per-component cost (K, 9) of residuals ``r`` (K, 9): r^2, except with ``centre_huber_delta`` d > 0
+        the centre's x, y components cost the Huber form rho(r) = r^2 for |r| <= d, 2 d |r| - d^2 beyond
+        (value and slope continuous at d; the gradient of a residual of metres is bounded by 2 d)."""
+        cost = r ** 2
+        d = self.cfg.centre_huber_delta
+        if d <= 0:
+            return cost
+        a = r[:, :2].abs()
+        return torch.cat([torch.where(a <= d, cost[:, :2], 2 * d * a - d * d), cost[:, 2:]], dim=1)
 
 
 def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
@@ -491,7 +502,9 @@ class Trainer:
         # foreach: the update of all parameters in a few multi-tensor operators (same AdamW, one Python loop less)
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, foreach=True)
         self.total_steps = cfg.epochs * -(-len(scenes) // cfg.scenes_per_step)   # ceil: a short last step
-        self.sched = torch.optim.lr_scheduler.CosineAnnealingLR(self.opt, T_max=max(self.total_steps, 1))
+        # eta_t = eta_min + (eta_0 - eta_min) (1 + cos(pi t / T)) / 2 (Loshchilov & Hutter 2017, without restarts)
+        self.sched = torch.optim.lr_scheduler.CosineAnnealingLR(self.opt, T_max=max(self.total_steps, 1),
+                                                                eta_min=min(cfg.lr_min, cfg.lr))
         self.state = TrainState()
         self.log = TrainingLog()
 
