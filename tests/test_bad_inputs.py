@@ -267,6 +267,12 @@ def test_bad_training_flags_are_blamed_on_the_flag(tmp_path, capsys):
                                                                           f"gt_term_gate: {value}"))
         fails(capsys, [*base, "--config", cfg], f"{cfg}: 'gt_term_gate' must be a distance in metres (0 for no "
               f"gate)", got)
+    for key, value, expected in (("centre_huber_delta: 0.0", "-0.5", "a distance in metres (0 for the squared loss)"),
+                                 ("lr_min: 0.0", "low", "a learning rate >= 0"),
+                                 ("yaw_loss: heading", "degrees", "'heading' or 'axis'")):
+        cfg = tmp_path / f"{key.split(':')[0]}.yaml"
+        cfg.write_text(config_path("training", "grukf").read_text().replace(key, f"{key.split(':')[0]}: {value}"))
+        fails(capsys, [*base, "--config", cfg], f"{cfg}: '{key.split(':')[0]}' must be {expected}")
 
 
 def test_a_closed_stdout_is_not_a_traceback(nusc_root, tmp_path):

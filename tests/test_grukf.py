@@ -711,6 +711,23 @@ def test_centre_huber_delta_bounds_the_centre_terms_only():
     assert values[0.0][1][0] == pytest.approx(-6.0)
 
 
+def test_yaw_loss_axis_takes_a_reversed_heading_as_no_residual():
+    # "axis": yaw residuals wrap to [-pi/2, pi/2) (pi + 0.1 -> 0.1); "heading": to [-pi, pi) (pi + 0.1 -> 0.1 - pi)
+    from grutrack.training.config import load_train_config
+    from grutrack.training.trainer import SceneLoss
+
+    target = np.zeros((2, 9))
+    target[:, 6] = [np.pi + 0.1, 0.3]
+    got = {}
+    for kind in ("heading", "axis"):
+        loss = SceneLoss(load_train_config("grukf", {"yaw_loss": kind}), torch.device("cpu"))
+        loss._add_rows(torch.zeros(2, 9, dtype=torch.float64), None, target, 1.0)
+        loss.gt_terms = 2
+        got[kind] = float(loss.value())
+    assert got["heading"] == pytest.approx(((np.pi - 0.1) ** 2 + 0.3 ** 2) / 2, rel=1e-12)
+    assert got["axis"] == pytest.approx((0.1 ** 2 + 0.3 ** 2) / 2, rel=1e-12)
+
+
 def test_lr_min_is_the_learning_rate_of_the_last_step(small_training_set, tmp_path):
     # the cosine schedule ends at lr_min (0: at 0); the first step runs at lr
     scenes, dets = small_training_set

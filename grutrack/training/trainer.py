@@ -173,10 +173,13 @@ class PairedBackend:
         return s.corrected_gain.max() if len(u.rows) else s.rows.new_zeros(())
 
 
-def _residual(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """pred - target (K, 9) with the yaw component wrapped."""
+def _residual(pred: torch.Tensor, target: torch.Tensor, yaw_period: float = 2 * math.pi) -> torch.Tensor:
+    """pred - target (K, 9) with the yaw component wrapped to [-period/2, period/2) (2 pi: a heading; pi: an
+    axis, a reversed heading has no yaw residual)."""
     r = pred - target
-    return torch.cat([r[:, :6], wrap_angle_t(r[:, 6:7]), r[:, 7:]], dim=1)
+    yaw = wrap_angle_t(r[:, 6:7]) if yaw_period == 2 * math.pi else \
+        wrap_angle_t(r[:, 6:7] * (2 * math.pi / yaw_period)) * (yaw_period / (2 * math.pi))
+    return torch.cat([r[:, :6], yaw, r[:, 7:]], dim=1)
 
 
 class SceneLoss:
@@ -260,7 +263,8 @@ class SceneLoss:
         pred = torch.cat(self._pred)
         target = torch.as_tensor(np.concatenate(self._target), device=pred.device)
         scale = torch.as_tensor(np.concatenate(self._scale), device=pred.device)
-        return ((self._cost(_residual(pred, target)) * self.w).sum(1) * scale).sum() / max(n, 1)
+        period = math.pi if self.cfg.yaw_loss == "axis" else 2 * math.pi
+        return ((self._cost(_residual(pred, target, period)) * self.w).sum(1) * scale).sum() / max(n, 1)
 
     def _cost(self, r: torch.Tensor) -> torch.Tensor:
         """Per-component cost (K, 9) of residuals ``r`` (K, 9): r^2, except with ``centre_huber_delta`` d > 0
