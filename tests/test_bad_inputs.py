@@ -1,5 +1,6 @@
 """Bad input on the command line: exit status 2 and one line naming the file, field or flag and what was
-expected (tests/README.md tabulates every case). Programming errors keep their tracebacks."""
+expected (one test per kind of input: flags, config keys, files and their fields). Programming errors keep their
+tracebacks."""
 
 from __future__ import annotations
 

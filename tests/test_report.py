@@ -96,6 +96,8 @@ def test_nusc_val_report_has_paper_reproduced_and_difference(tmp_path):
 
 
 def test_semi_supervised_report_from_two_logs(tmp_path):
+    from grutrack.documents import ValidationRecord
+
     head = "step,epoch,scene,loss,gt_terms,pseudo_terms,lr,val_amota,seconds\n"
     semi = head + "".join(f"{s},{(s - 1) // 4},sc,{1 / s:.4f},10,2,1e-5,{'' if s % 2 else 0.5 + 0.02 * s},1.0\n"
                           for s in range(1, 9))
@@ -105,6 +107,10 @@ def test_semi_supervised_report_from_two_logs(tmp_path):
     (tmp_path / "b").mkdir()
     (tmp_path / "a/train_log.csv").write_text(semi)
     (tmp_path / "b/train_log.csv").write_text(sup)
+    # each training's own reference (the preset's EKF on its validation): one line for the equal values
+    for d in ("a", "b"):
+        ValidationRecord("best_val_amota", 8, "mini_train", reference="tracker preset 'ekf' (its EKF)",
+                         reference_amota=0.55, selected_amota=0.66).write(tmp_path / d / "validation.json")
     out = tmp_path / "s.md"
     assert main(["report", "semi_supervised", "--out", str(out), "--paper", str(PAPER),
                  "--train-log", f"semi_supervised={tmp_path / 'a/train_log.csv'}",
@@ -112,6 +118,7 @@ def test_semi_supervised_report_from_two_logs(tmp_path):
     text = out.read_text()
     assert "| semi_supervised | 8 | 2 | 0.660 | 0.660 (step 8) |" in text
     assert "1,700 steps" in text and (tmp_path / "figures/s/val_amota_vs_step.png").is_file()
+    assert "(EKF on the validation of semi_supervised, supervised 0.5500)." in text
 
 
 def test_semi_supervised_report_over_seeds(tmp_path):
@@ -142,7 +149,7 @@ def test_semi_supervised_report_over_seeds(tmp_path):
     rows = list(csv.DictReader((tmp_path / "figures/s/val_amota_vs_step.csv").open()))
     assert len(rows) == 30 and {r["mode"] for r in rows} == {"semi_supervised", "supervised"}
     assert "[val_amota_vs_step.csv](figures/s/val_amota_vs_step.csv)" in text
-    assert "Reference lines: AMOTA of trackers without training on the same validation split and detections " \
+    assert "Reference lines: AMOTA of trackers without training on the same validation scenes and detections " \
            "(ekf 0.8765)." in text
 
 

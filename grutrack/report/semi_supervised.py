@@ -13,7 +13,7 @@ import statistics
 
 from grutrack.io import write_text_atomic
 from grutrack.report import figures
-from grutrack.documents import TrainingLog, TrainingStep
+from grutrack.documents import TrainingLog, TrainingStep, ValidationRecord
 from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import DASH, header, image, table, training_provenance
 
@@ -36,7 +36,7 @@ def build(inp: ReportInputs) -> str:
     refs = _references(inp)
     parts += ["", "## Validation AMOTA against step", "", _figure(inp, logs, refs), ""]
     if refs:
-        parts += ["Reference lines: AMOTA of trackers without training on the same validation split and "
+        parts += ["Reference lines: AMOTA of trackers without training on the same validation scenes and "
                   "detections (" + ", ".join(f"{k} {v:.4f}" for k, v in refs.items()) + ").", ""]
     if any(len(g) > 1 for g in groups.values()):
         parts += [_band_figure(inp, logs, groups, refs), "", "## Across seeds", "", _across(logs, groups), ""]
@@ -53,9 +53,21 @@ def _validated(rows: list[TrainingStep]) -> list[TrainingStep]:
 
 
 def _references(inp: ReportInputs) -> dict[str, float]:
-    """Run -> AMOTA of the report's experiment runs (trackers without training on the validation split)."""
-    return {run: float(doc.overall["amota"]) for run, doc in inp.docs().items()
+    """Label -> AMOTA of the report's experiment runs (trackers without training on the validation split), and
+    of each training's own reference (``reference_amota`` of the validation.json beside its train_log.csv: the
+    tracker preset's EKF on the same validation scenes and detection sets; trainings sharing a value share a
+    line)."""
+    refs = {run: float(doc.overall["amota"]) for run, doc in inp.docs().items()
             if doc.overall.get("amota") is not None}
+    by_value: dict[float, list[str]] = {}
+    for label, log in inp.train_logs.items():
+        path = log.parent / "validation.json"
+        record = ValidationRecord.read(path) if path.is_file() else None
+        if record is not None and record.reference_amota is not None:
+            by_value.setdefault(round(float(record.reference_amota), 6), []).append(label)
+    for value, labels in by_value.items():
+        refs[f"EKF on the validation of {', '.join(labels)}"] = value
+    return refs
 
 
 def _figure(inp: ReportInputs, logs: dict[str, list[TrainingStep]], refs: dict[str, float]) -> str:
