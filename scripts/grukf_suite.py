@@ -18,6 +18,8 @@ suite.md (a markdown table) into --out; trained checkpoints go to --out/<name>/.
 association event in a row of parked motorcycles or one bus ID switch moves a set's 6-class AMOTP by 0.03 m.
 suite.md then also gives, for every model, the mean difference to the ``ekf`` row over all CenterPoint-like sets
 with its standard error (differences taken set by set, so the detection draw cancels) and per class.
+``--drift-seeds N``: N sets of the drift profile (docs/results/grukf_eval/drift.yaml: centerpoint plus a centre
+error correlated over time) on mini_val (seeds 41 .. 40 + N), with the same difference table over them.
 
 ``--holdout scene-0655,scene-1094``: recipe selection on the training side. Training uses the other mini_train
 scenes; the evaluation sets are simulated on mini_train (centerpoint seeds 31, 34; pointpillars 32, 35; heavy-tail
@@ -44,6 +46,7 @@ EVAL_SETS = (("centerpoint_s11", "centerpoint", 11), ("pointpillars_s12", "point
 MORE_SETS = (("centerpoint_s2", "centerpoint", 2), ("pointpillars_s3", "pointpillars", 3),
              ("velfail_s14", "centerpoint_velfail", 14))
 SEED_BASE = 20   # --cp-seeds N: centerpoint seeds SEED_BASE + 1 .. SEED_BASE + N
+DRIFT_PROFILE, DRIFT_BASE = str(ROOT / "docs/results/grukf_eval/drift.yaml"), 40   # --drift-seeds N: 41 .. 40 + N
 HOLDOUT_SETS = (("centerpoint_s31", "centerpoint", 31), ("pointpillars_s32", "pointpillars", 32),
                 ("heavytail_s33", str(ROOT / "docs/results/grukf_eval/heavytail.yaml"), 33),
                 ("centerpoint_s34", "centerpoint", 34), ("pointpillars_s35", "pointpillars", 35))
@@ -108,12 +111,12 @@ def _score(nusc, tracker, scenes, dets, tokens, split: str = "mini_val", split_t
     return float(s["amota"]), float(s["amotp"])
 
 
-def _difference_table(rows: list[dict], classes: dict, sets: list[str]) -> list[str]:
+def _difference_table(rows: list[dict], classes: dict, sets: list[str], kind: str = "CenterPoint-like") -> list[str]:
     """Markdown lines: every model's mean difference to the ``ekf`` row over ``sets`` (AMOTA, AMOTP m, and AMOTP
-    per class), with standard errors; ``classes[(model, set)]`` = {class: AMOTP}."""
+    per class), with standard errors; ``classes[(model, set)]`` = {class: AMOTP}; ``kind`` names the sets."""
     ref = next(r for r in rows if r["model"] == "ekf")
     names = sorted({c for pc in classes.values() if pc for c in pc})
-    lines = [f"Difference to ekf over {len(sets)} CenterPoint-like sets (mean +- standard error; SYNTHETIC "
+    lines = [f"Difference to ekf over {len(sets)} {kind} sets (mean +- standard error; SYNTHETIC "
              "detections, real mini_val motion):", "",
              "| model | AMOTA | AMOTP (m) | " + " | ".join(f"{c} AMOTP" for c in names) + " |",
              "|---" * (len(names) + 3) + "|"]
@@ -150,10 +153,14 @@ def main() -> None:
     ap.add_argument("--cp-seeds", type=int, default=0, metavar="N",
                     help=f"also N CenterPoint-like sets on mini_val, seeds {SEED_BASE + 1}..{SEED_BASE} + N, and the "
                          "mean difference to the ekf row with its standard error (needs the ekf row)")
+    ap.add_argument("--drift-seeds", type=int, default=0, metavar="N",
+                    help=f"also N sets of the drift profile on mini_val, seeds {DRIFT_BASE + 1}..{DRIFT_BASE} + N, "
+                         "and the mean difference to the ekf row over them (needs the ekf row)")
     args = ap.parse_args()
-    if args.cp_seeds < 0 or (args.cp_seeds and (args.holdout or args.no_ekf)):
-        ap.error("--cp-seeds: expected a count >= 0, without --holdout and --no-ekf (it compares with the ekf row "
-                 "on mini_val)")
+    for flag, n in (("--cp-seeds", args.cp_seeds), ("--drift-seeds", args.drift_seeds)):
+        if n < 0 or (n and (args.holdout or args.no_ekf)):
+            ap.error(f"{flag}: expected a count >= 0, without --holdout and --no-ekf (it compares with the ekf "
+                     "row on mini_val)")
 
     from grutrack.data.nusc_detections import load_detections
     from grutrack.data.nuscenes import load_scenes, open_nuscenes
@@ -185,7 +192,8 @@ def main() -> None:
         va_scenes = load_scenes(nusc, "mini_val")
         va_tokens = [f.token for s in va_scenes for f in s.frames]
         eval_sets = EVAL_SETS + (MORE_SETS if args.more_sets else ()) + tuple(
-            (f"centerpoint_s{SEED_BASE + i}", "centerpoint", SEED_BASE + i) for i in range(1, args.cp_seeds + 1))
+            (f"centerpoint_s{SEED_BASE + i}", "centerpoint", SEED_BASE + i) for i in range(1, args.cp_seeds + 1)) \
+            + tuple((f"drift_s{DRIFT_BASE + i}", DRIFT_PROFILE, DRIFT_BASE + i) for i in range(1, args.drift_seeds + 1))
         sets = {name: _dets(nusc, "mini_val", prof, seed, va_tokens, out / "detections")
                 for name, prof, seed in eval_sets}
         sets["real_pointpillars"] = load_detections(Path(args.dataroot) / "detections/pointpillars_mini_val.json",
@@ -250,6 +258,9 @@ def main() -> None:
                      f"{mean(r, cp_like, 'amotp'):.3f} |")
     if args.cp_seeds:
         lines += ["", *_difference_table(rows, classes, cp_like)]
+    if args.drift_seeds:
+        lines += ["", *_difference_table(rows, classes, [n for n, prof, _ in eval_sets if prof == DRIFT_PROFILE],
+                                         "drift (time-correlated centre error)")]
     (out / "suite.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

@@ -72,6 +72,23 @@ def test_velfail_profile_is_centerpoint_with_velocity_failures():
         assert dataclasses.replace(vf.classes[c], vel_track_fail_prob=0.0) == cp.classes[c]
 
 
+def test_drift_profiles_are_centerpoint_with_a_drifting_centre():
+    """centerpoint_drift (training) and the suite's drift profile (evaluation): CenterPoint's statistics for every
+    class plus a centre error correlated over time, each with its own values."""
+    import dataclasses
+
+    cp = ds.load_profile("centerpoint")
+    for prof, sigma, tau in ((ds.load_profile("centerpoint_drift"), 0.15, 3.0),
+                             (ds.load_profile(Path(__file__).parents[1] / "docs/results/grukf_eval/drift.yaml"), 0.2,
+                              2.0)):
+        assert (prof.detection_range_m, prof.score_threshold, prof.max_boxes_per_sample) == \
+            (cp.detection_range_m, cp.score_threshold, cp.max_boxes_per_sample)
+        for c in ds.DETECTION_CLASSES:
+            assert (prof.classes[c].pos_drift_sigma_m, prof.classes[c].pos_drift_time_s) == (sigma, tau)
+            assert cp.classes[c].pos_drift_sigma_m == 0.0
+            assert dataclasses.replace(prof.classes[c], pos_drift_sigma_m=0.0, pos_drift_time_s=2.0) == cp.classes[c]
+
+
 def test_unknown_profile_name():
     with pytest.raises(ConfigError, match=r"unknown detector profile 'centrepoint'.*centerpoint"):
         ds.load_profile("centrepoint")
@@ -93,6 +110,13 @@ def test_misspelt_keys_are_named(tmp_path):
         ds.load_profile(bad)
     bad.write_text(text.replace("recall_max: 0.985", "recall_max: lots"))
     with pytest.raises(ConfigError, match="classes.car.recall_max"):
+        ds.load_profile(bad)
+    for value in ("0", "-1.0"):     # a correlation time must be positive
+        bad.write_text(text.replace("  pedestrian:\n", f"  pedestrian:\n    pos_drift_time_s: {value}\n"))
+        with pytest.raises(ConfigError, match="classes.pedestrian.pos_drift_time_s.*positive time"):
+            ds.load_profile(bad)
+    bad.write_text(text.replace("  pedestrian:\n", "  pedestrian:\n    pos_drift_sigma_m: -0.1\n"))
+    with pytest.raises(ConfigError, match="classes.pedestrian.pos_drift_sigma_m"):
         ds.load_profile(bad)
     assert main(["simulate-detections", "--dataroot", str(tmp_path), "--split", "x", "--profile", str(bad),
                  "--out", str(tmp_path / "o.json")]) == 2
@@ -268,3 +292,46 @@ def test_velocity_under_reported_per_object_over_its_life():
     assert all(np.array_equal(f, factors[0]) for f in factors)     # one factor per object over its life
     other_seed = ds.object_uniforms(4, prof.name, frames[0].instance_ids)
     assert not np.array_equal(other_seed, ds.object_uniforms(3, prof.name, frames[0].instance_ids))
+
+
+def test_centre_drift_has_its_variance_and_exponential_autocorrelation():
+    """``centre_drift``: over many objects the drift has variance sigma^2 and correlation exp(-dt / tau) between
+    times dt apart; the same (seed, profile, object, time) gives the same error, another seed another one."""
+    ids = np.array([f"obj{i}" for i in range(4000)], dtype=object)
+    sigma, tau = np.full(len(ids), 0.3), np.full(len(ids), 2.0)
+    t0 = 1.5e9                                       # absolute seconds, as timestamps give them
+    e0 = ds.centre_drift(7, "p", ids, t0, sigma, tau)
+    assert e0.shape == (len(ids), 2)
+    assert abs(e0.std() / 0.3 - 1.0) < 0.06
+    for dt in (0.5, 2.0, 6.0):
+        e1 = ds.centre_drift(7, "p", ids, t0 + dt, sigma, tau)
+        rho = np.mean(e0 * e1) / 0.3 ** 2
+        assert abs(rho - np.exp(-dt / 2.0)) < 0.06, (dt, rho)
+    assert abs(np.corrcoef(e0[:, 0], e0[:, 1])[0, 1]) < 0.06          # the two axes independent
+    np.testing.assert_array_equal(ds.centre_drift(7, "p", ids[::-1], t0, sigma, tau), e0[::-1])
+    assert not np.allclose(ds.centre_drift(8, "p", ids, t0, sigma, tau), e0)
+    assert ds.centre_drift(7, "p", ids[:0], t0, sigma[:0], tau[:0]).shape == (0, 2)
+
+
+def test_drifting_centre_error_moves_only_the_centre_of_its_class():
+    """``pos_drift_sigma_m`` on cars: each detected car's centre moves by its object's drift at the frame's time
+    (a function of seed, profile, instance id and time); every other column, score and draw is as without it."""
+    import dataclasses
+
+    prof = ds.load_profile("centerpoint")
+    drift = dataclasses.replace(prof, classes={**prof.classes, "car": dataclasses.replace(
+        prof.classes["car"], pos_drift_sigma_m=0.5, pos_drift_time_s=3.0)})
+    for k in range(2):
+        gt = _frame(n=40, seed=k)
+        gt.boxes[:, 0], gt.boxes[:, 1] = 10.0 + 7.0 * (np.arange(40) % 5), -24.5 + 7.0 * (np.arange(40) // 5)
+        gt.instance_ids[:] = np.array([f"car{i}" for i in range(len(gt))], dtype=object)
+        gt.timestamp = 1_500_000_000_000_000 + 500_000 * k
+        base = ds.simulate_frame(gt, prof, ds.frame_rng(3, prof.name, gt.token), seed=3)
+        out = ds.simulate_frame(gt, drift, ds.frame_rng(3, prof.name, gt.token), seed=3)
+        assert np.array_equal(out.boxes[:, 2:], base.boxes[:, 2:]) and np.array_equal(out.scores, base.scores)
+        hit = base.is_tp & (base.names == "car")
+        near = np.argmin(np.hypot(*(base.boxes[hit, None, :2] - gt.boxes[None, :, :2]).transpose(2, 0, 1)), axis=1)
+        want = ds.centre_drift(3, prof.name, gt.instance_ids[near], gt.timestamp * 1e-6, np.full(len(near), 0.5),
+                               np.full(len(near), 3.0))
+        np.testing.assert_allclose(out.boxes[hit, :2] - base.boxes[hit, :2], want, atol=1e-12)
+        assert np.abs(want).max() > 0.2

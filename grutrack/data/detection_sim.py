@@ -13,17 +13,22 @@ What is simulated, per class (parameters in ``grutrack/configs/detector_profiles
   and a small recall of objects without any lidar point (hallucinated from context);
 - centre noise growing with distance, with a heavy-tailed (Laplace) component; log-normal size noise;
   yaw noise with 180 degree flips; velocity noise proportional to speed with heavy tails;
+- optionally a centre error that drifts slowly over an object's life (``pos_drift_sigma_m``, correlation time
+  ``pos_drift_time_s``; :func:`centre_drift`), the time-correlated error of real detectors that a filter cannot
+  average away, and velocities under-reported over an object's whole life (``vel_track_fail_prob``);
 - class confusions (car <-> truck, bicycle <-> motorcycle, ...) with a lower score;
 - duplicates around true positives (same or confused class) that NMS has to remove;
 - false positives near objects and in free space, with scores that overlap those of true positives.
 
-Every frame draws from its own random stream, seeded by (seed, profile name, frame token): output is
-identical for a seed and independent of the order or the subset of frames processed.
+Every frame draws from its own random stream, seeded by (seed, profile name, frame token), and effects fixed per
+object are functions of (seed, profile name, instance id, time): output is identical for a seed and independent
+of the order or the subset of frames processed.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import os
@@ -109,6 +114,8 @@ class ClassProfile:
     pos_sigma_per_m: float = 0.003     # centre noise growth per metre of distance
     pos_tail_prob: float = 0.05        # probability of a heavy-tailed (Laplace) centre error
     pos_tail_scale_m: float = 0.6      # Laplace scale of that error
+    pos_drift_sigma_m: float = 0.0     # centre error (per axis) drifting over the object's life (0: none)
+    pos_drift_time_s: float = 2.0      # its correlation time: errors dt apart correlate by exp(-dt / this)
     z_sigma_m: float = 0.1             # height-of-centre noise
     size_sigma_rel: float = 0.06       # log-normal sigma of w, l, h
     yaw_sigma_rad: float = 0.08        # yaw noise
@@ -241,6 +248,41 @@ def object_uniforms(seed: int, profile_name: str, instance_ids) -> np.ndarray:
     return out
 
 
+#: cosine features per axis of :func:`centre_drift`
+DRIFT_FEATURES = 16
+
+
+@functools.lru_cache(maxsize=1 << 14)
+def _drift_features(seed: int, profile_name: str, instance) -> tuple[np.ndarray, np.ndarray]:
+    """One object's drift features: (2, DRIFT_FEATURES) standard Cauchy frequencies and (2, DRIFT_FEATURES)
+    phases in [0, 2 pi), a function of (seed, profile name, instance id) only (cached: an object appears in
+    many frames)."""
+    d = hashlib.md5(f"{int(seed)}|{profile_name}|drift|{instance}".encode()).digest()
+    rng = np.random.default_rng(np.random.SeedSequence([int.from_bytes(d[i:i + 4], "little")
+                                                        for i in range(0, 16, 4)]))
+    omega = np.tan(np.pi * (rng.random((2, DRIFT_FEATURES)) - 0.5))
+    return omega, rng.uniform(0.0, 2.0 * np.pi, (2, DRIFT_FEATURES))
+
+
+def centre_drift(seed: int, profile_name: str, instance_ids, t_s: float, sigma: np.ndarray,
+                 tau: np.ndarray) -> np.ndarray:
+    """The slowly drifting centre error ``(K, 2)`` metres (x, y, global frame) of K objects at time ``t_s``
+    (seconds): per axis ``e(t) = sigma sqrt(2/J) sum_j cos(w_j t / tau + phi_j)`` with J = DRIFT_FEATURES,
+    ``w_j`` standard Cauchy and ``phi_j`` uniform, drawn once per object (:func:`_drift_features`).
+
+    Random Fourier features of the exponential kernel (its spectral density is the Cauchy one): over objects the
+    error has variance ``sigma^2`` and autocorrelation ``exp(-|dt| / tau)``, a stationary Gauss-Markov process
+    like an AR(1) sequence, but a function of (seed, profile, instance id, time) alone, so a frame simulates the
+    same whichever other frames are simulated with it. sigma, tau: (K,) metres, seconds (tau > 0)."""
+    feats = [_drift_features(seed, profile_name, inst) for inst in instance_ids]
+    if not feats:
+        return np.zeros((0, 2))
+    omega = np.stack([f[0] for f in feats])              # (K, 2, J)
+    phase = np.stack([f[1] for f in feats])
+    arg = omega * (float(t_s) / np.asarray(tau, np.float64))[:, None, None] + phase
+    return np.asarray(sigma, np.float64)[:, None] * np.sqrt(2.0 / DRIFT_FEATURES) * np.cos(arg).sum(axis=2)
+
+
 def _under_reported_velocity(boxes: np.ndarray, cls: np.ndarray, u: np.ndarray, tab: _Tables) -> np.ndarray:
     """Boxes (K, 9) whose objects fail (``u[:, 0] < vel_track_fail_prob``) with their velocity scaled by
     ``u[:, 1] * vel_track_fail_scale`` (the same factor in every frame of the object): a detector that
@@ -345,7 +387,8 @@ def simulate_frame(gt: GTFrame, profile: DetectorProfile, rng: np.random.Generat
     """Detections of one frame sampled from its ground truth.
 
     gt: canonical GT arrays; profile: the simulated detector; rng: this frame's stream (:func:`frame_rng`);
-    seed: the run's seed, for effects fixed per object over its life (:func:`object_uniforms`).
+    seed: the run's seed, for effects fixed per object over its life (:func:`object_uniforms`,
+    :func:`centre_drift`).
     Returns boxes (M, 9), scores (M,) and names (M,), sorted by decreasing score, at most
     ``max_boxes_per_sample``, all with score >= ``score_threshold``. ``tables`` caches the profile's arrays.
     """
@@ -359,6 +402,10 @@ def simulate_frame(gt: GTFrame, profile: DetectorProfile, rng: np.random.Generat
     if tab.vel_track_fail_prob[cls[idx]].any():
         u = object_uniforms(seed, profile.name, np.asarray(gt.instance_ids, dtype=object)[idx])
         tp_boxes = _under_reported_velocity(tp_boxes, cls[idx], u, tab)
+    if tab.pos_drift_sigma_m[cls[idx]].any():
+        tp_boxes[:, 0:2] += centre_drift(seed, profile.name, np.asarray(gt.instance_ids, dtype=object)[idx],
+                                         gt.timestamp * 1e-6, tab.pos_drift_sigma_m[cls[idx]],
+                                         tab.pos_drift_time_s[cls[idx]])
     tp_cls = _sample_cdf(tab.confusion_cdf[cls[idx]], rng.random(len(idx)))
     tp_logit = _tp_scores(cls[idx], pts[idx], tab, rng) - tab.confusion_logit_penalty[cls[idx]] * (tp_cls != cls[idx])
 
