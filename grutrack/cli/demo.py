@@ -35,7 +35,8 @@ def add_parser(subparsers) -> None:
     add_dataset_args(p, "split name (predefined, or from <version>/splits.json for nuScenes)")
     p.set_defaults(version=VERSION)
     p.add_argument("--profile", default="centerpoint",
-                   help="detector profile: a shipped name (centerpoint, pointpillars, centerpoint_velfail, centerpoint_drift) or a YAML path")
+                   help="detector profile: a shipped name (centerpoint, pointpillars, centerpoint_velfail, "
+                        "centerpoint_drift) or a YAML path")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--out", required=True, help="detection JSON to write")
     p.set_defaults(func=run_simulate)
