@@ -34,3 +34,13 @@ def test_difference_table_pairs_every_model_with_the_ekf_row_set_by_set():
     assert ekf == "| ekf | +0.0000 +- 0.0000 | +0.0000 +- 0.0000 | +0.000 | +0.000 |"
     # AMOTA: +0.01, 0 -> mean 0.005, s.e. 0.005; AMOTP: -0.03, -0.01 -> -0.02 +- 0.01; bus only where both have it
     assert grukf == "| grukf | +0.0050 +- 0.0050 | -0.0200 +- 0.0100 | -0.100 | -0.015 |"
+    drift = suite._difference_table(rows, classes, sets, "drift (time-correlated centre error)")
+    assert "2 drift (time-correlated centre error) sets" in drift[0] and drift[2:] == lines[2:]
+
+
+def test_drift_sets_use_the_evaluation_profile_of_the_results():
+    """--drift-seeds simulates with docs/results/grukf_eval/drift.yaml, a profile with a drifting centre."""
+    from grutrack.data.detection_sim import load_profile
+
+    assert Path(suite.DRIFT_PROFILE).is_file()
+    assert load_profile(suite.DRIFT_PROFILE).classes["car"].pos_drift_sigma_m > 0
