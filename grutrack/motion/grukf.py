@@ -55,6 +55,8 @@ _YAW_Z = 6
 GAIN_PRIORS = ("constant", "ekf")
 #: which classes a tracker runs through the network (GRUKFConfig.network_classes)
 NETWORK_CLASSES = ("all", "ss_model", "own_model")
+#: how a coasting track is predicted (GRUKFConfig.coast_yaw_rate)
+COAST_YAW_RATES = ("keep", "zero")
 #: SS models with the state layout ``[x, y, z, w, l, h, v, a, yaw, *]`` one network can serve (``own_model``)
 NETWORK_MODELS = ("CTRA", "BICYCLE")
 
@@ -87,6 +89,11 @@ class GRUKFConfig:
     :data:`NETWORK_MODELS`, each through the network with its own SS model and noise: one track group per model,
     the weights shared; the others, e.g. CA, keep the preset's EKF). It changes no weight; the tracker and the
     trainer read it.
+    coast_yaw_rate: "keep" (the paper: a coasting track is predicted with the SS model as it stands) or "zero"
+    (a grutrack option: from a track's second frame without a detection on, its predictions hold the turn-rate
+    slot, CTRA's omega and the Bicycle's steering angle, at zero, so that a track keeps its heading through a
+    detection gap instead of turning on with a rate the learned gain may have overestimated). It changes no
+    weight; the tracker and the trainer read it.
     model_params: constructor parameters of the other SS models an ``own_model`` network runs (or trains with,
     ``training_classes: own_model`` of the training config)
     (``{model name: params}``, the training motion config's, and ``form``: "arc" or "piecewise", the tracker
@@ -107,6 +114,7 @@ class GRUKFConfig:
     gain_prior: str = "constant"   # "constant": K = network output; "ekf": K = K_ekf + network output
     network_classes: str = "all"   # "all", "ss_model" or "own_model" (see above)
     model_params: dict = field(default_factory=dict)   # own_model: {model name: constructor parameters}
+    coast_yaw_rate: str = "keep"   # "keep" or "zero" (see above)
 
     def torch_model(self, name: str | None = None):
         """The torch SS model ``name`` (default ``ss_model``) with its parameters (:mod:`torch_models`)."""
@@ -284,6 +292,8 @@ class GRUKalmanNet(nn.Module):
         if cfg.network_classes not in NETWORK_CLASSES:
             raise ValueError(f"network_classes must be one of {', '.join(NETWORK_CLASSES)}, "
                              f"got {cfg.network_classes!r}")
+        if cfg.coast_yaw_rate not in COAST_YAW_RATES:
+            raise ValueError(f"coast_yaw_rate must be one of {', '.join(COAST_YAW_RATES)}, got {cfg.coast_yaw_rate!r}")
         with torch.device("meta"):      # allocated without drawing from any generator, initialised below
             self._build(cfg)
         self.to_empty(device="cpu")

@@ -56,6 +56,7 @@ class TorchCTRA:
     name = "CTRA"
     dim_x = 10
     yaw_index = 8
+    turn_index = 9   # the turn-rate slot: omega
 
     def init_state(self, z: torch.Tensor) -> torch.Tensor:
         """(N, 9) canonical boxes -> (N, 10): v = |(vx, vy)|, a = omega = 0."""
@@ -98,6 +99,7 @@ class TorchBicycle:
     name = "Bicycle"
     dim_x = 10
     yaw_index = 8
+    turn_index = 9   # the turn-rate slot: the steering angle delta
 
     def __init__(self, wheelbase_ratio: float = 0.8, front_ratio: float = 0.5):
         self.wheelbase_ratio, self.front_ratio = wheelbase_ratio, front_ratio

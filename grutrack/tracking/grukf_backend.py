@@ -183,12 +183,26 @@ class GRUKFBackend:
         return torch.as_tensor(c, device=self.device, dtype=torch.float64)
 
     def predict(self, s: GRUState, dt: float) -> GRUState:
-        """x <- f(x, dt) for every track."""
+        """x <- f(x, dt) for every track; with ``coast_yaw_rate: zero`` the tracks already predicted once since
+        their last update (``since >= 1``: coasting) have their turn-rate slot set to 0 first."""
+        x = self._coasted(s)
         P = None
         if self.kf is not None:   # P^- = F P F^T + Q, F at the posterior
-            _, P = self.kf.predict(self._np(s.x), s.P, self.Q[self._classes(s.labels)], dt)
+            _, P = self.kf.predict(self._np(x), s.P, self.Q[self._classes(s.labels)], dt)
         with self._ctx():
-            return s.with_x(self.ss.f(s.x, dt), P)
+            return s.with_x(self.ss.f(x, dt), P)
+
+    def _coasted(self, s: GRUState) -> torch.Tensor:
+        """The state (N, m) to predict from: ``s.x``, with the turn rate (CTRA omega, Bicycle steering angle) of
+        coasting tracks (``since >= 1``) zeroed when the network's ``coast_yaw_rate`` is "zero"."""
+        coasting = s.since >= 1
+        if self.net.cfg.coast_yaw_rate != "zero" or not coasting.any():
+            return s.x
+        with self._ctx():
+            keep = torch.ones_like(s.x[:1])
+            keep[0, self.ss.turn_index] = 0.0
+            mask = torch.as_tensor(coasting, device=s.x.device)[:, None]
+            return torch.where(mask, s.x * keep, s.x)
 
     @staticmethod
     def _np(t: torch.Tensor) -> np.ndarray:

@@ -48,6 +48,7 @@ class TrainConfig:
     centre_huber_delta: float = 0.0   # metres: x, y residuals beyond it cost linearly, not squared (0: squared)
     lr_min: float = 0.0          # the cosine schedule's floor: the learning rate of the last step
     yaw_loss: str = "heading"    # the yaw residual wrapped as a "heading" (2 pi) or an "axis" (pi)
+    coast_yaw_rate: str = "keep"   # a coasting track's turn rate: "keep" (the SS model's) or "zero"
 
 
 #: fields holding real numbers: a string that reads as one is taken as that number (PyYAML reads ``1e-5``, which
