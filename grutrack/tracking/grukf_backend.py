@@ -199,10 +199,9 @@ class GRUKFBackend:
         if self.net.cfg.coast_yaw_rate != "zero" or not coasting.any():
             return s.x
         with self._ctx():
-            keep = torch.ones_like(s.x[:1])
-            keep[0, self.ss.turn_index] = 0.0
-            mask = torch.as_tensor(coasting, device=s.x.device)[:, None]
-            return torch.where(mask, s.x * keep, s.x)
+            turn = torch.arange(s.x.shape[1], device=s.x.device) == self.ss.turn_index             # (m,)
+            rows = torch.as_tensor(coasting, device=s.x.device)[:, None]                         # (N, 1)
+            return torch.where(rows & turn, torch.zeros((), dtype=s.x.dtype, device=s.x.device), s.x)
 
     @staticmethod
     def _np(t: torch.Tensor) -> np.ndarray:
