@@ -321,6 +321,7 @@ def test_resume_after_interruption_equals_uninterrupted_run(small_training_set, 
         return real(*a, **k)
 
     monkeypatch.setattr(tr, "run_scene", interrupted)
+    before = signal.getsignal(signal.SIGINT)  # Python's handler, or SIG_IGN when started as a background job
     t = _trainer(scenes, dets, tmp_path, epochs=3, checkpoint_every=checkpoint_every)
     if how == "crash":
         with pytest.raises(RuntimeError, match="power cut"):
@@ -330,7 +331,7 @@ def test_resume_after_interruption_equals_uninterrupted_run(small_training_set, 
         with pytest.raises(tr.TrainingInterrupted, match=f"after step {stop_at}.*last.pt"):
             t.run()
         saved = stop_at                       # the step under way completes, then last.pt is written
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is before       # the trainer's handler is removed again
     assert read_checkpoint(tmp_path / "last.pt")["train_state"]["step"] == saved
     monkeypatch.setattr(tr, "run_scene", real)
     r = _trainer(scenes, dets, tmp_path, epochs=3, checkpoint_every=checkpoint_every)
