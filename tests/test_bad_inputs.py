@@ -270,10 +270,12 @@ def test_bad_training_flags_are_blamed_on_the_flag(tmp_path, capsys):
               f"gate)", got)
     for key, value, expected in (("centre_huber_delta: 0.0", "-0.5", "a distance in metres (0 for the squared loss)"),
                                  ("lr_min: 0.0", "low", "a learning rate >= 0"),
-                                 ("yaw_loss: heading", "degrees", "'heading' or 'axis'"),
-                                 ("coast_yaw_rate: keep", "hold", "'keep' or 'zero'")):
+                                 ("yaw_loss: axis", "degrees", "'heading' or 'axis'"),
+                                 ("coast_yaw_rate: zero", "hold", "'keep' or 'zero'")):
         cfg = tmp_path / f"{key.split(':')[0]}.yaml"
-        cfg.write_text(config_path("training", "grukf").read_text().replace(key, f"{key.split(':')[0]}: {value}"))
+        shipped = config_path("training", "grukf").read_text()
+        assert f"\n{key}\n" in shipped                     # the shipped value, replaced by the bad one
+        cfg.write_text(shipped.replace(key, f"{key.split(':')[0]}: {value}"))
         fails(capsys, [*base, "--config", cfg], f"{cfg}: '{key.split(':')[0]}' must be {expected}")
 
 

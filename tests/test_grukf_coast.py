@@ -81,7 +81,8 @@ def test_the_option_is_checked_stored_and_absent_means_keep(tmp_path):
         GRUKalmanNet(GRUKFConfig(coast_yaw_rate="hold"))
     with pytest.raises(ConfigError, match="'coast_yaw_rate' must be 'keep' or 'zero', got 'hold'"):
         load_train_config("grukf", {"coast_yaw_rate": "hold"})
-    assert load_train_config("grukf").coast_yaw_rate == "keep"
+    assert load_train_config("grukf").coast_yaw_rate == "zero"          # the default recipe's
+    assert load_train_config("paper").coast_yaw_rate == "keep"          # the paper's
     net = GRUKalmanNet(GRUKFConfig(coast_yaw_rate="zero"), generator=torch.Generator())
     save_checkpoint(tmp_path / "z.pt", net)
     assert load_network(tmp_path / "z.pt").cfg.coast_yaw_rate == "zero"
@@ -95,5 +96,5 @@ def test_the_trainer_builds_the_network_with_the_training_configs_value():
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import _arch
 
-    assert _arch(load_train_config("grukf", {"coast_yaw_rate": "zero"})).coast_yaw_rate == "zero"
-    assert _arch(load_train_config("grukf")).coast_yaw_rate == "keep"
+    assert _arch(load_train_config("grukf", {"coast_yaw_rate": "keep"})).coast_yaw_rate == "keep"
+    assert _arch(load_train_config("grukf")).coast_yaw_rate == "zero"
