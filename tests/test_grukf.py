@@ -697,7 +697,8 @@ def test_centre_huber_delta_bounds_the_centre_terms_only():
     target[0, [0, 1, 6, 7]] = [3.0, -0.5, 2.0, 4.0]           # x 3 m off, y 0.5 m, yaw 2 rad, vx 4 m/s
     values = {}
     for d in (0.0, 1.0):
-        loss = SceneLoss(load_train_config("grukf", {"centre_huber_delta": d}), torch.device("cpu"))
+        cfg = load_train_config("grukf", {"centre_huber_delta": d, "yaw_loss": "heading"})   # yaw term: 2^2
+        loss = SceneLoss(cfg, torch.device("cpu"))
         post = torch.zeros(1, 9, dtype=torch.float64, requires_grad=True)
         loss._add_rows(post, None, target, 1.0)
         loss.gt_terms = 1
