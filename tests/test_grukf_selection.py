@@ -181,6 +181,7 @@ def test_one_se_rule_in_training_writes_the_chosen_step_with_its_sets(small_trai
     final = _trainer(scenes, dets, tmp_path, v, select_checkpoint="best_val_amota_1se").run()
     val = TrainingLog.read(tmp_path / "train_log.csv").validated()
     assert all(len(r.val_amota_sets) == 3 for r in val)
+    assert [r.val_amota for r in val] == [mean for mean, _ in v.seen]     # the mean of the sets' unrounded scores
     # the log rounds the mean and each set to 6 decimals: the mean of the rounded sets is within 1e-6 of it
     assert [r.val_amota for r in val] == pytest.approx([float(np.mean(r.val_amota_sets)) for r in val], abs=1e-6)
     # the rule written out over the whole curve: the latest step within one s.e. of the (earliest) best
