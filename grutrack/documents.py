@@ -206,7 +206,8 @@ class TrainingStep:
     """One optimiser step of ``grutrack train``: its loss and how many terms of each kind made it, the learning
     rate it ran with, the validation AMOTA when validated after it (else None), wall seconds of the step, and the
     AMOTA of each validation detection set (``val_amota_sets``, in ``validation.json``'s ``detection_sets`` order;
-    ``val_amota`` is their mean; written ``a;b;c`` in the CSV)."""
+    ``val_amota`` is their mean; written ``a;b;c`` in the CSV), and the L2 norm of the step's gradient over all
+    parameters before clipping (``grad_norm``, see ``grad_clip_norm``; NaN where the step had none)."""
 
     step: int
     epoch: int
@@ -219,6 +220,7 @@ class TrainingStep:
     val_amota: float | None = None
     seconds: float = math.nan
     val_amota_sets: tuple[float, ...] | None = None
+    grad_norm: float = math.nan
 
     @classmethod
     def from_row(cls, row: dict[str, str], where: str) -> TrainingStep:
@@ -231,7 +233,8 @@ class TrainingStep:
                        val_amota=float(row["val_amota"]) if row.get("val_amota") not in ("", None) else None,
                        seconds=float(row.get("seconds") or "nan"),
                        val_amota_sets=tuple(float(x) for x in row["val_amota_sets"].split(";"))
-                       if row.get("val_amota_sets") else None)
+                       if row.get("val_amota_sets") else None,
+                       grad_norm=float(row.get("grad_norm") or "nan"))
         except (TypeError, ValueError) as exc:
             raise InputFormatError(f"{where}: step {row.get('step')!r}: not a number where one is expected "
                                    f"({exc})") from exc

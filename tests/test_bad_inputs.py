@@ -270,6 +270,7 @@ def test_bad_training_flags_are_blamed_on_the_flag(tmp_path, capsys):
               f"gate)", got)
     for key, value, expected in (("centre_huber_delta: 0.0", "-0.5", "a distance in metres (0 for the squared loss)"),
                                  ("lr_min: 0.0", "low", "a learning rate >= 0"),
+                                 ("grad_clip_norm: 10.0", "-1", "a gradient norm >= 0 (0: no clipping)"),
                                  ("yaw_loss: axis", "degrees", "'heading' or 'axis'"),
                                  ("coast_yaw_rate: zero", "hold", "'keep' or 'zero'")):
         cfg = tmp_path / f"{key.split(':')[0]}.yaml"

@@ -82,12 +82,12 @@ def test_manifest_without_its_records_is_refused(tmp_path):
 
 
 def test_training_log_round_trip(tmp_path):
-    log = TrainingLog([TrainingStep(1, 0, "scene-0061", 0.5, 3, 1, 0, 1e-5, None, 0.2),
-                       TrainingStep(2, 0, "scene-0103", 0.4, 2, 2, 0, 1e-5, 0.8123, 0.3, (0.9, 0.7246))])
+    log = TrainingLog([TrainingStep(1, 0, "scene-0061", 0.5, 3, 1, 0, 1e-5, None, 0.2, grad_norm=1.25),
+                       TrainingStep(2, 0, "scene-0103", 0.4, 2, 2, 0, 1e-5, 0.8123, 0.3, (0.9, 0.7246), 1274.95)])
     log.write(tmp_path / "train_log.csv")
     text = (tmp_path / "train_log.csv").read_text().splitlines()
     assert text[0] == ("step,epoch,scene,loss,gt_terms,pseudo_terms,prediction_terms,lr,val_amota,seconds,"
-                       "val_amota_sets")
+                       "val_amota_sets,grad_norm")
     assert text[1].split(",")[8] == ""                       # no validation after step 1: empty cell
     assert text[2].split(",")[10] == "0.9;0.7246"             # the AMOTA of each validation detection set
     back = TrainingLog.read(tmp_path / "train_log.csv")
@@ -99,6 +99,7 @@ def test_training_log_of_an_older_version_reads_with_defaults(tmp_path):
     p.write_text("step,epoch,loss,val_amota\n1,0,0.5,\n")
     (s,) = TrainingLog.read(p).steps
     assert s.scene == "" and s.prediction_terms == 0 and math.isnan(s.lr) and s.val_amota is None
+    assert math.isnan(s.grad_norm)
 
 
 @pytest.mark.parametrize("text,expect", [

@@ -740,6 +740,34 @@ def test_lr_min_is_the_learning_rate_of_the_last_step(small_training_set, tmp_pa
         assert t.opt.param_groups[0]["lr"] == pytest.approx(lr_min, abs=1e-12)
 
 
+def test_grad_clip_norm_bounds_the_applied_gradient_and_logs_the_norm_before_it(small_training_set, tmp_path,
+                                                                             monkeypatch):
+    # every step logs ||g|| before clipping; with grad_clip_norm c the gradient AdamW sees has norm min(||g||, c)
+    scenes, dets = small_training_set
+    seen = []
+    step = torch.optim.AdamW.step
+
+    def spy(opt, *a, **k):
+        seen.append(float(torch.nn.utils.get_total_norm(
+            [p.grad for g in opt.param_groups for p in g["params"] if p.grad is not None])))
+        return step(opt, *a, **k)
+
+    monkeypatch.setattr(torch.optim.AdamW, "step", spy)
+    free = _trainer(scenes, dets, tmp_path / "free", epochs=1, validation_scenes=0)
+    free.run()
+    logged = [r.grad_norm for r in free.log.steps]
+    assert logged == pytest.approx(seen, rel=1e-5) and min(logged) > 0
+    cap = float(np.median(logged))                    # half the steps above it
+    seen.clear()
+    clipped = _trainer(scenes, dets, tmp_path / "clip", epochs=1, validation_scenes=0, grad_clip_norm=cap)
+    clipped.run()
+    first = clipped.log.steps[0].grad_norm            # the same network and scene: the same gradient
+    assert first == pytest.approx(logged[0], rel=1e-9)
+    assert seen[0] == pytest.approx(min(first, cap), rel=1e-5)
+    assert all(s <= cap * (1 + 1e-5) for s in seen)
+    assert any(r.grad_norm > cap * 1.01 for r in clipped.log.steps)   # some step was really clipped
+
+
 def test_gt_term_gate_drops_held_instances_the_track_has_left():
     # a sticky track whose GT box is farther than the gate gives no GT term in that frame (-1); 0 is no gate
     from grutrack.data.scene import BoxSet

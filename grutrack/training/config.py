@@ -49,12 +49,13 @@ class TrainConfig:
     lr_min: float = 0.0          # the cosine schedule's floor: the learning rate of the last step
     yaw_loss: str = "heading"    # the yaw residual wrapped as a "heading" (2 pi) or an "axis" (pi)
     coast_yaw_rate: str = "keep"   # a coasting track's turn rate: "keep" (the SS model's) or "zero"
+    grad_clip_norm: float = 0.0  # the L2 norm a step's gradient is clipped to (0: not clipped, the paper's)
 
 
 #: fields holding real numbers: a string that reads as one is taken as that number (PyYAML reads ``1e-5``, which
 #: has no decimal point, as a string)
 _FLOAT_FIELDS = ("lr", "weight_decay", "gt_match_distance", "prediction_weight", "gt_term_gate",
-                 "centre_huber_delta", "lr_min")
+                 "centre_huber_delta", "lr_min", "grad_clip_norm")
 
 
 def _as_float(v):
