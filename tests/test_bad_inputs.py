@@ -272,7 +272,8 @@ def test_bad_training_flags_are_blamed_on_the_flag(tmp_path, capsys):
                                  ("lr_min: 0.0", "low", "a learning rate >= 0"),
                                  ("grad_clip_norm: 10.0", "-1", "a gradient norm >= 0 (0: no clipping)"),
                                  ("yaw_loss: axis", "degrees", "'heading' or 'axis'"),
-                                 ("coast_yaw_rate: zero", "hold", "'keep' or 'zero'")):
+                                 ("coast_yaw_rate: zero", "hold", "'keep' or 'zero'"),
+                                 ("coast_acceleration: zero", "hold", "'keep' or 'zero'")):
         cfg = tmp_path / f"{key.split(':')[0]}.yaml"
         shipped = config_path("training", "grukf").read_text()
         assert f"\n{key}\n" in shipped                     # the shipped value, replaced by the bad one

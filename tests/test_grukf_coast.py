@@ -98,3 +98,77 @@ def test_the_trainer_builds_the_network_with_the_training_configs_value():
 
     assert _arch(load_train_config("grukf", {"coast_yaw_rate": "keep"})).coast_yaw_rate == "keep"
     assert _arch(load_train_config("grukf")).coast_yaw_rate == "zero"
+
+
+# ``coast_acceleration``: "zero" holds a coasting track's acceleration at 0 from its second frame without a detection
+# on, so that it coasts at the speed it had; "keep" (the paper, and every checkpoint written before the key)
+# extrapolates the acceleration, which can turn the speed's sign over a long gap.
+
+def _accelerating_track(b: GRUKFBackend, accel: float = -2.0) -> GRUState:
+    """One car track at the origin heading along x at 5 m/s with acceleration ``accel`` m/s^2, as right after an
+    update (since 0)."""
+    z = np.array([[0.0, 0.0, 0.0, 2.0, 4.5, 1.6, 0.0, 5.0, 0.0]])
+    s = b.initiate(z, np.array([0]))
+    x = s.x.clone()
+    x[0, b.ss.accel_index] = accel
+    return GRUState(torch.cat([x, s.rows[:, s.m:]], dim=1), s.hid, s.labels, s.n_updates, np.zeros(1, np.int64), s.P)
+
+
+def _accel_backend(coast: str, ss_model: str = "CTRA", yaw: str = "keep") -> GRUKFBackend:
+    net = GRUKalmanNet(GRUKFConfig(ss_model=ss_model, coast_acceleration=coast, coast_yaw_rate=yaw),
+                       generator=torch.Generator())
+    return GRUKFBackend(net, device="cpu")
+
+
+@pytest.mark.parametrize("ss_model", ["CTRA", "Bicycle"])
+def test_zero_acceleration_coasts_at_the_speed_of_the_first_prediction(ss_model):
+    keep, zero = _accel_backend("keep", ss_model), _accel_backend("zero", ss_model)
+    ai, vi = keep.ss.accel_index, 6
+    sk1, sz1 = keep.predict(_accelerating_track(keep), DT), zero.predict(_accelerating_track(zero), DT)
+    # the first prediction after an update is the SS model's under both: 5 - 2 * 0.5 = 4 m/s
+    assert torch.equal(sk1.x, sz1.x) and float(sz1.x[0, vi]) == pytest.approx(4.0)
+    sk, sz = sk1, sz1
+    for _ in range(5):                        # 3 s of coasting in all
+        sk, sz = keep.predict(sk, DT), zero.predict(sz, DT)
+    # "keep" brakes through zero and drives backwards (5 - 2 * 3 = -1 m/s); "zero" holds 4 m/s
+    assert float(sk.x[0, vi]) == pytest.approx(-1.0)
+    assert float(sz.x[0, vi]) == pytest.approx(4.0) and float(sz.x[0, ai]) == 0.0
+    # and moves 4 m/s * 0.5 s = 2 m along its heading (x) per frame
+    step = zero.predict(sz, DT).x[0, :2] - sz.x[0, :2]
+    np.testing.assert_allclose(step.numpy(), [2.0, 0.0], atol=1e-9)
+
+
+def test_both_options_hold_both_slots_and_nothing_else():
+    both = _accel_backend("zero", yaw="zero")
+    s = _accelerating_track(both)
+    x = s.x.clone()
+    x[0, both.ss.turn_index] = 0.3
+    s = GRUState(torch.cat([x, s.rows[:, s.m:]], dim=1), s.hid, s.labels, s.n_updates, np.ones(1, np.int64), s.P)
+    held = both._coasted(s)                 # since 1: coasting
+    want = x.clone()
+    want[0, both.ss.turn_index] = want[0, both.ss.accel_index] = 0.0
+    assert torch.equal(held, want)
+    assert both._coast_slots() == [both.ss.turn_index, both.ss.accel_index]
+    assert _accel_backend("keep")._coast_slots() == []
+
+
+def test_coast_acceleration_is_checked_stored_and_absent_means_keep(tmp_path):
+    from grutrack.motion.checkpoint import load_network, save_checkpoint
+    from grutrack.training.config import load_train_config
+    from grutrack.training.trainer import _arch
+
+    with pytest.raises(ValueError, match="coast_acceleration must be one of keep, zero, got 'hold'"):
+        GRUKalmanNet(GRUKFConfig(coast_acceleration="hold"))
+    with pytest.raises(ConfigError, match="'coast_acceleration' must be 'keep' or 'zero', got 'hold'"):
+        load_train_config("grukf", {"coast_acceleration": "hold"})
+    assert load_train_config("grukf").coast_acceleration == "zero"      # the default recipe's
+    assert load_train_config("paper").coast_acceleration == "keep"      # the paper's
+    assert _arch(load_train_config("grukf", {"coast_acceleration": "zero"})).coast_acceleration == "zero"
+    assert _arch(load_train_config("grukf", {"coast_acceleration": "keep"})).coast_acceleration == "keep"
+    net = GRUKalmanNet(GRUKFConfig(coast_acceleration="zero"), generator=torch.Generator())
+    save_checkpoint(tmp_path / "z.pt", net)
+    assert load_network(tmp_path / "z.pt").cfg.coast_acceleration == "zero"
+    ck = torch.load(tmp_path / "z.pt", weights_only=False)
+    del ck["arch"]["coast_acceleration"]                   # a checkpoint written before the key
+    torch.save(ck, tmp_path / "old.pt")
+    assert load_network(tmp_path / "old.pt").cfg.coast_acceleration == "keep"

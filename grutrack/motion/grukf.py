@@ -57,6 +57,8 @@ GAIN_PRIORS = ("constant", "ekf")
 NETWORK_CLASSES = ("all", "ss_model", "own_model")
 #: how a coasting track is predicted (GRUKFConfig.coast_yaw_rate)
 COAST_YAW_RATES = ("keep", "zero")
+#: how a coasting track's acceleration is predicted (GRUKFConfig.coast_acceleration)
+COAST_ACCELERATIONS = ("keep", "zero")
 #: SS models with the state layout ``[x, y, z, w, l, h, v, a, yaw, *]`` one network can serve (``own_model``)
 NETWORK_MODELS = ("CTRA", "BICYCLE")
 
@@ -94,6 +96,11 @@ class GRUKFConfig:
     slot, CTRA's omega and the Bicycle's steering angle, at zero, so that a track keeps its heading through a
     detection gap instead of turning on with a rate the learned gain may have overestimated). It changes no
     weight; the tracker and the trainer read it.
+    coast_acceleration: "keep" (the paper) or "zero" (a grutrack option: from a track's second frame without a
+    detection on, its predictions hold the acceleration slot at zero, so that it coasts at the speed it had
+    instead of extrapolating an acceleration, which over a gap of k frames moves the box by a (k dt)^2 / 2 and can
+    turn the speed's sign: a bus estimated at -2 m/s^2 is predicted 6 m backwards after 2.5 s). Same rule and
+    scope as ``coast_yaw_rate``.
     model_params: constructor parameters of the other SS models an ``own_model`` network runs (or trains with,
     ``training_classes: own_model`` of the training config)
     (``{model name: params}``, the training motion config's, and ``form``: "arc" or "piecewise", the tracker
@@ -115,6 +122,7 @@ class GRUKFConfig:
     network_classes: str = "all"   # "all", "ss_model" or "own_model" (see above)
     model_params: dict = field(default_factory=dict)   # own_model: {model name: constructor parameters}
     coast_yaw_rate: str = "keep"   # "keep" or "zero" (see above)
+    coast_acceleration: str = "keep"   # "keep" or "zero" (see above)
 
     def torch_model(self, name: str | None = None):
         """The torch SS model ``name`` (default ``ss_model``) with its parameters (:mod:`torch_models`)."""
@@ -294,6 +302,9 @@ class GRUKalmanNet(nn.Module):
                              f"got {cfg.network_classes!r}")
         if cfg.coast_yaw_rate not in COAST_YAW_RATES:
             raise ValueError(f"coast_yaw_rate must be one of {', '.join(COAST_YAW_RATES)}, got {cfg.coast_yaw_rate!r}")
+        if cfg.coast_acceleration not in COAST_ACCELERATIONS:
+            raise ValueError(f"coast_acceleration must be one of {', '.join(COAST_ACCELERATIONS)}, "
+                             f"got {cfg.coast_acceleration!r}")
         with torch.device("meta"):      # allocated without drawing from any generator, initialised below
             self._build(cfg)
         self.to_empty(device="cpu")

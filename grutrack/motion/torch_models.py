@@ -57,6 +57,7 @@ class TorchCTRA:
     dim_x = 10
     yaw_index = 8
     turn_index = 9   # the turn-rate slot: omega
+    accel_index = 7  # the acceleration slot: a (m/s^2)
 
     def init_state(self, z: torch.Tensor) -> torch.Tensor:
         """(N, 9) canonical boxes -> (N, 10): v = |(vx, vy)|, a = omega = 0."""
@@ -100,6 +101,7 @@ class TorchBicycle:
     dim_x = 10
     yaw_index = 8
     turn_index = 9   # the turn-rate slot: the steering angle delta
+    accel_index = 7  # the acceleration slot: a (m/s^2)
 
     def __init__(self, wheelbase_ratio: float = 0.8, front_ratio: float = 0.5):
         self.wheelbase_ratio, self.front_ratio = wheelbase_ratio, front_ratio

@@ -183,8 +183,9 @@ class GRUKFBackend:
         return torch.as_tensor(c, device=self.device, dtype=torch.float64)
 
     def predict(self, s: GRUState, dt: float) -> GRUState:
-        """x <- f(x, dt) for every track; with ``coast_yaw_rate: zero`` the tracks already predicted once since
-        their last update (``since >= 1``: coasting) have their turn-rate slot set to 0 first."""
+        """x <- f(x, dt) for every track; with ``coast_yaw_rate: zero`` (``coast_acceleration: zero``) the tracks
+        already predicted once since their last update (``since >= 1``: coasting) have their turn-rate
+        (acceleration) slot set to 0 first."""
         x = self._coasted(s)
         P = None
         if self.kf is not None:   # P^- = F P F^T + Q, F at the posterior
@@ -192,16 +193,25 @@ class GRUKFBackend:
         with self._ctx():
             return s.with_x(self.ss.f(x, dt), P)
 
+    def _coast_slots(self) -> list[int]:
+        """State columns a coasting track holds at 0: the turn rate (CTRA omega, Bicycle steering angle) with
+        ``coast_yaw_rate: zero``, the acceleration with ``coast_acceleration: zero``."""
+        cfg = self.net.cfg
+        return ([self.ss.turn_index] if cfg.coast_yaw_rate == "zero" else []) + \
+            ([self.ss.accel_index] if cfg.coast_acceleration == "zero" else [])
+
     def _coasted(self, s: GRUState) -> torch.Tensor:
-        """The state (N, m) to predict from: ``s.x``, with the turn rate (CTRA omega, Bicycle steering angle) of
-        coasting tracks (``since >= 1``) zeroed when the network's ``coast_yaw_rate`` is "zero"."""
+        """The state (N, m) to predict from: ``s.x``, with the :meth:`_coast_slots` of coasting tracks
+        (``since >= 1``) set to 0."""
         coasting = s.since >= 1
-        if self.net.cfg.coast_yaw_rate != "zero" or not coasting.any():
+        slots = self._coast_slots()
+        if not slots or not coasting.any():
             return s.x
         with self._ctx():
-            turn = torch.arange(s.x.shape[1], device=s.x.device) == self.ss.turn_index             # (m,)
+            held = torch.zeros(s.x.shape[1], dtype=torch.bool, device=s.x.device)
+            held[slots] = True                                                                   # (m,)
             rows = torch.as_tensor(coasting, device=s.x.device)[:, None]                         # (N, 1)
-            return torch.where(rows & turn, torch.zeros((), dtype=s.x.dtype, device=s.x.device), s.x)
+            return torch.where(rows & held, torch.zeros((), dtype=s.x.dtype, device=s.x.device), s.x)
 
     @staticmethod
     def _np(t: torch.Tensor) -> np.ndarray:

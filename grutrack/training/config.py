@@ -49,6 +49,7 @@ class TrainConfig:
     lr_min: float = 0.0          # the cosine schedule's floor: the learning rate of the last step
     yaw_loss: str = "heading"    # the yaw residual wrapped as a "heading" (2 pi) or an "axis" (pi)
     coast_yaw_rate: str = "keep"   # a coasting track's turn rate: "keep" (the SS model's) or "zero"
+    coast_acceleration: str = "keep"   # a coasting track's acceleration: "keep" (the SS model's) or "zero"
     grad_clip_norm: float = 0.0  # the L2 norm a step's gradient is clipped to (0: not clipped, the paper's)
 
 

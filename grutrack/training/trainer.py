@@ -443,7 +443,7 @@ def _arch(cfg: TrainConfig) -> GRUKFConfig:
                        class_gain=cfg.class_gain, age_bins=cfg.age_bins, gap_bins=cfg.gap_bins,
                        yaw_flip=cfg.yaw_flip, aux_inputs=cfg.aux_inputs, gain_prior=cfg.gain_prior,
                        network_classes=cfg.network_classes, model_params=others,
-                       coast_yaw_rate=cfg.coast_yaw_rate)
+                       coast_yaw_rate=cfg.coast_yaw_rate, coast_acceleration=cfg.coast_acceleration)
 
 
 @dataclass
