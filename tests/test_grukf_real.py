@@ -6,12 +6,12 @@ mini_train ground truth with simulated CenterPoint-like detections (seed 1), eva
 detections of other seeds (2, 11) and with the real PointPillars detections (official semantics via the exact fast
 evaluator, equal to the devkit's TrackingEval to 1e-15). The GRU-KF writes its posterior for matched tracks.
 
-Measured (docs/results/grukf_eval/README.md, "The axis loss and coasting without turning together: the default";
-training detection seeds 1 and 7 of the six): on these two simulated sets the mean AMOTA is the default `ekf`
-preset's or above (0.9100 and 0.9103 vs 0.9060) and above Poly-MOT's EKF (`polymot`, the paper's baseline, 0.8680),
-the mean AMOTP 0.021 and 0.023 m below the preset's (0.356 and 0.354 vs 0.377 m); the real file 0.1933 and 0.1934
-(the preset 0.1842). This test trains with seed 1. The bounds guard those relations with a margin for CPU
-arithmetic: AMOTA not more than 0.003 below the preset's, AMOTP at least 0.010 m below it (two sets: one
+Measured (docs/results/grukf_eval/README.md, "Coasting at constant speed (`coast_acceleration: zero`) with
+clipping: the default"; training detection seeds 1 and 3 of the four): on these two simulated sets the mean AMOTA
+is the default `ekf` preset's or above (0.9102 and 0.9098 vs 0.9060) and above Poly-MOT's EKF (`polymot`, the
+paper's baseline, 0.8680), the mean AMOTP 0.028 m below the preset's (0.350 and 0.349 vs 0.377 m); the real file
+0.1936 on both (the preset 0.1842). This test trains with seed 1. The bounds guard those relations with a margin
+for CPU arithmetic: AMOTA not more than 0.003 below the preset's, AMOTP at least 0.010 m below it (two sets: one
 association event moves a set's AMOTP by 0.03 m; the bar of 0.02 m is measured on 14 draws in the results file),
 the real file within 0.002 of it."""
 
