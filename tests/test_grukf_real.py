@@ -7,7 +7,7 @@ detections of other seeds (2, 11) and with the real PointPillars detections (off
 evaluator, equal to the devkit's TrackingEval to 1e-15). The GRU-KF writes its posterior for matched tracks.
 
 Measured (docs/results/grukf_eval/README.md, "Coasting at constant speed (`coast_acceleration: zero`) with
-clipping: the default"; training detection seeds 1 and 3 of the four): on these two simulated sets the mean AMOTA
+clipping: the default"; training detection seeds 1 and 3 of the six): on these two simulated sets the mean AMOTA
 is the default `ekf` preset's or above (0.9102 and 0.9098 vs 0.9060) and above Poly-MOT's EKF (`polymot`, the
 paper's baseline, 0.8680), the mean AMOTP 0.028 m below the preset's (0.350 and 0.349 vs 0.377 m); the real file
 0.1936 on both (the preset 0.1842). This test trains with seed 1. The bounds guard those relations with a margin
