@@ -16,6 +16,7 @@ import pytest
 from grutrack.boxes import quaternion_from_yaw
 from grutrack.classes import TRACKING_CLASSES
 from grutrack.cli import main
+from grutrack.data.nusc_detections import LIDAR_META
 from grutrack.data.nuscenes import load_scenes
 
 
@@ -30,7 +31,7 @@ def _gt_as_detections(nusc, split: str, path) -> None:
                  "rotation": qi.tolist(), "velocity": b[7:9].tolist(),
                  "detection_name": TRACKING_CLASSES[lab], "detection_score": 1.0, "attribute_name": ""}
                 for b, qi, lab in zip(f.gt.boxes, q, f.gt.labels)]
-    path.write_text(json.dumps({"meta": {"use_lidar": True}, "results": results}))
+    path.write_text(json.dumps({"meta": LIDAR_META, "results": results}))
 
 
 def _track_and_evaluate(nusc_root, dets, tmp_path, *extra) -> dict:
@@ -79,7 +80,7 @@ def test_frames_without_detections_give_empty_samples(nusc_mini, nusc_root, tmp_
     # every sample present, all empty: a valid (empty) submission, every token listed
     toks = [f.token for s in load_scenes(nusc_mini, "mini_val") for f in s.frames]
     det = tmp_path / "empty.json"
-    det.write_text(json.dumps({"meta": {"use_lidar": True}, "results": {t: [] for t in toks}}))
+    det.write_text(json.dumps({"meta": LIDAR_META, "results": {t: [] for t in toks}}))
     out = tmp_path / "sub.json"
     assert main(["track", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
                  "--detections", str(det), "--out", str(out), "--no-progress"]) == 0

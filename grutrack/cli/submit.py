@@ -24,7 +24,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--manifest", default=None,
                    help="manifest JSON (default: <out stem>.manifest.json; 'none': write no manifest, and the "
                         "provenance arguments below are not needed)")
-    _provenance_args(p, required=False)
+    _provenance_args(p, required=False, beside="--tracks")
     p.set_defaults(func=run_submit)
 
     p = sub.add_parser("manifest", help="write the provenance manifest of a submission (checked first)",
@@ -35,7 +35,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_dataset_args(p, "split of the submission")
     p.add_argument("--submission", required=True, help="the submission (grutrack submit --out)")
     p.add_argument("--out", default=None, help="manifest JSON (default: <submission stem>.manifest.json)")
-    _provenance_args(p, required=True)
+    _provenance_args(p, required=True, beside="--submission")
     p.set_defaults(func=run_manifest)
 
     p = sub.add_parser("leaderboard-zip", help="zip a nuScenes submission for the leaderboard (validated first)",
@@ -50,10 +50,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_zip)
 
 
-def _provenance_args(p: argparse.ArgumentParser, required: bool) -> None:
-    """What produced the tracks: detections, tracker and its resolved config, checkpoint, code version."""
+def _provenance_args(p: argparse.ArgumentParser, required: bool, beside: str) -> None:
+    """What produced the tracks: detections, tracker and its resolved config (default: the one `grutrack track`
+    wrote beside the file of the flag ``beside``), checkpoint, code version."""
     p.add_argument("--detections", required=required, help="detections the tracks were made from")
-    p.add_argument("--tracker-config", required=required, help="resolved tracker preset YAML used")
+    p.add_argument("--tracker-config", default=None,
+                   help=f"resolved tracker preset YAML used (default: <{beside} stem>.tracker.yaml, what `grutrack "
+                        f"track` writes beside its --out)")
     p.add_argument("--tracker", required=required, help="tracker name (ekf, grukf, greedy, ab3dmot)")
     p.add_argument("--checkpoint", default=None, help="GRU-KF model used (grukf)")
     p.add_argument("--code-version", default=None, help="code version of the tracking stage (from the workflow)")
@@ -70,12 +73,28 @@ def _write_manifest(args: argparse.Namespace, submission: str, counts: dict[str,
              checkpoint=FileRecord.of(args.checkpoint), code_version=args.code_version, counts=counts).write(out)
 
 
+def _tracker_config(given: str | None, beside: str) -> str | None:
+    """``--tracker-config`` as given, else the config `grutrack track` wrote beside ``beside`` when it is there
+    (:func:`grutrack.pipeline.presets.used_config_path`), else None."""
+    default = _used_config(beside)
+    return given or (str(default) if default.is_file() else None)
+
+
+def _used_config(beside: str):
+    """``<beside stem>.tracker.yaml``: where `grutrack track --out BESIDE` writes the tracker config it used."""
+    from grutrack.pipeline.presets import used_config_path
+
+    return used_config_path(beside)
+
+
 def run_submit(args: argparse.Namespace) -> int:
     """Validate, write, manifest."""
+    args.tracker_config = _tracker_config(args.tracker_config, args.tracks)
     missing = [f for f, v in (("--detections", args.detections), ("--tracker-config", args.tracker_config),
                               ("--tracker", args.tracker)) if v is None]
     if args.manifest != "none" and missing:
-        raise ConfigError(f"{', '.join(missing)}: needed for the manifest (or give --manifest none)")
+        hint = "" if args.tracker_config else f"; no {_used_config(args.tracks)} beside the tracks"
+        raise ConfigError(f"{', '.join(missing)}: needed for the manifest (or give --manifest none){hint}")
     counts = dataset_of(args).write_submission(args.tracks, args.split, args.out)
     wrote = f"wrote {args.out} ({', '.join(f'{v} {k}' for k, v in counts.items())})"
     if args.manifest != "none":
@@ -88,6 +107,11 @@ def run_submit(args: argparse.Namespace) -> int:
 
 def run_manifest(args: argparse.Namespace) -> int:
     """Check the submission, write its manifest."""
+    args.tracker_config = _tracker_config(args.tracker_config, args.submission)
+    if args.tracker_config is None:
+        raise ConfigError(f"--tracker-config: not given, and no {_used_config(args.submission)} beside "
+                          f"the submission (grutrack track --out X writes the tracker config it used to "
+                          f"<X stem>.tracker.yaml: give that file)")
     counts = dataset_of(args).check_submission(args.submission, args.split)
     out = args.out or str(Manifest.path_for(args.submission))
     _write_manifest(args, args.submission, counts, out)

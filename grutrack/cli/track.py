@@ -28,8 +28,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--checkpoint", default=None, help="trained GRU-KF model (with --tracker grukf)")
     p.add_argument("--device", default="auto", help="torch device for grukf: auto (GPU when present), cpu, cuda")
     p.add_argument("--out", required=True,
-                   help="output submission: JSON (nuscenes) or pickle (av2; a feather table of the same tracks is "
-                        "written beside it, .feather)")
+                   help="output submission: JSON (nuscenes; its meta is the detection file's) or pickle (av2; a "
+                        "feather table of the same tracks is written beside it, .feather)")
+    p.add_argument("--config-out", default=None,
+                   help="where to write the resolved tracker config this run used, what `grutrack submit` and "
+                        "`grutrack manifest` record (default: <out stem>.tracker.yaml beside --out, where they "
+                        "look for it; 'none': not written)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -55,13 +59,31 @@ def run(args: argparse.Namespace) -> int:
     with tqdm(total=n_frames, unit="frame", desc=f"tracking {ds.name} {args.split}", disable=args.no_progress,
               file=sys.stderr) as bar:
         run_ = tracker_run(tracker, scenes, dets.boxes, bar.update)
-    counts = ds.write_tracks(args.out, scenes, run_.results, tracker.cfg.max_boxes_per_sample)
+    counts = ds.write_tracks(args.out, scenes, run_.results, tracker.cfg.max_boxes_per_sample, meta=dets.meta)
+    config_out = write_used_config(args, tracker.cfg.matched_box)
     if dets.summary:
         print(dets.summary)
-    print(f"wrote {args.out}: {', '.join(f'{v} {k}' for k, v in counts.items())}")
+    print(f"wrote {args.out}: {', '.join(f'{v} {k}' for k, v in counts.items())}"
+          + (f"; tracker config {config_out}" if config_out else ""))
     print(f"tracking loop: {run_.frames} frames in {run_.seconds:.2f} s ({run_.fps:.1f} frames/s); "
           f"tracker start {run_.start_seconds:.2f} s")
     return 0
+
+
+def write_used_config(args: argparse.Namespace, matched_box: str) -> str | None:
+    """Write the tracker config the run used (``--config-out``, default beside ``--out``) atomically, as
+    ``resolve-config tracker`` writes one; returns its path (None with ``--config-out none``)."""
+    from grutrack.pipeline.presets import used_config_path, used_tracker_config, write_config
+    from grutrack.tracking.factory import DEFAULT_PRESET
+
+    if args.config_out == "none":
+        return None
+    out = args.config_out or str(used_config_path(args.out))
+    origin = (f"the config grutrack track --tracker {args.tracker} ran, preset "
+              f"'{args.config or DEFAULT_PRESET[args.tracker]}'"
+              + (" with the checkpoint's output.matched_box" if args.tracker == "grukf" and not args.config else ""))
+    write_config(out, "tracker", used_tracker_config(args.tracker, args.config, matched_box), origin)
+    return out
 
 
 def tracker_run(tracker, scenes, dets, progress):

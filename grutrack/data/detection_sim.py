@@ -40,6 +40,7 @@ import numpy as np
 
 from grutrack.boxes import BOX_DIM, VX, VY, W, H, YAW, quaternion_from_yaw, wrap_angle
 from grutrack.classes import DETECTION_CLASSES
+from grutrack.data.nusc_detections import LIDAR_META
 from grutrack.data.scene import BoxSet
 from grutrack.errors import ConfigError
 from grutrack.io import atomic_path
@@ -536,10 +537,11 @@ def _frame_records(det: DetFrame) -> list[dict]:
 
 
 def detection_json(dets: list[DetFrame], profile: DetectorProfile, seed: int) -> dict:
-    """The official nuScenes detection-submission object; a top-level ``synthetic`` entry says how it was made."""
+    """The official nuScenes detection-submission object; a top-level ``synthetic`` entry says how it was made.
+    Its meta is lidar-only with no map and no external data (:data:`~grutrack.data.nusc_detections.LIDAR_META`):
+    the profiles describe lidar detectors, and tracks made from the file declare the same meta."""
     return {
-        "meta": {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False,
-                 "use_external": False},
+        "meta": dict(LIDAR_META),
         "results": {d.token: _frame_records(d) for d in dets},
         "synthetic": {"generator": "grutrack simulate-detections", "profile": profile.name, "seed": int(seed),
                       "note": "SYNTHETIC detections sampled from ground truth by a detector simulator; "

@@ -1,6 +1,6 @@
 """Conversion of a downloaded nuScenes detection file (official detection-submission JSON, plain or inside a
 zip archive) into the detection JSON of one split: validated sample by sample, restricted to the split's
-samples, written atomically."""
+samples, its ``meta`` checked and kept, written atomically."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from grutrack.data.nusc_detections import load_detections, read_detection_json
+from grutrack.data.nusc_detections import detection_meta, read_detection_json, results_boxes
 from grutrack.data.nuscenes import load_scenes, open_nuscenes
 from grutrack.errors import InputFormatError
 from grutrack.io import atomic_path, write_json_atomic
@@ -33,15 +33,16 @@ def extract_member(archive: str | Path, member: str, out_dir: str | Path) -> Pat
 
 def convert_nuscenes_detections(raw: str | Path, dataroot: str | Path, version: str, split: str,
                                 out: str | Path, member: str | None = None) -> dict:
-    """Validate ``raw`` against the split and write the split's detections to ``out``; returns counts."""
+    """Validate ``raw`` against the split and write the split's detections to ``out`` with the file's meta
+    (checked: the five booleans of the official meta); returns counts."""
     nusc = open_nuscenes(dataroot, version)
     tokens = [f.token for s in load_scenes(nusc, split) for f in s.frames]
     with tempfile.TemporaryDirectory(prefix="grutrack-convert-") as tmp:
         path = extract_member(raw, member, tmp) if member else Path(raw)
-        load_detections(path, tokens)  # every sample present, every box valid (error names sample and field)
         data = read_detection_json(path)
+        results_boxes(path, data["results"], tokens)  # every sample present, every box valid (names sample, field)
+        meta = detection_meta(data, path)
     results = {t: data["results"][t] for t in tokens}
-    meta = data.get("meta") if isinstance(data.get("meta"), dict) else {"use_lidar": True}
     write_json_atomic(out, {"meta": meta, "results": results})
     return {"samples": len(tokens), "boxes": sum(len(v) for v in results.values()),
             "dropped_samples": len(data["results"]) - len(tokens)}

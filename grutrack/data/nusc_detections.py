@@ -3,6 +3,8 @@
 Validates what a tracker relies on and says exactly what is wrong: every sample of the split present,
 known class names, finite numbers, positive sizes, unit quaternions. The 10 detection classes map to the
 7 tracking classes; boxes of the 3 untracked classes (barrier, traffic_cone, construction_vehicle) are dropped.
+The file's ``meta`` (the devkit's detection-submission meta: which sensors, map and external data the detector
+used) is checked by :func:`detection_meta`; a tracking submission made from the file declares the same meta.
 """
 
 from __future__ import annotations
@@ -21,6 +23,12 @@ QUATERNION_TOLERANCE = 1e-2  # |‖q‖ - 1| allowed; JSON writers round quatern
 #: boxes per sample the official detection format allows (the devkit's ``max_boxes_per_sample``); it also bounds
 #: the tracker's per-frame work (NMS compares every pair of a frame's boxes)
 MAX_BOXES_PER_SAMPLE = 500
+#: the booleans of the official submission ``meta`` (detection and tracking alike), in the devkit's order
+META_KEYS = ("use_camera", "use_lidar", "use_radar", "use_map", "use_external")
+#: the keys of :data:`META_KEYS` that are sensors; a submission declares at least one
+SENSOR_KEYS = ("use_camera", "use_lidar", "use_radar")
+#: the meta of lidar-only detections with no map and no external data (what simulated detections declare)
+LIDAR_META = {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False, "use_external": False}
 
 
 def read_detection_json(path: str | Path) -> dict:
@@ -33,8 +41,39 @@ def read_detection_json(path: str | Path) -> dict:
     return data
 
 
+def detection_meta(data: dict, path: str | Path) -> dict[str, bool]:
+    """The ``meta`` of a parsed detection file (:func:`read_detection_json`) as ``{key: bool}`` over
+    :data:`META_KEYS` (other keys are dropped): each key present and a JSON boolean, at least one sensor true.
+    Raises :class:`InputFormatError` naming the file and the field (``meta.use_camera``)."""
+    meta = data.get("meta")
+    if not isinstance(meta, dict):
+        got = "nothing" if meta is None else type(meta).__name__
+        raise InputFormatError(f"{path}: field 'meta' must be an object with the booleans {', '.join(META_KEYS)} "
+                               f"(the official detection-submission meta: what the detector used), got {got}")
+    for key in META_KEYS:
+        if key not in meta:
+            raise InputFormatError(f"{path}: field 'meta.{key}' is missing; expected true or false (the official "
+                                   f"detection-submission meta has {', '.join(META_KEYS)})")
+        if not isinstance(meta[key], bool):
+            raise InputFormatError(f"{path}: field 'meta.{key}' must be true or false, got {meta[key]!r}")
+    if not any(meta[k] for k in SENSOR_KEYS):
+        raise InputFormatError(f"{path}: field 'meta' declares no sensor ({', '.join(SENSOR_KEYS)} all false); "
+                               f"expected at least one true")
+    return {k: meta[k] for k in META_KEYS}
+
+
+def load_detection_file(path: str | Path, sample_tokens: list[str],
+                        measured_yaw: str = "euler_z") -> tuple[dict[str, BoxSet], dict[str, bool]]:
+    """:func:`load_detections` and the file's checked meta (:func:`detection_meta`), the file parsed once:
+    ``(boxes by sample token, meta)``; what tracking reads, since its submission declares the same meta."""
+    path = Path(path)
+    data = read_detection_json(path)
+    return results_boxes(path, data["results"], sample_tokens, measured_yaw), detection_meta(data, path)
+
+
 def load_detections(path: str | Path, sample_tokens: list[str], measured_yaw: str = "euler_z") -> dict[str, BoxSet]:
-    """Detections of the given samples as canonical box sets (tracking classes only).
+    """Detections of the given samples as canonical box sets (tracking classes only); the ``meta`` is not read
+    (:func:`load_detection_file` checks it too).
 
     ``measured_yaw``: how a box's quaternion becomes its yaw, a key of :data:`grutrack.boxes.MEASURED_YAW`
     (``euler_z``: the Euler yaw; ``rotation_angle``: the whole rotation angle, as Poly-MOT).
@@ -43,7 +82,13 @@ def load_detections(path: str | Path, sample_tokens: list[str], measured_yaw: st
     in the file are ignored. Raises :class:`InputFormatError` naming the file, sample, box and field.
     """
     path = Path(path)
-    results = read_detection_json(path)["results"]
+    return results_boxes(path, read_detection_json(path)["results"], sample_tokens, measured_yaw)
+
+
+def results_boxes(path: Path, results: dict, sample_tokens: list[str],
+                  measured_yaw: str = "euler_z") -> dict[str, BoxSet]:
+    """The ``results`` object of the detection file ``path`` (for messages) as box sets of ``sample_tokens``,
+    validated as :func:`load_detections` says."""
     missing = [t for t in sample_tokens if t not in results]
     if missing:
         raise InputFormatError(

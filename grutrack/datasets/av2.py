@@ -104,8 +104,9 @@ class AV2Dataset:
         return scene_statistics([s for split in splits for s in self.scenes(split, with_gt=True)])
 
     def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
-                     max_boxes: int) -> dict[str, int]:
-        """The challenge pickle at ``path`` and a feather table of the same tracks beside it (``.feather``)."""
+                     max_boxes: int, meta: dict[str, bool] | None = None) -> dict[str, int]:
+        """The challenge pickle at ``path`` and a feather table of the same tracks beside it (``.feather``);
+        the pickle has no meta (``meta`` is None for LT3D detections and ignored)."""
         from grutrack.export.av2_tracks import write_tracks
 
         seqs = write_tracks(path, Path(path).with_suffix(".feather"), scenes, results, self.vocabulary)

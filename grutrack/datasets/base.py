@@ -32,12 +32,15 @@ class DatasetOptions:
 
 @dataclass
 class Detections:
-    """Detections of a split read for tracking: ``boxes[frame token]`` (global frame) and what reading them
-    found worth telling (``summary``: one line; ``warnings``: lines for stderr)."""
+    """Detections of a split read for tracking: ``boxes[frame token]`` (global frame), what reading them
+    found worth telling (``summary``: one line; ``warnings``: lines for stderr) and the file's submission
+    ``meta`` (nuScenes: ``{use_camera, use_lidar, use_radar, use_map, use_external: bool}``, which the tracking
+    submission declares too; None for a format that has none, AV2's)."""
 
     boxes: dict[str, BoxSet]
     summary: str = ""
     warnings: list[str] = field(default_factory=list)
+    meta: dict[str, bool] | None = None
 
 
 def config_entry(kind: str, **properties: dict) -> dict:
@@ -105,8 +108,9 @@ class Dataset(Protocol):
         (:mod:`grutrack.data.nusc_stats`: share, size, speed, moving share, |yaw rate|, 0-point share)."""
 
     def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
-                     max_boxes: int) -> dict[str, int]:
-        """The tracker's output written as the official submission (validated, atomically); returns counts
+                     max_boxes: int, meta: dict[str, bool] | None = None) -> dict[str, int]:
+        """The tracker's output written as the official submission (validated, atomically) declaring ``meta``
+        (:attr:`Detections.meta` of the detections tracked; a format without one ignores it); returns counts
         (samples/logs, frames, boxes)."""
 
     def write_submission(self, tracks: str | Path, split: str, out: str | Path) -> dict[str, int]:

@@ -85,10 +85,13 @@ class NuScenesDataset:
 
     def load_detections(self, path: str | Path, split: str, scenes: list[Scene],
                         measured_yaw: str = "euler_z") -> Detections:
-        from grutrack.data.nusc_detections import load_detections
+        """The official detection-submission JSON: boxes of every sample of ``scenes`` and the file's meta
+        (checked; the tracking submission declares it)."""
+        from grutrack.data.nusc_detections import load_detection_file
 
         tokens = [f.token for s in scenes for f in s.frames]
-        return Detections(load_detections(path, tokens, measured_yaw))
+        boxes, meta = load_detection_file(path, tokens, measured_yaw)
+        return Detections(boxes, meta=meta)
 
     def simulate_detections(self, split: str, profile, seed: int, out: str | Path) -> dict[str, int]:
         """SYNTHETIC detections of the split's samples (the 10 detection classes), sampled from its ground truth
@@ -106,11 +109,12 @@ class NuScenesDataset:
         return nuscenes_statistics(self.options.dataroot, self.options.version, splits, nusc=self.tables)
 
     def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
-                     max_boxes: int) -> dict[str, int]:
+                     max_boxes: int, meta: dict[str, bool] | None = None) -> dict[str, int]:
+        """The tracking JSON declaring the detections' ``meta`` (None: lidar-only)."""
         from grutrack.export.nuscenes_json import build_submission, write_submission
 
         tokens = [f.token for s in scenes for f in s.frames]
-        sub = build_submission(results, tokens, max_boxes)
+        sub = build_submission(results, tokens, max_boxes, meta)
         write_submission(path, sub, tokens)
         return {"samples": len(tokens), "boxes": sum(len(v) for v in sub["results"].values()),
                 "scenes": len(scenes)}

@@ -1,6 +1,7 @@
 """The official nuScenes tracking-submission JSON.
 
-``{"meta": {...use_lidar: true...}, "results": {sample_token: [box, ...]}}`` where each box has
+``{"meta": {use_camera, use_lidar, use_radar, use_map, use_external: booleans}, "results": {sample_token:
+[box, ...]}}``; the meta is the detection file's (what the detector used), lidar-only by default. Each box has
 sample_token, translation [x, y, z], size [w, l, h], rotation [w, x, y, z], velocity [vx, vy] (global frame,
 m/s), tracking_id (string), tracking_name (one of the 7 tracking classes) and tracking_score.
 Every sample token of the split is present and no sample has more than 500 boxes.
@@ -15,12 +16,14 @@ import numpy as np
 
 from grutrack.boxes import quaternion_from_yaw
 from grutrack.classes import TRACKING_CLASSES
+from grutrack.data.nusc_detections import LIDAR_META, META_KEYS, SENSOR_KEYS
 from grutrack.data.scene import BoxSet
 from grutrack.errors import InputFormatError
 from grutrack.io import write_json_atomic
 
 MAX_BOXES_PER_SAMPLE = 500
-META = {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False, "use_external": False}
+#: the meta of a submission built with no detection meta (the tracker's own evaluations: validation, scripts)
+META = dict(LIDAR_META)
 BOX_KEYS = ("sample_token", "translation", "size", "rotation", "velocity", "tracking_id", "tracking_name",
             "tracking_score")
 
@@ -43,13 +46,14 @@ def sample_boxes(token: str, tracks: BoxSet, max_boxes: int = MAX_BOXES_PER_SAMP
 
 
 def build_submission(results: dict[str, BoxSet], sample_tokens: list[str],
-                     max_boxes: int = MAX_BOXES_PER_SAMPLE) -> dict:
-    """The submission dict for the given samples (a sample with no tracks gets an empty list)."""
+                     max_boxes: int = MAX_BOXES_PER_SAMPLE, meta: dict[str, bool] | None = None) -> dict:
+    """The submission dict for the given samples (a sample with no tracks gets an empty list); ``meta``: the
+    detection file's (:func:`grutrack.data.nusc_detections.detection_meta`), None: :data:`META`."""
     out = {}
     for token in sample_tokens:
         r = results.get(token)
         out[token] = sample_boxes(token, r, max_boxes) if r is not None and len(r) else []
-    return {"meta": dict(META), "results": out}
+    return {"meta": dict(META if meta is None else meta), "results": out}
 
 
 def validate_submission(sub: dict, sample_tokens: list[str], where: str = "submission") -> None:
@@ -57,9 +61,9 @@ def validate_submission(sub: dict, sample_tokens: list[str], where: str = "submi
     if not isinstance(sub, dict) or set(sub) != {"meta", "results"}:
         raise InputFormatError(f"{where}: expected exactly the keys 'meta' and 'results'")
     meta = sub["meta"]
-    if not isinstance(meta, dict) or not all(isinstance(meta.get(k), bool) for k in META):
-        raise InputFormatError(f"{where}: 'meta' must have boolean {', '.join(META)}")
-    if not any(meta[k] for k in ("use_camera", "use_lidar", "use_radar")):
+    if not isinstance(meta, dict) or not all(isinstance(meta.get(k), bool) for k in META_KEYS):
+        raise InputFormatError(f"{where}: 'meta' must have boolean {', '.join(META_KEYS)}")
+    if not any(meta[k] for k in SENSOR_KEYS):
         raise InputFormatError(f"{where}: 'meta' must declare at least one sensor (use_lidar true for lidar)")
     res = sub["results"]
     missing = [t for t in sample_tokens if t not in res]

@@ -35,7 +35,7 @@ STAGE_SOURCES: dict[str, tuple[str, ...]] = {
     "resolve": ("pipeline/presets.py", "tracking/config.py", "motion/defaults.py", "configs/trackers",
                 "configs/motion", "cli/resolve.py"),
     "track": ("cli/track.py", *_TRACKING, *_DATASETS),
-    "submit": ("cli/submit.py", *_DATASETS),
+    "submit": ("cli/submit.py", "pipeline/presets.py", *_DATASETS),   # presets: where track wrote its config
     "evaluate": ("evaluation", "cli/evaluate.py", *_DATASETS),
     "render": ("render", "evaluation", "threads.py", "cli/render.py", *_DATASETS),
     "report": ("report", "render", "documents.py", "cli/report.py"),

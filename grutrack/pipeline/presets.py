@@ -44,9 +44,30 @@ def resolve(kind: str, base: str, overrides: dict | None = None) -> dict:
 
 def write_resolved(path: str | Path, kind: str, base: str, overrides: dict | None = None) -> str:
     """Write the resolved config as YAML (atomically) with a header naming its origin; returns its hash."""
-    cfg = resolve(kind, base, overrides)
+    origin = f"base '{base}' with overrides {json.dumps(overrides or {}, sort_keys=True)}"
+    return write_config(path, kind, resolve(kind, base, overrides), origin)
+
+
+def write_config(path: str | Path, kind: str, cfg: dict, origin: str) -> str:
+    """Write the resolved ``kind`` config ``cfg`` as YAML (atomically) with a header saying where it comes from
+    (``origin``) and its hash; returns the hash (:func:`grutrack.provenance.config_hash`)."""
     h = config_hash(cfg)
-    header = (f"# Resolved {kind} config, written by grutrack {__version__}: base '{base}' with overrides "
-              f"{json.dumps(overrides or {}, sort_keys=True)}.\n# config hash {h}\n")
+    header = f"# Resolved {kind} config, written by grutrack {__version__}: {origin}.\n# config hash {h}\n"
     write_text_atomic(path, header + yaml.safe_dump(cfg, sort_keys=False, default_flow_style=None, width=120))
     return h
+
+
+def used_config_path(out: str | Path) -> Path:
+    """Where ``grutrack track --out OUT`` writes the tracker config it ran: ``<OUT stem>.tracker.yaml`` beside
+    OUT (``tracks.json`` -> ``tracks.tracker.yaml``), where ``submit`` and ``manifest`` look for it."""
+    return Path(out).with_suffix(".tracker.yaml")
+
+
+def used_tracker_config(tracker: str, config: str | Path | None, matched_box: str) -> dict:
+    """The raw preset ``grutrack track --tracker TRACKER --config CONFIG`` ran, as ``resolve-config tracker``
+    writes one: ``config`` (None: the preset the tracker defaults to) with ``output.matched_box`` as the tracker
+    used it (the GRU-KF without ``--config`` takes it from its checkpoint)."""
+    from grutrack.tracking.factory import DEFAULT_PRESET
+
+    raw, _ = read_config("tracker", config or DEFAULT_PRESET[tracker])
+    return merge(raw, {"output": {"matched_box": matched_box}})

@@ -57,5 +57,6 @@ rule track:
     benchmark: "logs/benchmarks/track/{experiment}/{detector}/{run}.{ext}.tsv"
     shell:
         "{GRUTRACK} track {params.data} --detections {input.detections} --tracker {params.tracker} "
-        "--config {input.preset} {params.checkpoint} --device {params.device} --out {output} --no-progress "
+        "--config {input.preset} {params.checkpoint} --device {params.device} --out {output} --config-out none "
+        "--no-progress "
         "> {log} 2>&1 " + ON_FAIL
