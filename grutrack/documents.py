@@ -9,6 +9,10 @@ is between its evaluation and rendering).
        "overall": {metric: value}, "per_class": {class: {metric: value}},
        ["seconds"], ["settings"], ["logs"], ["frames"], ["devkit_summary"]}
 
+  A class the evaluated ground truth does not hold is marked ``per_class[c]["absent"] = true`` (AV2, with its
+  ``gt_boxes``); its numbers stay as the evaluator gave them but are in no average, and reports and the check show
+  it as absent (:meth:`MetricsDocument.is_absent`).
+
 - :class:`Manifest`: the provenance record ``grutrack submit`` writes beside a submission
   (``x.json`` -> ``x.manifest.json``).
 - :class:`TrainingLog`: ``train_log.csv`` of ``grutrack train``, one :class:`TrainingStep` per optimiser step.
@@ -35,6 +39,36 @@ from grutrack.provenance import sha256_file
 
 # -- metrics -----------------------------------------------------------------------------------------------
 
+#: how reports and ``grutrack check`` show a class without ground truth instead of its number
+ABSENT_TEXT = "absent (no ground truth)"
+
+#: AV2 ``overall`` columns that documents written before absent classes were left out of the averages kept twice:
+#: ``hota`` (mean over the 7 Table I classes, absent ones at their 0 / -FP) and ``hota_present`` (mean over the
+#: classes with ground truth, the average now written as ``hota``)
+_PRESENT_AVERAGES = ("hota", "mota", "idf1")
+
+
+def _upgraded(d: dict) -> dict:
+    """A metrics JSON in the current layout: an AV2 document written before absent classes were left out of the
+    averages (``overall`` has ``hota_present``) gets the averages over the classes with ground truth as ``hota`` /
+    ``mota`` / ``idf1`` (the ``*_present`` values it holds; nothing is recomputed), ``absent_classes``, and
+    ``absent`` per class from its ``present``. Other documents are returned as they are."""
+    overall = d["overall"]
+    if "hota_present" not in overall:
+        return d
+    overall = {k: v for k, v in overall.items() if not (k.endswith("_present") and k[:-8] in _PRESENT_AVERAGES)}
+    overall.update({k: d["overall"][f"{k}_present"] for k in _PRESENT_AVERAGES if f"{k}_present" in d["overall"]})
+    per_class = {c: ({**m, "absent": not m["present"]} if isinstance(m.get("present"), bool) and "absent" not in m
+                     else m) for c, m in d["per_class"].items()}
+    if isinstance(overall.get("classes"), list):
+        overall["absent_classes"] = [c for c in overall["classes"] if per_class.get(c, {}).get("absent") is True]
+    settings = d.get("settings")
+    if isinstance(settings, dict) and "average" in settings:
+        settings = {**settings, "average": "Table I: mean over the Table I classes with ground truth (absent "
+                                           "classes are left out; read from the document's *_present averages)"}
+    return {**d, "overall": overall, "per_class": per_class, **({"settings": settings} if settings else {})}
+
+
 @dataclass
 class MetricsDocument:
     """Official metrics of one submission: overall and per class (metric names as the evaluator gives them,
@@ -60,6 +94,29 @@ class MetricsDocument:
         """Class names in the evaluator's order."""
         return list(self.per_class)
 
+    def is_absent(self, cls: str) -> bool:
+        """Whether the evaluated ground truth holds no box of ``cls`` (``absent: true``; documents that only say
+        ``present`` or ``gt_boxes`` are read from those). A class the document does not list is not absent."""
+        m = self.per_class.get(cls)
+        if not isinstance(m, dict):
+            return False
+        if "absent" in m:
+            return m["absent"] is True
+        if isinstance(m.get("present"), bool):
+            return not m["present"]
+        gt = m.get("gt_boxes")
+        return isinstance(gt, int) and not isinstance(gt, bool) and gt == 0
+
+    @property
+    def absent_classes(self) -> list[str]:
+        """The classes without ground truth, in the evaluator's order."""
+        return [c for c in self.per_class if self.is_absent(c)]
+
+    def is_absent_path(self, dotted: str) -> bool:
+        """Whether a dotted path names a per-class value of an absent class (``per_class.BUS.hota``)."""
+        parts = dotted.split(".")
+        return len(parts) >= 3 and parts[0] == "per_class" and self.is_absent(parts[1])
+
     def value(self, dotted: str) -> float | None:
         """The number at a dotted path (``overall.amota``, ``per_class.car.amotp``); None when absent, not a
         number or not finite (the devkit reports a class without ground truth as NaN)."""
@@ -83,7 +140,9 @@ class MetricsDocument:
 
     @classmethod
     def from_dict(cls, d: Any, where: str = "metrics JSON") -> MetricsDocument:
-        """Parse and check the layout; unknown top-level keys are ignored (newer writers may add some)."""
+        """Parse and check the layout; unknown top-level keys are ignored (newer writers may add some). An AV2
+        document written before absent classes were left out of the averages is read in the current layout
+        (see :func:`_upgraded`)."""
         if not isinstance(d, dict):
             raise InputFormatError(f"{where}: not a metrics JSON of grutrack evaluate (expected a JSON object)")
         for key in ("overall", "per_class"):
@@ -92,6 +151,7 @@ class MetricsDocument:
         bad = next((c for c, m in d["per_class"].items() if not isinstance(m, dict)), None)
         if bad is not None:
             raise InputFormatError(f"{where}: per_class.{bad} must be an object of metric values")
+        d = _upgraded(d)
         names = {f.name for f in fields(cls)}
         kw = {k: v for k, v in d.items() if k in names}
         for key in ("dataset", "split", "evaluator", "submission"):

@@ -1,5 +1,6 @@
 """``grutrack check METRICS.json --table III``: reproduced vs paper numbers under the tolerances of paper.yaml;
-exits 1 when a number is out of tolerance or missing."""
+exits 1 when a number is out of tolerance or missing. A per-class number of a class without ground truth in the
+evaluated data (marked absent in the metrics JSON) is shown absent and not checked."""
 
 from __future__ import annotations
 
@@ -13,7 +14,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                    "paper table (workflow/config/paper.yaml) under that table's per-metric "
                                    "tolerances (|reproduced - paper| <= tolerance, in the paper's unit). Prints a "
                                    "table naming each metric; exit status 0 when all are within tolerance, 1 when "
-                                   "any is out of tolerance or missing.")
+                                   "any is out of tolerance or missing. A class without ground truth in the "
+                                   "evaluated data (absent in the metrics JSON) is marked absent, not checked.")
     p.add_argument("metrics", help="metrics JSON written by grutrack evaluate")
     p.add_argument("--table", required=True, help="paper table: I, II, III or IV")
     p.add_argument("--row", default=None, help="paper row (default: the table's default_row, e.g. Ours)")
@@ -36,6 +38,9 @@ def run(args: argparse.Namespace) -> int:
     if (doc.dataset, doc.split) != (table.get("dataset"), table.get("split")):
         print(f"note: the paper's table is {table.get('dataset')} {table.get('split')}; the metrics are not")
     print(format_comparisons(table, comps))
-    bad = [c.metric for c in comps if not c.ok]
-    print(f"{len(comps) - len(bad)} of {len(comps)} within tolerance" + (f"; out: {', '.join(bad)}" if bad else ""))
+    bad = [c.metric for c in comps if c.failed]
+    absent = [c.metric for c in comps if c.absent]
+    checked = len(comps) - len(absent)
+    print(f"{checked - len(bad)} of {checked} within tolerance" + (f"; out: {', '.join(bad)}" if bad else "")
+          + (f"; absent (no ground truth, not checked): {', '.join(absent)}" if absent else ""))
     return 1 if bad else 0

@@ -50,9 +50,12 @@ Metrics JSON (same top level as the nuScenes one): ``{"dataset": "av2", "version
 "submission", "overall", "per_class", ...}``. ``per_class[category]`` holds ``hota``, ``mota``, ``idf1`` (final
 evaluation at the tuned per-class score threshold), ``hota_tuned`` / ``hota_mean`` (the official function's
 tuned and recall-averaged values), the final CLEAR counts ``tp`` / ``fp`` / ``fn`` / ``ids`` (CLR_TP, CLR_FP,
-CLR_FN, IDSW; ``idsw`` repeats ``ids``), ``gt_boxes`` and ``present``. ``overall`` holds the Table I average over the
-7 classes of Table I (absent classes count as 0, as the official evaluator scores them), never over 26, and the
-average over the Table I classes present in the ground truth.
+CLR_FN, IDSW; ``idsw`` repeats ``ids``), ``gt_boxes`` (the ground-truth boxes the final evaluation scored, after the
+range and ROI filters), ``present`` and ``absent`` (``gt_boxes == 0``). ``overall`` holds the Table I average
+(``hota``, ``mota``, ``idf1``) over the Table I classes with ground truth, ``classes`` (the 7), ``present_classes``
+and ``absent_classes``; an absent class keeps the numbers the official evaluator gives it in ``per_class`` but is
+in no average (:func:`class_average` says why). Metrics documents written before absent classes were left out
+(their ``overall`` has ``hota_present``) are read with that rule (``MetricsDocument.from_dict``).
 """
 
 from __future__ import annotations
@@ -72,7 +75,7 @@ import numpy as np
 from grutrack.data.av2 import COMPETITION_CATEGORIES, TABLE_I_CLASSES, load_scenes, split_dir, vocabulary
 from grutrack.errors import DatasetError, InputFormatError
 from grutrack.export.av2_tracks import expected_frames, gt_sequences, read_tracks_pickle, validate_sequences
-from grutrack.documents import MetricsDocument
+from grutrack.documents import ABSENT_TEXT, MetricsDocument
 
 EVALUATOR = "av2.evaluation.tracking.eval.evaluate (HOTA objective)"
 DEFAULT_RANGE_M = 50
@@ -285,8 +288,54 @@ def evaluate_sequences(predictions: dict, labels: dict, dataset_dir: str | Path 
     return out
 
 
+#: the per-class columns ``overall`` averages
+AVERAGED_COLUMNS = ("hota", "mota", "idf1")
+AVERAGE_RULE = "Table I: mean over the Table I classes with ground truth (absent classes are left out)"
+
+
+def class_average(per_class: dict, classes=TABLE_I_CLASSES, columns=AVERAGED_COLUMNS) -> dict:
+    """The class average of each column over those of ``classes`` that have ground truth (``per_class[c]["absent"]``
+    false): ``{column: mean or None (no class has ground truth)}``, with ``classes``, ``present_classes`` and
+    ``absent_classes``. Every average of AV2 metrics in grutrack is this one.
+
+    Why absent classes are left out, from the official code (av2 0.3.6, ``av2/evaluation/tracking/eval.py``):
+
+    - the official tracking evaluation takes no average over classes. ``evaluate`` (eval.py:615-669) scores every
+      one of the 26 ``constants.AV2_CATEGORIES`` (eval.py:636) and returns per-class values; its command line
+      writes the per-class ``mean_metric_values`` as they are (eval.py:695-702). The class-averaged entries
+      TrackEval leaves in the result tree (``cls_comb_cls_av``, over all 26 classes) are TrackEval's generic
+      output, which the AV2 code never reads;
+    - for a class without ground truth the official numbers are not measurements but the denominators' floors:
+      ``_calculate_score_thresholds`` returns all-zero thresholds when no prediction can match (eval.py:450-453),
+      HOTA is 0 (DetA = TP / max(1, TP + FN + FP) with TP = 0, ``trackeval/metrics/hota.py:172``) and MOTA is
+      (TP - FP - IDSW) / max(1, TP + FN) = -FP (``trackeval/metrics/clear.py:178``), and the tuned HOTA is
+      clipped to ``max(0, ...)`` (eval.py:423). So
+      an absent class scores 0.0 (not NaN) with no prediction and -FP MOTA with false positives, and a mean over
+      it measures the class list, not the tracker (on the val fixture, 12 BUS false positives in a log without a
+      bus give BUS MOTA -12);
+    - where av2's evaluators do average over classes, a class without ground truth has no value: the forecasting
+      evaluator returns NaN for it (``av2/evaluation/forecasting/eval.py:293-294``) and averages with
+      ``np.nanmean`` (forecasting/eval.py:498-517), and the detection evaluator skips it ("Cannot evaluate
+      without ground truth information", ``av2/evaluation/detection/eval.py:266-268``). (Its summary row,
+      detection/eval.py:212, then takes a plain mean of the per-class defaults; the tracking evaluator, the one
+      grutrack runs, has no such row.)
+
+    So grutrack reads "absent" as "not evaluable" and averages over the classes present, as the av2 forecasting
+    evaluator does. "Ground truth" is what the final evaluation scores (``CLR_TP + CLR_FN``: label boxes within
+    the range and, with the maps, the drivable-area ROI), so a class whose labels all lie outside them is absent too.
+    TrackEval's own class average has the narrower ``ignore_empty_classes`` (no ground truth and no prediction),
+    which would still count a class of pure false positives; it is not used.
+    """
+    present = [c for c in classes if not per_class[c]["absent"]]
+    out = {k: (float(np.mean([per_class[c][k] for c in present])) if present else None) for k in columns}
+    out.update({"classes": list(classes), "present_classes": present,
+                "absent_classes": [c for c in classes if c not in present]})
+    return out
+
+
 def metrics_from_result(out: dict) -> tuple[dict, dict]:
-    """(overall, per_class) from :func:`evaluate_sequences` output; see the module docstring."""
+    """(overall, per_class) from :func:`evaluate_sequences` output; see the module docstring and
+    :func:`class_average`."""
     combined = out["result"]["TrackEvalDataset"]["TRACKER"]["COMBINED_SEQ"]
     per_class = {}
     for c in COMPETITION_CATEGORIES:
@@ -294,13 +343,8 @@ def metrics_from_result(out: dict) -> tuple[dict, dict]:
         gt = int(m["CLEAR"]["CLR_TP"] + m["CLEAR"]["CLR_FN"])
         per_class[c] = {col: _reduced(m[metric][field], how) for col, (metric, field, how) in TRACKEVAL_COLUMNS.items()}
         per_class[c].update({"hota_tuned": float(out["tuned"][c]), "hota_mean": float(out["mean"][c]),
-                             "gt_boxes": gt, "present": gt > 0})
-    present = [c for c in TABLE_I_CLASSES if per_class[c]["present"]]
-    overall = {f"{k}": float(np.mean([per_class[c][k] for c in TABLE_I_CLASSES])) for k in ("hota", "mota", "idf1")}
-    overall.update({f"{k}_present": (float(np.mean([per_class[c][k] for c in present])) if present else None)
-                    for k in ("hota", "mota", "idf1")})
-    overall.update({"classes": list(TABLE_I_CLASSES), "present_classes": present})
-    return overall, per_class
+                             "gt_boxes": gt, "present": gt > 0, "absent": gt == 0})
+    return class_average(per_class), per_class
 
 
 def metrics_document(out: dict, *, split: str, submission: str, rate_hz: float | None, max_range_m: int,
@@ -312,7 +356,7 @@ def metrics_document(out: dict, *, split: str, submission: str, rate_hz: float |
         overall=overall, per_class=per_class,
         settings={"rate_hz": rate_hz, "max_range_m": int(max_range_m), "drivable_area_roi": bool(roi),
                   "objective": "HOTA", "workers": int(workers),
-                  "average": "Table I: mean over the 7 Table I classes (absent classes score 0)"})
+                  "average": AVERAGE_RULE})
 
 
 def load_submission(root: str | Path, split: str, submission: str | Path, *, rate_hz: float | None = 2.0,
@@ -355,11 +399,20 @@ def evaluate_submission(root: str | Path, split: str, submission: str | Path, *,
 
 
 def format_summary(doc: MetricsDocument) -> str:
-    """A table of HOTA / MOTA / IDF1 for the Table I classes and their average."""
+    """A table of HOTA / MOTA / IDF1 for the Table I classes and their average over the classes with ground truth
+    (a class without is shown absent)."""
     lines = [f"{'class':<16}{'HOTA':>8}{'MOTA':>8}{'IDF1':>8}{'GT':>7}"]
     for c in TABLE_I_CLASSES:
         m = doc.per_class[c]
-        lines.append(f"{c:<16}{m['hota']:>8.3f}{m['mota']:>8.3f}{m['idf1']:>8.3f}{m['gt_boxes']:>7d}")
+        if doc.is_absent(c):
+            lines.append(f"{c:<16}{ABSENT_TEXT:>24}{m.get('gt_boxes', 0):>7d}")
+        else:
+            lines.append(f"{c:<16}{m['hota']:>8.3f}{m['mota']:>8.3f}{m['idf1']:>8.3f}{m['gt_boxes']:>7d}")
     o = doc.overall
-    lines.append(f"{'AVERAGE (7)':<16}{o['hota']:>8.3f}{o['mota']:>8.3f}{o['idf1']:>8.3f}")
+    n = len([c for c in TABLE_I_CLASSES if not doc.is_absent(c)])
+    label = f"AVERAGE ({n}/{len(TABLE_I_CLASSES)})"
+    if o.get("hota") is None:
+        lines.append(f"{label:<16}{'no class with ground truth':>24}")
+    else:
+        lines.append(f"{label:<16}{o['hota']:>8.3f}{o['mota']:>8.3f}{o['idf1']:>8.3f}")
     return "\n".join(lines)

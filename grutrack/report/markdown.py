@@ -6,9 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from grutrack import __version__
-from grutrack.documents import FileRecord, Manifest, MetricsDocument, TrainingLog
+from grutrack.documents import ABSENT_TEXT, FileRecord, Manifest, MetricsDocument, TrainingLog
 from grutrack.provenance import SHORT
-from grutrack.report.paper import reproduced
+from grutrack.report.paper import absent_columns, reproduced
 
 DASH = "—"
 
@@ -39,19 +39,31 @@ def column_is_count(tbl: dict, col: str) -> bool:
 def mirror_tables(tbl: dict, docs: dict[str, dict | None], extra: dict[str, dict] | None = None) -> str:
     """The paper table as printed (PAPER numbers), the same layout with the reproduced numbers, and the
     difference reproduced - paper; ``docs`` maps a paper row to the metrics JSON that reproduces it, ``extra``
-    a row that is not in the paper (reproduced only, labelled "not in the paper") to its metrics JSON."""
+    a row that is not in the paper (reproduced only, labelled "not in the paper") to its metrics JSON. A per-class
+    column of a class without ground truth in the evaluated data reads "absent (no ground truth)", not a number."""
     cols = list(tbl["columns"])
     paper_rows, repro_rows, diff_rows = [], [], []
+
+    def cells(values: dict, absent: set, diff_to: dict | None = None) -> list[str]:
+        out = []
+        for c in cols:
+            if c in absent:
+                out.append(ABSENT_TEXT)
+            elif diff_to is None:
+                out.append(num(values[c], column_is_count(tbl, c)))
+            else:
+                out.append(num(None if values[c] is None or c not in diff_to else values[c] - diff_to[c],
+                               column_is_count(tbl, c), signed=True))
+        return out
+
     for row, numbers in tbl["rows"].items():
-        values = reproduced(tbl, docs.get(row))
+        values, absent = reproduced(tbl, docs.get(row)), absent_columns(tbl, docs.get(row))
         paper_rows.append([row] + [num(numbers.get(c), column_is_count(tbl, c)) for c in cols])
         if row in docs:
-            repro_rows.append([row] + [num(values[c], column_is_count(tbl, c)) for c in cols])
-            diff_rows.append([row] + [num(None if values[c] is None or c not in numbers else values[c] - numbers[c],
-                                          column_is_count(tbl, c), signed=True) for c in cols])
+            repro_rows.append([row] + cells(values, absent))
+            diff_rows.append([row] + cells(values, absent, numbers))
     for row, doc in (extra or {}).items():
-        values = reproduced(tbl, doc)
-        repro_rows.append([f"{row} (not in the paper)"] + [num(values[c], column_is_count(tbl, c)) for c in cols])
+        repro_rows.append([f"{row} (not in the paper)"] + cells(reproduced(tbl, doc), absent_columns(tbl, doc)))
     out = [f"**Paper numbers** ({tbl['title']}; as printed in the paper):", "", table(["method"] + cols, paper_rows)]
     if repro_rows:
         out += ["", "**Reproduced** (same layout; read from the metrics JSONs listed under Provenance):", "",
@@ -135,7 +147,7 @@ def _inside(path: Path, folder: Path) -> bool:
 #: overall columns of a nuScenes metrics JSON shown in run tables: (key, header, scale)
 NUSC_OVERALL = (("amota", "AMOTA", 100), ("amotp", "AMOTP", 100), ("mota", "MOTA", 100), ("recall", "recall", 100),
                 ("ids", "IDS", 1), ("frag", "FRAG", 1), ("tp", "TP", 1), ("fp", "FP", 1), ("fn", "FN", 1))
-#: overall columns of an AV2 metrics JSON (Table I average over its 7 classes)
+#: overall columns of an AV2 metrics JSON (Table I average over its classes with ground truth)
 AV2_OVERALL = (("hota", "HOTA", 100), ("mota", "MOTA", 100), ("idf1", "IDF1", 100))
 
 
@@ -149,16 +161,17 @@ def runs_table(docs: dict[str, MetricsDocument], columns=NUSC_OVERALL) -> str:
 
 
 def per_class_table(docs: dict[str, MetricsDocument], key: str = "amota", scale: float = 100) -> str:
-    """One row per class, one column per run, of one per-class metric."""
+    """One row per class, one column per run, of one per-class metric (a class without ground truth: absent)."""
     classes = next(iter(docs.values())).classes if docs else []
-    rows = [[c] + [num(None if d.per_class.get(c, {}).get(key) is None else d.per_class[c][key] * scale)
+    rows = [[c] + [ABSENT_TEXT if d.is_absent(c) else
+                   num(None if d.per_class.get(c, {}).get(key) is None else d.per_class[c][key] * scale)
                    for d in docs.values()] for c in classes]
     return table(["class"] + list(docs), rows)
 
 
 def check_section(tid: str, tbl: dict, row_docs: dict[str, MetricsDocument]) -> str:
     """For each reproduced row: paper, reproduced, difference and tolerance per metric, and whether it passes
-    (the same test as ``grutrack check``)."""
+    (the same test as ``grutrack check``; a class without ground truth is absent, not checked)."""
     from grutrack.report.check import compare
 
     rows = []
@@ -166,9 +179,10 @@ def check_section(tid: str, tbl: dict, row_docs: dict[str, MetricsDocument]) -> 
         _, comps = compare(tbl, doc, row)
         for c in comps:
             integer = column_is_count(tbl, c.metric)
-            rows.append([f"{tid}: {row}", c.metric, num(c.paper, integer), num(c.reproduced, integer),
+            rows.append([f"{tid}: {row}", c.metric, num(c.paper, integer),
+                         ABSENT_TEXT if c.absent else num(c.reproduced, integer),
                          num(c.diff, integer, signed=True), "±" + num(c.tolerance, integer),
-                         "within" if c.ok else "**OUT**"])
+                         "absent, not checked" if c.absent else "within" if c.ok else "**OUT**"])
     if not rows:
         return "_No reproduced row._"
     return table(["paper row", "metric", "paper", "reproduced", "difference", "tolerance", "status"], rows,

@@ -60,9 +60,19 @@ def get_row(table: dict, row: str | None) -> tuple[str, dict]:
 
 
 def reproduced(table: dict, doc: MetricsDocument | None) -> dict[str, float | None]:
-    """Every column of a table read from a metrics document, in the paper's unit (None: not available)."""
+    """Every column of a table read from a metrics document, in the paper's unit (None: not available, or a
+    per-class value of a class without ground truth, see :func:`absent_columns`)."""
     out = {}
+    absent = absent_columns(table, doc)
     for col, spec in table["columns"].items():
-        v = doc.value(spec["metric"]) if doc is not None else None
+        v = doc.value(spec["metric"]) if doc is not None and col not in absent else None
         out[col] = None if v is None else v * spec["scale"]
     return out
+
+
+def absent_columns(table: dict, doc: MetricsDocument | None) -> set[str]:
+    """The columns that read a per-class value of a class the document marks absent (no ground truth): shown as
+    absent, never as a number, and not checked against the paper."""
+    if doc is None:
+        return set()
+    return {col for col, spec in table["columns"].items() if doc.is_absent_path(spec["metric"])}
