@@ -37,7 +37,7 @@ rule train:
         data=lambda w: S.dataset_args(config, _training(w)["dataset"], _training(w)["split"]),
         val=_val_args,
         code=code_version("train"),
-    threads: 2
+    threads: 1          # one intra-op thread: fastest alone and side by side (docs/results/threads.md)
     log: "logs/train/{training}.log"
     benchmark: "logs/benchmarks/train/{training}.tsv"
     shell:
