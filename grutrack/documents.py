@@ -18,6 +18,8 @@ is between its evaluation and rendering).
 - :class:`TrainingLog`: ``train_log.csv`` of ``grutrack train``, one :class:`TrainingStep` per optimiser step.
 - :class:`ValidationRecord`: ``validation.json`` beside it: what was validated, the reference tracker's AMOTA on
   the same scenes and which step ``model.pt`` holds.
+- :class:`CrossCheckDocument`: what ``grutrack cross-check`` writes: the devkit and the fast evaluator on the
+  same submission (or an evenly spaced subset of its scenes), the largest difference of any metric entry.
 
 Readers raise :class:`~grutrack.errors.InputFormatError` naming the file and what was expected.
 """
@@ -27,6 +29,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+from dataclasses import MISSING as dataclasses_MISSING
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -395,3 +398,59 @@ class ValidationRecord:
             return cls(**{f.name: d[f.name] for f in fields(cls) if f.name in d})
         except TypeError as exc:
             raise InputFormatError(f"{path}: not a validation record ({exc})") from exc
+
+
+# -- evaluator cross-check ---------------------------------------------------------------------------------
+
+@dataclass
+class CrossCheckDocument:
+    """What ``grutrack cross-check`` writes (``reports/metrics/<experiment>/<detector>/<run>.crosscheck.json``):
+    the devkit's ``TrackingEval`` and the fast evaluator on the same submission, restricted to ``scenes`` of the
+    split's ``split_scenes`` (all of them, or evenly spaced ones), every one of the summary's ``entries``
+    compared; ``equal`` when the largest absolute difference is at most ``tolerance`` (``max_abs_difference``
+    null: an entry differs in kind, e.g. NaN against a number; ``worst_entry`` names it). ``amota`` and
+    ``seconds`` per evaluator."""
+
+    dataset: str
+    version: str | None
+    split: str
+    submission: str
+    scenes: list[str]
+    split_scenes: int
+    samples: int
+    entries: int
+    max_abs_difference: float | None
+    worst_entry: str
+    tolerance: float
+    equal: bool
+    amota: dict[str, float | None] = field(default_factory=dict)
+    seconds: dict[str, float | None] = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.max_abs_difference is not None and not math.isfinite(self.max_abs_difference):
+            self.max_abs_difference = None        # JSON has no infinity
+
+    @property
+    def subset(self) -> bool:
+        """Whether fewer scenes than the split's were compared."""
+        return len(self.scenes) < self.split_scenes
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def write(self, path: str | Path) -> None:
+        """Write the JSON atomically."""
+        write_json_atomic(path, self.to_dict(), indent=2)
+
+    @classmethod
+    def read(cls, path: str | Path) -> CrossCheckDocument:
+        """Read a cross-check JSON written by :meth:`write`."""
+        d = read_json(path, "cross-check JSON")
+        need = [f.name for f in fields(cls) if f.default is dataclasses_MISSING and f.default_factory is
+                dataclasses_MISSING]
+        if not isinstance(d, dict) or any(k not in d for k in need):
+            raise InputFormatError(f"{path}: not a cross-check JSON of grutrack cross-check (it needs the fields "
+                                   f"{', '.join(need)})")
+        if not isinstance(d["equal"], bool) or not isinstance(d["scenes"], list):
+            raise InputFormatError(f"{path}: 'equal' must be true or false and 'scenes' a list")
+        return cls(**{f.name: d[f.name] for f in fields(cls) if f.name in d})

@@ -38,6 +38,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--render", action="append", default=[], metavar="RUN=COUNTS_JSON",
                    help="a run's `grutrack render` folder (its counts.json): the report shows key frames of its "
                         "worst scene")
+    p.add_argument("--cross-check", default=None, metavar="RUN=CROSSCHECK_JSON",
+                   help="a run's `grutrack cross-check` JSON (devkit vs fast evaluator): the report states it")
     p.set_defaults(func=run)
 
 
@@ -89,7 +91,9 @@ def run(args: argparse.Namespace) -> int:
                        extra_rows=_rows(args.extra_row, "--extra-row"),
                        train_logs={k: Path(v) for k, v in _pairs(args.train_log, "--train-log").items()},
                        zips={k: Path(v) for k, v in _pairs(args.zip, "--zip").items()},
-                       renders={k: Path(v) for k, v in _pairs(args.render, "--render").items()})
+                       renders={k: Path(v) for k, v in _pairs(args.render, "--render").items()},
+                       cross_check=next(((k, Path(v)) for k, v in _pairs(
+                           [args.cross_check] if args.cross_check else [], "--cross-check").items()), None))
     if inp.renders and "renders" not in KINDS[args.kind].reads:
         raise ConfigError(f"--render: a {args.kind} report shows no key frames ({KINDS[args.kind].no_renders})")
     inp.figures.mkdir(parents=True, exist_ok=True)

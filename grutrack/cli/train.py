@@ -78,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
                           f"without it (or validate a checkpoint with grutrack track + evaluate)")
     scenes = ds.scenes(args.split, with_gt=True)
     yaw = load_tracker_config(cfg.tracker_preset).measured_yaw  # the preset's measured-yaw definition
-    dets = ds.load_detections(args.detections, args.split, scenes, yaw).boxes
+    loaded_dets = ds.load_detections(args.detections, args.split, scenes, yaw)
+    dets = loaded_dets.boxes
     validate = None
     source = {"dataset": ds.name, "dataroot": str(Path(args.dataroot).resolve()), "version": args.version,
               "split": args.split, "detections": str(Path(args.detections).resolve())}
@@ -122,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
     trainer.validate = validate
     if args.resume:
         trainer.resume(Path(args.out) / "last.pt")
+    source["synthetic"] = synthetic_inputs(ds, loaded_dets, cfg, [e for e, _ in extra])
     write_training_yaml(cfg, args.config, Path(args.out) / "training.yaml", source)
     try:
         final = trainer.run()
@@ -183,6 +185,28 @@ def _parsed_sources(values: list[str]) -> list[dict]:
     from grutrack.training.sources import parse_source
 
     return [parse_source(v, i + 1) for i, v in enumerate(values)]
+
+
+def synthetic_inputs(ds, dets, cfg, sources: list[dict]) -> list[str]:
+    """What of the training's data is SYNTHETIC, one phrase each (empty: none), for the ``# data`` line of
+    training.yaml, which reports read to flag every number that depends on it: the grutrack demo's scenes, a
+    simulated detection file (its ``synthetic`` entry), detections resampled from the ground truth each epoch
+    (``resample_profiles``), and extra sources that are demo scenes or simulated detections."""
+    from grutrack.data.demo import is_demo_tables
+
+    out = []
+    if ds.name == "nuscenes" and is_demo_tables(ds.tables):
+        out.append("scenes of the SYNTHETIC grutrack demo dataset")
+    if dets.synthetic:
+        out.append(f"simulated detections ({dets.synthetic.get('profile', '?')} profile, seed "
+                   f"{dets.synthetic.get('seed', '?')})")
+    if cfg.resample_profiles and cfg.epochs > 1:
+        out.append(f"detections simulated afresh every epoch after the first ({', '.join(cfg.resample_profiles)})")
+    synthetic_sources = [e for e in sources if e.get("dataset") == "demo" or "profile" in e]
+    if synthetic_sources:
+        out.append(f"{len(synthetic_sources)} SYNTHETIC training source(s) "
+                   f"({sum(e.get('scenes', 0) for e in synthetic_sources if e.get('dataset') == 'demo')} demo scenes)")
+    return out
 
 
 def write_training_yaml(cfg, config_arg: str, path: Path, source: dict) -> None:

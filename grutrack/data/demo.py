@@ -822,6 +822,12 @@ def build_tables(scenes: int, frames: int, seed: int, version: str) -> tuple[dic
 # writing
 # ----------------------------------------------------------------------------------------------------------------
 
+def is_demo_tables(nusc) -> bool:
+    """Whether nuScenes-format tables (anything with a ``scene`` list of records) are a grutrack demo dataset:
+    its scene descriptions start with :data:`MARKER`."""
+    return any(str(rec.get("description", "")).startswith(MARKER) for rec in nusc.scene)
+
+
 def placeholder_png() -> bytes:
     """A valid 1x1 grayscale PNG (the devkit only checks that the map file exists)."""
     def chunk(kind: bytes, data: bytes) -> bytes:

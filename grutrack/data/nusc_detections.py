@@ -62,13 +62,17 @@ def detection_meta(data: dict, path: str | Path) -> dict[str, bool]:
     return {k: meta[k] for k in META_KEYS}
 
 
-def load_detection_file(path: str | Path, sample_tokens: list[str],
-                        measured_yaw: str = "euler_z") -> tuple[dict[str, BoxSet], dict[str, bool]]:
-    """:func:`load_detections` and the file's checked meta (:func:`detection_meta`), the file parsed once:
-    ``(boxes by sample token, meta)``; what tracking reads, since its submission declares the same meta."""
+def load_detection_file(path: str | Path, sample_tokens: list[str], measured_yaw: str = "euler_z"
+                        ) -> tuple[dict[str, BoxSet], dict[str, bool], dict | None]:
+    """:func:`load_detections`, the file's checked meta (:func:`detection_meta`) and its ``synthetic`` entry
+    (what ``grutrack simulate-detections`` writes: generator, profile, seed; None for a detector's file), the file
+    parsed once: ``(boxes by sample token, meta, synthetic)``; what tracking and training read, since the
+    tracking submission declares the same meta and reports flag numbers made from simulated detections."""
     path = Path(path)
     data = read_detection_json(path)
-    return results_boxes(path, data["results"], sample_tokens, measured_yaw), detection_meta(data, path)
+    synthetic = data.get("synthetic")
+    return (results_boxes(path, data["results"], sample_tokens, measured_yaw), detection_meta(data, path),
+            synthetic if isinstance(synthetic, dict) else None)
 
 
 def load_detections(path: str | Path, sample_tokens: list[str], measured_yaw: str = "euler_z") -> dict[str, BoxSet]:

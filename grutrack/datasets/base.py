@@ -35,12 +35,15 @@ class Detections:
     """Detections of a split read for tracking: ``boxes[frame token]`` (global frame), what reading them
     found worth telling (``summary``: one line; ``warnings``: lines for stderr) and the file's submission
     ``meta`` (nuScenes: ``{use_camera, use_lidar, use_radar, use_map, use_external: bool}``, which the tracking
-    submission declares too; None for a format that has none, AV2's)."""
+    submission declares too; None for a format that has none, AV2's) and, for detections simulated by
+    ``grutrack simulate-detections``, how they were made (``synthetic``: generator, profile, seed; None for a
+    detector's output)."""
 
     boxes: dict[str, BoxSet]
     summary: str = ""
     warnings: list[str] = field(default_factory=list)
     meta: dict[str, bool] | None = None
+    synthetic: dict | None = None
 
 
 def config_entry(kind: str, **properties: dict) -> dict:

@@ -90,8 +90,8 @@ class NuScenesDataset:
         from grutrack.data.nusc_detections import load_detection_file
 
         tokens = [f.token for s in scenes for f in s.frames]
-        boxes, meta = load_detection_file(path, tokens, measured_yaw)
-        return Detections(boxes, meta=meta)
+        boxes, meta, synthetic = load_detection_file(path, tokens, measured_yaw)
+        return Detections(boxes, meta=meta, synthetic=synthetic)
 
     def simulate_detections(self, split: str, profile, seed: int, out: str | Path) -> dict[str, int]:
         """SYNTHETIC detections of the split's samples (the 10 detection classes), sampled from its ground truth

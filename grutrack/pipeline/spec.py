@@ -192,6 +192,13 @@ def _check_experiment(cfg: dict, registry: dict, name: str, exp: dict) -> None:
     if exp["evaluator"] not in evaluators:
         raise ConfigError(f"config key {key}.evaluator: '{exp['evaluator']}' is not available for a {kind} "
                           f"dataset (choose {', '.join(evaluators)})")
+    cc = exp.get("cross_check")
+    if cc is not None:
+        _need(exp["runs"], cc["run"], f"{key}.cross_check.run", f"{key}.runs")
+        if exp["evaluator"] != "fast" or "devkit" not in ds.evaluators:
+            raise ConfigError(f"config key {key}.cross_check: the cross-check compares the fast evaluator with the "
+                              f"devkit on nuScenes-format data; experiment '{name}' is evaluated with "
+                              f"'{exp['evaluator']}' on {kind} (set evaluator: fast, or cross_check: null)")
     lb = exp["leaderboard_run"]
     if lb is not None:
         _need(exp["runs"], lb, f"{key}.leaderboard_run", f"{key}.runs")
@@ -346,6 +353,11 @@ def submission_file(cfg: dict, experiment: str, detector: str, run: str) -> str:
 def metrics_file(experiment: str, detector: str, run: str) -> str:
     """The metrics JSON of one run."""
     return f"reports/metrics/{experiment}/{detector}/{run}.json"
+
+
+def cross_check_file(experiment: str, detector: str, run: str) -> str:
+    """The devkit-vs-fast cross-check JSON of one run (rule cross_check)."""
+    return f"reports/metrics/{experiment}/{detector}/{run}.crosscheck.json"
 
 
 def checkpoint_file(training: str) -> str:

@@ -8,7 +8,8 @@ from grutrack.documents import MetricsDocument
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import (AV2_OVERALL, check_section, detections_line, header, image, mirror_tables,
-                                      provenance, runs_table, setting_note, training_provenance, worst_scene_strips)
+                                      provenance, runs_table, setting_note, synthetic_training_banner,
+                                      training_provenance, worst_scene_strips)
 from grutrack.report.paper import get_table, reproduced
 
 AVERAGE_NOTE = ("Note: the paper's average for Ours (47.3) is not the mean of its seven per-class values (54.1) "
@@ -26,7 +27,8 @@ def build(inp: ReportInputs) -> str:
     tbl = get_table(inp.paper, "I")
     parts = [header(f"Argoverse 2 {exp.get('split', 'val')}: Table I",
                     [f"{detections_line(exp)} Official AV2 tracking evaluation (HOTA) of "
-                     f"{_scored(docs)}. Paper numbers are labelled **Paper numbers**."])]
+                     f"{_scored(docs)}. Paper numbers are labelled **Paper numbers**.",
+                     *([""] + [banner] if (banner := synthetic_training_banner(inp.train_logs)) else [])])]
     note = setting_note(tbl, exp, exp.get("detector"))
     parts += ["", f"## {tbl['title']}", "", *([note, ""] if note else []),
               mirror_tables(tbl, inp.row_docs("I"), inp.row_docs("I", extra=True)),

@@ -8,8 +8,8 @@ from pathlib import Path
 from grutrack.report import figures
 from grutrack.documents import SELECTION_RULES, TrainingLog, ValidationRecord
 from grutrack.report.inputs import ReportInputs
-from grutrack.report.markdown import (header, image, per_class_table, provenance, runs_table, table, num,
-                                      training_provenance, worst_scene_strips)
+from grutrack.report.markdown import (evaluator_line, header, image, per_class_table, provenance, runs_table, table,
+                                      num, training_provenance, worst_scene_strips)
 from grutrack.report.paper import get_table
 
 BANNER = ("> **SYNTHETIC DATA.** Every reproduced number in this report is measured on grutrack's synthetic demo "
@@ -26,7 +26,8 @@ def build(inp: ReportInputs) -> str:
     parts = [header(f"Demo report: GRU-KF and EKF on the SYNTHETIC demo ({exp.get('split', '')})",
                     [BANNER.format(version=version, split=exp.get("split", "?"), detector=exp.get("detector", "?"))])]
     parts += ["", "## Reproduced on the synthetic demo", "",
-              "Overall (official nuScenes TrackingEval, `tracking_nips_2019`; rates ×100, AMOTP in cm):", "",
+              evaluator_line(docs, *reversed(inp.cross_check_doc())), "",
+              "Overall (rates ×100, AMOTP in cm):", "",
               runs_table(docs), "", "AMOTA per class (×100):", "", per_class_table(docs, "amota")]
     parts += ["", _amota_figure(inp, docs)]
     strips = worst_scene_strips(inp)

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from grutrack.errors import InputFormatError
-from grutrack.documents import MetricsDocument
+from grutrack.documents import CrossCheckDocument, MetricsDocument
 
 
 @dataclass
@@ -26,7 +26,15 @@ class ReportInputs:
     train_logs: dict[str, Path] = field(default_factory=dict)  # label -> train_log.csv
     zips: dict[str, Path] = field(default_factory=dict)        # detector -> leaderboard zip
     renders: dict[str, Path] = field(default_factory=dict)     # run -> counts.json of its `grutrack render`
+    cross_check: tuple[str, Path] | None = None                # (run, its `grutrack cross-check` JSON)
     _docs: dict | None = None
+
+    def cross_check_doc(self) -> tuple[str | None, CrossCheckDocument | None]:
+        """(run, cross-check document) when the report was given one, else (None, None)."""
+        if self.cross_check is None:
+            return None, None
+        run, path = self.cross_check
+        return run, CrossCheckDocument.read(path)
 
     def docs(self) -> dict[str, MetricsDocument]:
         """Metrics document of every run (read once)."""

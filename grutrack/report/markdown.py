@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from grutrack import __version__
-from grutrack.documents import ABSENT_TEXT, FileRecord, Manifest, MetricsDocument, TrainingLog
+from grutrack.documents import ABSENT_TEXT, CrossCheckDocument, FileRecord, Manifest, MetricsDocument, TrainingLog
 from grutrack.provenance import SHORT
 from grutrack.report.paper import absent_columns, reproduced
 
@@ -87,9 +87,14 @@ def setting_note(tbl: dict, experiment: dict | None, detections: str | None = No
 
 
 def detections_line(experiment: dict | None) -> str:
-    """What the runs tracked: the detector, and a SYNTHETIC banner when its detections were simulated."""
+    """What the runs tracked: the detector, and SYNTHETIC banners when the dataset is the demo or the detections
+    were simulated."""
     exp = experiment or {}
     line = f"Detections: {exp.get('detector', '?')}."
+    if exp.get("dataset") == "demo":
+        line = (f"> **SYNTHETIC DATA.** The scenes and ground truth are grutrack's SYNTHETIC demo dataset (split "
+                f"{exp.get('split', '?')}), and so are detections made from it: the reproduced numbers measure the "
+                f"trackers on synthetic data, not on nuScenes.\n\n{line}")
     if exp.get("simulated"):
         line = (f"> **SYNTHETIC DETECTIONS.** The detections ({exp.get('detector')}) were simulated from the ground "
                 f"truth by `grutrack simulate-detections` (a detector model, not a real detector): the reproduced "
@@ -206,9 +211,63 @@ def training_provenance(train_logs: dict[str, Path]) -> str:
         steps = TrainingLog.read(log).steps if Path(log).is_file() else None
         done = (f"{steps[-1].step} steps, {steps[-1].epoch + 1} epochs" if steps else
                 "no step (the initialised network)" if steps is not None else DASH)
-        rows.append([label, training_data(cfg_path), done, f"`{log}`", f"`{cfg_path}` (config hash {cfg_hash})",
-                     model_txt])
-    return table(["training", "trained on", "length", "log", "training config", "checkpoint"], rows, "llllll")
+        synthetic = training_synthetic(cfg_path)
+        rows.append([label, training_data(cfg_path), "SYNTHETIC: " + ", ".join(synthetic) if synthetic else "none",
+                     done, f"`{log}`", f"`{cfg_path}` (config hash {cfg_hash})", model_txt])
+    return table(["training", "trained on", "synthetic data", "length", "log", "training config", "checkpoint"],
+                 rows, "lllllll")
+
+
+def training_synthetic(cfg_path: Path) -> list[str]:
+    """What of a training's data was SYNTHETIC (the ``synthetic`` list of training.yaml's ``# data`` line,
+    written by ``grutrack train``); empty when none was, or the line predates the list."""
+    import json
+
+    if not Path(cfg_path).is_file():
+        return []
+    for line in Path(cfg_path).read_text().splitlines():
+        if line.startswith("# data "):
+            try:
+                found = json.loads(line[len("# data "):]).get("synthetic", [])
+            except (ValueError, AttributeError):
+                return []
+            return [str(x) for x in found] if isinstance(found, list) else []
+    return []
+
+
+def synthetic_training_banner(train_logs: dict[str, Path]) -> str | None:
+    """A SYNTHETIC banner naming each training whose data was partly synthetic and what was, or None."""
+    items = [(label, training_synthetic(Path(log).parent / "training.yaml")) for label, log in train_logs.items()]
+    items = [(label, what) for label, what in items if what]
+    if not items:
+        return None
+    return ("> **SYNTHETIC TRAINING DATA.** The GRU-KF rows depend on trainings that used synthetic data: "
+            + "; ".join(f"`{label}`: {', '.join(what)}" for label, what in items)
+            + ". Their numbers measure the method trained so, not trained on a real detector's output alone.")
+
+
+def evaluator_line(docs: dict[str, MetricsDocument], cross_check: CrossCheckDocument | None = None,
+                   run: str | None = None) -> str:
+    """Which evaluator made the numbers and, with a cross-check, how the devkit and the fast evaluator compared
+    on ``run``."""
+    used = sorted({d.evaluator for d in docs.values()})
+    names = {"devkit": "nuscenes-devkit `TrackingEval` (`tracking_nips_2019`)",
+             "fast": "grutrack's fast exact evaluator (nuscenes-devkit `TrackingEval`'s metrics, re-implemented; "
+                     "`grutrack evaluate --evaluator fast`)",
+             "official": "the official AV2 tracking evaluation (`av2.evaluation.tracking.eval`, HOTA via TrackEval)"}
+    line = "Evaluated with " + " and ".join(names.get(e, e) for e in used) + "."
+    if cross_check is None:
+        return line
+    cc = cross_check
+    where = (f"{len(cc.scenes)} of the split's {cc.split_scenes} scenes, evenly spaced ({cc.samples} samples)"
+             if cc.subset else f"all {cc.split_scenes} scenes of the split")
+    diff = "an entry differing in kind" if cc.max_abs_difference is None else f"{cc.max_abs_difference:.2g}"
+    verdict = (f"**equal** to {cc.tolerance:g}" if cc.equal else
+               f"**NOT EQUAL** (largest difference in `{cc.worst_entry}`)")
+    return (f"{line} Cross-check: run `{run or '?'}` scored by both nuscenes-devkit `TrackingEval` and the fast "
+            f"evaluator on {where}: all {cc.entries} entries of the metrics summary compared, largest absolute "
+            f"difference {diff}: {verdict} (devkit {cc.seconds.get('devkit') or 0:.0f} s, fast "
+            f"{cc.seconds.get('fast') or 0:.1f} s; `grutrack cross-check`).")
 
 
 def training_data(cfg_path: Path) -> str:

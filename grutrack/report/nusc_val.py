@@ -5,8 +5,9 @@ from __future__ import annotations
 
 from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
-from grutrack.report.markdown import (check_section, detections_line, header, image, mirror_tables, provenance,
-                                      runs_table, setting_note, training_provenance, worst_scene_strips)
+from grutrack.report.markdown import (check_section, detections_line, evaluator_line, header, image, mirror_tables,
+                                      provenance, runs_table, setting_note, synthetic_training_banner,
+                                      training_provenance, worst_scene_strips)
 from grutrack.report.paper import get_table, reproduced
 
 
@@ -14,9 +15,11 @@ def build(inp: ReportInputs) -> str:
     """The markdown text (figures are written into ``inp.figures``)."""
     docs = inp.docs()
     exp = inp.experiment or {}
+    banner = synthetic_training_banner(inp.train_logs)
     parts = [header(f"nuScenes {exp.get('split', 'val')}: Tables III and IV",
                     [f"{detections_line(exp)} Paper numbers are labelled **Paper numbers**; "
-                     "reproduced numbers come from the metrics JSONs under Provenance."])]
+                     "reproduced numbers come from the metrics JSONs under Provenance.",
+                     *(["", banner] if banner else []), "", evaluator_line(docs, *reversed(inp.cross_check_doc()))])]
     for tid in ("III", "IV"):
         if tid in inp.rows:
             tbl = get_table(inp.paper, tid)

@@ -38,7 +38,7 @@ wildcard_constraints:
     dataset=_alternation(config["datasets"]),
     detector=_alternation(config["detectors"]),
     training=_alternation(config["trainings"]),
-    run="[^/]+",
+    run=_alternation({r for e in config["experiments"].values() for r in e["runs"]}),
     split="[^/]+",
     source="[^/]+",
 

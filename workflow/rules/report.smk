@@ -52,9 +52,23 @@ def _report_zips(rep):
             for det in exp["detectors"]]
 
 
+def _report_cross_check(rep):
+    """(run, cross-check JSON) of the report's experiment when it has a cross_check, else None."""
+    if "runs" not in S.report_kind(rep["kind"]).reads or not rep["experiment"]:
+        return None
+    exp_name = rep["experiment"]
+    cc = config["experiments"][exp_name].get("cross_check")
+    if not cc:
+        return None
+    det = config["experiments"][exp_name]["detectors"][0]
+    return cc["run"], S.cross_check_file(exp_name, det, cc["run"])
+
+
 def _report_inputs(w):
     rep = _report(w)
     files = [PAPER_PATH]
+    cc = _report_cross_check(rep)
+    files += [cc[1]] if cc else []
     for _, metrics, manifest in _report_runs(rep):
         files += [metrics, manifest]
     for _, log_csv, cfg in _report_trainings(rep):
@@ -79,6 +93,8 @@ def _report_args(w):
     args += [f"--train-log {label}={log_csv}" for label, log_csv, _ in _report_trainings(rep)]
     args += [f"--zip {det}={zp}" for det, zp, _ in _report_zips(rep)]
     args += [f"--render {run}={folder}/counts.json" for run, folder in _report_renders(rep)]
+    cc = _report_cross_check(rep)
+    args += [f"--cross-check {cc[0]}={cc[1]}"] if cc else []
     args += [f"--row {shlex.quote(f'{table}:{row}={run}')}" for table, rows in rep["tables"].items()
              for row, run in rows.items()]
     args += [f"--extra-row {shlex.quote(f'{table}:{row}={run}')}" for table, rows in rep.get("extra_rows", {}).items()
