@@ -122,6 +122,14 @@ def test_mini_val_ekf_metrics_equal_the_cli_run(mini_run):
 def test_mini_val_report_numbers_equal_the_cli_and_metrics(mini_run):
     text = (mini_run / "reports/nusc_val.md").read_text()
     assert "mini_val" in text and "pointpillars" in text
+    # fast evaluator, the devkit cross-check of the grukf run stated; trainings on simulated detections flagged
+    assert "Evaluated with grutrack's fast exact evaluator" in text
+    cc = json.loads((mini_run / "reports/metrics/nusc_val/pointpillars/grukf.crosscheck.json").read_text())
+    assert cc["equal"] and cc["scenes"] == ["scene-0103", "scene-0916"]
+    assert "Cross-check: run `grukf` scored by both nuscenes-devkit `TrackingEval` and the fast evaluator on all 2 " \
+           "scenes of the split" in text and "**equal** to 1e-09" in text
+    assert "SYNTHETIC TRAINING DATA" in text and "`nusc_grukf`: simulated detections (centerpoint profile, seed 1)" \
+        in text
     cli = json.loads((mini_run / "cli/metrics.json").read_text())["overall"]
 
     every = _table(text, "## Every run", "")
