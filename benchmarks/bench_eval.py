@@ -85,7 +85,7 @@ def main(argv=None) -> int:
     from nuscenes.eval.common.config import config_factory
     from nuscenes.eval.tracking.evaluate import TrackingEval
 
-    from grutrack.evaluation.fast_amota import evaluate_tracks, fast_tracking_eval, load_tracks
+    from grutrack.evaluation.nuscenes_fast import evaluate_tracks, fast_tracking_eval, load_tracks
 
     t0 = time.perf_counter()
     nusc = NuScenes(version=args.version, dataroot=args.dataroot, verbose=False)

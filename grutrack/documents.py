@@ -20,6 +20,9 @@ is between its evaluation and rendering).
   the same scenes and which step ``model.pt`` holds.
 - :class:`CrossCheckDocument`: what ``grutrack cross-check`` writes: the devkit and the fast evaluator on the
   same submission (or an evenly spaced subset of its scenes), the largest difference of any metric entry.
+- :class:`Checkpoint`: a GRU-KF checkpoint of ``grutrack train`` (``model.pt``, ``last.pt``, ``best.pt``): the
+  network's weights and architecture, the training config, the state a run resumes from and provenance; read by
+  ``grutrack track`` and by a resumed training.
 
 Readers raise :class:`~grutrack.errors.InputFormatError` naming the file and what was expected.
 """
@@ -454,3 +457,171 @@ class CrossCheckDocument:
         if not isinstance(d["equal"], bool) or not isinstance(d["scenes"], list):
             raise InputFormatError(f"{path}: 'equal' must be true or false and 'scenes' a list")
         return cls(**{f.name: d[f.name] for f in fields(cls) if f.name in d})
+
+
+# -- GRU-KF checkpoint -------------------------------------------------------------------------------------
+
+#: the format tag every grutrack GRU-KF checkpoint carries (the layout below; checkpoints of every grutrack version
+#: so far have it)
+CHECKPOINT_FORMAT = "grutrack-grukf/1"
+
+#: the checkpoint fields a run resumes from (``last.pt``, and ``model.pt`` of the trainer); ``best.pt`` and a
+#: network saved outside a training have none of them
+RESUME_FIELDS = ("train_state", "train_config", "optimizer", "scheduler", "rng", "log")
+
+
+@dataclass
+class TrainingPosition:
+    """Where a training run stands: optimizer steps taken, the epoch, the position within the epoch's scene order
+    and that order (None: the epoch's order is not drawn yet)."""
+
+    step: int = 0
+    epoch: int = 0
+    index: int = 0
+    order: list[int] | None = None
+
+
+@dataclass
+class TrainingState:
+    """What resumes a run exactly: its position, the optimizer's and the learning-rate scheduler's state dicts,
+    the states of the run's own generators (``{"numpy": bit-generator state, "torch": ByteTensor}``) and its
+    log so far."""
+
+    position: TrainingPosition
+    optimizer: dict[str, Any]
+    scheduler: dict[str, Any]
+    rng: dict[str, Any]
+    log: list[TrainingStep]
+
+
+@dataclass
+class CheckpointSelection:
+    """Which validated step a checkpoint's network is: ``step`` and its validation ``val_amota`` (the mean over
+    the detection sets; the dataset's metric); ``rule``: the ``select_checkpoint`` rule that chose it (model.pt;
+    None in best.pt, the candidate the rule holds so far)."""
+
+    step: int
+    val_amota: float | None = None
+    rule: str | None = None
+
+
+@dataclass
+class Checkpoint:
+    """A GRU-KF checkpoint (``model.pt``, ``last.pt``, ``best.pt`` of ``grutrack train``): the network's weights
+    (``weights``: tensor name -> tensor) and architecture (``arch``: the ``GRUKFConfig`` fields), the training
+    config the run had (``train_config``: the ``TrainConfig`` fields; what ``grutrack track`` reads its
+    ``matched_box`` from), the state a run resumes from (``training``), the selected step (``selected``) and
+    provenance: the package version that wrote it, a fingerprint of the training data (``data_fingerprint``,
+    SHA-256 hex: a resumed run must see the same data) and where that data came from (``data_source``).
+
+    One writer (:meth:`write`) and one reader (:meth:`read`); a torch file of the layout every version so far wrote::
+
+        {"format": "grutrack-grukf/1", "grutrack_version", "arch", "model", ["selected"], ["optimizer",
+         "scheduler", "rng", "train_state", "train_config", "log", "data_fingerprint", "data_source"]}
+
+    Fields a version did not write read as None (a checkpoint without its training state loads as a network
+    but cannot be resumed: :meth:`require_resumable`)."""
+
+    arch: dict[str, Any]
+    weights: dict[str, Any]
+    train_config: dict[str, Any] | None = None
+    training: TrainingState | None = None
+    selected: CheckpointSelection | None = None
+    data_fingerprint: str | None = None
+    data_source: dict[str, Any] | None = None
+    grutrack_version: str = __version__
+    #: the resume fields the file lacks (set by :meth:`from_dict`; empty for a document made in memory)
+    absent: tuple[str, ...] = field(default=(), repr=False, compare=False)
+
+    @property
+    def matched_box(self) -> str:
+        """The box a tracker running this network writes for a matched track by default: the training config's
+        ``matched_box`` ("filter" or "detection"); "detection" for a checkpoint without one (written before that
+        key, or a network saved outside a training)."""
+        return (self.train_config or {}).get("matched_box", "detection")
+
+    def require_resumable(self, where: str) -> TrainingState:
+        """The training state, or :class:`InputFormatError` naming the first resume field the file lacks."""
+        if self.training is None or self.train_config is None:
+            missing = next((k for k in RESUME_FIELDS if k in self.absent), "train_state")
+            raise InputFormatError(f"{where}: not a resumable checkpoint (no '{missing}'; model.pt files of old "
+                                   f"versions cannot be resumed: train again with another --out)")
+        return self.training
+
+    def to_dict(self) -> dict[str, Any]:
+        """The file's object (fields that are None are left out)."""
+        d: dict[str, Any] = {"format": CHECKPOINT_FORMAT, "grutrack_version": self.grutrack_version,
+                             "arch": self.arch, "model": self.weights}
+        if self.selected is not None:
+            s = self.selected
+            d["selected"] = ({"rule": s.rule} if s.rule is not None else {}) | {"step": s.step,
+                                                                                "val_amota": s.val_amota}
+        t = self.training
+        if t is not None:
+            d.update(optimizer=t.optimizer, scheduler=t.scheduler, rng=t.rng, train_state=asdict(t.position))
+        if self.train_config is not None:
+            d["train_config"] = self.train_config
+        if t is not None:
+            d["log"] = [s.to_row() for s in t.log]
+        for key in ("data_fingerprint", "data_source"):
+            if getattr(self, key) is not None:
+                d[key] = getattr(self, key)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str = "checkpoint") -> Checkpoint:
+        """Parse and check the layout (InputFormatError naming ``where`` and the field)."""
+        if not isinstance(d, dict) or d.get("format") != CHECKPOINT_FORMAT:
+            raise InputFormatError(f"{where}: not a grutrack GRU-KF checkpoint (expected format {CHECKPOINT_FORMAT}; "
+                                   f"train one with `grutrack train`)")
+        if not isinstance(d.get("arch"), dict):
+            raise InputFormatError(f"{where}: field 'arch' must be the network's architecture (a mapping)")
+        if not isinstance(d.get("model"), dict):
+            raise InputFormatError(f"{where}: field 'model' must hold the network's tensors")
+        for key in ("train_config", "data_source", "optimizer", "scheduler", "rng", "train_state", "selected"):
+            if d.get(key) is not None and not isinstance(d[key], dict):
+                raise InputFormatError(f"{where}: field '{key}' must be a mapping, got {type(d[key]).__name__}")
+        if d.get("log") is not None and not isinstance(d["log"], list):
+            raise InputFormatError(f"{where}: field 'log' must be a list of training-log rows")
+        absent = tuple(k for k in RESUME_FIELDS if d.get(k) is None)
+        training = None
+        if not (set(absent) - {"train_config"}):
+            try:
+                position = TrainingPosition(**d["train_state"])
+            except TypeError as exc:
+                raise InputFormatError(f"{where}: field 'train_state' is not a training position ({exc})") from exc
+            training = TrainingState(position, d["optimizer"], d["scheduler"], d["rng"],
+                                     [TrainingStep.from_row(r, where) for r in d["log"]])
+        selected = None
+        if d.get("selected") is not None:
+            s = d["selected"]
+            if not isinstance(s.get("step"), int):
+                raise InputFormatError(f"{where}: field 'selected.step' must be an integer, got {s.get('step')!r}")
+            selected = CheckpointSelection(step=s["step"], val_amota=s.get("val_amota"), rule=s.get("rule"))
+        return cls(arch=d["arch"], weights=d["model"], train_config=d.get("train_config"), training=training,
+                   selected=selected, data_fingerprint=d.get("data_fingerprint"), data_source=d.get("data_source"),
+                   grutrack_version=str(d.get("grutrack_version", "")), absent=absent)
+
+    def write(self, path: str | Path) -> None:
+        """Write the checkpoint atomically (torch's file format)."""
+        import torch
+
+        from grutrack.io import atomic_path
+
+        with atomic_path(path) as tmp:
+            torch.save(self.to_dict(), tmp)
+
+    @classmethod
+    def read(cls, path: str | Path, map_location: Any = "cpu") -> Checkpoint:
+        """Read a checkpoint (tensors onto ``map_location``); a missing, unreadable or foreign file is an
+        :class:`InputFormatError` naming it."""
+        import torch
+
+        path = Path(path)
+        if not path.is_file():
+            raise InputFormatError(f"{path}: checkpoint does not exist (train one with `grutrack train`)")
+        try:
+            d = torch.load(path, map_location=map_location, weights_only=False)
+        except Exception as exc:  # torch raises many types for a corrupt file
+            raise InputFormatError(f"{path}: not a readable torch checkpoint ({exc})") from exc
+        return cls.from_dict(d, where=str(path))

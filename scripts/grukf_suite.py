@@ -89,7 +89,7 @@ def _score(nusc, tracker, scenes, dets, tokens, split: str = "mini_val", split_t
     """AMOTA, AMOTP of ``tracker`` on ``scenes``; with ``split_tokens`` (every sample of ``split``) the scenes
     are part of the split and only their tracks are scored. ``per_class``: filled with {class: AMOTP (m)}
     (classes without ground truth left out; mini_val only)."""
-    from grutrack.evaluation.fast_amota import evaluate_tracks, fast_tracking_eval, load_tracks
+    from grutrack.evaluation.nuscenes_fast import evaluate_tracks, fast_tracking_eval, load_tracks
     from grutrack.export.nuscenes_json import build_submission
     from grutrack.tracking.tracker import track_scenes
 

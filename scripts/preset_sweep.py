@@ -38,7 +38,7 @@ def _preset_key(preset: str) -> str:
     """Content hash of a preset and its motion config (a shipped name or a path)."""
     import yaml
 
-    from grutrack.motion.defaults import resolve_config_path
+    from grutrack.motion.config import resolve_config_path
     from grutrack.tracking.config import preset_path
 
     path = preset_path(preset)
@@ -51,7 +51,7 @@ def _preset_key(preset: str) -> str:
 def _score(nusc, scenes, split: str, detections: Path, preset: str) -> dict:
     """AMOTA, AMOTP, IDS of one preset on one detection file."""
     from grutrack.data.nusc_detections import load_detections
-    from grutrack.evaluation.fast_amota import fast_tracking_eval
+    from grutrack.evaluation.nuscenes_fast import fast_tracking_eval
     from grutrack.export.nuscenes_json import build_submission
     from grutrack.tracking.factory import build_tracker
     from grutrack.tracking.tracker import track_scenes

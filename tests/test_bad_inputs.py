@@ -5,6 +5,7 @@ tracebacks."""
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 import torch
@@ -274,11 +275,14 @@ def test_bad_training_flags_are_blamed_on_the_flag(tmp_path, capsys):
                                  ("yaw_loss: axis", "degrees", "'heading' or 'axis'"),
                                  ("coast_yaw_rate: zero", "hold", "'keep' or 'zero'"),
                                  ("coast_acceleration: zero", "hold", "'keep' or 'zero'")):
-        cfg = tmp_path / f"{key.split(':')[0]}.yaml"
+        name = key.split(":")[0]
+        cfg = tmp_path / f"{name}.yaml"
         shipped = config_path("training", "grukf").read_text()
-        assert f"\n{key}\n" in shipped                     # the shipped value, replaced by the bad one
-        cfg.write_text(shipped.replace(key, f"{key.split(':')[0]}: {value}"))
-        fails(capsys, [*base, "--config", cfg], f"{cfg}: '{key.split(':')[0]}' must be {expected}")
+        line = re.search(rf"^( *){re.escape(key)}$", shipped, re.M)   # the shipped value, replaced by the bad one
+        assert line, key
+        cfg.write_text(shipped.replace(line.group(0), f"{line.group(1)}{name}: {value}"))
+        where = f"network.{name}" if line.group(1) else name            # the network's options are one section
+        fails(capsys, [*base, "--config", cfg], f"{cfg}: '{where}' must be {expected}")
 
 
 def test_a_closed_stdout_is_not_a_traceback(nusc_root, tmp_path):

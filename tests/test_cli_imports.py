@@ -91,7 +91,7 @@ def test_fast_evaluate_skips_the_devkit_package(nusc_root, tmp_path):
     sub, metrics = tmp_path / "gt_tracks.json", tmp_path / "metrics.json"
     sub.write_text(json.dumps({"meta": {"use_camera": False, "use_lidar": True, "use_radar": False,
                                         "use_map": False, "use_external": False}, "results": results}))
-    code = ("import contextlib, io, grutrack.cli, grutrack.evaluation.lsap as lsap\n"
+    code = ("import contextlib, io, grutrack.cli, grutrack.evaluation.nuscenes_fast.motmetrics_assignment as lsap\n"
             "calls = []\n"
             "solve = lsap.motmetrics_lsa\n"
             "lsap.motmetrics_lsa = lambda dm: calls.append(dm.shape) or solve(dm)\n"

@@ -69,7 +69,7 @@ def test_devkit_and_fast_agree_on_all_and_on_a_subset(tracks, nusc_root, tmp_pat
 
 def test_a_difference_is_reported_and_not_called_equal(tracks, nusc_root, monkeypatch):
     """A fast evaluator that drifted by 1e-6 in one entry: the cross-check names the entry and says not equal."""
-    from grutrack.evaluation import fast_amota
+    from grutrack.evaluation import nuscenes_fast as fast_amota
 
     real = fast_amota.fast_tracking_eval
 

@@ -135,20 +135,16 @@ def test_train_on_av2_then_track_av2_with_the_model(av2_root, tmp_path, capsys):
     dets, ck = tmp_path / "dets.feather", tmp_path / "ck"
     assert main(["simulate-detections", *common, "--seed", "4", "--out", str(dets)]) == 0
     cfg = tmp_path / "train.yaml"
-    over = '{"epochs": 2, "device": "cpu", "resample_profiles": ["pointpillars"], "sources": []}'
+    over = ('{"epochs": 2, "device": "cpu", "resample_profiles": ["pointpillars"], "sources": [], '
+            '"validation_scenes": 1}')
     assert main(["resolve-config", "training", "--base", "grukf", "--overrides", over, "--out", str(cfg)]) == 0
     assert main(["train", *common, "--detections", str(dets), "--config", str(cfg), "--out", str(ck),
                  "--no-progress"]) == 0
     out = capsys.readouterr()
-    assert "after 4 steps" in out.out            # 2 logs x 2 epochs
-    # the default recipe's held-out validation is nuScenes-format only: said in one line, all logs trained on
-    assert ("note: validation_scenes 2 is for nuScenes-format data; training on every av2 scene of val without "
-            "validation (model.pt: the last step)") in out.err
+    assert "after 2 steps" in out.out            # 1 log trained on (the other held out for validation) x 2 epochs
+    assert "validating on 1 scenes held out of val" in out.out
     assert main(["track", *common, "--detections", str(dets), "--tracker", "grukf", "--checkpoint",
                  str(ck / "model.pt"), "--out", str(tmp_path / "t.pkl"), "--no-progress"]) == 0
-    assert main(["train", *common, "--detections", str(dets), "--out", str(tmp_path / "ck2"), "--val-split",
-                 "val", "--val-detections", str(dets)]) == 2
-    assert "--val-split: validation AMOTA is scored on nuScenes-format data" in capsys.readouterr().err
 
     ds = open_dataset("av2", DatasetOptions(av2_root))
     scenes = ds.scenes("val", with_gt=True)

@@ -17,7 +17,7 @@ import pytest
 from grutrack.cli import main
 from grutrack.data import demo
 from grutrack.data.detection_sim import nusc_gt_frames
-from grutrack.data.nusc_stats import class_statistics, format_comparison, format_table, yaw_rates
+from grutrack.data.gt_stats import class_statistics, format_comparison, format_table, yaw_rates
 from grutrack.errors import ConfigError
 
 VERSION = demo.VERSION

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import pytest
 
@@ -134,3 +135,139 @@ def test_a_bad_validation_record_names_the_file_and_field(tmp_path, text, messag
                            reference_amota_sets=[0.7, 0.9], selected_amota_sets=[0.75, 0.95])
     rec.write(tmp_path / "ok.json")
     assert ValidationRecord.read(tmp_path / "ok.json") == rec
+
+
+# -- GRU-KF checkpoints ------------------------------------------------------------------------------------------
+def _legacy_checkpoint(path, **fields):
+    """A checkpoint in the layout grutrack wrote before the :class:`Checkpoint` document (``save_checkpoint`` of
+    motion/checkpoint.py plus the trainer's fields), written here by hand so that the test does not depend on the
+    writer it checks; returns the network."""
+    import torch
+
+    from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
+
+    net = GRUKalmanNet(GRUKFConfig(gap_bins=2), generator=torch.Generator().manual_seed(0))
+    torch.save({"format": "grutrack-grukf/1", "grutrack_version": "0.1.0", "arch": net.config_dict(),
+                "model": net.state_dict(), **fields}, path)
+    return net
+
+
+def _resume_fields(net) -> dict:
+    import numpy as np
+    import torch
+
+    opt = torch.optim.AdamW(net.parameters(), lr=1e-3)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=4)
+    row = TrainingStep(1, 0, "scene-0061", 0.5, 3, 1, 0, 1e-3, None, 0.2, grad_norm=1.5).to_row()
+    return {"optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
+            "rng": {"numpy": np.random.default_rng(0).bit_generator.state, "torch": torch.Generator().get_state()},
+            "train_state": {"step": 1, "epoch": 0, "index": 1, "order": [1, 0]},
+            "train_config": {"epochs": 2, "matched_box": "filter"}, "log": [row]}
+
+
+def test_a_checkpoint_of_the_earlier_layout_reads_with_every_field(tmp_path):
+    import torch
+
+    from grutrack.documents import Checkpoint, TrainingPosition
+    from grutrack.motion.checkpoint import load_network
+
+    path = tmp_path / "last.pt"
+    net = _legacy_checkpoint(path, **_resume_fields(torch.nn.Linear(2, 2)), data_fingerprint="ab" * 32,
+                             data_source={"split": "mini_train"})
+    ck = Checkpoint.read(path)
+    state = ck.require_resumable(str(path))
+    assert state.position == TrainingPosition(step=1, epoch=0, index=1, order=[1, 0])
+    assert state.log == [TrainingStep(1, 0, "scene-0061", 0.5, 3, 1, 0, 1e-3, None, 0.2, grad_norm=1.5)]
+    assert ck.matched_box == "filter" and ck.data_source == {"split": "mini_train"} and ck.selected is None
+    assert ck.grutrack_version == "0.1.0" and ck.arch["gap_bins"] == 2
+    loaded = load_network(path)
+    assert all(torch.equal(loaded.state_dict()[k], v) for k, v in net.state_dict().items())
+    # the writer keeps the layout: every field of the file comes back under its name
+    assert set(ck.to_dict()) == set(torch.load(path, weights_only=False))
+
+
+def test_a_network_only_checkpoint_loads_but_does_not_resume(tmp_path):
+    from grutrack.documents import Checkpoint
+
+    path = tmp_path / "model.pt"
+    _legacy_checkpoint(path)                       # a checkpoint of an old version: no training config, no state
+    ck = Checkpoint.read(path)
+    assert ck.train_config is None and ck.training is None and ck.matched_box == "detection"
+    with pytest.raises(InputFormatError, match=r"model.pt: not a resumable checkpoint \(no 'train_state'"):
+        ck.require_resumable(str(path))
+
+
+def test_checkpoint_round_trip_through_its_one_writer_and_reader(tmp_path):
+    import torch
+
+    from grutrack.documents import Checkpoint, CheckpointSelection, TrainingPosition, TrainingState
+    from grutrack.motion.checkpoint import network_checkpoint
+
+    net = torch.nn.Linear(2, 2)
+    fields = _resume_fields(net)
+    state = TrainingState(TrainingPosition(4, 1, 0, None), fields["optimizer"], fields["scheduler"], fields["rng"],
+                          [TrainingStep(4, 1, "s", 0.25, lr=1e-3, val_amota=0.7, seconds=1.0, val_amota_sets=(0.6, 0.8),
+                                        grad_norm=2.0)])
+    from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
+
+    gru = GRUKalmanNet(GRUKFConfig(), generator=torch.Generator().manual_seed(1))
+    doc = network_checkpoint(gru, train_config={"matched_box": "filter"}, training=state,
+                             selected=CheckpointSelection(4, 0.7, rule="best_val_amota"), data_fingerprint="f",
+                             data_source={"split": "x"})
+    doc.write(tmp_path / "m.pt")
+    back = Checkpoint.read(tmp_path / "m.pt")
+    assert back.selected == CheckpointSelection(4, 0.7, rule="best_val_amota")
+    assert back.training.position == state.position and back.training.log == state.log
+    assert back.train_config == {"matched_box": "filter"} and back.data_fingerprint == "f"
+    assert all(torch.equal(back.weights[k], v) for k, v in gru.state_dict().items())
+    raw = torch.load(tmp_path / "m.pt", weights_only=False)
+    assert raw["selected"] == {"rule": "best_val_amota", "step": 4, "val_amota": 0.7}
+    assert raw["train_state"] == {"step": 4, "epoch": 1, "index": 0, "order": None} and raw["log"][0]["step"] == 4
+
+
+@pytest.mark.parametrize("content, expect", [
+    ({"state_dict": {}}, "not a grutrack GRU-KF checkpoint (expected format grutrack-grukf/1; train one with"),
+    ({"format": "grutrack-grukf/1", "arch": {}, "model": [1]}, "field 'model' must hold the network's tensors"),
+    ({"format": "grutrack-grukf/1", "arch": {}, "model": {}, "train_state": {"step": 1, "wings": 2},
+      "optimizer": {}, "scheduler": {}, "rng": {}, "log": []}, "field 'train_state' is not a training position"),
+])
+def test_a_foreign_checkpoint_is_one_line_naming_the_file(tmp_path, content, expect):
+    import torch
+
+    from grutrack.documents import Checkpoint
+
+    torch.save(content, tmp_path / "x.pt")
+    with pytest.raises(InputFormatError, match=re.escape(expect)) as e:
+        Checkpoint.read(tmp_path / "x.pt")
+    assert str(e.value).startswith(str(tmp_path / "x.pt")) and "\n" not in str(e.value)
+    (tmp_path / "y.pt").write_text("not a torch file")
+    with pytest.raises(InputFormatError, match="y.pt: not a readable torch checkpoint"):
+        Checkpoint.read(tmp_path / "y.pt")
+    with pytest.raises(InputFormatError, match="z.pt: checkpoint does not exist"):
+        Checkpoint.read(tmp_path / "z.pt")
+
+
+def test_grutrack_track_reads_its_checkpoint_once_and_refuses_a_foreign_one(nusc_root, pointpillars_mini_val,
+                                                                             tmp_path, capsys, monkeypatch):
+    import torch
+
+    from grutrack.cli import main
+    from grutrack.documents import Checkpoint
+
+    track = ["track", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
+             "--detections", str(pointpillars_mini_val), "--tracker", "grukf", "--device", "cpu", "--no-progress"]
+    torch.save({"state_dict": {}}, tmp_path / "foreign.pt")
+    assert main([*track, "--checkpoint", str(tmp_path / "foreign.pt"), "--out", str(tmp_path / "a.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "foreign.pt: not a grutrack GRU-KF checkpoint" in err[0]
+    _legacy_checkpoint(tmp_path / "old.pt", train_config={"matched_box": "filter"})
+    reads, read = [], Checkpoint.read.__func__
+
+    def counted(cls, *a, **k):
+        reads.append(a[0])
+        return read(cls, *a, **k)
+
+    monkeypatch.setattr(Checkpoint, "read", classmethod(counted))
+    assert main([*track, "--checkpoint", str(tmp_path / "old.pt"), "--out", str(tmp_path / "b.json")]) == 0
+    assert len(reads) == 1                          # the network and its matched box from one read
+    assert "matched_box: filter" in (tmp_path / "b.tracker.yaml").read_text()

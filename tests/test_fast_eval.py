@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 from support.compare import entry_differences, flatten
-from grutrack.evaluation.fast_amota import (evaluate_tracks, exact_center_distances, fast_tracking_eval,
-                                            load_tracks)
+from grutrack.evaluation.nuscenes_fast import (evaluate_tracks, exact_center_distances, fast_tracking_eval,
+                                               load_tracks)
 from support.fast_synth import corrupt_submission, gt_submission
 
 TOL = 1e-9
@@ -478,7 +478,7 @@ def test_ekf_on_simulated_demo_val(tmp_path):
 # ----------------------------------------------------------------------------------------------------------------
 
 def _decision_sums(decisions, class_name: str) -> Dict[str, float]:
-    from grutrack.evaluation.fast_amota import MATCH, MISS_OR_FP, SWITCH
+    from grutrack.evaluation.nuscenes_fast import MATCH, MISS_OR_FP, SWITCH
 
     c = decisions.class_names.index(class_name)
     g = decisions.g_status[decisions.g_cls == c]
@@ -501,7 +501,7 @@ def _assert_decisions_match(decisions, label_metrics: Dict[str, Dict[str, float]
 
 def test_match_decisions_sum_to_the_devkit_counts(nusc_mini, mini_val_gt, devkit_reference):
     """Per-box decisions at each class's best-MOTA threshold add up to the devkit's TP / FP / FN / IDS."""
-    from grutrack.evaluation.fast_amota import match_decisions
+    from grutrack.evaluation.nuscenes_fast import match_decisions
 
     sub = corrupt_submission(nusc_mini, "mini_val", seed=0, base=mini_val_gt)
     summary = devkit_reference("corrupted_mini_val", nusc_mini, sub, "mini_val")[0]
@@ -515,12 +515,34 @@ def test_match_decisions_sum_to_the_devkit_counts(nusc_mini, mini_val_gt, devkit
 @pytest.mark.parametrize("seed", [0, 3])
 def test_match_decisions_random_crowded_tracks(seed):
     """Contested frames, switches and repeated ids: the decisions' sums equal the summary's counts."""
-    from grutrack.evaluation.fast_amota import match_decisions
+    from grutrack.evaluation.nuscenes_fast import match_decisions
 
     tracks_gt, tracks_pred = _random_tracks(seed)
     decisions, metrics = match_decisions(tracks_gt, tracks_pred)
     _assert_decisions_match(decisions, metrics.serialize()["label_metrics"])
     assert metrics.serialize()["ids"] > 0
+
+
+def test_match_decisions_accumulates_each_class_once(monkeypatch):
+    """One accumulation per class gives both the decisions and the metrics, which are evaluate_tracks'."""
+    from grutrack.evaluation.nuscenes_fast import ClassAccumulator, match_decisions
+
+    tracks_gt, tracks_pred = _random_tracks(3)
+    built = []
+    init = ClassAccumulator.__init__
+
+    def counting(self, flat, c, dist_th):
+        built.append(c)
+        init(self, flat, c, dist_th)
+
+    monkeypatch.setattr(ClassAccumulator, "__init__", counting)
+    _, metrics = match_decisions(tracks_gt, tracks_pred)
+    assert built == list(range(len(metrics.class_names)))
+    monkeypatch.undo()
+    ref, _ = evaluate_tracks(tracks_gt, tracks_pred)
+    ours, ref = metrics.serialize(), ref.serialize()
+    ours.pop("eval_time"), ref.pop("eval_time")
+    assert json.dumps(ours) == json.dumps(ref)
 
 
 # ----- the accumulation as a drop-in inside the devkit's own TrackingEval -----------------------------------------
@@ -596,7 +618,7 @@ def test_fast_tracking_eval_main_on_a_submission_file(nusc_root, pointpillars_mi
     from nuscenes.eval.common.config import config_factory
 
     from grutrack.evaluation.devkit_plugin import FastTrackingEval
-    from grutrack.evaluation.fast_amota import fast_tracking_eval as fast
+    from grutrack.evaluation.nuscenes_fast import fast_tracking_eval as fast
     from grutrack.data.nuscenes import open_nuscenes
 
     sub = _tracked_submission(open_nuscenes(nusc_root, "v1.0-mini"), "mini_val", pointpillars_mini_val)

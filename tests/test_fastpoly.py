@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from grutrack.tracking.fastpoly import (GeometryWindow, a_giou_3d, a_giou_bev, aligned_extents, distance_mask,
-                                        pairwise_a_giou, scale_nms_keep)
+from grutrack.tracking.association import a_giou_3d, a_giou_bev, aligned_extents, distance_mask, pairwise_a_giou
+from grutrack.tracking.geometry_filter_backend import GeometryWindow
 from grutrack.tracking.lifecycle import lifecycle_kernel
+from grutrack.tracking.preprocess import scale_nms_keep
 
 
 def box(x=0.0, y=0.0, z=0.0, w=1.0, l=1.0, h=1.0, yaw=0.0):
@@ -148,9 +149,10 @@ import yaml  # noqa: E402
 from grutrack.classes import CLASS_INDEX  # noqa: E402
 from grutrack.data.scene import BoxSet  # noqa: E402
 from grutrack.errors import ConfigError  # noqa: E402
+from grutrack.tracking.association import gated_costs  # noqa: E402
 from grutrack.tracking.config import PRESET_DIR, config_from_dict, load_tracker_config  # noqa: E402
 from grutrack.tracking.factory import build_tracker  # noqa: E402
-from grutrack.tracking.fastpoly import GeometryFilterBackend, gated_costs  # noqa: E402
+from grutrack.tracking.geometry_filter_backend import GeometryFilterBackend  # noqa: E402
 from grutrack.tracking.preprocess import preprocess_frame  # noqa: E402
 
 CAR, PED, BUS = CLASS_INDEX["car"], CLASS_INDEX["pedestrian"], CLASS_INDEX["bus"]

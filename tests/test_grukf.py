@@ -75,9 +75,9 @@ def test_the_network_takes_the_motion_configs_model_parameters(tmp_path):
     checkpoint's architecture."""
     import yaml
 
-    from grutrack.motion.defaults import resolve_config_path
+    from grutrack.motion.config import resolve_config_path
     from grutrack.training.config import load_train_config
-    from grutrack.training.trainer import _arch
+    from grutrack.training.network import network_config as _arch
 
     raw = yaml.safe_load(resolve_config_path("polymot_nusc").read_text())
     raw["models"]["Bicycle"]["params"] = {"wheelbase_ratio": 0.6, "front_ratio": 0.3}
@@ -551,7 +551,7 @@ def test_backend_maps_dataset_labels_to_tracking_classes():
 def test_ekf_gain_table_grows_after_missed_frames(small_training_set):
     from grutrack.tracking.config import load_tracker_config
     from grutrack.training.config import load_train_config
-    from grutrack.training.trainer import mean_ekf_gain
+    from grutrack.training.gain_prior import mean_ekf_gain
 
     scenes, dets = small_training_set
     cfg = load_train_config("grukf", {"gap_bins": 3, "age_bins": 0, "class_gain": False})
@@ -667,7 +667,7 @@ def test_heading_frame_rotation_against_the_matrix_form_and_its_inverse():
 def test_scene_loss_is_the_mean_of_the_weighted_squared_residuals():
     # a scene's terms are collected per frame and formed at once: the value is the same sum as term by term
     from grutrack.training.config import load_train_config
-    from grutrack.training.trainer import SceneLoss
+    from grutrack.training.loss import SceneLoss
 
     weights = [1.0, 2.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0]
     loss = SceneLoss(load_train_config("grukf", {"loss_weights": weights}), torch.device("cpu"))
@@ -691,7 +691,7 @@ def test_centre_huber_delta_bounds_the_centre_terms_only():
     # x, y residuals beyond the delta cost 2 d |r| - d^2 (gradient 2 d sign r), within it r^2; the other
     # components stay squared; 0 is the squared loss
     from grutrack.training.config import load_train_config
-    from grutrack.training.trainer import SceneLoss
+    from grutrack.training.loss import SceneLoss
 
     target = np.zeros((1, 9))
     target[0, [0, 1, 6, 7]] = [3.0, -0.5, 2.0, 4.0]           # x 3 m off, y 0.5 m, yaw 2 rad, vx 4 m/s
@@ -716,7 +716,7 @@ def test_centre_huber_delta_bounds_the_centre_terms_only():
 def test_yaw_loss_axis_takes_a_reversed_heading_as_no_residual():
     # "axis": yaw residuals wrap to [-pi/2, pi/2) (pi + 0.1 -> 0.1); "heading": to [-pi, pi) (pi + 0.1 -> 0.1 - pi)
     from grutrack.training.config import load_train_config
-    from grutrack.training.trainer import SceneLoss
+    from grutrack.training.loss import SceneLoss
 
     target = np.zeros((2, 9))
     target[:, 6] = [np.pi + 0.1, 0.3]
@@ -772,7 +772,7 @@ def test_gt_term_gate_drops_held_instances_the_track_has_left():
     # a sticky track whose GT box is farther than the gate gives no GT term in that frame (-1); 0 is no gate
     from grutrack.data.scene import BoxSet
     from grutrack.training.config import load_train_config
-    from grutrack.training.trainer import SceneLoss
+    from grutrack.training.loss import SceneLoss
 
     gt_boxes = np.zeros((3, 9))
     gt_boxes[:, 0] = [0.0, 10.0, 20.0]

@@ -79,10 +79,10 @@ def test_the_option_is_checked_stored_and_absent_means_keep(tmp_path):
 
     with pytest.raises(ValueError, match="coast_yaw_rate must be one of keep, zero, got 'hold'"):
         GRUKalmanNet(GRUKFConfig(coast_yaw_rate="hold"))
-    with pytest.raises(ConfigError, match="'coast_yaw_rate' must be 'keep' or 'zero', got 'hold'"):
+    with pytest.raises(ConfigError, match="'network.coast_yaw_rate' must be 'keep' or 'zero', got 'hold'"):
         load_train_config("grukf", {"coast_yaw_rate": "hold"})
-    assert load_train_config("grukf").coast_yaw_rate == "zero"          # the default recipe's
-    assert load_train_config("paper").coast_yaw_rate == "keep"          # the paper's
+    assert load_train_config("grukf").network["coast_yaw_rate"] == "zero"          # the default recipe's
+    assert load_train_config("paper").network["coast_yaw_rate"] == "keep"          # the paper's
     net = GRUKalmanNet(GRUKFConfig(coast_yaw_rate="zero"), generator=torch.Generator())
     save_checkpoint(tmp_path / "z.pt", net)
     assert load_network(tmp_path / "z.pt").cfg.coast_yaw_rate == "zero"
@@ -94,7 +94,7 @@ def test_the_option_is_checked_stored_and_absent_means_keep(tmp_path):
 
 def test_the_trainer_builds_the_network_with_the_training_configs_value():
     from grutrack.training.config import load_train_config
-    from grutrack.training.trainer import _arch
+    from grutrack.training.network import network_config as _arch
 
     assert _arch(load_train_config("grukf", {"coast_yaw_rate": "keep"})).coast_yaw_rate == "keep"
     assert _arch(load_train_config("grukf")).coast_yaw_rate == "zero"
@@ -155,14 +155,14 @@ def test_both_options_hold_both_slots_and_nothing_else():
 def test_coast_acceleration_is_checked_stored_and_absent_means_keep(tmp_path):
     from grutrack.motion.checkpoint import load_network, save_checkpoint
     from grutrack.training.config import load_train_config
-    from grutrack.training.trainer import _arch
+    from grutrack.training.network import network_config as _arch
 
     with pytest.raises(ValueError, match="coast_acceleration must be one of keep, zero, got 'hold'"):
         GRUKalmanNet(GRUKFConfig(coast_acceleration="hold"))
-    with pytest.raises(ConfigError, match="'coast_acceleration' must be 'keep' or 'zero', got 'hold'"):
+    with pytest.raises(ConfigError, match="'network.coast_acceleration' must be 'keep' or 'zero', got 'hold'"):
         load_train_config("grukf", {"coast_acceleration": "hold"})
-    assert load_train_config("grukf").coast_acceleration == "zero"      # the default recipe's
-    assert load_train_config("paper").coast_acceleration == "keep"      # the paper's
+    assert load_train_config("grukf").network["coast_acceleration"] == "zero"      # the default recipe's
+    assert load_train_config("paper").network["coast_acceleration"] == "keep"      # the paper's
     assert _arch(load_train_config("grukf", {"coast_acceleration": "zero"})).coast_acceleration == "zero"
     assert _arch(load_train_config("grukf", {"coast_acceleration": "keep"})).coast_acceleration == "keep"
     net = GRUKalmanNet(GRUKFConfig(coast_acceleration="zero"), generator=torch.Generator())

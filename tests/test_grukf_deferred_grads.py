@@ -16,7 +16,7 @@ def scenes_and_dets(nusc_mini, tmp_path_factory):
 
 
 def _grads(t, scene, deferred: bool) -> dict[str, torch.Tensor]:
-    from grutrack.training.trainer import run_scene
+    from grutrack.training.loss import run_scene
 
     t.net.zero_grad(set_to_none=True)
     if deferred:

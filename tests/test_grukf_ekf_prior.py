@@ -37,7 +37,8 @@ def _paired_run(t, scenes, dets):
     largest relative covariance difference at the scene ends, and the number of updates."""
     from grutrack.tracking.factory import grukf_group
     from grutrack.tracking.tracker import Tracker, TrackGroup
-    from grutrack.training.trainer import PairedBackend, ekf_backend
+    from grutrack.training.loss import PairedBackend
+    from grutrack.training.network import ekf_backend
 
     gru = grukf_group(t.net, len(t.index), "cpu", class_index=t.index).backend
     pb = PairedBackend(gru, ekf_backend(t.cfg, t.index))
@@ -63,7 +64,7 @@ def test_untrained_ekf_prior_grukf_is_the_ekf(scenes_and_dets, tmp_path):
     assert float(t.net.fc_gain[2].weight.detach().abs().max()) == 0.0 and float(t.net.fc_gain[2].bias.detach().abs().max()) == 0.0
     assert float(t.net.gain_table.detach().abs().max()) == 0.0
     # the network carries the parallel EKF's noise: car's R is the motion config's
-    from grutrack.training.trainer import ekf_backend
+    from grutrack.training.network import ekf_backend
     assert torch.equal(t.net.ekf_R[2], torch.as_tensor(ekf_backend(t.cfg, t.index).R[2]))
     diff, p_rel, n = _paired_run(t, scenes, dets)
     assert n > 200
@@ -115,7 +116,7 @@ def test_ekf_prior_needs_the_ekf_gain_and_is_a_named_option():
     assert float(post[0, 0].detach()) == pytest.approx(0.125, abs=1e-15) and torch.equal(post[0, 1:], x[0, 1:])
     with pytest.raises(ValueError, match="gain_prior"):
         GRUKalmanNet(GRUKFConfig(gain_prior="kalman"))
-    with pytest.raises(ConfigError, match="'gain_prior' must be 'constant' or 'ekf'"):
+    with pytest.raises(ConfigError, match="'network.gain_prior' must be 'constant' or 'ekf'"):
         load_train_config("grukf", {"gain_prior": "kalman"})
-    assert load_train_config("paper").gain_prior == "constant"            # the paper's form
-    assert load_train_config("grukf").gain_prior == "ekf"                 # the default recipe
+    assert load_train_config("paper").network["gain_prior"] == "constant"            # the paper's form
+    assert load_train_config("grukf").network["gain_prior"] == "ekf"                 # the default recipe

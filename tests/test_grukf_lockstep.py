@@ -50,7 +50,7 @@ def _counting(net):
 
 
 def _loss_and_grads(t, scenes, together: bool):
-    from grutrack.training.trainer import run_scene, run_scenes
+    from grutrack.training.loss import run_scene, run_scenes
 
     t.net.zero_grad(set_to_none=True)
     with t.net.deferring_weight_grads() as d:
@@ -86,7 +86,7 @@ def test_lockstep_equals_the_mean_of_one_scene_steps(scenes_and_dets, tmp_path, 
 
 
 def test_a_failing_scene_stops_the_step_with_its_own_error(scenes_and_dets, tmp_path):
-    from grutrack.training.trainer import run_scenes
+    from grutrack.training.loss import run_scenes
 
     scenes, dets = scenes_and_dets
     t = _trainer(scenes, dets, tmp_path)

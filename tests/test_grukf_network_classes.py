@@ -35,7 +35,7 @@ def _trainer(scenes, dets, out, **over):
 
 def _loss_terms(trainer, scenes, dets) -> int:
     """Loss terms (ground truth and pseudo-label) of the untrained network of ``trainer`` over ``scenes``."""
-    from grutrack.training.trainer import run_scene
+    from grutrack.training.loss import run_scene
 
     t = trainer
     losses = [run_scene(t.net, s, dets, t.tracker_cfg, t.cfg, t.device, t.index) for s in scenes]
@@ -101,10 +101,10 @@ def test_training_with_network_classes_ss_model_takes_loss_terms_of_the_network_
 def test_network_classes_is_a_named_option():
     from grutrack.training.config import load_train_config
 
-    assert load_train_config("paper").network_classes == "all"            # the paper: one network for all
-    assert load_train_config("grukf").network_classes == "ss_model"       # the default recipe
+    assert load_train_config("paper").network["network_classes"] == "all"            # the paper: one network for all
+    assert load_train_config("grukf").network["network_classes"] == "ss_model"       # the default recipe
     assert GRUKFConfig().network_classes == "all"      # checkpoints written before the key: every class
-    with pytest.raises(ConfigError, match="'network_classes' must be 'all', 'ss_model' or 'own_model'"):
+    with pytest.raises(ConfigError, match="'network.network_classes' must be 'all', 'ss_model' or 'own_model'"):
         load_train_config("grukf", {"network_classes": "ctra"})
     with pytest.raises(ValueError, match="network_classes"):
         GRUKalmanNet(GRUKFConfig(network_classes="ctra"))
@@ -148,7 +148,7 @@ def test_training_with_network_classes_own_model_takes_loss_terms_of_both_models
     assert net.cfg.network_classes == "own_model"
     assert net.cfg.model_params["BICYCLE"]["form"] == "piecewise"      # the ekf preset's form of the model
     # the Bicycle classes keep their own noise in the network's EKF prior (not CTRA's)
-    from grutrack.motion.defaults import load_motion_config
+    from grutrack.motion.config import load_motion_config
 
     motion = load_motion_config("grutrack_nusc")
     np.testing.assert_array_equal(net.ekf_P0[TRACKING_CLASSES.index("bicycle")].numpy(), motion["bicycle"]["P0"])
@@ -208,7 +208,7 @@ def test_training_classes_own_model_is_refused_where_it_cannot_apply():
         load_train_config("grukf", {"training_classes": "all"})
     with pytest.raises(ConfigError, match="'scenes_per_step' must be 1 with training_classes 'own_model'"):
         load_train_config("grukf", {"training_classes": "own_model", "scenes_per_step": 2})
-    with pytest.raises(ConfigError, match="'training_classes' 'own_model' needs network_classes 'ss_model' or"):
+    with pytest.raises(ConfigError, match="'training_classes' 'own_model' needs network.network_classes 'ss_model' or"):
         load_train_config("grukf", {"training_classes": "own_model", "network_classes": "all"})
 
 
@@ -226,3 +226,23 @@ def test_a_checkpoint_written_before_training_classes_resumes_with_its_default(s
     _trainer(scenes, dets, tmp_path / "old", network_classes="ss_model").resume(path)
     with pytest.raises(ConfigError, match="training_classes 'tracked' -> 'own_model'"):
         _trainer(scenes, dets, tmp_path / "old", network_classes="ss_model", training_classes="own_model").resume(path)
+
+
+def test_a_checkpoint_written_before_the_network_section_resumes(scenes_and_dets, tmp_path):
+    """A run saved by a version with the network's options at the top level of its training config (and without
+    the options added since) resumes as the same run; a changed network option is refused, naming it."""
+    import torch
+
+    from grutrack.training.config import config_record
+
+    scenes, dets = scenes_and_dets
+    t = _trainer(scenes, dets, tmp_path, network_classes="ss_model")
+    path = t.save("last.pt")
+    ck = torch.load(path, weights_only=False)
+    network = ck["train_config"].pop("network")
+    ck["train_config"].update({k: v for k, v in network.items() if k not in ("coast_acceleration", "min_size")})
+    torch.save(ck, path)
+    assert config_record(ck["train_config"])["network"] == network
+    _trainer(scenes, dets, tmp_path, network_classes="ss_model").resume(path)
+    with pytest.raises(ConfigError, match="cannot resume with other training settings \\(network.gap_bins 5 -> 2\\)"):
+        _trainer(scenes, dets, tmp_path, network_classes="ss_model", gap_bins=2).resume(path)

@@ -104,7 +104,7 @@ def test_new_training_keys_are_validated():
         load_train_config("grukf", {"matched_box": "posterior"})
     with pytest.raises(ConfigError, match="'resample_profiles' must be a list"):
         load_train_config("grukf", {"resample_profiles": "centerpoint"})
-    with pytest.raises(ConfigError, match="'aux_inputs' must be true or false"):
+    with pytest.raises(ConfigError, match="'network.aux_inputs' must be true or false"):
         load_train_config("grukf", {"aux_inputs": 1})
 
 
@@ -184,3 +184,64 @@ def test_scene_mix_gives_every_epoch_every_profile_and_every_scene_every_profile
     assert load_train_config("grukf").resample_mix == "scene" and load_train_config("paper").resample_mix == "epoch"
     with pytest.raises(ConfigError, match="'resample_mix' must be 'epoch' or 'scene'"):
         load_train_config("grukf", {"resample_mix": "frame"})
+
+
+# ----- the network's options: one section of the training config, the architecture's fields -------------------
+def test_every_network_option_is_an_architecture_field_with_its_default():
+    """The training config's ``network`` section is the part of :class:`GRUKFConfig` a config sets: every option
+    the schema names is a field, and an optional option's schema default is the field's default (what a checkpoint
+    written before the option reads)."""
+    from dataclasses import MISSING, fields
+
+    from grutrack.config_loader import schema
+
+    section = schema("training")["properties"]["network"]
+    arch = {f.name: f.default for f in fields(GRUKFConfig)}
+    assert set(section["properties"]) <= set(arch)
+    for name, node in section["properties"].items():
+        if name not in section["required"]:
+            assert node["default"] == arch[name] and arch[name] is not MISSING, name
+
+
+def test_network_options_are_read_nested_and_in_the_flat_layout_of_earlier_configs(tmp_path):
+    import yaml
+
+    from grutrack.training.network import network_config
+
+    nested = load_train_config("paper", {"network": {"gap_bins": 5}})
+    flat = load_train_config("paper", {"gap_bins": 5})                 # an override in the layout before the section
+    assert nested == flat and nested.network["gap_bins"] == 5 and network_config(nested).gap_bins == 5
+    raw = yaml.safe_load(open(__import__("grutrack.config_loader", fromlist=["x"]).config_path("training", "paper")))
+    old = {k: v for k, v in raw.items() if k != "network"} | raw["network"]   # a config file written before it
+    (tmp_path / "old.yaml").write_text(yaml.safe_dump(old))
+    assert load_train_config(tmp_path / "old.yaml") == load_train_config("paper")
+    with pytest.raises(ConfigError, match=r"unknown key 'network.gap_bin'.*did you mean 'network.gap_bins'"):
+        load_train_config("paper", {"network": {"gap_bin": 5}})
+
+
+def test_min_size_bounds_the_posterior_sizes_from_config_to_checkpoint_to_tracker(tmp_path):
+    """``network.min_size`` (optional; 0.05 m, the bound before the option): the trained network's and the tracked
+    posterior's w, l, h never go below it; it travels in the checkpoint's architecture."""
+    from grutrack.motion.checkpoint import load_network, save_checkpoint
+    from grutrack.tracking.factory import build_tracker
+    from grutrack.training.network import network_config
+
+    assert network_config(load_train_config("grukf")).min_size == 0.05 == GRUKFConfig().min_size
+    cfg = load_train_config("paper", {"network": {"min_size": 0.3}, "device": "cpu"})
+    assert network_config(cfg).min_size == 0.3
+    y = TorchCTRA().h(_prior(1))
+    y[0, 3:6] = -10.0                                         # a detection that pulls every size below zero
+    for bound in (0.05, 0.3):
+        net = _net(min_size=bound)
+        with torch.no_grad():
+            x, _, _ = net.correct(_prior(1), y, y, _prior(1), _prior(1), _prior(1), net.init_hidden(1))
+        assert x[0, 3:6].tolist() == [bound] * 3
+    save_checkpoint(tmp_path / "m.pt", _net(min_size=0.3).float())
+    assert load_network(tmp_path / "m.pt").cfg.min_size == 0.3
+    tracker = build_tracker("grukf", checkpoint=tmp_path / "m.pt", device="cpu")
+    assert all(g.backend.net.cfg.min_size == 0.3 for g in tracker.groups if hasattr(g.backend, "net"))
+    # a checkpoint written before the option: the bound it had
+    old = torch.load(tmp_path / "m.pt", weights_only=False)
+    del old["arch"]["min_size"]
+    torch.save(old, tmp_path / "old.pt")
+    assert load_network(tmp_path / "old.pt").cfg.min_size == 0.05

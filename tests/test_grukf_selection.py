@@ -22,22 +22,28 @@ def small_training_set(nusc_mini, tmp_path_factory):
 
 
 class ScriptedValidator:
-    """A validator whose AMOTA is a fixed pseudo-random function of the network's weights (so a resumed run sees
-    the values of an uninterrupted one); it keeps the weights of every call."""
+    """A validator (:class:`grutrack.training.validation.Validator`) of one detection set whose AMOTA is a fixed
+    pseudo-random function of the network's weights (so a resumed run sees the values of an uninterrupted one); it
+    keeps the weights of every call."""
 
-    split, scene_names, reference_name = "mini_val", ["scene-a", "scene-b"], "tracker preset 'ekf' (its EKF)"
+    metric = "AMOTA"
+    detection_sets = ["given"]
 
     def __init__(self):
         self.seen: list[tuple[float, dict]] = []
 
-    def __call__(self, net) -> float:
+    def scores(self, net) -> list[float]:
         s = sum(float(p.detach().double().sum()) for p in net.parameters())
         value = round(0.5 + (abs(s) * 7919.0) % 0.4, 6)
         self.seen.append((value, {k: v.clone() for k, v in net.state_dict().items()}))
-        return value
+        return [value]
 
-    def reference_amota(self) -> float:
-        return 0.75
+    def reference_scores(self) -> list[float]:
+        return [0.75]
+
+    def describe(self) -> ValidationRecord:
+        return ValidationRecord(rule="last", selected_step=0, split="mini_val", scenes=["scene-a", "scene-b"],
+                                detection_sets=list(self.detection_sets), reference="tracker preset 'ekf' (its EKF)")
 
 
 #: validation AMOTA of three detection sets at validations 0, 1, ... (steps 0, 1, ... with val_every 1): the best
@@ -70,14 +76,8 @@ class ScriptedSetsValidator(ScriptedValidator):
         self.seen.append((round(float(values.mean()), 6), {k: v.clone() for k, v in net.state_dict().items()}))
         return values
 
-    def __call__(self, net) -> float:
-        return float(self.scores(net).mean())
-
     def reference_scores(self):
         return [0.7, 0.71, 0.72]
-
-    def reference_amota(self) -> float:
-        return 0.71
 
 
 def _trainer(scenes, dets, out, validate=None, **over):
@@ -94,8 +94,11 @@ def _same(a: dict, b: dict) -> bool:
 
 
 def test_model_pt_holds_the_best_validated_step_and_last_pt_the_last(small_training_set, tmp_path):
+    from grutrack.training.validation import Validator
+
     scenes, dets = small_training_set
     v = ScriptedValidator()
+    assert isinstance(v, Validator) and isinstance(ScriptedSetsValidator(), Validator)   # the trainer's protocol
     t = _trainer(scenes, dets, tmp_path, v, select_checkpoint="best_val_amota")
     final = t.run()
     log = TrainingLog.read(tmp_path / "train_log.csv")
@@ -291,3 +294,43 @@ def test_bad_selection_settings_are_refused_naming_the_key(key, value, message):
         (2, "best_val_amota_1se")
     assert (load_train_config("paper").validation_scenes, load_train_config("paper").select_checkpoint) == \
         (0, "last")
+
+
+def test_av2_training_validates_on_a_held_out_log_with_the_datasets_hota(av2_root, tmp_path, capsys):
+    """Training on AV2 validates as on nuScenes, through the dataset: a log held out of the split, scored with
+    AV2's metric (HOTA, the official evaluation, :meth:`AV2Dataset.score_tracks`), the preset's EKF as reference."""
+    from grutrack.cli import main
+    from grutrack.datasets import DatasetOptions, open_dataset
+    from grutrack.tracking.factory import build_tracker
+    from grutrack.tracking.tracker import track_scenes
+
+    common = ["--dataset", "av2", "--dataroot", str(av2_root), "--split", "val"]
+    dets = tmp_path / "d.feather"
+    assert main(["simulate-detections", *common, "--seed", "4", "--out", str(dets)]) == 0
+    over = {"epochs": 1, "device": "cpu", "validation_scenes": 1, "val_every": 1, "select_checkpoint": "best_val_amota"}
+    cfg = tmp_path / "t.yaml"
+    assert main(["resolve-config", "training", "--base", "paper", "--overrides", json.dumps(over), "--out",
+                 str(cfg)]) == 0
+    assert main(["train", *common, "--detections", str(dets), "--config", str(cfg), "--out", str(tmp_path / "ck"),
+                 "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    ds = open_dataset("av2", DatasetOptions(av2_root))
+    scenes = ds.scenes("val")
+    logs = sorted(s.name for s in scenes)
+    assert f"validating on 1 scenes held out of val: {logs[1]}" in out
+    rec = ValidationRecord.read(tmp_path / "ck" / "validation.json")
+    assert (rec.split, rec.scenes, rec.held_out, rec.detection_sets) == ("val", [logs[1]], True, ["given"])
+    log = TrainingLog.read(tmp_path / "ck" / "train_log.csv")
+    assert [r.step for r in log.validated()] == [0, 1] and all(0.0 < r.val_amota <= 1.0 for r in log.validated())
+    assert [r.scene for r in log.steps if r.step > 0] == [logs[0]]          # trained on the other log only
+    assert f"validation HOTA {rec.selected_amota:.4f}" in out
+    # the reference line: the preset's EKF on the held-out log, scored by the dataset
+    ekf = build_tracker("ekf", param_classes=ds.vocabulary.param_classes)
+    given = ds.load_detections(dets, "val", scenes, ekf.cfg.measured_yaw).boxes
+    held = [s for s in scenes if s.name == logs[1]]
+    assert rec.reference_amota == round(ds.score_tracks("val", held, track_scenes(ekf, held, given).results, 500), 6)
+    # scoring the whole split is the official evaluation of the same tracks written as the challenge pickle
+    results = track_scenes(ekf, scenes, given).results
+    ds.write_tracks(tmp_path / "t.pkl", scenes, results, 500)
+    assert ds.score_tracks("val", scenes, results, 500) == ds.evaluate(tmp_path / "t.pkl", "val",
+                                                                       workers=1).overall["hota"]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from grutrack.evaluation.lsap import motmetrics_lsa
+from grutrack.evaluation.nuscenes_fast.motmetrics_assignment import motmetrics_lsa
 from grutrack.lsap import scipy_lsa, scipy_lsa_compiled
 
 

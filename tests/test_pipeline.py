@@ -141,6 +141,15 @@ def test_core_geometry_and_box_code_re_run_tracking():
     assert "evaluation" in STAGE_SOURCES["evaluate"]   # every evaluator module, fast_loading.py included
 
 
+def test_every_listed_code_version_source_exists():
+    """A renamed or moved module must be renamed in the stage lists too (a missing path hashes as nothing)."""
+    from grutrack.pipeline.codever import _COMMON, PACKAGE, STAGE_SOURCES
+
+    missing = sorted({(stage, rel) for stage, paths in STAGE_SOURCES.items() for rel in (*_COMMON, *paths)
+                      if not (PACKAGE / rel).exists()})
+    assert missing == []
+
+
 def test_extra_row_that_is_a_paper_row_is_refused(cfg, paper):
     bad = copy.deepcopy(cfg)
     bad["reports"]["nusc_val"]["extra_rows"] = {"III": {"Poly-MOT": "polymot"}}
@@ -157,20 +166,26 @@ def _shipped_workflow_config():
     return cfg, load_paper(root / cfg["paper"]), load_registry()
 
 
-def test_workflow_checks_ask_the_dataset_what_it_supports():
+def test_workflow_checks_ask_the_dataset_what_it_supports(monkeypatch):
     """Evaluators, leaderboard zips, validation during training and dataroot layout come from the dataset
     classes (grutrack.datasets), not from per-dataset branches of the workflow's checks."""
+    from grutrack.datasets.av2 import AV2Dataset
+
     cfg, paper, registry = _shipped_workflow_config()
     spec.check_config(cfg, paper, registry)
-    # a GRU-KF training on AV2 logs (no validation AMOTA there) is accepted; with validation it is refused
+    # a GRU-KF training on AV2 logs is accepted, with validation too (AV2 validates by HOTA); a dataset class that
+    # does not validate trainings has validation refused
     c = copy.deepcopy(cfg)
     c["detectors"]["av2_sim"] = {"kind": "simulated", "profile": "centerpoint", "seeds": {"train": 1, "val": 2}}
     c["trainings"]["av2_grukf"] = {"dataset": "av2", "split": "train", "detector": "av2_sim", "config": "grukf",
                                    "overrides": {}, "validation": None}
     spec.check_config(c, paper, registry)
     c["trainings"]["av2_grukf"]["validation"] = {"split": "val", "every": 4}
+    spec.check_config(c, paper, registry)
+    monkeypatch.setattr(AV2Dataset, "validates_training", False)
     with pytest.raises(ConfigError, match=r"trainings\.av2_grukf\.validation: .* \(av2\); set it to null"):
         spec.check_config(c, paper, registry)
+    monkeypatch.undo()
     c = copy.deepcopy(cfg)
     c["experiments"]["av2_val"]["evaluator"] = "fast"
     with pytest.raises(ConfigError, match=r"experiments\.av2_val\.evaluator: 'fast' .* \(choose official, none\)"):

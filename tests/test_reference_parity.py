@@ -22,7 +22,7 @@ import pytest
 from grutrack.data.nusc_detections import load_detections
 from grutrack.data.nuscenes import load_scenes
 from support.compare import entry_differences
-from grutrack.evaluation.fast_amota import fast_tracking_eval
+from grutrack.evaluation.nuscenes_fast import fast_tracking_eval
 from grutrack.evaluation.track_parity import compare_tracks
 from grutrack.export.nuscenes_json import build_submission
 from grutrack.tracking.factory import build_tracker

@@ -179,7 +179,8 @@ def test_reports_name_their_sources_training_data_and_scored_logs(tmp_path, monk
     text = (tmp_path / "r.md").read_text()
     assert "## How the GRU-KF was trained" in text
     assert ("split train of v1.0-trainval at `/data/nuscenes`; detections `/d/centerpoint_train.json` | "
-            "3 steps, 2 epochs |") in text
+            "none | 3 steps, 2 epochs |") in text                     # no synthetic data listed: none
+    assert "SYNTHETIC TRAINING DATA" not in text
     # the semi-supervised report says it reads training logs, and names where the data is said
     out = tmp_path / "s.md"
     assert main(["report", "semi_supervised", "--out", str(out), "--paper", str(PAPER), "--train-log",

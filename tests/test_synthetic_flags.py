@@ -7,17 +7,15 @@ import json
 from pathlib import Path
 from types import SimpleNamespace
 
-from grutrack.cli.train import synthetic_inputs
+from grutrack.training.run import synthetic_inputs
 from grutrack.report.markdown import detections_line, synthetic_training_banner, training_synthetic
 
 
-class _Tables:
-    def __init__(self, descriptions):
-        self.scene = [{"description": d} for d in descriptions]
-
-
 def _ds(descriptions, name="nuscenes"):
-    return SimpleNamespace(name=name, tables=_Tables(descriptions))
+    """A dataset whose scene descriptions are these (the demo's start with its SYNTHETIC marker)."""
+    from grutrack.data.demo import MARKER
+
+    return SimpleNamespace(name=name, is_synthetic=lambda: any(d.startswith(MARKER) for d in descriptions))
 
 
 def _cfg(profiles=(), epochs=3):

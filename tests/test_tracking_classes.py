@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from grutrack.evaluation import tracking_classes as tc
-from grutrack.evaluation.fast_loading import _box_corners, _points_in_box
+from grutrack.evaluation.nuscenes_fast.loading import _box_corners, _points_in_box
 
 
 def test_config_and_constants_equal_the_devkits():

@@ -105,12 +105,15 @@ def _metrics(work: Path, run: str) -> dict:
 def test_mini_val_ekf_metrics_equal_the_cli_run(mini_run):
     wf = _metrics(mini_run, "ekf")
     cli = json.loads((mini_run / "cli/metrics.json").read_text())
-    assert wf["split"] == cli["split"] == "mini_val" and wf["evaluator"] == cli["evaluator"] == "devkit"
-    for key in EKF_KEYS:
-        assert wf["overall"][key] == cli["overall"][key], key          # exact equality of the JSON numbers
-    assert wf["overall"] == cli["overall"]
-    # per-class numbers: equal up to the last bit of the devkit's per-class MOTP, which has been seen to differ
-    # by one ulp between two processes on the same submission
+    # the workflow scores with the fast evaluator, the command by hand with the devkit: the same numbers
+    assert wf["split"] == cli["split"] == "mini_val" and (wf["evaluator"], cli["evaluator"]) == ("fast", "devkit")
+    assert wf["overall"].keys() == cli["overall"].keys()
+    for key, value in wf["overall"].items():
+        ref = cli["overall"][key]
+        assert (value is None and ref is None) or math.isclose(value, ref, rel_tol=1e-12, abs_tol=1e-12), key
+    assert all(wf["overall"][k] == cli["overall"][k] for k in EKF_KEYS if k == "ids")   # counts exactly
+    # per-class numbers: equal up to the last bits (the devkit's per-class MOTP has been seen to differ by one ulp
+    # between two processes on the same submission)
     assert wf["per_class"].keys() == cli["per_class"].keys()
     for cls, row in wf["per_class"].items():
         for key, value in row.items():

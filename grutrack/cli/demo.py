@@ -78,7 +78,7 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 def run_stats(args: argparse.Namespace) -> int:
     """``grutrack dataset-stats``."""
-    from grutrack.data.nusc_stats import format_comparison, format_table, write_stats_json
+    from grutrack.data.gt_stats import format_comparison, format_table, write_stats_json
 
     ds = dataset_of(args)
     stats = ds.gt_statistics(args.split)

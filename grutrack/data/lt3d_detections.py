@@ -150,16 +150,18 @@ def load_detections(path: str | Path, root: str | Path, split: str, scenes: list
     logs = df["log_id"].astype(str).to_numpy()
     _check_sweep_counts(path, logs, ts)
     known = {s.name for s in scenes}
-    unknown = sorted(set(logs) - known)
+    outside = set(logs) - known          # logs of the split that are not tracked now (a held-out subset) are ignored
+    ddir = split_dir(root, split)
+    unknown = sorted(outside - {p.name for p in ddir.iterdir() if p.is_dir()}) if outside else []
     if unknown:
         raise InputFormatError(f"{path}: field 'log_id' has {len(unknown)} log(s) that are not logs of split "
                                f"'{split}' under {root} (first: {unknown[0]}); expected one of the {len(known)} "
                                f"logs being tracked")
-    stats = DetectionStats(rows=len(df))
+    tracked = np.isin(logs, list(known)) if outside else np.ones(len(df), dtype=bool)
+    stats = DetectionStats(rows=int(tracked.sum()))
     labels = vocab.labels(df["category"].astype(str).to_numpy())
-    stats.other_category = int((labels < 0).sum())
+    stats.other_category = int(((labels < 0) & tracked).sum())
     out: dict[str, BoxSet] = {}
-    ddir = split_dir(root, split)
     for scene in scenes:
         rows = np.flatnonzero(logs == scene.name)
         kept = stats.kept

@@ -4,7 +4,7 @@ Reads the dataset's tables (the devkit's records without importing it). Ground t
 to a vocabulary's classes: the 7 tracking classes (default) or the 10 detection classes (what the detector
 simulator and the dataset statistics read), annotations of other categories dropped, with the devkit's
 centred-difference velocity (NaN -> 0). This module is the one place nuScenes ground truth is read for
-tracking, training, simulation and statistics (the evaluator's loader, grutrack/evaluation/fast_loading.py,
+tracking, training, simulation and statistics (the evaluator's loader, grutrack/evaluation/nuscenes_fast/loading.py,
 reproduces the devkit's own loading and filters instead).
 """
 

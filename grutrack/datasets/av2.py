@@ -25,7 +25,8 @@ class AV2Dataset:
     dataroot_hint = ("the Argoverse 2 sensor-dataset root, i.e. the folder that holds {split}/<log_id>/ with "
                      "annotations.feather, city_SE3_egovehicle.feather and map/")
     leaderboard_zip = False
-    validates_training = False
+    validates_training = True
+    validation_metric = "HOTA"
     #: workflow config kinds this class reads -> the JSON schema of such a ``datasets:`` entry
     config_kinds = {
         "av2": config_entry("av2", dataroot={"type": ["string", "null"], "minLength": 1}, version={"type": "null"},
@@ -45,6 +46,7 @@ class AV2Dataset:
 
     def __init__(self, options: DatasetOptions):
         self.options = options
+        self._labels: dict[str, dict] = {}     # split -> the evaluation's labels (score_tracks)
 
     def describe(self) -> str:
         """``av2 at <rate> Hz``, for messages."""
@@ -55,6 +57,10 @@ class AV2Dataset:
         from grutrack.data.av2 import vocabulary
 
         return vocabulary(self.options.all_categories)
+
+    def is_synthetic(self) -> bool:
+        """AV2 logs are real data."""
+        return False
 
     def scenes(self, split: str, with_gt: bool = False) -> list[Scene]:
         from grutrack.data.av2 import load_scenes
@@ -99,7 +105,7 @@ class AV2Dataset:
 
     def gt_statistics(self, splits: list[str]) -> dict[str, dict]:
         """Over the vocabulary's classes, from the annotations at the tracked frames (``rate_hz``)."""
-        from grutrack.data.nusc_stats import scene_statistics
+        from grutrack.data.gt_stats import scene_statistics
 
         return scene_statistics([s for split in splits for s in self.scenes(split, with_gt=True)])
 
@@ -145,6 +151,26 @@ class AV2Dataset:
         return av2_eval.evaluate_submission(self.options.dataroot, split, submission, rate_hz=self.options.rate_hz,
                                             max_range_m=max_range_m or av2_eval.DEFAULT_RANGE_M, workers=workers,
                                             trackeval_dir=trackeval_dir)
+
+    def score_tracks(self, split: str, scenes: list[Scene], results: dict[str, BoxSet], max_boxes: int) -> float:
+        """HOTA, the Table I average over the classes with ground truth (NaN when none has), of the tracks on the
+        logs ``scenes`` by the official AV2 evaluation in this process (the labels of those logs alone; the
+        drivable-area ROI when every log has its map); ``max_boxes`` does not apply (the pickle has no limit)."""
+        from grutrack.data.av2 import load_scenes, split_dir, vocabulary
+        from grutrack.evaluation import av2_eval
+        from grutrack.export.av2_tracks import build_sequences, gt_sequences
+
+        if split not in self._labels:
+            every = load_scenes(self.options.dataroot, split, rate_hz=self.options.rate_hz, with_gt=True,
+                                all_categories=True)
+            self._labels[split] = gt_sequences(every, vocabulary(all_categories=True))
+        names = {s.name for s in scenes}
+        labels = {log: frames for log, frames in self._labels[split].items() if log in names}
+        ddir = split_dir(self.options.dataroot, split)
+        out = av2_eval.evaluate_sequences(build_sequences(scenes, results, self.vocabulary), labels,
+                                          ddir if av2_eval.has_maps(ddir, list(labels)) else None, workers=1)
+        hota = av2_eval.metrics_from_result(out)[0]["hota"]
+        return float("nan") if hota is None else float(hota)
 
     def format_summary(self, doc: MetricsDocument) -> str:
         from grutrack.evaluation.av2_eval import format_summary

@@ -61,7 +61,8 @@ class Dataset(Protocol):
     evaluation runs worker processes (``--workers``); ``dataroot_folder``: the folder a dataroot must hold
     (a format string of ``version`` and ``split``) and ``dataroot_hint`` what a dataroot is, for error messages;
     ``leaderboard_zip``: whether ``grutrack leaderboard-zip`` packs its submissions; ``validates_training``:
-    whether ``grutrack train`` can score validation AMOTA on it (``--val-split``); ``config_kinds``: the
+    whether ``grutrack train`` can validate on it (``--val-split``, ``validation_scenes``: :meth:`score_tracks`)
+    and ``validation_metric`` the name of that score (AMOTA, HOTA); ``config_kinds``: the
     workflow config kinds it reads (``datasets: {<name>: {kind: <kind>, ...}}``), each with the JSON schema of
     such an entry; ``config_version`` / ``config_options``: the ``--version`` and other command-line options
     of a split of such an entry."""
@@ -75,6 +76,7 @@ class Dataset(Protocol):
     dataroot_hint: str
     leaderboard_zip: bool
     validates_training: bool
+    validation_metric: str
     config_kinds: dict[str, dict]
     options: DatasetOptions
 
@@ -94,6 +96,9 @@ class Dataset(Protocol):
     def vocabulary(self) -> Vocabulary:
         """What the labels of its boxes mean (tracked classes and their parameter classes)."""
 
+    def is_synthetic(self) -> bool:
+        """Whether its scenes are SYNTHETIC (the grutrack demo dataset), which every number made from them says."""
+
     def scenes(self, split: str, with_gt: bool = False) -> list[Scene]:
         """The split's scenes in order; ground-truth boxes on each frame when ``with_gt``."""
 
@@ -108,7 +113,7 @@ class Dataset(Protocol):
 
     def gt_statistics(self, splits: list[str]) -> dict[str, dict]:
         """Per-class statistics of the ground truth of the union of ``splits``
-        (:mod:`grutrack.data.nusc_stats`: share, size, speed, moving share, |yaw rate|, 0-point share)."""
+        (:mod:`grutrack.data.gt_stats`: share, size, speed, moving share, |yaw rate|, 0-point share)."""
 
     def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
                      max_boxes: int, meta: dict[str, bool] | None = None) -> dict[str, int]:
@@ -127,6 +132,11 @@ class Dataset(Protocol):
     def evaluate(self, submission: str | Path, split: str, evaluator: str | None = None,
                  **options) -> MetricsDocument:
         """Official metrics of a submission (``evaluator`` one of :attr:`evaluators`, None: the default)."""
+
+    def score_tracks(self, split: str, scenes: list[Scene], results: dict[str, BoxSet], max_boxes: int) -> float:
+        """The dataset's headline metric (:attr:`validation_metric`) of the tracker output ``results`` (frame
+        token -> tracks) on ``scenes`` of ``split`` (all of them, or a subset: only their frames are scored), by the
+        dataset's evaluator in memory, with nothing written; what validation during training reads."""
 
     def format_summary(self, doc: MetricsDocument) -> str:
         """A table of the document's headline metrics for the terminal."""

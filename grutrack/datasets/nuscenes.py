@@ -28,6 +28,7 @@ class NuScenesDataset:
                      "too for the test split)")
     leaderboard_zip = True
     validates_training = True
+    validation_metric = "AMOTA"
     #: workflow config kinds (``datasets: {<name>: {kind: ...}}``) this class reads -> the JSON schema of such an
     #: entry; the demo is nuScenes-format data that the workflow generates (rule demo_data)
     config_kinds = {
@@ -56,6 +57,7 @@ class NuScenesDataset:
             raise ConfigError("--version is required with --dataset nuscenes (e.g. v1.0-trainval, v1.0-mini)")
         self.options = options
         self._nusc = None
+        self._split_samples: dict[str, set[str]] = {}    # split -> its sample tokens (score_tracks of a subset)
 
     def describe(self) -> str:
         """``<name> <version>``, for messages."""
@@ -64,6 +66,12 @@ class NuScenesDataset:
     @property
     def vocabulary(self) -> Vocabulary:
         return NUSCENES_VOCABULARY
+
+    def is_synthetic(self) -> bool:
+        """Whether the tables are the grutrack demo's (SYNTHETIC)."""
+        from grutrack.data.demo import is_demo_tables
+
+        return is_demo_tables(self.tables)
 
     @property
     def tables(self):
@@ -104,7 +112,7 @@ class NuScenesDataset:
 
     def gt_statistics(self, splits: list[str]) -> dict[str, dict]:
         """Over the 7 tracking classes, from every annotation of the 10 detection classes (lidar points)."""
-        from grutrack.data.nusc_stats import nuscenes_statistics
+        from grutrack.data.gt_stats import nuscenes_statistics
 
         return nuscenes_statistics(self.options.dataroot, self.options.version, splits, nusc=self.tables)
 
@@ -150,13 +158,40 @@ class NuScenesDataset:
             summary = devkit_tracking_eval(self.options.dataroot, self.options.version, split, submission,
                                            progress=sys.stderr.isatty() if progress is None else progress)
         else:
-            from grutrack.evaluation.fast_amota import fast_tracking_eval
+            from grutrack.evaluation.nuscenes_fast import fast_tracking_eval
 
             summary = fast_tracking_eval(self.tables, sub, split)
         doc = metrics_document(summary, dataset=self.name, version=self.options.version, split=split,
                                evaluator=evaluator, submission=str(submission))
         doc.seconds = round(time.perf_counter() - t0, 3)
         return doc
+
+    def score_tracks(self, split: str, scenes: list[Scene], results: dict[str, BoxSet], max_boxes: int) -> float:
+        """AMOTA (official semantics, the exact fast evaluator) of the tracks on ``scenes``: the split's evaluation
+        when they are the whole split, else that of their samples alone (the split's other samples given no
+        tracks, and only the scenes' ground truth and tracks scored)."""
+        import contextlib
+        import io
+
+        from grutrack.data.nuscenes import split_scene_names
+        from grutrack.evaluation.nuscenes_fast import evaluate_tracks, fast_tracking_eval, load_tracks
+        from grutrack.export.nuscenes_json import build_submission
+
+        tokens = [f.token for s in scenes for f in s.frames]
+        sub = build_submission(results, tokens, max_boxes)
+        with contextlib.redirect_stdout(io.StringIO()):
+            if {s.name for s in scenes} == set(split_scene_names(self.tables, split)):
+                return float(fast_tracking_eval(self.tables, sub, split)["amota"])
+            if split not in self._split_samples:
+                names = set(split_scene_names(self.tables, split))
+                in_split = {s["token"] for s in self.tables.scene if s["name"] in names}
+                self._split_samples[split] = {s["token"] for s in self.tables.sample if s["scene_token"] in in_split}
+            sub["results"].update({t: [] for t in self._split_samples[split] - set(tokens)})  # every sample of it
+            gt, pred, _ = load_tracks(self.tables, sub, split)
+            keep = {sc.token for sc in scenes}
+            metrics, _ = evaluate_tracks({k: v for k, v in gt.items() if k in keep},
+                                         {k: v for k, v in pred.items() if k in keep})
+        return float(metrics.serialize()["amota"])
 
     def format_summary(self, doc: MetricsDocument) -> str:
         from grutrack.evaluation.nuscenes_eval import format_summary

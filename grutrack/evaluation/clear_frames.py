@@ -53,13 +53,11 @@ class StepDecisions:
 
 def clear_decisions(gt_ids: list, tracker_ids: list, similarity: list, num_gt_ids: int,
                     threshold: float = 0.5) -> list[StepDecisions]:
-    """Replay CLEAR over one sequence of one class.
+    """Replay CLEAR over one sequence of one class: one :class:`StepDecisions` per timestep.
 
-    :param gt_ids: per timestep, (G_t,) int ids in ``0..num_gt_ids-1`` (TrackEval's mapped ids).
-    :param tracker_ids: per timestep, (T_t,) int ids (mapped).
-    :param similarity: per timestep, (G_t, T_t) float similarity (1 = same place).
-    :param threshold: CLEAR's similarity threshold (AV2: 0.5, i.e. centre distance <= 1 m).
-    :return: one :class:`StepDecisions` per timestep.
+    Per timestep: gt_ids (G_t,) int ids in ``0..num_gt_ids-1`` (TrackEval's mapped ids), tracker_ids (T_t,) int
+    ids (mapped), similarity (G_t, T_t) float (1 = same place). threshold: CLEAR's similarity threshold (AV2:
+    0.5, i.e. centre distance <= 1 m).
     """
     prev_tracker_id = np.full(num_gt_ids, np.nan)            # last match, any timestep before: id switches
     prev_timestep_tracker_id = np.full(num_gt_ids, np.nan)   # match of the previous timestep: matching bonus
@@ -113,11 +111,10 @@ class ClassSequence:
 
 
 def official_sequence_data(labels: dict, predictions: dict, classes: list[str]) -> dict:
-    """Per log and class, the data the AV2 evaluator's CLEAR metric is given.
+    """Per log and class, the data the AV2 evaluator's CLEAR metric is given: ``{log_id: {class: ClassSequence}}``.
 
-    :param labels: / predictions: ``{log_id: [frame dict, ...]}`` as the final official evaluation scores them
-        (:func:`grutrack.evaluation.av2_eval.evaluate_sequences` with ``keep_inputs``).
-    :return: ``{log_id: {class: ClassSequence}}``.
+    labels / predictions: ``{log_id: [frame dict, ...]}`` as the final official evaluation scores them
+    (:func:`grutrack.evaluation.av2_eval.evaluate_sequences` with ``keep_inputs``).
     """
     from grutrack.evaluation.av2_eval import official_module
 

@@ -14,7 +14,7 @@ import functools
 import importlib.util
 import json
 from pathlib import Path
-from typing import Any, Dict
+from typing import Any
 
 import numpy as np
 
@@ -48,7 +48,7 @@ class TrackingConfig:
     FIELDS = ("tracking_names", "pretty_tracking_names", "tracking_colors", "class_range", "dist_fcn",
               "dist_th_tp", "min_recall", "max_boxes_per_sample", "metric_worst", "num_thresholds")
 
-    def __init__(self, content: Dict[str, Any]):
+    def __init__(self, content: dict[str, Any]):
         for key in self.FIELDS:
             setattr(self, key, content[key])
         assert set(self.class_range) == set(self.tracking_names), "Class count mismatch."
@@ -112,7 +112,7 @@ class TrackingMetricDataList:
     """Class name -> :class:`TrackingMetricData` (the devkit's ``TrackingMetricDataList``)."""
 
     def __init__(self):
-        self.md: Dict[str, Any] = {}
+        self.md: dict[str, Any] = {}
 
     def __getitem__(self, key):
         return self.md[key]
@@ -132,7 +132,7 @@ class TrackingMetrics:
         self.eval_time = None
         self.class_names = cfg.class_names
         self.metric_names = list(TRACKING_METRICS)
-        self.label_metrics: Dict[str, Dict[str, float]] = {m: {c: np.nan for c in self.class_names}
+        self.label_metrics: dict[str, dict[str, float]] = {m: {c: np.nan for c in self.class_names}
                                                            for m in self.metric_names}
 
     def add_label_metric(self, metric_name: str, tracking_name: str, value: float) -> None:
@@ -152,8 +152,8 @@ class TrackingMetrics:
             return float(np.nansum(data))  # counts are summed over classes, NaN ignored
         return float(np.nanmean(data))
 
-    def serialize(self) -> Dict[str, Any]:
-        metrics: Dict[str, Any] = {"label_metrics": self.label_metrics, "eval_time": self.eval_time,
+    def serialize(self) -> dict[str, Any]:
+        metrics: dict[str, Any] = {"label_metrics": self.label_metrics, "eval_time": self.eval_time,
                                    "cfg": self.cfg.serialize()}
         for metric_name in self.label_metrics:
             metrics[metric_name] = self.compute_metric(metric_name)

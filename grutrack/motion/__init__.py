@@ -1,7 +1,7 @@
 """Motion module: batched state-space models (CTRA, Bicycle, CA, CV), the batched EKF / KF, and the per-class
 motion configuration (Poly-MOT's nuScenes values by default)."""
 
-from grutrack.motion.defaults import (
+from grutrack.motion.config import (
     DEFAULT_CONFIG,
     build_models,
     class_matrices,

@@ -1,4 +1,5 @@
-"""GRU-KF checkpoints: weights, architecture, optimizer, scheduler, RNG states and position, written atomically."""
+"""GRU-KF checkpoints as networks: the network of a :class:`~grutrack.documents.Checkpoint` (the document, its one
+writer and one reader, is in :mod:`grutrack.documents`), and the weights checked against the architecture."""
 
 from __future__ import annotations
 
@@ -6,55 +7,52 @@ from pathlib import Path
 
 import torch
 
-from grutrack import __version__
+from grutrack.documents import CHECKPOINT_FORMAT as FORMAT  # noqa: F401  (the format tag, re-exported)
+from grutrack.documents import Checkpoint
 from grutrack.errors import InputFormatError
-from grutrack.io import atomic_path
 from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
 
-FORMAT = "grutrack-grukf/1"
+
+def network_checkpoint(net: GRUKalmanNet, **fields) -> Checkpoint:
+    """The checkpoint document of ``net`` (its architecture and a copy-free view of its weights) with ``fields``
+    (:class:`~grutrack.documents.Checkpoint`'s other fields)."""
+    return Checkpoint(arch=net.config_dict(), weights=net.state_dict(), **fields)
 
 
 def save_checkpoint(path: str | Path, net: GRUKalmanNet, extra: dict | None = None) -> None:
-    """Write ``{format, version, arch, model, **extra}`` to ``path`` atomically."""
-    payload = {"format": FORMAT, "grutrack_version": __version__, "arch": net.config_dict(),
-               "model": net.state_dict(), **(extra or {})}
-    with atomic_path(path) as tmp:
-        torch.save(payload, tmp)
+    """Write ``net`` as a checkpoint to ``path`` atomically; ``extra``: more fields in the file's layout
+    (``{"train_config": {...}}``), read through :meth:`Checkpoint.from_dict`."""
+    doc = network_checkpoint(net)
+    if extra:
+        doc = Checkpoint.from_dict({**doc.to_dict(), **extra}, where=str(path))
+    doc.write(path)
 
 
 def read_checkpoint(path: str | Path, map_location="cpu") -> dict:
-    """The checkpoint dict; clear error for a missing or foreign file."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputFormatError(f"{path}: checkpoint does not exist (train one with `grutrack train`)")
-    try:
-        ck = torch.load(path, map_location=map_location, weights_only=False)
-    except Exception as exc:  # torch raises many types for a corrupt file
-        raise InputFormatError(f"{path}: not a readable torch checkpoint ({exc})") from exc
-    if not isinstance(ck, dict) or ck.get("format") != FORMAT:
-        raise InputFormatError(f"{path}: not a grutrack GRU-KF checkpoint (expected format {FORMAT})")
-    return ck
+    """The checkpoint at ``path`` as the file's mapping (:meth:`Checkpoint.to_dict`; for tools that read single
+    fields); a missing or foreign file is an InputFormatError naming it."""
+    return Checkpoint.read(path, map_location).to_dict()
 
 
-def load_network(path: str | Path, map_location="cpu") -> GRUKalmanNet:
-    """The trained network of a checkpoint (weights loaded once, never re-initialised afterwards)."""
-    ck = read_checkpoint(path, map_location)
+def load_network(source: str | Path | Checkpoint, map_location="cpu", where: str | Path | None = None
+                 ) -> GRUKalmanNet:
+    """The trained network of a checkpoint (a path, or a document already read: ``where`` names its file in
+    errors), weights loaded once and never re-initialised afterwards, in eval mode."""
+    ck = source if isinstance(source, Checkpoint) else Checkpoint.read(source, map_location)
+    where = where or (source if not isinstance(source, Checkpoint) else "checkpoint")
     try:
-        net = GRUKalmanNet(GRUKFConfig(**ck["arch"]), generator=torch.Generator())  # weights loaded below
+        net = GRUKalmanNet(GRUKFConfig(**ck.arch), generator=torch.Generator())  # weights loaded below
     except (TypeError, ValueError, KeyError) as exc:
-        raise InputFormatError(f"{path}: field 'arch' is not a GRU-KF architecture ({exc})") from exc
-    load_weights(net, ck, path)
+        raise InputFormatError(f"{where}: field 'arch' is not a GRU-KF architecture ({exc})") from exc
+    load_weights(net, ck, where)
     net.eval()
     return net
 
 
-def load_weights(net: GRUKalmanNet, ck: dict, path: str | Path) -> None:
-    """Load ``ck['model']`` into ``net``; a missing, extra or mis-shaped tensor raises InputFormatError naming
-    the file and the tensor."""
-    state = ck.get("model")
-    if not isinstance(state, dict):
-        raise InputFormatError(f"{path}: field 'model' must hold the network's tensors")
-    own = net.state_dict()
+def load_weights(net: GRUKalmanNet, ck: Checkpoint, path: str | Path) -> None:
+    """Load the checkpoint's weights into ``net``; a missing, extra or mis-shaped tensor raises InputFormatError
+    naming the file and the tensor."""
+    state, own = ck.weights, net.state_dict()
     missing, extra = sorted(set(own) - set(state)), sorted(set(state) - set(own))
     if missing or extra:
         raise InputFormatError(f"{path}: field 'model' does not fit the architecture in 'arch' (missing tensors "
@@ -65,10 +63,3 @@ def load_weights(net: GRUKalmanNet, ck: dict, path: str | Path) -> None:
             raise InputFormatError(f"{path}: tensor 'model.{k}' has shape {got}, expected {tuple(own[k].shape)} "
                                    f"(the architecture in 'arch')")
     net.load_state_dict(state)
-
-
-def checkpoint_matched_box(path: str | Path) -> str:
-    """The box a tracker running this checkpoint's network writes for a matched track by default: the training
-    config's ``matched_box`` ("filter" or "detection"); "detection" for checkpoints written before that key."""
-    cfg = read_checkpoint(path).get("train_config") or {}
-    return cfg.get("matched_box", "detection")

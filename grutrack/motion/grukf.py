@@ -49,7 +49,7 @@ from grutrack.motion.torch_models import make_torch_model, wrap_angle_t
 MEAS_DIM = 9
 #: extra inputs with ``aux_inputs``: log(1 + norm) of the four features, log(update count), log(gap)
 AUX_DIM = 6
-MIN_SIZE = 0.05  # metres: lower bound of the posterior w, l, h
+MIN_SIZE = 0.05  # metres: the default lower bound of the posterior w, l, h (GRUKFConfig.min_size)
 _YAW_Z = 6
 #: what the network's output is added to: nothing ("constant", the paper) or the per-track EKF gain ("ekf")
 GAIN_PRIORS = ("constant", "ekf")
@@ -105,6 +105,8 @@ class GRUKFConfig:
     ``training_classes: own_model`` of the training config)
     (``{model name: params}``, the training motion config's, and ``form``: "arc" or "piecewise", the tracker
     preset's form of that model, so that the untrained network is the preset's EKF for those classes too).
+    min_size: the lower bound (metres) of the posterior's w, l, h (a learned gain can overshoot; sizes stay
+    physical); :data:`MIN_SIZE` by default and in checkpoints written before the option.
     """
 
     ss_model: str = "CTRA"
@@ -123,6 +125,7 @@ class GRUKFConfig:
     model_params: dict = field(default_factory=dict)   # own_model: {model name: constructor parameters}
     coast_yaw_rate: str = "keep"   # "keep" or "zero" (see above)
     coast_acceleration: str = "keep"   # "keep" or "zero" (see above)
+    min_size: float = MIN_SIZE     # metres: lower bound of the posterior w, l, h
 
     def torch_model(self, name: str | None = None):
         """The torch SS model ``name`` (default ``ss_model``) with its parameters (:mod:`torch_models`)."""
@@ -427,7 +430,7 @@ class GRUKalmanNet(nn.Module):
         columns; ``flip`` (1, 4) which of those are measurement-space residuals; ``pairs`` (i, j) the planar
         column pairs in the heading frame (x, y and vx, vy of the measurements; x, y of the states); ``part``
         (D, 4) the input each column belongs to (one-hot); ``lower`` (1, m) the posterior's lower bounds (sizes
-        at MIN_SIZE, -inf elsewhere); ``yaw`` the state's yaw column."""
+        at ``min_size``, -inf elsewhere); ``yaw`` the state's yaw column."""
         cache = self.__dict__.setdefault("_layout_cache", {})
         if device not in cache:
             n, m, yi = self.n, self.m, self.ss.yaw_index
@@ -448,7 +451,7 @@ class GRUKalmanNet(nn.Module):
                 for k, (o, size) in enumerate(zip(starts, sizes)):
                     part[o:o + size, k] = 1.0
                 lower = torch.full((1, m), -math.inf, dtype=torch.float64)
-                lower[0, 3:6] = MIN_SIZE
+                lower[0, 3:6] = self.cfg.min_size
                 cache[device] = {"diff": diff.to(device), "pairs": pairs, "part": part.to(device),
                                  "angles": torch.tensor([_YAW_Z, n + _YAW_Z, 2 * n + yi, 2 * n + m + yi],
                                                         device=device),

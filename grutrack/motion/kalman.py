@@ -11,7 +11,8 @@ ordinary Kalman filter (its F and H are exact).
   by pi when it exceeds pi/2, see below), ``S = H P H^T + R``, ``K = P H^T S^-1`` (LU with partial pivoting),
   ``x = x + K r`` with the yaw wrapped again, and Joseph form ``P = (I-KH) P (I-KH)^T + K R K^T``, symmetrised.
   :meth:`BatchKalmanFilter.correct` does this in place for selected rows with a per-class R table (the tracker's
-  call: one compiled pass, no gathered copies of P).
+  call: one compiled pass, no gathered copies of P) and returns what it computed, r, S and K (a
+  :class:`Correction`, as filterpy's update keeps ``y``, ``S``, ``K``): nobody computes the gain again.
 
 Heading ambiguity (``yaw_flip``, default True): a box's footprint is the same under a 180 degree turn and
 detectors often return the reversed heading. When the wrapped yaw residual exceeds pi/2 in magnitude the
@@ -23,6 +24,8 @@ the heading by up to K * pi; ``yaw_flip=False`` reproduces that.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -43,11 +46,6 @@ def _batch(M: np.ndarray, n: int, d: int, name: str) -> np.ndarray:
     if M.shape != (n, d, d):
         raise ValueError(f"{name} must have shape ({n}, {d}, {d}) or ({d}, {d}), got {M.shape}")
     return M
-
-
-def _symmetrise(P: np.ndarray) -> np.ndarray:
-    """``(P + P^T) / 2`` over the last two axes."""
-    return 0.5 * (P + np.swapaxes(P, -1, -2))
 
 
 def wrap_yaw_residual(r_yaw: np.ndarray, yaw_flip: bool) -> np.ndarray:
@@ -104,14 +102,15 @@ def _propagate_kernel(F, P, Q, out) -> None:
 
 
 @njit(cache=True)
-def _correct_kernel(x, P, rows, z, h, H, R, R_index, yaw_flip, yaw_index) -> None:
+def _correct_kernel(x, P, rows, z, h, H, R, R_index, yaw_flip, yaw_index, y_out, S_out, K_out) -> None:
     """EKF correction, Joseph form, of the tracks ``rows (K,)`` of ``x (N, d)`` and ``P (N, d, d)``, in place.
 
     ``z (K, m)`` measurements, ``h (K, m)`` = h(x[rows]), ``H (K, m, d)`` its Jacobian, ``R (C, m, m)`` a table
     indexed by ``R_index (K,)``. Residual ``r = z - h`` with the yaw component (``YAW_Z``) wrapped to [-pi, pi)
     (and turned by pi beyond pi/2 with ``yaw_flip``); ``S = sym(H P H^T + R)``, ``K = P H^T S^-1``
     (``K^T = S^-1 (H P)`` by LU with partial pivoting), ``x' = x + K r`` with the yaw state ``yaw_index``
-    wrapped, ``P' = sym((I - K H) P (I - K H)^T + K R K^T)``.
+    wrapped, ``P' = sym((I - K H) P (I - K H)^T + K R K^T)``. Row k's r, S and K are written to ``y_out (K, m)``,
+    ``S_out (K, m, m)`` and ``K_out (K, d, m)``.
     """
     d, m = x.shape[1], H.shape[1]
     HP, KT, S, S_sym = np.empty((m, d)), np.empty((m, d)), np.empty((m, m)), np.empty((m, m))
@@ -130,7 +129,12 @@ def _correct_kernel(x, P, rows, z, h, H, R, R_index, yaw_flip, yaw_index) -> Non
         _mm(HP, Hk, S, b_t=True, sparse_b=True)   # H P H^T
         S += Rk
         _sym_into(S, S_sym)
-        _lu_solve(S_sym, HP, KT, perm)            # K^T = S^-1 H P
+        S_out[k] = S_sym
+        _lu_solve(S_sym, HP, KT, perm)            # K^T = S^-1 H P (S_sym overwritten by its LU factors)
+        for i in range(m):
+            y_out[k, i] = r[0, i]
+            for j in range(d):
+                K_out[k, j, i] = KT[i, j]
         _mm(KT, r, Kr, a_t=True, b_t=True)        # K r
         _mm(KT, Hk, IKH, a_t=True, sparse_b=True)  # K H
         IKH *= -1.0
@@ -179,6 +183,22 @@ def _lu_solve(S, B, X, perm) -> None:
             X[i, col] = acc / S[i, i]
 
 
+@dataclass
+class Correction:
+    """What an update of K tracks computed, row k for the k-th corrected track: the innovation ``y = z - h(x^-)``
+    (K, 9) with its yaw component wrapped (and flip-corrected with ``yaw_flip``), its covariance
+    ``S = H P^- H^T + R`` (K, 9, 9) and the gain ``K = P^- H^T S^-1`` (K, dim_x, 9) the update applied."""
+
+    y: np.ndarray
+    S: np.ndarray
+    K: np.ndarray
+
+    @classmethod
+    def empty(cls, dim_x: int) -> Correction:
+        """The correction of no track."""
+        return cls(np.zeros((0, BOX_DIM)), np.zeros((0, BOX_DIM, BOX_DIM)), np.zeros((0, dim_x, BOX_DIM)))
+
+
 class BatchKalmanFilter:
     """EKF (non-linear model) or KF (linear model) over a batch of tracks; see the module docstring."""
 
@@ -213,14 +233,6 @@ class BatchKalmanFilter:
         r[:, YAW_Z] = wrap_yaw_residual(r[:, YAW_Z], self.yaw_flip)
         return r
 
-    def project(self, x: np.ndarray, P: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Measurement-space prediction: ``h(x) (N, 9)``, ``H (N, 9, dim_x)``, ``S = H P H^T + R (N, 9, 9)``."""
-        x = np.asarray(x, dtype=np.float64)
-        n, d = x.shape[0], self.model.dim_x
-        H = self.model.H(x)
-        S = H @ _batch(P, n, d, "P") @ np.swapaxes(H, -1, -2) + _batch(R, n, BOX_DIM, "R")
-        return self.model.h(x), H, _symmetrise(S)
-
     def update(self, x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Correct with measurements ``z (N, 9)`` (row i for track i) -> ``(x, P)``, Joseph form."""
         x = np.array(x, dtype=np.float64)
@@ -237,13 +249,18 @@ class BatchKalmanFilter:
         return x, P
 
     def correct(self, x: np.ndarray, P: np.ndarray, rows: np.ndarray, z: np.ndarray, R: np.ndarray,
-                R_index: np.ndarray) -> None:
+                R_index: np.ndarray) -> Correction:
         """Correct the tracks ``rows (K,)`` of ``x (N, dim_x)``, ``P (N, dim_x, dim_x)`` (C-contiguous float64,
         changed in place) with ``z (K, 9)``; ``R (C, 9, 9)`` a table indexed by ``R_index (K,)`` (e.g. the
-        per-class noise and the tracks' labels). Row k of the result equals :meth:`update` of that track."""
-        if len(rows) == 0:
-            return
+        per-class noise and the tracks' labels). Row k of the result equals :meth:`update` of that track.
+        Returns the update's innovation, its covariance and the gain (:class:`Correction`)."""
+        d, k = self.model.dim_x, len(rows)
+        if k == 0:
+            return Correction.empty(d)
         h, H = self.model.measurement(x[rows])
         z = np.ascontiguousarray(z, dtype=np.float64).reshape(-1, BOX_DIM)
+        out = Correction(np.empty((k, BOX_DIM)), np.empty((k, BOX_DIM, BOX_DIM)), np.empty((k, d, BOX_DIM)))
         _correct_kernel(x, P, np.asarray(rows, dtype=np.int64), z, h, H, np.asarray(R, dtype=np.float64),
-                        np.asarray(R_index, dtype=np.int64), self.yaw_flip, self.model.yaw_index)
+                        np.asarray(R_index, dtype=np.int64), self.yaw_flip, self.model.yaw_index, out.y, out.S,
+                        out.K)
+        return out

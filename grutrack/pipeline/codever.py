@@ -30,9 +30,9 @@ STAGE_SOURCES: dict[str, tuple[str, ...]] = {
     "simulate": ("configs/detector_profiles", "cli/demo.py", *_DATASETS),
     "fetch": ("data/registry.py", "data/download.py", "configs/detections.yaml", "cli/detections.py"),
     "convert": ("data", "configs/detections.yaml", "cli/detections.py"),
-    "train": ("training", "evaluation/fast_amota.py", "evaluation/fast_loading.py", "configs/training",
+    "train": ("training", "evaluation/nuscenes_fast", "evaluation/tracking_classes.py", "configs/training",
               "cli/train.py", *_TRACKING, *_DATASETS),
-    "resolve": ("pipeline/presets.py", "tracking/config.py", "motion/defaults.py", "configs/trackers",
+    "resolve": ("pipeline/presets.py", "tracking/config.py", "motion/config.py", "configs/trackers",
                 "configs/motion", "cli/resolve.py"),
     "track": ("cli/track.py", *_TRACKING, *_DATASETS),
     "submit": ("cli/submit.py", "pipeline/presets.py", *_DATASETS),   # presets: where track wrote its config

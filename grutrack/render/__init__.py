@@ -1,7 +1,8 @@
 """Bird's-eye renders of a tracking run with the evaluator's own decisions (true positive, false positive, miss,
 id switch) drawn on the scene. :mod:`grutrack.render.views` joins the boxes with the decisions (numpy only);
-:mod:`grutrack.render.draw` draws them (matplotlib, imported lazily). Sits at the report layer: it reads data
-and evaluation, nothing below imports it."""
+:mod:`grutrack.render.draw` draws them (matplotlib, imported lazily); :mod:`grutrack.render.records` forms the
+counts.json entries and, on request, the Rerun recordings (:mod:`grutrack.render.rerun_log`). Sits at the report
+layer: it reads data and evaluation, nothing below imports it."""
 
 from __future__ import annotations
 

@@ -25,9 +25,9 @@ import numpy as np
 
 from grutrack.errors import DatasetError
 from grutrack.io import write_json_atomic
+from grutrack.render.records import scene_record
 from grutrack.render.views import (COUNT_KEYS, GT_IGNORED, GT_MATCH, GT_MISS, GT_SWITCH, TR_BELOW, TR_FP,
-                                   TR_IGNORED, TR_MATCH, TR_SWITCH, FrameView, choose_scenes, scene_record,
-                                   update_trails)
+                                   TR_IGNORED, TR_MATCH, TR_SWITCH, FrameView, choose_scenes, update_trails)
 
 MATCHING = ("official AV2 tracking evaluation (av2.evaluation.tracking.eval.evaluate, HOTA objective): per class "
             "at its tuned score threshold, TrackEval CLEAR on centre distance (similarity 1 - d/2 m >= 0.5, i.e. "

@@ -16,8 +16,8 @@ from pathlib import Path
 
 from grutrack.errors import InputFormatError
 from grutrack.io import read_json, write_json_atomic
-from grutrack.render.views import (COUNT_KEYS, FrameView, build_views, choose_scenes, scene_errors,
-                                   scene_record)
+from grutrack.render.records import scene_record
+from grutrack.render.views import COUNT_KEYS, FrameView, build_views, choose_scenes, scene_errors
 
 
 def load_evaluation(dataroot: str, version: str, split: str, submission: str | Path):
@@ -27,7 +27,7 @@ def load_evaluation(dataroot: str, version: str, split: str, submission: str | P
     split, or an unknown split.
     """
     from grutrack.data.nuscenes import load_scenes, open_nuscenes
-    from grutrack.evaluation.fast_amota import load_tracks, match_decisions
+    from grutrack.evaluation.nuscenes_fast import load_tracks, match_decisions
 
     nusc = open_nuscenes(dataroot, version)
     scenes = load_scenes(nusc, split, with_gt=True)

@@ -1,7 +1,7 @@
 """What one rendered frame shows: ground truth, tracks and detections joined with the evaluator's decisions.
 
 :class:`FrameView` is the drawn frame of either dataset. For nuScenes, :func:`build_views` takes the decisions
-from :func:`grutrack.evaluation.fast_amota.match_decisions` (the fast exact evaluator's own matching at each
+from :func:`grutrack.evaluation.nuscenes_fast.match_decisions` (the fast exact evaluator's own matching at each
 class's best-MOTA threshold), so the counts of a frame summed over frames and scenes are the metrics JSON's
 TP / FP / FN / IDS; AV2 frames are built by :mod:`grutrack.render.av2`. Boxes keep the global frame here;
 :mod:`grutrack.render.draw` moves them into the ego frame.
@@ -10,14 +10,13 @@ TP / FP / FN / IDS; AV2 frames are built by :mod:`grutrack.render.av2`. Boxes ke
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from grutrack.boxes import yaw_from_quaternion
 from grutrack.data.scene import Scene
-from grutrack.evaluation.fast_amota import BELOW_THRESHOLD, MATCH, MISS_OR_FP, SWITCH, UNSCORED, MatchDecisions
+from grutrack.evaluation.nuscenes_fast import BELOW_THRESHOLD, MATCH, MISS_OR_FP, SWITCH, UNSCORED, MatchDecisions
 
 #: ground-truth states drawn: matched (TP), matched with an id switch, missed (FN), not evaluated
 #: (outside the class range or without lidar/radar points: the evaluator drops it)
@@ -240,31 +239,3 @@ def scene_errors(decisions: MatchDecisions) -> dict:
     for f in range(len(tokens)):
         out[tokens[f]] = out.get(tokens[f], 0) + int(per_frame[f])
     return out
-
-
-def frame_record(v: FrameView, png: Path, out: Path) -> dict:
-    """The counts.json entry of one frame."""
-    return {"index": v.index, "frame": v.index + 1, "sample_token": v.sample_token, "timestamp": v.timestamp,
-            "png": str(png.relative_to(out)),
-            "ego": {"xy": [round(float(x), 4) for x in v.ego_xy], "yaw": round(v.ego_yaw, 6)},
-            "totals": v.totals(), "per_class": v.counts,
-            "false_positives": v.false_positives, "missed": v.missed, "id_switches": v.id_switches}
-
-
-def scene_record(scene, errors: int, views: list[FrameView], pngs: list[Path], gif: Path | None, out: Path,
-                 rerun: bool) -> dict:
-    """The counts.json entry of one rendered scene (``scene``: a canonical scene; ``errors``: its IDS + FP + FN);
-    writes ``out/<scene>.rrd`` too when ``rerun``."""
-    return {"name": scene.name, "token": scene.token, "errors": errors,
-            "animation": str(gif.relative_to(out)) if gif else None,
-            "rerun": _recording(out, views) if rerun else None,
-            "frames": [frame_record(v, p, out) for v, p in zip(views, pngs)]}
-
-
-def _recording(out: Path, views: list[FrameView]) -> str:
-    """Write ``out/<scene>.rrd`` (:mod:`grutrack.render.rerun_log`); returns its path relative to ``out``."""
-    from grutrack.render.rerun_log import write_recording
-
-    path = out / f"{views[0].scene}.rrd"
-    write_recording(path, views)
-    return str(path.relative_to(out))

@@ -99,7 +99,8 @@ def _no_step(cfg_path: Path) -> str:
     import yaml
 
     cfg = yaml.safe_load(cfg_path.read_text()) if cfg_path.is_file() else {}
-    if cfg.get("gap_bins") == 0 and cfg.get("gain_prior", "constant") == "constant":
+    net = {**cfg, **(cfg.get("network") or {})}     # the network's options: nested, or flat in older configs
+    if net.get("gap_bins") == 0 and net.get("gain_prior", "constant") == "constant":
         return ("No training step: the network as initialised, whose gain is one constant, the EKF's mean gain "
                 "on the training data (the constant-gain ablation).")
     return "No training step: the network as initialised (its gain prior)."

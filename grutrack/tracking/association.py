@@ -12,6 +12,13 @@ Two assignment rules (tracker preset key ``association.assignment``), both over 
   ``sum (threshold - cost)`` over its pairs; a cheap pair is kept even when it leaves two others unmatched.
   This is what ``lap.lapjv(cost, extend_cost=True, cost_limit=threshold)`` solves (Poly-MOT, Fast-Poly): lap
   pads the matrix so that leaving a detection and a track unmatched costs ``threshold / 2`` each.
+
+Fast-Poly's association (Li et al., "Fast-Poly", RA-L 2024; preset ``fastpoly``), on dense cost matrices
+(:func:`gated_association`, :func:`gated_costs`): the alignment GIoU (A-GIoU, :func:`aligned_extents`,
+:func:`pairwise_a_giou`: every box is replaced by the axis-aligned rectangle enclosing its, optionally scaled,
+BEV footprint, so no polygon clipping is needed; the 3D variant extrudes the rectangles by the box heights) and
+the "voxel" distance gate (:func:`distance_mask`: a 3D centre distance below a per-class radius; pairs outside
+it are never scored). Scale NMS (:func:`grutrack.tracking.preprocess.scale_nms_keep`) uses the same measures.
 """
 
 from __future__ import annotations
@@ -213,6 +220,150 @@ def _solve_stages(solve, costs: list[np.ndarray], det_labels: np.ndarray, first_
     return Matches(md, mt, _unmatched(n_det, md), _unmatched(n_trk, mt))
 
 
+# --- Fast-Poly's association (preset ``fastpoly``; Li et al., "Fast-Poly", RA-L 2024, behaviour read from its
+# public code at 694dec3): alignment GIoU (A-GIoU) similarities and a 3D centre-distance gate, on dense costs.
+
+
+def aligned_extents(boxes: np.ndarray, scale: np.ndarray | float = 1.0,
+                    quaternion: np.ndarray | None = None) -> np.ndarray:
+    """Axis-aligned BEV extents of boxes whose size is scaled by ``scale`` about its centre.
+
+    boxes (N, >=7); scale scalar or (N,) -> (N, 4) float64 ``[x_min, y_min, x_max, y_max]`` metres.
+    Without ``quaternion`` the footprint is the yaw-rotated w x l rectangle. With ``quaternion`` (N, 4)
+    ``[w, x, y, z]`` (a detection's own rotation, pitch and roll included) it is, as Fast-Poly's, the ground-plane
+    projection of the box's bottom face: ``c + R(q) [+-l/2, +-w/2, -h/2]`` with w, l, h scaled.
+    """
+    b = np.array(boxes, dtype=np.float64, ndmin=2)[:, :7]
+    k = np.broadcast_to(np.asarray(scale, dtype=np.float64), (len(b),))
+    if quaternion is None:
+        b[:, 3:5] *= k[:, None]
+        c = geometry.bev_corners(b)                                # (N, 4, 2)
+    else:
+        R = rotation_matrices(quaternion)                          # (N, 3, 3)
+        local = np.stack([np.array([1, 1, -1, -1]) * (0.5 * k * b[:, 4])[:, None],
+                          np.array([-1, 1, 1, -1]) * (0.5 * k * b[:, 3])[:, None],
+                          np.broadcast_to((-0.5 * k * b[:, 5])[:, None], (len(b), 4))], axis=1)   # (N, 3, 4)
+        c = (np.einsum("nij,njk->nik", R[:, :2], local) + b[:, :2, None]).transpose(0, 2, 1)
+    return np.concatenate([c.min(axis=1), c.max(axis=1)], axis=1)
+
+
+def rotation_matrices(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) of quaternions ``q (N, 4) [w, x, y, z]`` (normalised first)."""
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+                     np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+                     np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], axis=1)
+
+
+def _rect_area(e: np.ndarray) -> np.ndarray:
+    """Areas (m^2) of extents ``e (..., 4)``."""
+    return (e[..., 2] - e[..., 0]) * (e[..., 3] - e[..., 1])
+
+
+def pairwise_a_giou(ext_a: np.ndarray, ext_b: np.ndarray, z_h_a: np.ndarray | None = None,
+                    z_h_b: np.ndarray | None = None) -> np.ndarray:
+    """A-GIoU between every pair of axis-aligned extents: (Na, 4), (Nb, 4) -> (Na, Nb) in (-1, 1].
+
+    BEV (``z_h_*`` None): ``A-GIoU = I / U - (C - U) / C`` with I, U the intersection and union areas of the
+    two rectangles and C the area of the smallest axis-aligned rectangle enclosing both.
+    3D (``z_h_a (Na, 2)``, ``z_h_b (Nb, 2)`` = centre height z and box height h, metres): the same formula on
+    volumes, ``I3 = I * h_o``, ``U3 = A_a h_a + A_b h_b - I3``, ``C3 = C * h_u`` with h_o the overlap and h_u the
+    span of the two vertical intervals [z - h/2, z + h/2].
+    """
+    a, b = ext_a[:, None, :], ext_b[None, :, :]
+    iw = np.maximum(0.0, np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]))
+    ih = np.maximum(0.0, np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]))
+    inter = iw * ih
+    area_a, area_b = _rect_area(a), _rect_area(b)
+    hull = ((np.maximum(a[..., 2], b[..., 2]) - np.minimum(a[..., 0], b[..., 0]))
+            * (np.maximum(a[..., 3], b[..., 3]) - np.minimum(a[..., 1], b[..., 1])))
+    if z_h_a is None:
+        union = area_a + area_b - inter
+        return inter / union - (hull - union) / hull
+    za, ha = z_h_a[:, None, 0], z_h_a[:, None, 1]
+    zb, hb = z_h_b[None, :, 0], z_h_b[None, :, 1]
+    top_a, bot_a, top_b, bot_b = za + ha / 2, za - ha / 2, zb + hb / 2, zb - hb / 2
+    h_over = np.maximum(0.0, np.minimum(top_a, top_b) - np.maximum(bot_a, bot_b))
+    h_span = np.maximum(top_a, top_b) - np.minimum(bot_b, bot_a)
+    inter3 = inter * h_over
+    union3 = area_a * ha + area_b * hb - inter3
+    hull3 = hull * h_span
+    return inter3 / union3 - (hull3 - union3) / hull3
+
+
+def a_giou_bev(a: np.ndarray, b: np.ndarray, qa: np.ndarray | None = None) -> np.ndarray:
+    """BEV A-GIoU between boxes a (Na, 9) and b (Nb, 9) -> (Na, Nb); ``qa`` (Na, 4): a's own quaternions."""
+    return pairwise_a_giou(aligned_extents(a, quaternion=qa), aligned_extents(b))
+
+
+def a_giou_3d(a: np.ndarray, b: np.ndarray, qa: np.ndarray | None = None) -> np.ndarray:
+    """3D A-GIoU between boxes a (Na, 9) and b (Nb, 9) -> (Na, Nb); ``qa`` (Na, 4): a's own quaternions."""
+    return pairwise_a_giou(aligned_extents(a, quaternion=qa), aligned_extents(b), a[:, [2, 5]], b[:, [2, 5]])
+
+
+def distance_mask(a: np.ndarray, b: np.ndarray, radius: np.ndarray | float) -> np.ndarray:
+    """(Na, Nb) bool: 3D centre distance ``||c_a - c_b||_2 < radius`` (metres).
+
+    a (Na, >=3), b (Nb, >=3); radius scalar, (Na, 1) or (Na, Nb) (e.g. per class of ``a``).
+    """
+    d = np.linalg.norm(a[:, None, :3] - b[None, :, :3], axis=2)
+    return d < radius
+
+
+#: similarities :func:`gated_costs` can compute densely
+DENSE_METRICS = ("a_giou_3d", "a_giou_bev", "giou_3d", "giou_bev", "iou_3d", "iou_bev")
+
+
+def _dense_similarity(name: str, a: np.ndarray, b: np.ndarray, qa: np.ndarray | None = None) -> np.ndarray:
+    """(Na, Nb) similarity ``name`` between boxes a (Na, 9) and b (Nb, 9); ``qa`` (Na, 4) a's own quaternions
+    (A-GIoU footprints only)."""
+    if name == "a_giou_3d":
+        return a_giou_3d(a, b, qa)
+    if name == "a_giou_bev":
+        return a_giou_bev(a, b, qa)
+    fn = {"giou_3d": geometry.pairwise_giou_3d, "giou_bev": geometry.pairwise_bev_giou,
+          "iou_3d": geometry.pairwise_iou_3d, "iou_bev": geometry.pairwise_bev_iou}[name]
+    return fn(a, b)
+
+
+def gated_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray, trk_labels: np.ndarray,
+                first_metric: tuple[str, ...], second_metric: str, gate: np.ndarray,
+                invalid: float = np.inf, det_quaternion: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Stage-1 and stage-2 cost matrices (D, T) with Fast-Poly's distance gate; cost = 1 - similarity.
+
+    Stage 1: a pair is scored when its classes agree and its 3D centre distance is below ``gate[class]``
+    metres (``gate`` (C,), 0 = no gate for that class); other pairs cost ``invalid``.
+    Stage 2: as Fast-Poly, the gate only selects rows and columns: every same-class pair between a detection
+    and a track that each have a same-class partner closer than the largest gate radius is scored with
+    ``second_metric``, even when that pair itself lies outside the gate (Fast-Poly's rows and columns come
+    from the union of its per-class distance masks). ``det_quaternion`` (D, 4): the detections' own rotations,
+    for their A-GIoU footprints (tracks are yaw-only boxes).
+    """
+    D, T = len(det_boxes), len(trk_boxes)
+    c1, c2 = np.full((D, T), invalid), np.full((D, T), invalid)
+    same = det_labels[:, None] == trk_labels[None, :]
+    radii = np.where(gate > 0, gate, np.inf)
+    dist = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2)
+    valid = same & (dist < radii[det_labels][:, None])                 # stage-1 pairs
+    near = same & (dist < radii.max())                                 # Fast-Poly's union of the class masks
+    rows, cols = np.flatnonzero(near.any(axis=1)), np.flatnonzero(near.any(axis=0))
+    if len(rows) == 0:
+        return c1, c2
+    a, b = det_boxes[rows], trk_boxes[cols]
+    sub = np.ix_(rows, cols)
+    names = {first_metric[c] for c in np.unique(det_labels[rows])} | {second_metric}
+    qa = None if det_quaternion is None else det_quaternion[rows]
+    sims = {n: _dense_similarity(n, a, b, qa) for n in sorted(names)}
+    first = np.full((len(rows), len(cols)), -np.inf)
+    for c in np.unique(det_labels[rows]):
+        r = det_labels[rows] == c
+        first[r] = sims[first_metric[c]][r]
+    c1[sub] = np.where(valid[sub], 1.0 - first, invalid)
+    c2[sub] = np.where(same[sub], 1.0 - sims[second_metric], invalid)
+    return c1, c2
+
+
 def gated_association_needed(cfg) -> bool:
     """Whether a preset needs :func:`gated_association` (alignment-GIoU metrics or a distance gate)."""
     metrics = set(cfg.first_metric) | {cfg.second_metric}
@@ -221,9 +372,7 @@ def gated_association_needed(cfg) -> bool:
 
 def gated_association(cfg):
     """Two-stage association on dense costs with Fast-Poly's distance gate and A-GIoU metrics
-    (:func:`grutrack.tracking.fastpoly.gated_costs`); thresholds and assignment rule as :func:`associate`."""
-    from grutrack.tracking.fastpoly import gated_costs
-
+    (:func:`gated_costs`); thresholds and assignment rule as :func:`associate`."""
     solve = ASSIGNMENT[cfg.assignment]
 
     def run(dets, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:

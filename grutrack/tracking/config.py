@@ -38,7 +38,9 @@ _NAMED_PER_CLASS = ("per_class_metric", "per_class_nms_metric", "per_class_geome
 
 @dataclass(frozen=True)
 class TrackerConfig:
-    """A validated preset. Per-class values are (7,) arrays indexed by tracking-class label."""
+    """A validated preset. Per-class values are arrays (tuples for names) indexed by label: (7,) by tracking-class
+    label as read; :func:`grutrack.tracking.factory.remap_config` re-indexes them by dataset label, (n_labels,)
+    (sized by the dataset's vocabulary), the form the tracker runs on."""
 
     source: str
     score_threshold: np.ndarray
@@ -56,7 +58,7 @@ class TrackerConfig:
     max_age: np.ndarray
     min_hits: np.ndarray
     decay_rate: np.ndarray
-    punish_num: np.ndarray      # (7,) int64: predicted boxes written for at most this many missed frames
+    punish_num: np.ndarray      # int64 per label: predicted boxes written for at most this many missed frames
     motion_config: str
     model_override: dict[str, str]
     yaw_flip: bool

@@ -6,17 +6,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grutrack.motion.kalman import BatchKalmanFilter
+from grutrack.motion.kalman import BatchKalmanFilter, Correction
 from grutrack.motion.models import MotionModel
 
 
 @dataclass
 class KFState:
-    """Filter state of N tracks: x (N, dim_x), P (N, dim_x, dim_x), labels (N,) class indices."""
+    """Filter state of N tracks: x (N, dim_x), P (N, dim_x, dim_x), labels (N,) class indices; after an update,
+    ``corrected``: what it computed for the tracks it corrected (innovation, its covariance and the gain, rows in
+    the order of the update's ``rows``; :class:`~grutrack.motion.kalman.Correction`), else None."""
 
     x: np.ndarray
     P: np.ndarray
     labels: np.ndarray
+    corrected: Correction | None = None
 
 
 class KalmanBackend:
@@ -43,8 +46,8 @@ class KalmanBackend:
     def update(self, s: KFState, rows: np.ndarray, z: np.ndarray) -> KFState:
         """Correct tracks ``rows`` with measurements z (K, 9)."""
         x, P = s.x.copy(), s.P.copy()
-        self.kf.correct(x, P, rows, z, self.R, s.labels[rows])
-        return KFState(x, P, s.labels)
+        corrected = self.kf.correct(x, P, rows, z, self.R, s.labels[rows])
+        return KFState(x, P, s.labels, corrected)
 
     def boxes(self, s: KFState) -> np.ndarray:
         """Canonical boxes (N, 9) of the current state."""

@@ -40,13 +40,16 @@ def build_tracker(name: str = "ekf", config: str | Path | None = None,
     if name == "grukf":
         if checkpoint is None:
             raise ConfigError("--tracker grukf needs --checkpoint CKPT (a model written by `grutrack train`)")
+        from grutrack.documents import Checkpoint
+        from grutrack.motion.checkpoint import load_network
         from grutrack.tracking.grukf_backend import resolve_device
-        from grutrack.motion.checkpoint import checkpoint_matched_box, load_network
 
         device = resolve_device(device)   # a device this machine lacks is refused before the model is read
+        ck = Checkpoint.read(checkpoint)  # read once: the network and the training config's matched box
         if config is None:  # the default preset writes what the network was trained to give (see grukf.yaml)
-            cfg = replace(cfg, matched_box=checkpoint_matched_box(checkpoint))
-        return Tracker(cfg, network_groups(load_network(checkpoint), cfg, index, device), _association(cfg))
+            cfg = replace(cfg, matched_box=ck.matched_box)
+        return Tracker(cfg, network_groups(load_network(ck, where=checkpoint), cfg, index, device),
+                       _association(cfg))
     return Tracker(cfg, _baseline_groups(name, cfg, index), _association(cfg))
 
 
@@ -90,7 +93,7 @@ def network_models(arch, cfg: TrackerConfig, index: np.ndarray) -> list[tuple[st
     :data:`~grutrack.motion.grukf.NETWORK_MODELS`, one group per model."""
     if arch.network_classes == "all":
         return [(arch.ss_model, np.ones(len(index), dtype=bool))]
-    from grutrack.motion.defaults import load_motion_config
+    from grutrack.motion.config import load_motion_config
     from grutrack.motion.grukf import NETWORK_MODELS
 
     motion = load_motion_config(cfg.motion_config, cfg.model_override or None)
@@ -151,7 +154,7 @@ def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None, backend_cls=
     ``only`` (n_labels,) bool: groups for these labels alone (default: every label).
     """
     index = np.arange(len(TRACKING_CLASSES)) if index is None else index
-    from grutrack.motion.defaults import load_motion_config
+    from grutrack.motion.config import load_motion_config
     from grutrack.motion.models import make_model
     from grutrack.tracking.ekf_backend import KalmanBackend
 
@@ -184,7 +187,7 @@ def with_geometry_filter(backend, cfg: TrackerConfig):
     use = np.array([f != "none" for f in cfg.geometry_filter])
     if not use.any():
         return backend
-    from grutrack.tracking.fastpoly import GeometryFilterBackend
+    from grutrack.tracking.geometry_filter_backend import GeometryFilterBackend
 
     window = np.where(use, cfg.geometry_window, 0)
     return GeometryFilterBackend(backend, window, np.array([f == "mean" for f in cfg.geometry_filter]))

@@ -10,7 +10,8 @@ form, the network's per-class Q, R, P0), linearised at the GRU-KF's own (detache
 
 * predict: ``P^- = F P F^T + Q``, F the Jacobian of f at the posterior;
 * update: ``K_ekf = P^- H^T S^-1``, ``S = H P^- H^T + R`` (given to the network, which adds its residual), and
-  ``P = (I - K_ekf H) P^- (I - K_ekf H)^T + K_ekf R K_ekf^T`` (Joseph form, the EKF's own update).
+  ``P = (I - K_ekf H) P^- (I - K_ekf H)^T + K_ekf R K_ekf^T`` (Joseph form): the EKF's own update, whose gain
+  (:class:`~grutrack.motion.kalman.Correction`) is the one given to the network.
 """
 
 from __future__ import annotations
@@ -219,20 +220,15 @@ class GRUKFBackend:
         return t.detach().cpu().numpy().astype(np.float64)
 
     def _ekf_gain(self, s: GRUState, rows: np.ndarray, z: np.ndarray) -> tuple[torch.Tensor | None, np.ndarray | None]:
-        """The EKF gain ``K_ekf = P^- H^T S^-1`` (K, m, 9) tensor of tracks ``rows`` at their prior and the
-        covariance of all tracks after the EKF's Joseph-form update of ``rows`` with z (K, 9) ((N, m, m));
-        (None, None) without an EKF gain prior."""
+        """The EKF's Joseph-form update of tracks ``rows`` with z (K, 9) at the GRU-KF's (detached) prior: the gain
+        ``K_ekf = P^- H^T S^-1`` (K, m, 9) tensor it applied and the covariance of all tracks after it ((N, m, m));
+        (None, None) without an EKF gain prior. A singular S (a state driven far off) raises LinAlgError."""
         if self.kf is None:
             return None, None
-        x = self._np(s.x)
-        R_index = self._classes(s.labels[rows])
-        _, H = self.kf.model.measurement(x[rows])
-        HP = H @ s.P[rows]                                                    # H P^-  (K, 9, m)
-        S = HP @ np.swapaxes(H, -1, -2) + self.R[R_index]                     # S = H P^- H^T + R
-        S = 0.5 * (S + np.swapaxes(S, -1, -2))
-        K = np.swapaxes(np.linalg.solve(S, HP), -1, -2)                       # K = P^- H^T S^-1  (K, m, 9)
         P = np.ascontiguousarray(s.P, dtype=np.float64).copy()
-        self.kf.correct(x, P, rows, z, self.R, R_index)                       # Joseph form on rows of P
+        K = self.kf.correct(self._np(s.x), P, rows, z, self.R, self._classes(s.labels[rows])).K
+        if not np.isfinite(K).all():
+            raise np.linalg.LinAlgError("Singular matrix")
         return torch.as_tensor(K, device=self.device), P
 
     def update(self, s: GRUState, rows: np.ndarray, z: np.ndarray) -> GRUState:

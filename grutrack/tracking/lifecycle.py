@@ -21,9 +21,10 @@ def lifecycle_kernel(rows, det_scores, labels, scores, misses, hits, score_total
 
     rows (K,) int64: the matched tracks, det_scores (K,): their detections' scores; labels (N,) int64;
     scores, score_total (N,) float64 and misses, hits, score_count (N,) int64 are updated; decay_rate, max_age,
-    min_hits, delete_threshold (7,) float64 per class; multiply: the ``multiply`` score rule; average_score: the
-    ``average_score`` termination; punish_num (7,) float64 per class; frame_count: frames of the scene so far,
-    this one included.
+    min_hits, delete_threshold (n_labels,) float64 per label; multiply: the ``multiply`` score rule; average_score:
+    the ``average_score`` termination; punish_num (n_labels,) float64 per label; frame_count: frames of the scene
+    so far, this one included. Per-label arrays are sized by the dataset's vocabulary (7 nuScenes tracking
+    classes, more for AV2 categories).
     Out: matched, alive, emit (N,) bool.
     """
     n = labels.shape[0]

@@ -1,4 +1,7 @@
-"""Pre-processing of one frame's detections: per-class score filter, then NMS on BEV IoU."""
+"""Pre-processing of one frame's detections: per-class score filter, then NMS: blend NMS on BEV IoU
+(:func:`nms_keep`, Poly-MOT) or Fast-Poly's scale NMS (:func:`scale_nms_keep`: class by class, on footprints
+enlarged by a per-class factor, with a per-class similarity, A-GIoU BEV or rotated BEV IoU, threshold and
+distance gate; its A-GIoU and gate come from :mod:`grutrack.tracking.association`)."""
 
 from __future__ import annotations
 
@@ -7,13 +10,13 @@ from numba import njit
 
 from grutrack import geometry
 from grutrack.data.scene import BoxSet
-from grutrack.tracking.fastpoly import scale_nms_keep
+from grutrack.tracking.association import aligned_extents, distance_mask, pairwise_a_giou
 
 
 def score_filter(dets: BoxSet, thresholds: np.ndarray, strict: bool = False) -> BoxSet:
     """Keep detections whose score is at least (``strict``: above) the threshold of their class.
 
-    thresholds: (7,) float64 indexed by tracking-class label.
+    thresholds: (n_labels,) float64 indexed by label (sized by the dataset's vocabulary).
     """
     thr = thresholds[dets.labels]
     return dets.subset(dets.scores > thr if strict else dets.scores >= thr)
@@ -67,6 +70,65 @@ def nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, threshol
     _nms_kernel(boxes, geometry._box_terms(boxes), np.asarray(labels, dtype=np.int64),
                 np.argsort(-scores, kind="stable"), float(threshold), bool(class_aware), keep)
     return np.flatnonzero(keep).astype(np.int64)
+
+
+#: per-class NMS similarities scale_nms_keep accepts
+NMS_METRICS = ("a_giou_bev", "iou_bev")
+
+
+def scale_nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, metric: tuple[str, ...],
+                   threshold: np.ndarray, scale: np.ndarray, radius: np.ndarray,
+                   quaternion: np.ndarray | None = None) -> np.ndarray:
+    """Fast-Poly's scale NMS; returns the kept indices (K,) int64, class by class (label 0 first), each class in
+    descending score order.
+
+    Within one class c, boxes are visited by descending score (numpy's default, non-stable argsort of
+    ``-score``, as Fast-Poly); a visited box that is still present is kept and removes every later box of
+    its class whose centre lies within ``radius[c]`` metres (3D) and whose similarity ``metric[c]`` with it,
+    computed on both footprints enlarged by ``scale[c]`` (w and l times the factor), exceeds
+    ``threshold[c]``. Metrics: ``a_giou_bev`` (alignment GIoU of the enlarged footprints' enclosing
+    rectangles) or ``iou_bev`` (rotated BEV IoU of the enlarged footprints). Boxes of different classes never
+    suppress each other.
+
+    boxes (N, 9), scores (N,), labels (N,) int; metric: name per label (n_labels,); threshold, scale, radius
+    (n_labels,) (per-label arrays sized by the dataset's vocabulary);
+    quaternion: optional (N, 4) own rotations of the boxes, for the A-GIoU footprints (:func:`aligned_extents`;
+    the rotated IoU always uses the yaw-only footprint).
+    """
+    keep = []
+    for c in range(len(metric)):
+        idx = np.flatnonzero(labels == c)
+        if len(idx) == 0:
+            continue
+        order = idx[np.argsort(-scores[idx])]
+        b = boxes[order]
+        q = None if quaternion is None else quaternion[order]
+        over = _suppression_matrix(b, metric[c], threshold[c], scale[c], radius[c], q)
+        removed = np.zeros(len(order), dtype=bool)
+        for i in range(len(order)):
+            if removed[i]:
+                continue
+            keep.append(order[i])
+            removed[i + 1:] |= over[i, i + 1:]
+    return np.asarray(keep, dtype=np.int64)
+
+
+def _suppression_matrix(b: np.ndarray, metric: str, threshold: float, scale: float, radius: float,
+                        quaternion: np.ndarray | None = None) -> np.ndarray:
+    """(N, N) bool: box i would suppress box j (centres within ``radius``, similarity above ``threshold``)."""
+    near = distance_mask(b, b, radius)
+    if metric == "a_giou_bev":
+        e = aligned_extents(b, scale, quaternion)
+        return near & (pairwise_a_giou(e, e) > threshold)
+    if metric == "iou_bev":
+        i, j = np.nonzero(np.triu(near, k=1))
+        big = b.copy()
+        big[:, 3:6] *= scale
+        over = np.zeros(near.shape, dtype=bool)
+        hit = geometry.paired_bev_iou(big[i], big[j]) > threshold
+        over[i[hit], j[hit]] = over[j[hit], i[hit]] = True
+        return over
+    raise ValueError(f"unknown NMS metric {metric!r} (expected one of {', '.join(NMS_METRICS)})")
 
 
 def preprocess_frame(dets: BoxSet, cfg) -> BoxSet:

@@ -49,7 +49,7 @@ class TrackGroup:
     """The tracks handled by one backend; every array has one entry per track."""
 
     backend: MotionBackend
-    classes: np.ndarray                     # (7,) bool: which tracking classes this group takes
+    classes: np.ndarray                     # (n_labels,) bool: which labels this group takes
     state: Any = None
     ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     labels: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
@@ -142,7 +142,7 @@ class Tracker:
         #: per-class lifecycle tables of :func:`lifecycle_kernel`: decay_rate, max_age, min_hits, delete_threshold
         self._life = tuple(np.ascontiguousarray(a, dtype=np.float64)
                            for a in (cfg.decay_rate, cfg.max_age, cfg.min_hits, cfg.delete_threshold))
-        self._punish = np.ascontiguousarray(cfg.punish_num, dtype=np.float64)  # (7,) frames a track may coast
+        self._punish = np.ascontiguousarray(cfg.punish_num, dtype=np.float64)  # (n_labels,) frames a track may coast
 
     def reset(self) -> None:
         """Forget all tracks (start of a scene); track ids keep counting so they stay unique."""

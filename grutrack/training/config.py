@@ -1,18 +1,26 @@
 """Training configuration (YAML under ``grutrack/configs/training/``), validated against its JSON Schema by the
-one config loader (:mod:`grutrack.config_loader`)."""
+one config loader (:mod:`grutrack.config_loader`).
+
+The network's options are one section, ``network`` (the fields of the network's architecture,
+:class:`~grutrack.motion.grukf.GRUKFConfig`, that a config may set; the schema names them, describes them and
+gives the default of each optional one). A network option given at the top level, as configs and overrides written
+before the section have them (``{gap_bins: 5}``), is read as that option of the section."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, dataclass, fields
+from functools import lru_cache
 from pathlib import Path
 
-from grutrack.config_loader import read_config, validate
+from grutrack.config_loader import read_config, schema, validate
 from grutrack.errors import ConfigError
 
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """See ``grutrack/configs/training/grukf.yaml`` for the meaning of every field."""
+    """See ``grutrack/configs/training/grukf.yaml`` for the meaning of every field. ``network``: the network's
+    options, every key of the schema's ``network`` section (the defaults of those left out filled in); the
+    architecture they make is :func:`grutrack.training.network.network_config`."""
 
     mode: str
     epochs: int
@@ -20,15 +28,7 @@ class TrainConfig:
     weight_decay: float
     seed: int
     device: str
-    ss_model: str
-    four_gru: bool
-    class_gain: bool
-    age_bins: int
-    gap_bins: int
-    yaw_flip: bool
-    aux_inputs: bool
-    gain_prior: str
-    network_classes: str
+    network: dict
     tracker_preset: str
     motion_config: str
     gt_match_distance: float
@@ -48,15 +48,40 @@ class TrainConfig:
     centre_huber_delta: float = 0.0   # metres: x, y residuals beyond it cost linearly, not squared (0: squared)
     lr_min: float = 0.0          # the cosine schedule's floor: the learning rate of the last step
     yaw_loss: str = "heading"    # the yaw residual wrapped as a "heading" (2 pi) or an "axis" (pi)
-    coast_yaw_rate: str = "keep"   # a coasting track's turn rate: "keep" (the SS model's) or "zero"
-    coast_acceleration: str = "keep"   # a coasting track's acceleration: "keep" (the SS model's) or "zero"
     grad_clip_norm: float = 0.0  # the L2 norm a step's gradient is clipped to (0: not clipped, the paper's)
 
 
-#: fields holding real numbers: a string that reads as one is taken as that number (PyYAML reads ``1e-5``, which
-#: has no decimal point, as a string)
-_FLOAT_FIELDS = ("lr", "weight_decay", "gt_match_distance", "prediction_weight", "gt_term_gate",
-                 "centre_huber_delta", "lr_min", "grad_clip_norm")
+@lru_cache(maxsize=None)
+def _network_schema() -> dict:
+    """The schema of the ``network`` section: ``{option: schema node}``."""
+    return schema("training")["properties"]["network"]["properties"]
+
+
+def network_options(section: dict) -> dict:
+    """The network section with every option of the schema, in its order: the given value, else the option's
+    schema default (an option the section lacks and the schema has no default for stays out, for validation to
+    name)."""
+    return {k: section[k] if k in section else node["default"] for k, node in _network_schema().items()
+            if k in section or "default" in node}
+
+
+def nested(raw: dict) -> dict:
+    """``raw`` with the network options given at the top level (the layout before the ``network`` section)
+    moved into the section, where they take the place of the section's own value."""
+    flat = {k: raw[k] for k in _network_schema() if k in raw}
+    section = raw.get("network")
+    if not flat or not isinstance(section, (dict, type(None))):
+        return raw
+    return {**{k: v for k, v in raw.items() if k not in flat}, "network": {**(section or {}), **flat}}
+
+
+def config_record(d: dict) -> dict:
+    """A training config as a checkpoint or training.yaml of any version records it (``asdict`` of its
+    :class:`TrainConfig`), in the current layout: the network options in their section with the defaults of those
+    left out, and the defaults of the keys that version did not have yet (the behaviour it had)."""
+    out = {**{f.name: f.default for f in fields(TrainConfig) if f.default is not MISSING}, **nested(d)}
+    out["network"] = network_options(out.get("network") or {})
+    return out
 
 
 def _as_float(v):
@@ -69,40 +94,56 @@ def _as_float(v):
     return v
 
 
+def _floats(raw: dict, props: dict) -> dict:
+    """``raw`` with the values of the keys the schema ``props`` types as numbers read as floats when they spell
+    one (PyYAML reads ``1e-5``, which has no decimal point, as a string)."""
+    return {k: _as_float(v) if props.get(k, {}).get("type") == "number" else v for k, v in raw.items()}
+
+
 def load_train_config(name_or_path: str | Path = "grukf", overrides: dict | None = None,
                       flags: dict | None = None) -> TrainConfig:
-    """Load a training config by name or path, apply ``overrides`` (key -> value), and validate against
-    ``grutrack/configs/schemas/training.schema.yaml``.
+    """Load a training config by name or path, apply ``overrides`` (key -> value; the network's options at the
+    top level or in a ``network`` mapping), and validate against ``grutrack/configs/schemas/training.schema.yaml``.
 
     ``flags`` (key -> command-line flag) names where an override came from: a bad override is blamed on its
     flag, not on the file."""
     raw, source = read_config("training", name_or_path)
-    raw.update(overrides or {})
+    over = nested(overrides or {})
+    raw = nested(raw)
+    if isinstance(over.get("network"), dict) and isinstance(raw.get("network"), dict):
+        over = {**over, "network": {**raw["network"], **over["network"]}}
+    raw.update(over)
     return config_from_dict(raw, source, flags)
 
 
 def config_from_dict(raw: dict, source: str = "<dict>", flags: dict | None = None) -> TrainConfig:
     """Validate a training config dict; unknown, missing or ill-typed keys raise :class:`ConfigError`."""
     names = [f.name for f in fields(TrainConfig)]
-    raw = {k: _as_float(v) if k in _FLOAT_FIELDS else v for k, v in raw.items()}
+    props = schema("training")["properties"]
+    raw = _floats(nested(raw), props)
+    if isinstance(raw.get("network"), dict):
+        raw["network"] = _floats(raw["network"], _network_schema())
     if isinstance(raw.get("loss_weights"), list):
         raw["loss_weights"] = [_as_float(x) for x in raw["loss_weights"]]
     validate("training", raw, source, flags)
     vals = dict(raw)
+    vals["network"] = network_options(raw["network"])
     vals["loss_weights"] = tuple(float(x) for x in raw["loss_weights"])
     vals["resample_profiles"] = tuple(str(x) for x in raw["resample_profiles"])
     vals["sources"] = tuple(dict(x) for x in raw.get("sources", []))
-    for k in _FLOAT_FIELDS:
-        if k in raw:
+    for k, node in props.items():
+        if node.get("type") == "number" and k in raw:
             vals[k] = float(raw[k])
-    own = "network_classes" if vals["network_classes"] == "own_model" else (
+    network_classes = vals["network"]["network_classes"]
+    own = "network_classes" if network_classes == "own_model" else (
         "training_classes" if vals.get("training_classes") == "own_model" else None)
     if own and vals.get("scenes_per_step", 1) > 1:
         where = (flags or {}).get("scenes_per_step", f"{source}: 'scenes_per_step'")
         raise ConfigError(f"{where} must be 1 with {own} 'own_model' (its groups of one model each call "
                           f"the network separately), got {vals['scenes_per_step']!r}")
-    if vals.get("training_classes") == "own_model" and vals["network_classes"] == "all":
+    if vals.get("training_classes") == "own_model" and network_classes == "all":
         where = (flags or {}).get("training_classes", f"{source}: 'training_classes'")
-        raise ConfigError(f"{where} 'own_model' needs network_classes 'ss_model' or 'own_model' (with 'all' every "
-                          f"class is tracked with the network's one SS model, not the one it would be trained with)")
+        raise ConfigError(f"{where} 'own_model' needs network.network_classes 'ss_model' or 'own_model' (with 'all' "
+                          f"every class is tracked with the network's one SS model, not the one it would be trained "
+                          f"with)")
     return TrainConfig(**{k: vals[k] for k in names if k in vals})

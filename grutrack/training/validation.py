@@ -1,108 +1,98 @@
-"""Validation during training: track the validation scenes with the current network and score them (AMOTA), and
-the tracker preset's own EKF once on the same scenes as the reference line of the learning curve."""
+"""Validation during training: track the validation scenes with the current network and have the dataset score them
+(its headline metric: nuScenes AMOTA, AV2 HOTA; :meth:`~grutrack.datasets.base.Dataset.score_tracks`), and the
+tracker preset's own EKF once on the same scenes as the reference line of the learning curve.
+
+The trainer asks a :class:`Validator` (the protocol) for scores; :class:`DatasetValidator` is grutrack's, on any
+dataset that ``validates_training``."""
 
 from __future__ import annotations
 
-import contextlib
-import io
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from grutrack.classes import TRACKING_CLASSES
 from grutrack.data.scene import BoxSet, Scene
-from grutrack.export.nuscenes_json import build_submission
-from grutrack.tracking.config import TrackerConfig
-from grutrack.tracking.factory import ekf_groups, network_groups
+from grutrack.documents import ValidationRecord
+from grutrack.tracking.config import load_tracker_config
+from grutrack.tracking.factory import ekf_groups, network_groups, param_index, remap_config
 from grutrack.tracking.tracker import Tracker, track_scenes
+from grutrack.training.config import TrainConfig
 
 
-class Validator:
-    """callable(net) -> overall AMOTA of the GRU-KF tracker on ``scenes`` of nuScenes(-format) ``split`` (official
-    semantics, grutrack's exact fast evaluator; labels are the 7 tracking classes). With ``held_out`` the scenes are
-    part of ``split`` held out of training and only their tracks and ground truth are scored.
+@runtime_checkable
+class Validator(Protocol):
+    """What the trainer asks of validation. ``metric``: the name of the score (``AMOTA``, ``HOTA``) for messages;
+    the training log's ``val_amota`` columns hold it whatever its name."""
+
+    metric: str
+
+    def scores(self, net) -> Sequence[float]:
+        """The score of the GRU-KF tracker with ``net`` (a ``GRUKalmanNet``, left in the mode it came in) on each
+        validation detection set; the step's validation score is their mean."""
+        ...
+
+    def reference_scores(self) -> Sequence[float]:
+        """The reference tracker's score on each detection set (the learning curve's reference line)."""
+        ...
+
+    def describe(self) -> ValidationRecord:
+        """A new record of what is validated (``split``, ``scenes``, ``held_out``, ``detection_sets``,
+        ``reference``); the trainer fills in the selection and the scores."""
+        ...
+
+
+class DatasetValidator:
+    """The GRU-KF tracker (preset ``cfg.tracker_preset``, output ``cfg.matched_box``, ``cfg.device``) on ``scenes``
+    of ``split`` of ``dataset`` (a :class:`~grutrack.datasets.base.Dataset`), scored by the dataset
+    (:meth:`~grutrack.datasets.base.Dataset.score_tracks`). With ``held_out`` the scenes are part of the training
+    split held out of training, and only they are scored.
 
     ``dets``: the detections by frame token, or several sets ``{name: detections}`` (e.g. one per detector
-    profile the training draws from): the AMOTA is then the mean over the sets, so that a step which fails on one
-    kind of detector error is not selected for its score on another.
+    profile the training draws from): the score is then the mean over the sets, so that a step which fails on one
+    kind of detector error is not selected for its score on another. The reference is the preset's own EKF on the
+    same scenes and sets, computed once."""
 
-    :meth:`scores` gives the AMOTA of each set (the spread between sets is what the one-standard-error selection
-    rule reads). ``split``, ``scene_names``, ``detection_sets``, ``reference_name`` and :meth:`reference_scores`
-    (the AMOTA of ``tracker_cfg``'s own EKF on the same scenes and sets, computed once) describe it in
-    ``validation.json``."""
-
-    def __init__(self, nusc, split: str, scenes: list[Scene], dets: dict, tracker_cfg: TrackerConfig,
-                 device: str = "auto", held_out: bool = False, reference_name: str = "ekf"):
+    def __init__(self, dataset, split: str, scenes: list[Scene], dets: dict, cfg: TrainConfig,
+                 held_out: bool = False, reference_name: str = "ekf"):
         first = next(iter(dets.values()), None) if dets else None
-        self.sets = dets if isinstance(first, dict) else {"given": dets}
-        self.nusc, self.split, self.scenes = nusc, split, scenes
-        self.tracker_cfg, self.device, self.held_out = tracker_cfg, device, held_out
-        self.scene_names = [sc.name for sc in scenes]
-        self.detection_sets = list(self.sets)
+        self.sets: dict[str, dict[str, BoxSet]] = dets if isinstance(first, dict) else {"given": dets}
+        self.dataset, self.split, self.scenes, self.held_out = dataset, split, scenes, held_out
+        self.metric = dataset.validation_metric
+        self.index = param_index(dataset.vocabulary.param_classes)
+        preset = remap_config(load_tracker_config(cfg.tracker_preset), self.index)
+        self.tracker_cfg, self.device = replace(preset, matched_box=cfg.matched_box), cfg.device
         self.reference_name = reference_name
         self._reference: np.ndarray | None = None
-        self._others: set[str] | None = None     # held out: the split's other samples (empty in submissions)
 
-    def __call__(self, net) -> float:
-        """The mean of :meth:`scores` over the detection sets."""
-        return float(np.mean(self.scores(net)))
+    def describe(self) -> ValidationRecord:
+        return ValidationRecord(rule="last", selected_step=0, split=self.split,
+                                scenes=[sc.name for sc in self.scenes], held_out=self.held_out,
+                                detection_sets=list(self.sets), reference=self.reference_name)
 
     def scores(self, net) -> np.ndarray:
-        """(n_sets,) float64: AMOTA of the GRU-KF tracker with ``net`` on each detection set."""
+        """(n_sets,) float64: the score of the GRU-KF tracker with ``net`` on each detection set."""
         was_training = net.training
         net.eval()
-        groups = network_groups(net, self.tracker_cfg, np.arange(len(TRACKING_CLASSES)), self.device)
         try:
-            return self._score(Tracker(self.tracker_cfg, groups))
+            return self._score(Tracker(self.tracker_cfg, network_groups(net, self.tracker_cfg, self.index,
+                                                                        self.device)))
         finally:
             net.train(was_training)
 
-    def reference_amota(self) -> float:
-        """Mean AMOTA of the tracker preset with its own EKF motion models on the validation scenes."""
-        return float(np.mean(self.reference_scores()))
-
     def reference_scores(self) -> np.ndarray:
-        """(n_sets,) float64: :meth:`reference_amota` per detection set (computed once)."""
+        """(n_sets,) float64: the tracker preset with its own EKF motion models on each set (computed once)."""
         if self._reference is None:
-            groups = ekf_groups(self.tracker_cfg, np.arange(len(TRACKING_CLASSES)))
-            self._reference = self._score(Tracker(self.tracker_cfg, groups))
+            self._reference = self._score(Tracker(self.tracker_cfg, ekf_groups(self.tracker_cfg, self.index)))
         return self._reference
 
     def _score(self, tracker: Tracker) -> np.ndarray:
-        """(n_sets,) float64: AMOTA of ``tracker`` on each detection set."""
-        return np.array([self._score_set(tracker, d) for d in self.sets.values()], dtype=np.float64)
-
-    def _score_set(self, tracker: Tracker, dets: dict[str, BoxSet]) -> float:
-        from grutrack.evaluation.fast_amota import evaluate_tracks, fast_tracking_eval, load_tracks
-
-        tokens = [f.token for s in self.scenes for f in s.frames]
-        sub = build_submission(track_scenes(tracker, self.scenes, dets).results, tokens,
-                               self.tracker_cfg.max_boxes_per_sample)
-        with contextlib.redirect_stdout(io.StringIO()):
-            if not self.held_out:
-                return float(fast_tracking_eval(self.nusc, sub, self.split)["amota"])
-            keep = {sc.token for sc in self.scenes}
-            if self._others is None:
-                in_split = _split_scene_tokens(self.nusc, self.split)
-                self._others = {s["token"] for s in self.nusc.sample if s["scene_token"] in in_split} - set(tokens)
-            sub["results"].update({t: [] for t in self._others})   # the loader wants every sample of the split
-            gt, pred, _ = load_tracks(self.nusc, sub, self.split)
-            metrics, _ = evaluate_tracks({k: v for k, v in gt.items() if k in keep},
-                                         {k: v for k, v in pred.items() if k in keep})
-        return float(metrics.serialize()["amota"])
-
-
-def _split_scene_tokens(nusc, split: str) -> set[str]:
-    """Tokens of the scenes of ``split`` (a devkit split or a custom one of the dataset's splits.json)."""
-    from grutrack.data.nuscenes import split_scene_names
-
-    names = set(split_scene_names(nusc, split))
-    return {s["token"] for s in nusc.scene if s["name"] in names}
-
-
-def make_validator(nusc, split: str, scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
-                   device: str = "auto") -> Validator:
-    """A :class:`Validator` of a whole validation split."""
-    return Validator(nusc, split, scenes, dets, tracker_cfg, device)
+        """(n_sets,) float64: the dataset's score of ``tracker`` on each detection set."""
+        return np.array([self.dataset.score_tracks(self.split, self.scenes,
+                                                   track_scenes(tracker, self.scenes, d).results,
+                                                   self.tracker_cfg.max_boxes_per_sample)
+                         for d in self.sets.values()], dtype=np.float64)
 
 
 def held_out_scenes(scenes: list[Scene], n: int) -> list[Scene]:

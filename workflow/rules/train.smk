@@ -38,6 +38,7 @@ rule train:
         val=_val_args,
         code=code_version("train"),
     threads: 1          # one intra-op thread: fastest alone and side by side (docs/results/threads.md)
+    priority: 10        # the longest jobs of a DAG: started first, side by side, with the short jobs around them
     log: "logs/train/{training}.log"
     benchmark: "logs/benchmarks/train/{training}.tsv"
     shell:

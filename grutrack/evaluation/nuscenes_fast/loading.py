@@ -1,11 +1,10 @@
-"""Fast, exact re-implementation of the devkit's loading for the tracking evaluation.
+"""Loading and filtering: ground truth and predictions to tracks exactly as ``TrackingEval.__init__`` makes them.
 
 ``TrackingEval.__init__`` (nuscenes-devkit 1.2.0) builds one ``TrackingBox`` per box (tens of microseconds each:
 shape and NaN assertions through numpy), estimates a velocity for every ground-truth annotation, filters the
-boxes one by one and interpolates track gaps in a loop over timestamps x track ids. This module produces the same
-tracks (same scenes, frames, boxes, order, translations, track-averaged scores, interpolated boxes) with light
-records, for what the metrics read: ``tracking_id``, ``tracking_name``, ``translation``, ``tracking_score``.
-It mirrors, step by step:
+boxes one by one and interpolates track gaps in a loop over timestamps x track ids. :func:`fast_load_tracks`
+produces the same tracks (same scenes, frames, boxes, order, translations, track-averaged scores, interpolated
+boxes) with light records (:class:`LiteBox`: what the metrics read). It mirrors, step by step:
 
 * ``load_prediction`` / ``load_prediction_of_sample_tokens`` and ``TrackingBox.deserialize`` with its
   validation (required keys, 3/3/4/2 elements, no NaN, numeric values, string sample token, known class, float
@@ -18,31 +17,136 @@ It mirrors, step by step:
   ``interpolate_tracks`` with its weights, its right-box class/id, and its order of appended boxes).
 
 Anything it does not model exactly (input the devkit would reject, an empty box set, ...) raises
-:class:`NeedsDevkitLoader`; the caller then runs the devkit's loaders, which give their own result or error.
-Box velocities, sizes and rotations are validated but not kept: the tracking metrics never read them.
+:class:`NeedsDevkitLoader`; :func:`load_tracks` then runs the devkit's own loaders, which give their own result
+or error. Box velocities, sizes and rotations are validated but not kept: the tracking metrics never read them.
+
+Tracks, either loader: ``{scene token: {timestamp (us): [box, ...]}}``, boxes with ``tracking_id``,
+``tracking_name``, ``translation`` (global frame, metres) and ``tracking_score``.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 from bisect import bisect
 from collections import defaultdict
-from typing import Any, Dict, List, NamedTuple, Sequence, Tuple
+from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["LiteBox", "NeedsDevkitLoader", "fast_load_tracks"]
+__all__ = ["LiteBox", "NeedsDevkitLoader", "default_config", "fast_load_tracks", "load_tracks"]
 
 _BIKE_CLASSES = ("bicycle", "motorcycle")
 _BIKE_RACK = "static_object.bicycle_rack"
 
 
+def default_config():
+    """``config_factory('tracking_nips_2019')``'s content (a ``TrackingConfig``), without importing the devkit."""
+    from grutrack.evaluation.tracking_classes import load_config
+
+    return load_config("tracking_nips_2019")
+
+
+def load_tracks(nusc, submission: dict | str | os.PathLike, eval_split: str, config=None, verbose: bool = False,
+                loader: str = "fast"):
+    """``(tracks_gt, tracks_pred, meta)`` as the devkit's ``create_tracks`` gives them in ``TrackingEval.__init__``.
+
+    ``loader``: ``"fast"`` (default): :func:`fast_load_tracks`, the same tracks with :class:`LiteBox` records,
+    falling back to the devkit's loaders for any input it does not reproduce (the devkit then gives its own
+    result or error); ``"devkit"``: the devkit's loaders (``TrackingBox`` objects).
+    """
+    cfg = config if config is not None else default_config()
+    if loader == "fast":
+        try:
+            return fast_load_tracks(nusc, submission, eval_split, cfg)
+        except NeedsDevkitLoader as exc:
+            if verbose:
+                print(f"fast loader: {exc}; using the devkit's loaders")
+    elif loader != "devkit":
+        raise ValueError(f"loader must be 'fast' or 'devkit', not {loader!r}")
+    return _devkit_load_tracks(nusc, submission, eval_split, cfg, verbose)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The devkit's own loaders
+# ----------------------------------------------------------------------------------------------------------------
+
+def _quiet(verbose: bool):
+    """The devkit's GT loaders draw a tqdm bar on stderr even when not verbose; hide it unless verbose."""
+    return contextlib.nullcontext() if verbose else contextlib.redirect_stderr(io.StringIO())
+
+
+def _devkit_load_tracks(nusc, submission, eval_split: str, cfg, verbose: bool):
+    from nuscenes.eval.common.data_classes import EvalBoxes
+    from nuscenes.eval.common.loaders import (add_center_dist, filter_eval_boxes, get_samples_of_custom_split,
+                                              load_gt, load_gt_of_sample_tokens, load_prediction,
+                                              load_prediction_of_sample_tokens)
+    from nuscenes.eval.tracking.data_classes import TrackingBox
+    from nuscenes.eval.tracking.loaders import create_tracks
+    from nuscenes.utils.splits import is_predefined_split
+
+    from grutrack.evaluation.tracking_classes import devkit_config
+
+    cfg = devkit_config(cfg)  # also sets the devkit's TRACKING_NAMES, which TrackingBox checks
+    predefined = is_predefined_split(split_name=eval_split)
+    custom_tokens = None if predefined else get_samples_of_custom_split(split_name=eval_split, nusc=nusc)
+
+    if isinstance(submission, (str, os.PathLike)):
+        path = os.fspath(submission)
+        assert os.path.exists(path), "Error: The result file does not exist!"
+        with _quiet(verbose):
+            if predefined:
+                pred_boxes, meta = load_prediction(path, cfg.max_boxes_per_sample, TrackingBox, verbose=verbose)
+            else:
+                pred_boxes, meta = load_prediction_of_sample_tokens(
+                    path, cfg.max_boxes_per_sample, TrackingBox, sample_tokens=custom_tokens, verbose=verbose)
+    else:
+        # Same steps as load_prediction / load_prediction_of_sample_tokens, on an in-memory submission.
+        data = submission
+        assert "results" in data, "Error: No field `results` in result file."
+        if predefined:
+            results = data["results"]
+        else:
+            assert isinstance(data["results"], dict), "Error: results must be a dict."
+            results = {token: data["results"][token] for token in custom_tokens}
+        pred_boxes = EvalBoxes.deserialize(results, TrackingBox)
+        meta = data["meta"]
+        for sample_token in pred_boxes.sample_tokens:
+            assert len(pred_boxes.boxes[sample_token]) <= cfg.max_boxes_per_sample, \
+                f"Error: Only <= {cfg.max_boxes_per_sample} boxes per sample allowed!"
+
+    with _quiet(verbose):
+        if predefined:
+            gt_boxes = load_gt(nusc, eval_split, TrackingBox, verbose=verbose)
+        else:
+            gt_boxes = load_gt_of_sample_tokens(nusc, custom_tokens, TrackingBox, verbose=verbose)
+
+    assert set(pred_boxes.sample_tokens) == set(gt_boxes.sample_tokens), \
+        "Samples in split don't match samples in predicted tracks."
+
+    pred_boxes = add_center_dist(nusc, pred_boxes)
+    gt_boxes = add_center_dist(nusc, gt_boxes)
+    pred_boxes = filter_eval_boxes(nusc, pred_boxes, cfg.class_range, verbose=verbose)
+    gt_boxes = filter_eval_boxes(nusc, gt_boxes, cfg.class_range, verbose=verbose)
+
+    tracks_gt = create_tracks(gt_boxes, nusc, eval_split, gt=True)
+    tracks_pred = create_tracks(pred_boxes, nusc, eval_split, gt=False)
+    return tracks_gt, tracks_pred, meta
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The fast loader: records and validation
+# ----------------------------------------------------------------------------------------------------------------
+
 class LiteBox(NamedTuple):
     """What the tracking metrics read from a ``TrackingBox`` (``sample_token``: the sample the box is filed
-    under; for an interpolated box, that of its right neighbour, as the devkit does)."""
+    under; for an interpolated box, that of its right neighbour, as the devkit does); ``translation``: global
+    frame, metres."""
     sample_token: str
-    translation: Tuple[float, float, float]
+    translation: tuple[float, float, float]
     tracking_id: Any
     tracking_name: str
     tracking_score: float
@@ -57,25 +161,29 @@ def _require(cond: bool, why: str) -> None:
         raise NeedsDevkitLoader(why)
 
 
-def _numeric(rows: List[Any], width: int, what: str) -> np.ndarray:
-    """Rows of ``width`` numbers (bool/int/float), no NaN: as the devkit's ``len`` and ``np.isnan`` asserts."""
+def _numeric(rows: list[Any], width: int, what: str) -> np.ndarray:
+    """(N, width) float64 from rows of numbers (bool/int/float), no NaN: as the devkit's ``len`` and ``np.isnan``
+    asserts."""
     if not rows:
         return np.zeros((0, width))
     try:
         arr = np.array(rows)
     except (ValueError, TypeError) as exc:
-        raise NeedsDevkitLoader("%s: %s" % (what, exc)) from exc
-    _require(arr.ndim == 2 and arr.shape[1] == width and arr.dtype.kind in "biuf", "%s: shape/type" % what)
+        raise NeedsDevkitLoader(f"{what}: {exc}") from exc
+    _require(arr.ndim == 2 and arr.shape[1] == width and arr.dtype.kind in "biuf", f"{what}: shape/type")
     arr = arr.astype(np.float64)
-    _require(not np.isnan(arr).any(), "%s: NaN" % what)
+    _require(not np.isnan(arr).any(), f"{what}: NaN")
     return arr
 
 
 class _Boxes:
-    """Flat box arrays of one side (ground truth or predictions), in the devkit's sample/box order."""
+    """Flat box arrays of one side (ground truth or predictions), in the devkit's sample/box order.
 
-    def __init__(self, tokens: List[str], counts: List[int], xyz: np.ndarray, raw_translation: List[Any],
-                 ids: List[Any], names: List[str], scores: List[float], num_pts: np.ndarray):
+    xyz: (N, 3) float64 translations, global frame, metres; num_pts: (N,) int64 (-1: not given).
+    """
+
+    def __init__(self, tokens: list[str], counts: list[int], xyz: np.ndarray, raw_translation: list[Any],
+                 ids: list[Any], names: list[str], scores: list[float], num_pts: np.ndarray):
         self.tokens = tokens            # sample tokens, in EvalBoxes order
         self.counts = counts            # boxes per sample token
         self.xyz = xyz
@@ -88,11 +196,12 @@ class _Boxes:
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Loading
+# The fast loader: loading
 # ----------------------------------------------------------------------------------------------------------------
 
-def _split_tokens(nusc, eval_split: str) -> Tuple[List[str], bool]:
-    """Sample tokens of the split in the devkit's order (``load_gt`` / ``get_samples_of_custom_split``)."""
+def _split_tokens(nusc, eval_split: str) -> tuple[list[str], bool]:
+    """Sample tokens of the split in the devkit's order (``load_gt`` / ``get_samples_of_custom_split``), and
+    whether the split is predefined."""
     from grutrack.data.nusc_tables import predefined_split_scenes
 
     if eval_split not in predefined_split_scenes():
@@ -118,7 +227,7 @@ def _split_tokens(nusc, eval_split: str) -> Tuple[List[str], bool]:
     return tokens, True
 
 
-def _custom_split_scenes(nusc, eval_split: str) -> List[str]:
+def _custom_split_scenes(nusc, eval_split: str) -> list[str]:
     """Scene names of a custom split (``<dataroot>/<version>/splits.json``, as the devkit's
     ``get_scenes_of_custom_split``); anything the devkit would reject is left to the devkit."""
     path = os.path.join(nusc.dataroot, nusc.version, "splits.json")
@@ -129,7 +238,8 @@ def _custom_split_scenes(nusc, eval_split: str) -> List[str]:
     return splits[eval_split]
 
 
-def _load_predictions(submission, split_tokens: List[str], predefined: bool, cfg, tracking_names) -> Tuple[_Boxes, Any]:
+def _load_predictions(submission, split_tokens: list[str], predefined: bool, cfg,
+                      tracking_names) -> tuple[_Boxes, Any]:
     if isinstance(submission, (str, os.PathLike)):
         _require(os.path.exists(os.fspath(submission)), "result file does not exist")
         with open(os.fspath(submission)) as f:
@@ -178,16 +288,16 @@ def _load_predictions(submission, split_tokens: List[str], predefined: bool, cfg
                   np.asarray(num_pts, dtype=np.int64)), meta
 
 
-def _load_gt(nusc, split_tokens: List[str], tracking_names) -> _Boxes:
+def _load_gt(nusc, split_tokens: list[str], tracking_names) -> _Boxes:
     from grutrack.data.nuscenes import category_to_tracking_name
 
-    counts: List[int] = []
-    raw_translation: List[Any] = []
-    sizes: List[Any] = []
-    rotations: List[Any] = []
-    ids: List[Any] = []
-    names: List[str] = []
-    num_pts: List[int] = []
+    counts: list[int] = []
+    raw_translation: list[Any] = []
+    sizes: list[Any] = []
+    rotations: list[Any] = []
+    ids: list[Any] = []
+    names: list[str] = []
+    num_pts: list[int] = []
     for token in split_tokens:
         n = 0
         for ann_token in nusc.get("sample", token)["anns"]:
@@ -214,16 +324,18 @@ def _load_gt(nusc, split_tokens: List[str], tracking_names) -> _Boxes:
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Filtering (add_center_dist + filter_eval_boxes)
+# The fast loader: filtering (add_center_dist + filter_eval_boxes)
 # ----------------------------------------------------------------------------------------------------------------
 
 class _SampleInfo:
+    """Per sample token: ego position (global frame, metres), scene token, timestamp (us); bike racks on demand."""
+
     def __init__(self, nusc, tokens: Sequence[str]):
         self.nusc = nusc
-        self.ego: Dict[str, Tuple[float, float, float]] = {}
-        self.scene: Dict[str, str] = {}
-        self.timestamp: Dict[str, int] = {}
-        self._racks: Dict[str, list] = {}
+        self.ego: dict[str, tuple[float, float, float]] = {}
+        self.scene: dict[str, str] = {}
+        self.timestamp: dict[str, int] = {}
+        self._racks: dict[str, list] = {}
         for token in tokens:
             sample = nusc.get("sample", token)
             sd = nusc.get("sample_data", sample["data"]["LIDAR_TOP"])
@@ -232,6 +344,7 @@ class _SampleInfo:
             self.timestamp[token] = sample["timestamp"]
 
     def racks(self, token: str) -> list:
+        """(3, 8) corners of every bicycle rack annotated in the sample."""
         boxes = self._racks.get(token)
         if boxes is None:
             nusc = self.nusc
@@ -272,7 +385,8 @@ def _points_in_box(corners: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.logical_and(np.logical_and(mask_x, mask_y), mask_z)
 
 
-def _keep_mask(b: _Boxes, info: _SampleInfo, class_range: Dict[str, float]) -> np.ndarray:
+def _keep_mask(b: _Boxes, info: _SampleInfo, class_range: dict[str, float]) -> np.ndarray:
+    """(N,) bool: the boxes ``filter_eval_boxes`` keeps (class range in metres from the ego, points, bike racks)."""
     n = len(b.names)
     _require(n > 0, "no boxes at all (the devkit's filter raises)")
     tok_of_box = np.repeat(np.arange(len(b.tokens)), b.counts)
@@ -297,7 +411,7 @@ def _keep_mask(b: _Boxes, info: _SampleInfo, class_range: Dict[str, float]) -> n
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# create_tracks
+# The fast loader: create_tracks
 # ----------------------------------------------------------------------------------------------------------------
 
 def _create_tracks(b: _Boxes, keep: np.ndarray, info: _SampleInfo, nusc, eval_split: str, gt: bool):
@@ -313,10 +427,10 @@ def _create_tracks(b: _Boxes, keep: np.ndarray, info: _SampleInfo, nusc, eval_sp
     _require(all(info.scene[t] in scene_tokens for t in b.tokens), "sample outside the split's scenes")
 
     # Frames of each scene (timestamps in sample-chain order) holding indices of the kept boxes.
-    frames: Dict[str, Dict[int, List[int]]] = {}
+    frames: dict[str, dict[int, list[int]]] = {}
     for scene_token in scene_tokens:
         scene = nusc.get("scene", scene_token)
-        per_ts: Dict[int, List[int]] = {}
+        per_ts: dict[int, list[int]] = {}
         token = scene["first_sample_token"]
         while True:
             sample = nusc.get("sample", token)
@@ -332,11 +446,11 @@ def _create_tracks(b: _Boxes, keep: np.ndarray, info: _SampleInfo, nusc, eval_sp
         start += count
 
     xyz = b.xyz
-    scores: List[float] = list(b.scores)
+    scores: list[float] = list(b.scores)
     if not gt:
         # Track score: np.mean of the scores of an id in the scene, in the devkit's order.
         for per_ts in frames.values():
-            by_id: Dict[Any, List[int]] = {}
+            by_id: dict[Any, list[int]] = {}
             for boxes in per_ts.values():
                 for i in boxes:
                     by_id.setdefault(b.ids[i], []).append(i)
@@ -345,25 +459,25 @@ def _create_tracks(b: _Boxes, keep: np.ndarray, info: _SampleInfo, nusc, eval_sp
                 for i in members:
                     scores[i] = mean
 
-    tracks: Dict[str, Dict[int, List[LiteBox]]] = defaultdict(lambda: defaultdict(list))
+    tracks: dict[str, dict[int, list[LiteBox]]] = defaultdict(lambda: defaultdict(list))
     for scene_token, per_ts in frames.items():
         def lite(i: int) -> LiteBox:
             return LiteBox(b.tokens_of_box[i], (float(xyz[i, 0]), float(xyz[i, 1]), float(xyz[i, 2])), b.ids[i],
                            b.names[i], scores[i])
 
-        out: Dict[int, List[LiteBox]] = defaultdict(list)
+        out: dict[int, list[LiteBox]] = defaultdict(list)
         for ts, boxes in per_ts.items():
             out[ts] = [lite(i) for i in boxes]
         # interpolate_tracks: ids in order of first appearance, their timestamps (chronological).
-        track_boxes: Dict[Any, List[int]] = {}
-        track_ts: Dict[Any, List[int]] = {}
+        track_boxes: dict[Any, list[int]] = {}
+        track_ts: dict[Any, list[int]] = {}
         for ts, boxes in per_ts.items():
             for i in boxes:
                 track_boxes.setdefault(b.ids[i], []).append(i)
                 track_ts.setdefault(b.ids[i], []).append(ts)
         timestamps = list(per_ts)
         position = {ts: k for k, ts in enumerate(timestamps)}
-        added: List[Tuple[int, int, LiteBox]] = []
+        added: list[tuple[int, int, LiteBox]] = []
         for order, (tid, tss) in enumerate(track_ts.items()):
             if tss[-1] == tss[0]:
                 continue
@@ -391,15 +505,10 @@ def _create_tracks(b: _Boxes, keep: np.ndarray, info: _SampleInfo, nusc, eval_sp
     return tracks
 
 
-# ----------------------------------------------------------------------------------------------------------------
-# Entry point
-# ----------------------------------------------------------------------------------------------------------------
-
 def fast_load_tracks(nusc, submission, eval_split: str, cfg):
-    """``(tracks_gt, tracks_pred, meta)`` equal to the devkit's loading in ``TrackingEval.__init__``.
-
-    Raises :class:`NeedsDevkitLoader` for inputs it does not reproduce (the devkit then decides).
-    """
+    """``(tracks_gt, tracks_pred, meta)`` equal to the devkit's loading in ``TrackingEval.__init__``, boxes as
+    :class:`LiteBox`. Raises :class:`NeedsDevkitLoader` for inputs it does not reproduce (the devkit then
+    decides)."""
     tracking_names = list(cfg.tracking_names)  # what TrackingEval's config sets as the devkit's TRACKING_NAMES
     split_tokens, predefined = _split_tokens(nusc, eval_split)
     pred, meta = _load_predictions(submission, split_tokens, predefined, cfg, tracking_names)
