@@ -22,6 +22,7 @@ THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "GR
 @dataclass
 class Run:
     """One child process: wall and CPU seconds, peak RSS in MiB, its stdout."""
+
     wall: float
     cpu: float
     rss_mib: float
@@ -31,6 +32,7 @@ class Run:
 @dataclass
 class Series:
     """Repeated runs of one measurement on one checkout."""
+
     runs: list[Run] = field(default_factory=list)
 
     def median(self, attr: str) -> float:
@@ -45,8 +47,7 @@ def reference_checkout(commit: str | None):
         return
     tmp = Path(tempfile.mkdtemp(prefix="grutrack-ref-"))
     path = tmp / "ref"
-    subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", "--quiet", str(path), commit],
-                   check=True)
+    subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", "--quiet", str(path), commit], check=True)
     try:
         yield path
     finally:
@@ -59,30 +60,42 @@ def child_env(root: Path, keep_thread_vars: bool = False) -> dict:
     """The environment of a child run on checkout ``root``: ``root`` first on PYTHONPATH (other entries kept,
     either checkout removed), thread variables removed."""
     env = {k: v for k, v in os.environ.items() if keep_thread_vars or k not in THREAD_VARS}
-    others = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep)
-              if p and Path(p).resolve() not in (REPO.resolve(), Path(root).resolve())]
+    others = [
+        p
+        for p in os.environ.get("PYTHONPATH", "").split(os.pathsep)
+        if p and Path(p).resolve() not in (REPO.resolve(), Path(root).resolve())
+    ]
     env["PYTHONPATH"] = os.pathsep.join([str(root), *others])
     return env
 
 
-def run_measured(argv: list[str], root: Path, cwd: Path | None = None, stdin: str | None = None,
-                 keep_thread_vars: bool = False) -> Run:
+def run_measured(
+    argv: list[str], root: Path, cwd: Path | None = None, stdin: str | None = None, keep_thread_vars: bool = False
+) -> Run:
     """Run ``argv`` with checkout ``root`` on PYTHONPATH (thread variables removed unless ``keep_thread_vars``);
     wall time, the child's own CPU time and peak RSS (``os.wait4``). Raises on a non-zero exit status."""
     import threading
 
     env = child_env(root, keep_thread_vars)
     t0 = time.perf_counter()
-    proc = subprocess.Popen(argv, cwd=str(cwd or root), env=env, text=True,
-                            stdin=subprocess.PIPE if stdin is not None else subprocess.DEVNULL,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        argv,
+        cwd=str(cwd or root),
+        env=env,
+        text=True,
+        stdin=subprocess.PIPE if stdin is not None else subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     chunks: dict[str, str] = {}
 
     def _read(name, stream):
         chunks[name] = stream.read()
 
-    readers = [threading.Thread(target=_read, args=("out", proc.stdout)),
-               threading.Thread(target=_read, args=("err", proc.stderr))]
+    readers = [
+        threading.Thread(target=_read, args=("out", proc.stdout)),
+        threading.Thread(target=_read, args=("err", proc.stderr)),
+    ]
     for t in readers:
         t.start()
     if stdin is not None:
@@ -94,8 +107,9 @@ def run_measured(argv: list[str], root: Path, cwd: Path | None = None, stdin: st
         t.join()
     proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(argv[:4])} ... failed ({proc.returncode}) on {root}:\n"
-                           f"{chunks.get('err', '')[-3000:]}")
+        raise RuntimeError(
+            f"{' '.join(argv[:4])} ... failed ({proc.returncode}) on {root}:\n{chunks.get('err', '')[-3000:]}"
+        )
     return Run(wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024.0, chunks.get("out", ""))
 
 

@@ -96,8 +96,8 @@ def write_dense_detections(scenes, path: Path, target: int = 75, seed: int = 0) 
     """Detector-like boxes from the scenes' ground truth (``bench_tracking.noisy_detections``: noise, misses,
     duplicates and false positives up to ``target`` per frame, CenterPoint's density) as a detection JSON."""
     import numpy as np
-
     from bench_tracking import noisy_detections
+
     from grutrack.boxes import quaternion_from_yaw
     from grutrack.classes import TRACKING_CLASSES
 
@@ -106,10 +106,19 @@ def write_dense_detections(scenes, path: Path, target: int = 75, seed: int = 0) 
     for f in (f for s in scenes for f in s.frames):
         d = noisy_detections(f.gt, rng, target)
         q = quaternion_from_yaw(d.boxes[:, 6])
-        results[f.token] = [{"sample_token": f.token, "translation": b[:3].tolist(), "size": b[3:6].tolist(),
-                             "rotation": qq.tolist(), "velocity": b[7:9].tolist(),
-                             "detection_name": TRACKING_CLASSES[int(lab)], "detection_score": float(sc),
-                             "attribute_name": ""} for b, qq, lab, sc in zip(d.boxes, q, d.labels, d.scores)]
+        results[f.token] = [
+            {
+                "sample_token": f.token,
+                "translation": b[:3].tolist(),
+                "size": b[3:6].tolist(),
+                "rotation": qq.tolist(),
+                "velocity": b[7:9].tolist(),
+                "detection_name": TRACKING_CLASSES[int(lab)],
+                "detection_score": float(sc),
+                "attribute_name": "",
+            }
+            for b, qq, lab, sc in zip(d.boxes, q, d.labels, d.scores)
+        ]
         n += len(d)
     meta = {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False, "use_external": False}
     path.write_text(json.dumps({"meta": meta, "results": results}))
@@ -128,14 +137,12 @@ def make_inputs(root: Path, tmp: Path) -> dict:
     write_dense_detections(val, paths["dense"])
     for split, seed in (("mini_train", 1), ("mini_val", 2)):
         paths[split] = tmp / f"sim_{split}.json"
-        paths[split].write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", split, "centerpoint", seed,
-                                                             nusc=nusc)))
+        paths[split].write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", split, "centerpoint", seed, nusc=nusc)))
     return paths
 
 
 def _fps(run, pattern: str) -> float:
-    m = re.search(pattern + r"\s*\(?([0-9.]+) frames/s" if "loop" in pattern else pattern + r" ([0-9.]+)",
-                  run.stdout)
+    m = re.search(pattern + r"\s*\(?([0-9.]+) frames/s" if "loop" in pattern else pattern + r" ([0-9.]+)", run.stdout)
     if not m:
         raise RuntimeError(f"no '{pattern}' figure in:\n{run.stdout[-2000:]}")
     return float(m.group(1))
@@ -167,12 +174,21 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--repeat-devkit", type=int, default=1, help="runs of the devkit evaluate command")
     ap.add_argument("--repeat-grukf", type=int, default=3, help="runs of GRU-KF tracking and training")
-    ap.add_argument("--train-steps", type=int, default=8,
-                    help="GRU-KF training steps timed (8 = one epoch of mini_train: every scene once)")
+    ap.add_argument(
+        "--train-steps",
+        type=int,
+        default=8,
+        help="GRU-KF training steps timed (8 = one epoch of mini_train: every scene once)",
+    )
     ap.add_argument("--make-inputs", default=None, help=argparse.SUPPRESS)  # internal: build inputs into DIR
     ap.add_argument("--skip", action="append", default=[], choices=MEASUREMENTS, help="skip a measurement")
-    ap.add_argument("--only", action="append", default=[], choices=MEASUREMENTS,
-                    help="run only this measurement (repeatable), e.g. --only grukf_track --only grukf_train")
+    ap.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        choices=MEASUREMENTS,
+        help="run only this measurement (repeatable), e.g. --only grukf_track --only grukf_train",
+    )
     args = ap.parse_args(argv)
     if args.only:
         args.skip = [m for m in MEASUREMENTS if m not in args.only]
@@ -200,50 +216,145 @@ def main(argv=None) -> int:
             rows.append(("  its CPU time", "s", s, lambda x: x.median("cpu"), False))
         # the track output of each checkout is what its evaluate commands read
         need_track = {"track", "fast", "devkit"} - set(args.skip)
-        s = None if not need_track else interleaved(lambda r: run_measured([py, "-m", "grutrack", "track", *common, "--detections",
-                                                str(paths["dense"]), "--out", out(r, "tracks"), "--no-progress"], r),
-                        roots, args.repeat)
+        s = (
+            None
+            if not need_track
+            else interleaved(
+                lambda r: run_measured(
+                    [
+                        py,
+                        "-m",
+                        "grutrack",
+                        "track",
+                        *common,
+                        "--detections",
+                        str(paths["dense"]),
+                        "--out",
+                        out(r, "tracks"),
+                        "--no-progress",
+                    ],
+                    r,
+                ),
+                roots,
+                args.repeat,
+            )
+        )
         if "track" not in args.skip:
             rows.append(("grutrack track (EKF, ~75 dets/frame)", "s", s, lambda x: x.median("wall"), False))
             rows.append(("  its CPU time", "s", s, lambda x: x.median("cpu"), False))
             rows.append(("  its peak memory", "MiB", s, lambda x: x.median("rss_mib"), False))
         fast = None
         if "fast" not in args.skip:
-            fast = interleaved(lambda r: run_measured([py, "-m", "grutrack", "evaluate", *common, "--submission",
-                                                       out(r, "tracks"), "--out", out(r, "m_fast"),
-                                                       "--evaluator", "fast"], r), roots, args.repeat)
+            fast = interleaved(
+                lambda r: run_measured(
+                    [
+                        py,
+                        "-m",
+                        "grutrack",
+                        "evaluate",
+                        *common,
+                        "--submission",
+                        out(r, "tracks"),
+                        "--out",
+                        out(r, "m_fast"),
+                        "--evaluator",
+                        "fast",
+                    ],
+                    r,
+                ),
+                roots,
+                args.repeat,
+            )
             rows.append(("grutrack evaluate --evaluator fast", "s", fast, lambda x: x.median("wall"), False))
             rows.append(("  its CPU time", "s", fast, lambda x: x.median("cpu"), False))
         devkit = None
         if "devkit" not in args.skip:
-            devkit = interleaved(lambda r: run_measured([py, "-m", "grutrack", "evaluate", *common, "--submission",
-                                                         out(r, "tracks"), "--out", out(r, "m_devkit"),
-                                                         "--evaluator", "devkit"], r), roots, args.repeat_devkit)
+            devkit = interleaved(
+                lambda r: run_measured(
+                    [
+                        py,
+                        "-m",
+                        "grutrack",
+                        "evaluate",
+                        *common,
+                        "--submission",
+                        out(r, "tracks"),
+                        "--out",
+                        out(r, "m_devkit"),
+                        "--evaluator",
+                        "devkit",
+                    ],
+                    r,
+                ),
+                roots,
+                args.repeat_devkit,
+            )
             rows.append(("grutrack evaluate --evaluator devkit", "s", devkit, lambda x: x.median("wall"), False))
             rows.append(("  its CPU time", "s", devkit, lambda x: x.median("cpu"), False))
         if "grukf_track" not in args.skip:
             checkpoint = {}
             for name, r in roots.items():
-                run_measured([py, "-", str(root), str(paths["mini_train"]), str(tmp / f"ck_{name}")], r,
-                             stdin=CHECKPOINT_DRIVER)
+                run_measured(
+                    [py, "-", str(root), str(paths["mini_train"]), str(tmp / f"ck_{name}")], r, stdin=CHECKPOINT_DRIVER
+                )
                 checkpoint[r] = str(tmp / f"ck_{name}" / "bench.pt")
-            s = interleaved(lambda r: run_measured(
-                [py, "-m", "grutrack", "track", *common, "--detections", str(paths["mini_val"]), "--tracker", "grukf",
-                 "--checkpoint", checkpoint[r], "--device", "cpu", "--out", out(r, "grukf"),
-                 "--no-progress"], r), roots, args.repeat_grukf)
+            s = interleaved(
+                lambda r: run_measured(
+                    [
+                        py,
+                        "-m",
+                        "grutrack",
+                        "track",
+                        *common,
+                        "--detections",
+                        str(paths["mini_val"]),
+                        "--tracker",
+                        "grukf",
+                        "--checkpoint",
+                        checkpoint[r],
+                        "--device",
+                        "cpu",
+                        "--out",
+                        out(r, "grukf"),
+                        "--no-progress",
+                    ],
+                    r,
+                ),
+                roots,
+                args.repeat_grukf,
+            )
             for r in (x for v in s.values() for x in v.runs):
                 r.fps = _fps(r, "tracking loop: [0-9]+ frames in [0-9.]+ s")
             rows.append(("GRU-KF tracking loop (grutrack track)", "frames/s", s, lambda x: x.median("fps"), True))
             rows.append(("  the whole command's wall time", "s", s, lambda x: x.median("wall"), False))
         if "grukf_train" not in args.skip:
-            s = interleaved(lambda r: run_measured([py, "-", str(root), str(paths["mini_train"]),
-                                                    str(tmp / f"train_{'ref' if r == ref else 'cur'}"),
-                                                    str(args.train_steps)], r, stdin=TRAIN_DRIVER),
-                            roots, args.repeat_grukf)
+            s = interleaved(
+                lambda r: run_measured(
+                    [
+                        py,
+                        "-",
+                        str(root),
+                        str(paths["mini_train"]),
+                        str(tmp / f"train_{'ref' if r == ref else 'cur'}"),
+                        str(args.train_steps),
+                    ],
+                    r,
+                    stdin=TRAIN_DRIVER,
+                ),
+                roots,
+                args.repeat_grukf,
+            )
             for r in (x for v in s.values() for x in v.runs):
                 r.fps = _fps(r, "training frames/s")
-            rows.append((f"GRU-KF training ({args.train_steps} steps, one per scene)", "frames/s", s,
-                         lambda x: x.median("fps"), True))
+            rows.append(
+                (
+                    f"GRU-KF training ({args.train_steps} steps, one per scene)",
+                    "frames/s",
+                    s,
+                    lambda x: x.median("fps"),
+                    True,
+                )
+            )
 
     cpu_note = f"{__import__('os').cpu_count()} cores; thread variables unset in the children"
     print(f"\nmedians; reference {args.reference or '-'} vs current checkout; {cpu_note}")
@@ -252,9 +363,11 @@ def main(argv=None) -> int:
         print(_line(*row))
     if fast and devkit:
         for name in fast:
-            print(f"fast vs devkit evaluate command ({name}): "
-                  f"{devkit[name].median('wall') / fast[name].median('wall'):.1f}x wall, "
-                  f"{devkit[name].median('cpu') / fast[name].median('cpu'):.1f}x CPU time")
+            print(
+                f"fast vs devkit evaluate command ({name}): "
+                f"{devkit[name].median('wall') / fast[name].median('wall'):.1f}x wall, "
+                f"{devkit[name].median('cpu') / fast[name].median('cpu'):.1f}x CPU time"
+            )
     return 0
 
 

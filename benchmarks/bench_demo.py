@@ -33,8 +33,10 @@ def main() -> None:
         t0 = time.perf_counter()
         info = generate_demo(root, scenes=args.scenes, frames=args.frames, seed=args.seed)
         t_gen = time.perf_counter() - t0
-        print(f"generate {args.scenes} scenes x {args.frames} frames: {t_gen:6.1f} s "
-              f"({info['samples']} samples, {info['instances']} instances, {info['annotations']} annotations)")
+        print(
+            f"generate {args.scenes} scenes x {args.frames} frames: {t_gen:6.1f} s "
+            f"({info['samples']} samples, {info['instances']} instances, {info['annotations']} annotations)"
+        )
 
         t0 = time.perf_counter()
         nusc = ds.open_dataset(root, info["version"])
@@ -51,9 +53,11 @@ def main() -> None:
         t_write = time.perf_counter() - t0
         n_det = sum(len(d) for d in dets)
         total = t_load + t_gt + t_sim + t_write
-        print(f"simulate-detections ({args.profile}, all {len(frames)} samples): {total:6.1f} s "
-              f"(devkit load {t_load:.1f}, GT + box_velocity {t_gt:.1f}, sampling {t_sim:.1f}, "
-              f"JSON {t_write:.1f}; {n_det} detections)")
+        print(
+            f"simulate-detections ({args.profile}, all {len(frames)} samples): {total:6.1f} s "
+            f"(devkit load {t_load:.1f}, GT + box_velocity {t_gt:.1f}, sampling {t_sim:.1f}, "
+            f"JSON {t_write:.1f}; {n_det} detections)"
+        )
         status = "OK" if t_gen < 60.0 else "SLOWER THAN THE 60 s TARGET"
         print(f"generation target < 60 s: {status}")
     finally:

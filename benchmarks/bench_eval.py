@@ -31,7 +31,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "tests"))   # support.fast_synth / support.compare: test helpers, not the package
+sys.path.insert(0, str(REPO / "tests"))  # support.fast_synth / support.compare: test helpers, not the package
 
 
 class _Timing:
@@ -72,13 +72,19 @@ def main(argv=None) -> int:
     ap.add_argument("--dataroot", default=str(default_root))
     ap.add_argument("--version", default="v1.0-mini")
     ap.add_argument("--split", default="mini_val")
-    ap.add_argument("--submission", default=None,
-                    help="tracking-submission JSON; default: the split's ground truth, corrupted (seed 0)")
+    ap.add_argument(
+        "--submission",
+        default=None,
+        help="tracking-submission JSON; default: the split's ground truth, corrupted (seed 0)",
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--repeat", type=int, default=5, help="repeats of the fast evaluator")
     ap.add_argument("--repeat-devkit", type=int, default=3, help="repeats of the devkit")
-    ap.add_argument("--skip-devkit-whole", action="store_true",
-                    help="time only the devkit's evaluate() (not TrackingEval(...).main)")
+    ap.add_argument(
+        "--skip-devkit-whole",
+        action="store_true",
+        help="time only the devkit's evaluate() (not TrackingEval(...).main)",
+    )
     args = ap.parse_args(argv)
 
     from nuscenes import NuScenes
@@ -102,8 +108,10 @@ def main(argv=None) -> int:
             sub_path = os.path.join(tmp, "submission.json")
             with open(sub_path, "w") as f:
                 json.dump(corrupt_submission(nusc, args.split, seed=args.seed), f)
-            what = "ground truth of %s corrupted (seed %d: noise, id switches, fragments, drops, " \
-                   "false positives, class changes, shadow tracks)" % (args.split, args.seed)
+            what = (
+                "ground truth of %s corrupted (seed %d: noise, id switches, fragments, drops, "
+                "false positives, class changes, shadow tracks)" % (args.split, args.seed)
+            )
         with open(sub_path) as f:
             n_boxes = sum(len(v) for v in json.load(f)["results"].values())
         print("input: %s; %d boxes; %s %s (NuScenes load %.2fs)" % (what, n_boxes, args.version, args.split, t_nusc))
@@ -111,9 +119,9 @@ def main(argv=None) -> int:
         # Loading + filtering: the devkit's loaders vs the fast exact re-implementation.
         n_load = max(1, min(args.repeat, 3))
         t_load_dev, (tracks_gt, tracks_pred, meta) = _median_time(
-            lambda: load_tracks(nusc, sub_path, args.split, cfg, loader="devkit"), n_load)
-        t_load_fast, _ = _median_time(lambda: load_tracks(nusc, sub_path, args.split, cfg, loader="fast"),
-                                         n_load)
+            lambda: load_tracks(nusc, sub_path, args.split, cfg, loader="devkit"), n_load
+        )
+        t_load_fast, _ = _median_time(lambda: load_tracks(nusc, sub_path, args.split, cfg, loader="fast"), n_load)
 
         # Accumulation + metrics, on the devkit-loaded tracks.
         def devkit_evaluate():
@@ -124,22 +132,25 @@ def main(argv=None) -> int:
             return dict(metrics.serialize(), meta=meta)
 
         t_dev_acc, dev_summary = _median_time(devkit_evaluate, args.repeat_devkit)
-        t_fast_acc, (fast_metrics, _) = _median_time(
-            lambda: evaluate_tracks(tracks_gt, tracks_pred, cfg), args.repeat)
+        t_fast_acc, (fast_metrics, _) = _median_time(lambda: evaluate_tracks(tracks_gt, tracks_pred, cfg), args.repeat)
         diff_acc = _max_diff(dev_summary, dict(fast_metrics.serialize(), meta=meta))
 
         # Whole pipeline.
         t_fast_whole, fast_summary = _median_time(
-            lambda: fast_tracking_eval(nusc, sub_path, args.split, cfg), args.repeat)
+            lambda: fast_tracking_eval(nusc, sub_path, args.split, cfg), args.repeat
+        )
         from grutrack.evaluation.devkit_plugin import FastTrackingEval
 
         def whole(cls, folder):
             """``cls(...).main()``: the devkit's pipeline (it loads NuScenes itself) with its or our accumulation."""
+
             def run():
                 with contextlib.redirect_stderr(io.StringIO()):
-                    ev = cls(cfg, sub_path, args.split, os.path.join(tmp, folder), args.version, args.dataroot,
-                             verbose=False)
+                    ev = cls(
+                        cfg, sub_path, args.split, os.path.join(tmp, folder), args.version, args.dataroot, verbose=False
+                    )
                     return ev.main(render_curves=False)
+
             return run
 
         t_dev_whole = None
@@ -156,8 +167,10 @@ def main(argv=None) -> int:
         print("  %-34s %9.1f x wall  %9.1f x CPU" % (label, slow.wall_med / fast.wall_med, slow.cpu_med / fast.cpu_med))
 
     print()
-    print("accumulation + metrics (same loaded tracks; medians of %d devkit / %d fast runs)"
-          % (args.repeat_devkit, args.repeat))
+    print(
+        "accumulation + metrics (same loaded tracks; medians of %d devkit / %d fast runs)"
+        % (args.repeat_devkit, args.repeat)
+    )
     line("devkit TrackingEval.evaluate()", t_dev_acc)
     line("fast evaluate_tracks()", t_fast_acc, "%.3f")
     ratio("ratio", t_dev_acc, t_fast_acc)
@@ -171,8 +184,10 @@ def main(argv=None) -> int:
     print("    ~ loading %.3f + accumulation %.3f s CPU" % (t_load_fast.cpu_med, t_fast_acc.cpu_med))
     if t_dev_whole is not None:
         line("devkit TrackingEval(...).main()", t_dev_whole)
-        print("    ~ its NuScenes load %.3f + loading %.3f + accumulation %.3f s CPU"
-              % (t_nusc, t_load_dev.cpu_med, t_dev_acc.cpu_med))
+        print(
+            "    ~ its NuScenes load %.3f + loading %.3f + accumulation %.3f s CPU"
+            % (t_nusc, t_load_dev.cpu_med, t_dev_acc.cpu_med)
+        )
         ratio("ratio", t_dev_whole, t_fast_whole)
         print("  max |difference| of the results    %9.3g" % diff_whole)
     line("FastTrackingEval(...).main()", t_plugin_whole, "%.3f")
@@ -180,9 +195,10 @@ def main(argv=None) -> int:
     if t_dev_whole is not None:
         ratio("ratio devkit / FastTrackingEval", t_dev_whole, t_plugin_whole)
     else:
-        print("  devkit loading + evaluate()        %9.3f s CPU   ratio %.1f x"
-              % (t_load_dev.cpu_med + t_dev_acc.cpu_med,
-                 (t_load_dev.cpu_med + t_dev_acc.cpu_med) / t_fast_whole.cpu_med))
+        print(
+            "  devkit loading + evaluate()        %9.3f s CPU   ratio %.1f x"
+            % (t_load_dev.cpu_med + t_dev_acc.cpu_med, (t_load_dev.cpu_med + t_dev_acc.cpu_med) / t_fast_whole.cpu_med)
+        )
     return 0
 
 

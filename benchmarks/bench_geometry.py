@@ -25,8 +25,7 @@ import numpy as np
 from grutrack import geometry
 
 # (w, l, h) in metres and relative frequency of a few nuScenes classes.
-_SIZES = np.array([[1.95, 4.6, 1.75], [0.7, 0.75, 1.8], [2.5, 7.5, 3.0], [0.6, 1.8, 1.4],
-                   [0.45, 0.45, 1.0]])
+_SIZES = np.array([[1.95, 4.6, 1.75], [0.7, 0.75, 1.8], [2.5, 7.5, 3.0], [0.6, 1.8, 1.4], [0.45, 0.45, 1.0]])
 _FREQ = np.array([0.45, 0.25, 0.1, 0.1, 0.1])
 
 FUNCTIONS = {
@@ -75,20 +74,22 @@ def report(label: str, a: np.ndarray, b: np.ndarray, repeats: int) -> None:
     """Print one table of timings for all pairwise functions on ``a`` x ``b``."""
     pairs = a.shape[0] * b.shape[0]
     overlap = float((geometry.pairwise_bev_iou(a, b) > 0).mean())
-    print(f"\n{label}: {a.shape[0]} x {b.shape[0]} = {pairs} pairs "
-          f"({overlap:.1%} overlapping in BEV), {repeats} runs each")
+    print(
+        f"\n{label}: {a.shape[0]} x {b.shape[0]} = {pairs} pairs "
+        f"({overlap:.1%} overlapping in BEV), {repeats} runs each"
+    )
     print(f"  {'function':26s} {'median ms':>10s} {'min ms':>9s} {'max ms':>9s} {'pairs/s':>12s}")
     for name, fn in FUNCTIONS.items():
         times = time_runs(fn, a, b, repeats)
         med = statistics.median(times)
-        print(f"  {name:26s} {med * 1e3:10.3f} {min(times) * 1e3:9.3f} {max(times) * 1e3:9.3f} "
-              f"{pairs / med:12.3g}")
+        print(f"  {name:26s} {med * 1e3:10.3f} {min(times) * 1e3:9.3f} {max(times) * 1e3:9.3f} {pairs / med:12.3g}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=30,
-                        help="timing runs for 60 x 75 (500 x 500 gets a fifth, at least 3)")
+    parser.add_argument(
+        "--repeats", type=int, default=30, help="timing runs for 60 x 75 (500 x 500 gets a fifth, at least 3)"
+    )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)

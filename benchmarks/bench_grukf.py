@@ -74,11 +74,17 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=8)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--device", default="auto")
-    ap.add_argument("--config", default="paper",
-                    help="training config (default: paper, with the 5-bin gap table; grukf: the default recipe, "
-                         "whose network filters only the CTRA classes)")
-    ap.add_argument("--paper-scale", action="store_true",
-                    help="train on mini_train + a 700-scene SYNTHETIC demo (the paper's scale), see the docstring")
+    ap.add_argument(
+        "--config",
+        default="paper",
+        help="training config (default: paper, with the 5-bin gap table; grukf: the default recipe, "
+        "whose network filters only the CTRA classes)",
+    )
+    ap.add_argument(
+        "--paper-scale",
+        action="store_true",
+        help="train on mini_train + a 700-scene SYNTHETIC demo (the paper's scale), see the docstring",
+    )
     ap.add_argument("--demo-scenes", type=int, default=700, help=argparse.SUPPRESS)
     ap.add_argument("--scenes-per-step", type=int, default=1, help="training config scenes_per_step")
     args = ap.parse_args()
@@ -91,29 +97,44 @@ def main() -> None:
     val = load_scenes(nusc, "mini_val")
     with tempfile.TemporaryDirectory() as tmp:
         dtrain, dval = _dets(nusc, "mini_train", 1, train, tmp), _dets(nusc, "mini_val", 2, val, tmp)
-        cfg = load_train_config(args.config, {**_fixed(args.config, args.scenes_per_step), "device": args.device,
-                                              "checkpoint_every": 0, "epochs": 100,
-                                              "scenes_per_step": args.scenes_per_step})
+        cfg = load_train_config(
+            args.config,
+            {
+                **_fixed(args.config, args.scenes_per_step),
+                "device": args.device,
+                "checkpoint_every": 0,
+                "epochs": 100,
+                "scenes_per_step": args.scenes_per_step,
+            },
+        )
         t, fps, sps = _timed_trainings(cfg, train, dtrain, tmp, args)
         ckpt = t.save("bench.pt")
         track_fps = []
         for _ in range(args.repeat):
             run = track_scenes(build_tracker("grukf", checkpoint=ckpt, device=args.device), val, dval)
             track_fps.append(run.fps)
-    print(f"device {t.device}, torch threads {torch.get_num_threads()}, {args.steps} training steps per run, "
-          f"{args.scenes_per_step} scene(s) per step")
-    print(f"training: median {statistics.median(fps):.1f} frames/s, {statistics.median(sps):.2f} scenes/s "
-          f"(runs: {', '.join(f'{v:.1f}' for v in fps)} frames/s)")
-    print(f"tracking with the GRU-KF: median {statistics.median(track_fps):.1f} frames/s "
-          f"(runs: {', '.join(f'{v:.1f}' for v in track_fps)})")
+    print(
+        f"device {t.device}, torch threads {torch.get_num_threads()}, {args.steps} training steps per run, "
+        f"{args.scenes_per_step} scene(s) per step"
+    )
+    print(
+        f"training: median {statistics.median(fps):.1f} frames/s, {statistics.median(sps):.2f} scenes/s "
+        f"(runs: {', '.join(f'{v:.1f}' for v in fps)} frames/s)"
+    )
+    print(
+        f"tracking with the GRU-KF: median {statistics.median(track_fps):.1f} frames/s "
+        f"(runs: {', '.join(f'{v:.1f}' for v in track_fps)})"
+    )
 
 
 def _fixed(config: str, scenes_per_step: int = 1) -> dict:
     """Overrides of a training config: "paper" runs with the 5-bin gap table, the configuration the figures in
     the README were measured with (the default of earlier versions); several scenes per step train the network
     on the tracked classes only (``training_classes: own_model`` needs one scene per step)."""
-    return {**({"gap_bins": 5} if config == "paper" else {}),
-            **({"training_classes": "tracked"} if scenes_per_step > 1 else {})}
+    return {
+        **({"gap_bins": 5} if config == "paper" else {}),
+        **({"training_classes": "tracked"} if scenes_per_step > 1 else {}),
+    }
 
 
 def paper_scale(args) -> None:
@@ -121,14 +142,35 @@ def paper_scale(args) -> None:
     from grutrack.tracking.config import load_tracker_config
     from grutrack.training.sources import load_source, merge
 
-    cfg = load_train_config(args.config, {**_fixed(args.config, args.scenes_per_step), "device": args.device,
-                                          "checkpoint_every": 0, "epochs": 100,
-                                          "scenes_per_step": args.scenes_per_step})
+    cfg = load_train_config(
+        args.config,
+        {
+            **_fixed(args.config, args.scenes_per_step),
+            "device": args.device,
+            "checkpoint_every": 0,
+            "epochs": 100,
+            "scenes_per_step": args.scenes_per_step,
+        },
+    )
     yaw = load_tracker_config(cfg.tracker_preset).measured_yaw
-    entries = [{"dataset": "nuscenes", "dataroot": args.dataroot, "version": "v1.0-mini", "split": "mini_train",
-                "profile": "centerpoint", "seed": 1},
-               {"dataset": "demo", "scenes": args.demo_scenes, "frames_per_scene": 40, "split": "demo_all",
-                "profile": "centerpoint", "seed": 1}]
+    entries = [
+        {
+            "dataset": "nuscenes",
+            "dataroot": args.dataroot,
+            "version": "v1.0-mini",
+            "split": "mini_train",
+            "profile": "centerpoint",
+            "seed": 1,
+        },
+        {
+            "dataset": "demo",
+            "scenes": args.demo_scenes,
+            "frames_per_scene": 40,
+            "split": "demo_all",
+            "profile": "centerpoint",
+            "seed": 1,
+        },
+    ]
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         loaded = [load_source(e, yaw, Path(tmp) / "sources", f"source {i}") for i, e in enumerate(entries)]
@@ -137,12 +179,16 @@ def paper_scale(args) -> None:
         frames_per_epoch = sum(len(s) for s in scenes)
         t, fps, _ = _timed_trainings(cfg, scenes, dets, tmp, args)
     f = statistics.median(fps)
-    print(f"paper-scale source mix: {len(scenes)} scenes, {frames_per_epoch} frames per epoch (mini_train, real motion, "
-          f"simulated detections; demo_all, SYNTHETIC); data prepared in {prepare:.1f} s")
-    print(f"device {t.device}, torch threads {torch.get_num_threads()}: training median {f:.1f} frames/s over "
-          f"{args.steps} steps of {args.scenes_per_step} scene(s) (runs: {', '.join(f'{v:.1f}' for v in fps)}); an "
-          f"epoch ({t.total_steps // cfg.epochs} steps) "
-          f"{frames_per_epoch / f / 60:.1f} min")
+    print(
+        f"paper-scale source mix: {len(scenes)} scenes, {frames_per_epoch} frames per epoch (mini_train, real motion, "
+        f"simulated detections; demo_all, SYNTHETIC); data prepared in {prepare:.1f} s"
+    )
+    print(
+        f"device {t.device}, torch threads {torch.get_num_threads()}: training median {f:.1f} frames/s over "
+        f"{args.steps} steps of {args.scenes_per_step} scene(s) (runs: {', '.join(f'{v:.1f}' for v in fps)}); an "
+        f"epoch ({t.total_steps // cfg.epochs} steps) "
+        f"{frames_per_epoch / f / 60:.1f} min"
+    )
 
 
 if __name__ == "__main__":

@@ -46,8 +46,7 @@ def main() -> None:
         if args.dataset == "nuscenes":
             nusc = Path(args.data) / "nuscenes"
             dets = nusc / "detections" / "pointpillars_mini_val.json"
-            common = ["--dataset", "nuscenes", "--dataroot", str(nusc), "--version", "v1.0-mini", "--split",
-                      "mini_val"]
+            common = ["--dataset", "nuscenes", "--dataroot", str(nusc), "--version", "v1.0-mini", "--split", "mini_val"]
             sub = work / "ekf_pointpillars_mini_val.json"
             scenes, what = ["scene-0103", "scene-0916"], "81 frames, 2 GIFs, counts.json"
         else:
@@ -58,10 +57,36 @@ def main() -> None:
             sub = work / "ekf_simulated_av2_val.pkl"
             scenes = ["7fab2350-7eaf-3b7e-a39d-6937a4c1bede", "adcf7d18-0510-35b0-a2fa-b4cea13a6d76"]
             what = "64 frames, 2 GIFs, counts.json, official AV2 evaluation"
-        subprocess.run([*grutrack, "track", *common, "--detections", str(dets), "--tracker", "ekf", "--out",
-                        str(sub), "--no-progress"], check=True, env=env, stdout=subprocess.DEVNULL)
-        cmd = [*grutrack, "render", *common, "--submission", str(sub), "--detections", str(dets),
-               "--scene", *scenes, "--out", str(work / "render")]
+        subprocess.run(
+            [
+                *grutrack,
+                "track",
+                *common,
+                "--detections",
+                str(dets),
+                "--tracker",
+                "ekf",
+                "--out",
+                str(sub),
+                "--no-progress",
+            ],
+            check=True,
+            env=env,
+            stdout=subprocess.DEVNULL,
+        )
+        cmd = [
+            *grutrack,
+            "render",
+            *common,
+            "--submission",
+            str(sub),
+            "--detections",
+            str(dets),
+            "--scene",
+            *scenes,
+            "--out",
+            str(work / "render"),
+        ]
         print("command:", shlex.join(cmd))
         times = []
         for i in range(args.repeat):
@@ -73,8 +98,10 @@ def main() -> None:
             ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
             cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
             print(f"repeat {i + 1}: {times[-1]:6.1f} s wall, {cpu:5.1f} s CPU ({what})")
-        print(f"best {min(times):.1f} s, median {sorted(times)[len(times) // 2]:.1f} s; target < 30 s; "
-              f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+        print(
+            f"best {min(times):.1f} s, median {sorted(times)[len(times) // 2]:.1f} s; target < 30 s; "
+            f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
+        )
     finally:
         if not args.keep:
             shutil.rmtree(work, ignore_errors=True)

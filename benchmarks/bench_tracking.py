@@ -73,12 +73,13 @@ def main() -> None:
         run = track_scenes(tracker, scenes, dets)
         cpu_fps.append(run.frames / (time.process_time() - c0))
         fps.append(run.fps)
-    print(f"tracker {args.tracker} (config {args.config}), {run.frames} frames per run, "
-          f"{density:.1f} raw detections per frame, OMP_NUM_THREADS={os.environ['OMP_NUM_THREADS']}")
+    print(
+        f"tracker {args.tracker} (config {args.config}), {run.frames} frames per run, "
+        f"{density:.1f} raw detections per frame, OMP_NUM_THREADS={os.environ['OMP_NUM_THREADS']}"
+    )
     print(f"frames/s per run: {', '.join(f'{v:.1f}' for v in fps)}")
     print(f"median frames/s (wall clock): {statistics.median(fps):.1f}")
-    print(f"median frames/s (process CPU time, robust to other load on the machine): "
-          f"{statistics.median(cpu_fps):.1f}")
+    print(f"median frames/s (process CPU time, robust to other load on the machine): {statistics.median(cpu_fps):.1f}")
 
 
 if __name__ == "__main__":

@@ -39,8 +39,21 @@ def make_inputs(py: str, tmp: Path, scenes: int, frames: int) -> dict:
     """Demo dataset and ~75 detections per frame made from its ground truth (bench_tracking's noise model), by the
     current checkout in child processes."""
     data, dets = tmp / "demo", tmp / "dets_demo_all.json"
-    run_measured([py, "-m", "grutrack", "demo-data", "--out", str(data), "--scenes", str(scenes),
-                  "--frames-per-scene", str(frames)], REPO)
+    run_measured(
+        [
+            py,
+            "-m",
+            "grutrack",
+            "demo-data",
+            "--out",
+            str(data),
+            "--scenes",
+            str(scenes),
+            "--frames-per-scene",
+            str(frames),
+        ],
+        REPO,
+    )
     run_measured([py, "-", str(data), str(dets), str(Path(__file__).resolve().parent)], REPO, stdin=DENSE_DRIVER)
     return {"data": data, "dets": dets}
 
@@ -49,9 +62,26 @@ def prepare_checkout(py: str, root: Path, paths: dict, out: Path) -> Path:
     """A GRU-KF checkpoint trained by checkout ``root`` (2 steps) and one untimed EKF run of ``demo_val`` there
     (fills its compiled-kernel cache); returns the checkpoint."""
     run_measured([py, "-", str(paths["data"]), str(paths["dets"]), str(out)], root, stdin=TRAIN_DRIVER)
-    run_measured([py, "-m", "grutrack", "track", "--dataroot", str(paths["data"]), "--version", "v1.0-demo",
-                  "--split", "demo_val", "--detections", str(paths["dets"]), "--out", str(out / "warm.json"),
-                  "--no-progress"], root)
+    run_measured(
+        [
+            py,
+            "-m",
+            "grutrack",
+            "track",
+            "--dataroot",
+            str(paths["data"]),
+            "--version",
+            "v1.0-demo",
+            "--split",
+            "demo_val",
+            "--detections",
+            str(paths["dets"]),
+            "--out",
+            str(out / "warm.json"),
+            "--no-progress",
+        ],
+        root,
+    )
     return out / "bench.pt"
 
 
@@ -103,11 +133,21 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", type=int, default=150)
     ap.add_argument("--frames-per-scene", type=int, default=40)
     ap.add_argument("--repeat", type=int, default=1)
-    ap.add_argument("--skip", action="append", default=[], choices=("grukf", "fast", "devkit"),
-                    help="skip a row (the EKF tracks are needed by the evaluation rows)")
-    ap.add_argument("--concurrent", action="append", default=[], choices=("ekf", "grukf", "fast", "devkit"),
-                    help="run the two checkouts' commands of this row (ekf, grukf, fast, devkit) at the same time, "
-                         "one per core, instead of one after the other (the devkit at full size: hours otherwise)")
+    ap.add_argument(
+        "--skip",
+        action="append",
+        default=[],
+        choices=("grukf", "fast", "devkit"),
+        help="skip a row (the EKF tracks are needed by the evaluation rows)",
+    )
+    ap.add_argument(
+        "--concurrent",
+        action="append",
+        default=[],
+        choices=("ekf", "grukf", "fast", "devkit"),
+        help="run the two checkouts' commands of this row (ekf, grukf, fast, devkit) at the same time, "
+        "one per core, instead of one after the other (the devkit at full size: hours otherwise)",
+    )
     args = ap.parse_args(argv)
     py = python()
     with tempfile.TemporaryDirectory(prefix="grutrack-valsize-") as tmp_, reference_checkout(args.reference) as ref:
@@ -126,32 +166,93 @@ def main(argv=None) -> int:
         def measured(row):
             return concurrent if row in args.concurrent else interleaved
 
-        s = measured("ekf")(lambda r: run_measured([py, "-m", "grutrack", "track", *common, "--detections",
-                                                str(paths["dets"]), "--out", out(r, "ekf"), "--no-progress"], r),
-                        roots, args.repeat)
+        s = measured("ekf")(
+            lambda r: run_measured(
+                [
+                    py,
+                    "-m",
+                    "grutrack",
+                    "track",
+                    *common,
+                    "--detections",
+                    str(paths["dets"]),
+                    "--out",
+                    out(r, "ekf"),
+                    "--no-progress",
+                ],
+                r,
+            ),
+            roots,
+            args.repeat,
+        )
         _done(rows, "track, EKF", s)
         if "grukf" not in args.skip:
-            s = measured("grukf")(lambda r: run_measured(
-                [py, "-m", "grutrack", "track", *common, "--detections", str(paths["dets"]), "--tracker", "grukf",
-                 "--checkpoint", str(checkpoint[r]), "--device", "cpu", "--out", out(r, "grukf"),
-                 "--no-progress"], r), roots, args.repeat)
+            s = measured("grukf")(
+                lambda r: run_measured(
+                    [
+                        py,
+                        "-m",
+                        "grutrack",
+                        "track",
+                        *common,
+                        "--detections",
+                        str(paths["dets"]),
+                        "--tracker",
+                        "grukf",
+                        "--checkpoint",
+                        str(checkpoint[r]),
+                        "--device",
+                        "cpu",
+                        "--out",
+                        out(r, "grukf"),
+                        "--no-progress",
+                    ],
+                    r,
+                ),
+                roots,
+                args.repeat,
+            )
             _done(rows, "track, GRU-KF", s)
         for ev in ("fast", "devkit"):
             if ev in args.skip:
                 continue
-            s = measured(ev)(lambda r: run_measured([py, "-m", "grutrack", "evaluate", *common, "--submission",
-                                                    out(r, "ekf"), "--out", out(r, f"m_{ev}"), "--evaluator", ev],
-                                                   r), roots, args.repeat)
+            s = measured(ev)(
+                lambda r: run_measured(
+                    [
+                        py,
+                        "-m",
+                        "grutrack",
+                        "evaluate",
+                        *common,
+                        "--submission",
+                        out(r, "ekf"),
+                        "--out",
+                        out(r, f"m_{ev}"),
+                        "--evaluator",
+                        ev,
+                    ],
+                    r,
+                ),
+                roots,
+                args.repeat,
+            )
             _done(rows, f"evaluate, {ev}", s)
-        amota = {name: json.loads(Path(out(r, "m_fast")).read_text())["overall"]["amota"]
-                 for name, r in roots.items()} if "fast" not in args.skip else {}
+        amota = (
+            {name: json.loads(Path(out(r, "m_fast")).read_text())["overall"]["amota"] for name, r in roots.items()}
+            if "fast" not in args.skip
+            else {}
+        )
 
     frames = args.scenes * args.frames_per_scene
-    print(f"\nSYNTHETIC demo split: {args.scenes} scenes, {frames} frames, {n_dets} SIMULATED detections "
-          f"({n_dets / frames:.1f} per frame); medians of {args.repeat} run(s); thread variables unset"
-          + (f"; run side by side (one per core): {', '.join(args.concurrent)}" if args.concurrent else ""))
-    print(f"{'command':<18}{'':>3}{'wall s':>10}{'CPU s':>10}{'peak MiB':>10}   |{'wall s':>10}{'CPU s':>10}"
-          f"{'peak MiB':>10}{'wall x':>8}")
+    print(
+        f"\nSYNTHETIC demo split: {args.scenes} scenes, {frames} frames, {n_dets} SIMULATED detections "
+        f"({n_dets / frames:.1f} per frame); medians of {args.repeat} run(s); thread variables unset"
+        + (f"; run side by side (one per core): {', '.join(args.concurrent)}" if args.concurrent else "")
+    )
+    print(
+        f"{'command':<18}{'':>3}{'wall s':>10}{'CPU s':>10}{'peak MiB':>10}   |{'wall s':>10}{'CPU s':>10}"
+        f"{'peak MiB':>10}{'wall x':>8}"
+    )
     print(f"{'':<21}{'reference ' + (args.reference or '-'):>30}   |{'current':>30}")
     for label, s in rows:
         print(_row(label, s))

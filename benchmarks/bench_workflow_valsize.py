@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 REPO = Path(__file__).resolve().parents[1]
 OVERLAY = REPO / "workflow/config/valsize.yaml"
-DENSE = "detections/dense/valsize_demo_val.json"     # the dense detector's file, relative to OUT
+DENSE = "detections/dense/valsize_demo_val.json"  # the dense detector's file, relative to OUT
 DENSE_OVERLAY = f"""detectors:
   dense: {{kind: local, format: nuscenes_json, member: null, files: {{demo_val: {DENSE}}}}}
 experiments:
@@ -51,9 +51,24 @@ def snakemake(out: Path, cores: int, target: str) -> float:
     """Run one snakemake target in ``out`` with the two overlays; returns its wall seconds."""
     (out / "dense.yaml").write_text(DENSE_OVERLAY)
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "snakemake", target, "--snakefile", str(REPO / "Snakefile"),
-                    "--directory", str(out), "--cores", str(cores), "--configfile", str(OVERLAY),
-                    str(out / "dense.yaml")], check=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "snakemake",
+            target,
+            "--snakefile",
+            str(REPO / "Snakefile"),
+            "--directory",
+            str(out),
+            "--cores",
+            str(cores),
+            "--configfile",
+            str(OVERLAY),
+            str(out / "dense.yaml"),
+        ],
+        check=True,
+    )
     return time.perf_counter() - t0
 
 
@@ -66,8 +81,14 @@ def job_rows(out: Path) -> list[tuple[str, str, float, float]]:
             rec = next(csv.DictReader(f, delimiter="\t"))
         rel = tsv.relative_to(root)
         rss = rec.get("max_rss", "NA")
-        rows.append((rel.parts[0], str(rel.with_suffix("")), float(rec["s"]),
-                     float(rss) if rss not in ("NA", "-") else float("nan")))
+        rows.append(
+            (
+                rel.parts[0],
+                str(rel.with_suffix("")),
+                float(rec["s"]),
+                float(rss) if rss not in ("NA", "-") else float("nan"),
+            )
+        )
     return rows
 
 
@@ -87,9 +108,14 @@ def main(argv=None) -> int:
     t_start = time.perf_counter()
     t_data = snakemake(out, args.cores, "data/valsize")
     t0 = time.perf_counter()
-    dense = subprocess.run([sys.executable, "-", str(out / "data/valsize"), str(out / DENSE),
-                            str(Path(__file__).resolve().parent)], input=DENSE_DRIVER, text=True, cwd=REPO,
-                           capture_output=True, check=True).stdout.strip()
+    dense = subprocess.run(
+        [sys.executable, "-", str(out / "data/valsize"), str(out / DENSE), str(Path(__file__).resolve().parent)],
+        input=DENSE_DRIVER,
+        text=True,
+        cwd=REPO,
+        capture_output=True,
+        check=True,
+    ).stdout.strip()
     t_dense = time.perf_counter() - t0
     t_report = snakemake(out, args.cores, "reports/nusc_val.md")
     total = time.perf_counter() - t_start
@@ -98,19 +124,24 @@ def main(argv=None) -> int:
     stages: dict[str, list] = {}
     for stage, _, s, mib in jobs:
         stages.setdefault(stage, []).append((s, mib))
-    stage_rows = [[st, str(len(v)), f"{sum(s for s, _ in v):.0f}", f"{max(m for _, m in v):.0f}"]
-                  for st, v in stages.items()]
+    stage_rows = [
+        [st, str(len(v)), f"{sum(s for s, _ in v):.0f}", f"{max(m for _, m in v):.0f}"] for st, v in stages.items()
+    ]
     stage_rows.append(["dense val detections (this script)", "1", f"{t_dense:.0f}", "-"])
     job_table = table([[j, f"{s:.1f}", f"{m:.0f}"] for _, j, s, m in jobs], ["job", "wall s", "peak MiB"])
     stage_table = table(stage_rows, ["stage", "jobs", "job wall s (sum)", "peak MiB (largest job)"])
     cc_files = list((out / "reports/metrics").rglob("*.crosscheck.json"))
     cc = json.loads(cc_files[0].read_text()) if cc_files else {}
-    summary = (f"total wall {total:.0f} s ({total / 60:.1f} min) on --cores {args.cores}: data {t_data:.0f} s, "
-               f"dense detections {t_dense:.0f} s ({dense}), reports/nusc_val.md {t_report:.0f} s")
-    cross = (f"cross-check ({cc_files[0].name if cc_files else '-'}): {len(cc.get('scenes', []))} of "
-             f"{cc.get('split_scenes')} scenes, {cc.get('entries')} entries, max |difference| "
-             f"{cc.get('max_abs_difference')}, equal {cc.get('equal')}, devkit {cc.get('seconds', {}).get('devkit')} s"
-             f", fast {cc.get('seconds', {}).get('fast')} s")
+    summary = (
+        f"total wall {total:.0f} s ({total / 60:.1f} min) on --cores {args.cores}: data {t_data:.0f} s, "
+        f"dense detections {t_dense:.0f} s ({dense}), reports/nusc_val.md {t_report:.0f} s"
+    )
+    cross = (
+        f"cross-check ({cc_files[0].name if cc_files else '-'}): {len(cc.get('scenes', []))} of "
+        f"{cc.get('split_scenes')} scenes, {cc.get('entries')} entries, max |difference| "
+        f"{cc.get('max_abs_difference')}, equal {cc.get('equal')}, devkit {cc.get('seconds', {}).get('devkit')} s"
+        f", fast {cc.get('seconds', {}).get('fast')} s"
+    )
     text = "\n\n".join([summary, cross, stage_table, job_table])
     print(text)
     if args.markdown:

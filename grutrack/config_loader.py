@@ -12,7 +12,7 @@ from __future__ import annotations
 import copy
 import difflib
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 from grutrack.errors import ConfigError
@@ -28,18 +28,23 @@ class ConfigKind:
     folder: str | None
     schema: str
     what: str
-    holds: str      # what the file's top-level mapping holds, for "expected a mapping of ..."
+    holds: str  # what the file's top-level mapping holds, for "expected a mapping of ..."
 
 
 KINDS: dict[str, ConfigKind] = {
-    "tracker": ConfigKind("trackers", "tracker.schema.yaml", "tracker preset",
-                          "sections preprocessing, association, lifecycle, motion, output"),
+    "tracker": ConfigKind(
+        "trackers",
+        "tracker.schema.yaml",
+        "tracker preset",
+        "sections preprocessing, association, lifecycle, motion, output",
+    ),
     "training": ConfigKind("training", "training.schema.yaml", "training config", "training settings"),
     "motion": ConfigKind("motion", "motion.schema.yaml", "motion config", "sections models, classes"),
     "paper": ConfigKind(None, "paper.schema.yaml", "paper numbers file", "sections tables, figures"),
     "registry": ConfigKind(None, "registry.schema.yaml", "detection registry", "one key 'sources'"),
-    "detector_profile": ConfigKind("detector_profiles", "detector_profile.schema.yaml", "detector profile",
-                                   "profile settings"),
+    "detector_profile": ConfigKind(
+        "detector_profiles", "detector_profile.schema.yaml", "detector profile", "profile settings"
+    ),
 }
 
 
@@ -60,8 +65,10 @@ def config_path(kind: str, name_or_path: str | Path) -> Path:
         return p
     cand = CONFIG_ROOT / k.folder / f"{name_or_path}.yaml"
     if not cand.is_file():
-        raise ConfigError(f"unknown {k.what} '{name_or_path}' (available: {', '.join(shipped_names(kind))}; or "
-                          f"give a path to a YAML file)")
+        raise ConfigError(
+            f"unknown {k.what} '{name_or_path}' (available: {', '.join(shipped_names(kind))}; or "
+            f"give a path to a YAML file)"
+        )
     return cand
 
 
@@ -72,7 +79,7 @@ def read_config(kind: str, name_or_path: str | Path) -> tuple[dict, str]:
     path = config_path(kind, name_or_path)
     try:
         raw = read_yaml(path, KINDS[kind].what)
-    except Exception as exc:            # an InputFormatError of the reader: a bad config is a ConfigError
+    except Exception as exc:  # an InputFormatError of the reader: a bad config is a ConfigError
         raise ConfigError(str(exc)) from exc
     raw = {} if raw is None else raw
     if not isinstance(raw, dict):
@@ -88,7 +95,7 @@ def merge(base: dict, overrides: dict) -> dict:
     return out
 
 
-@lru_cache(maxsize=None)
+@cache
 def schema(kind: str) -> dict:
     """The kind's JSON Schema (read once)."""
     from grutrack.io import parse_yaml
@@ -100,13 +107,15 @@ def validate(kind: str, raw: dict, source: str, flags: dict[str, str] | None = N
     """Check ``raw`` against the kind's schema; the first error (the shallowest) raises :class:`ConfigError`.
 
     ``flags`` (top-level key -> command-line flag): an error under such a key is blamed on the flag."""
-    errors = sorted(_validator(kind).iter_errors(raw),
-                    key=lambda e: (len(e.absolute_path), [str(p) for p in e.absolute_path], e.validator))
+    errors = sorted(
+        _validator(kind).iter_errors(raw),
+        key=lambda e: (len(e.absolute_path), [str(p) for p in e.absolute_path], e.validator),
+    )
     if errors:
         raise ConfigError(_message(_inner(errors[0]), raw, kind, source, flags or {}))
 
 
-@lru_cache(maxsize=None)
+@cache
 def _validator(kind: str):
     """A Draft 2020-12 validator of the kind's schema whose ``number`` is finite (YAML's .nan and .inf are not
     numbers here: NaN passes every comparison, so a range check alone would let it through)."""
@@ -115,7 +124,8 @@ def _validator(kind: str):
     from jsonschema import Draft202012Validator, validators
 
     finite = Draft202012Validator.TYPE_CHECKER.redefine(
-        "number", lambda _, x: isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x))
+        "number", lambda _, x: isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+    )
     cls = validators.extend(Draft202012Validator, type_checker=finite)
     return cls(schema(kind))
 
@@ -146,12 +156,13 @@ def _message(err, raw: dict, kind: str, source: str, flags: dict[str, str]) -> s
         extra = next(k for k in err.instance if k not in allowed)
         close = difflib.get_close_matches(str(extra), allowed, n=1)
         hint = f"; did you mean '{prefix}{close[0]}'?" if close else ""
-        return (f"{source}: unknown key '{prefix}{extra}' (expected one of: {', '.join(prefix + a for a in allowed)})"
-                f"{hint}")
+        return (
+            f"{source}: unknown key '{prefix}{extra}' (expected one of: {', '.join(prefix + a for a in allowed)}){hint}"
+        )
     at = list(err.absolute_path)
     depth, expected = _described(schema(kind), at)
     if expected is None or (depth < len(at) and not any(isinstance(p, int) for p in at[depth:])):
-        depth, expected = len(at), _expectation(err)   # described above only when inside a list: the list
+        depth, expected = len(at), _expectation(err)  # described above only when inside a list: the list
 
     value = raw
     for part in list(err.absolute_path)[:depth]:
@@ -164,6 +175,7 @@ def _message(err, raw: dict, kind: str, source: str, flags: dict[str, str]) -> s
 def _described(root: dict, path: list) -> tuple[int, str | None]:
     """(depth, description) of the deepest node along ``path`` whose schema has a ``description`` (an error
     inside a list whose items have none is stated for the whole list)."""
+
     def resolve(node: dict) -> dict:
         while isinstance(node, dict) and "$ref" in node:
             node = root["$defs"][node["$ref"].rsplit("/", 1)[1]]
@@ -189,8 +201,15 @@ def _expectation(err) -> str:
     if err.validator == "enum":
         return "one of " + ", ".join(str(x) for x in v)
     if err.validator == "type":
-        names = {"object": "a mapping", "array": "a list", "boolean": "true or false", "integer": "an integer",
-                 "number": "a finite number", "string": "a string", "null": "null"}
+        names = {
+            "object": "a mapping",
+            "array": "a list",
+            "boolean": "true or false",
+            "integer": "an integer",
+            "number": "a finite number",
+            "string": "a string",
+            "null": "null",
+        }
         return " or ".join(names.get(t, t) for t in (v if isinstance(v, list) else [v]))
     bounds = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=", "exclusiveMaximum": "<"}
     if err.validator in bounds:
@@ -204,8 +223,9 @@ def _expectation(err) -> str:
     return err.message
 
 
-def load_config(kind: str, name_or_path: str | Path, overrides: dict | None = None,
-                flags: dict[str, str] | None = None) -> tuple[dict, str]:
+def load_config(
+    kind: str, name_or_path: str | Path, overrides: dict | None = None, flags: dict[str, str] | None = None
+) -> tuple[dict, str]:
     """Read, merge ``overrides``, validate: the checked mapping and its source. ``flags``: see :func:`validate`
     (overrides given on the command line are checked alone first, so their error names the flag)."""
     raw, source = read_config(kind, name_or_path)
@@ -213,4 +233,3 @@ def load_config(kind: str, name_or_path: str | Path, overrides: dict | None = No
         raw = merge(raw, overrides)
     validate(kind, raw, source, flags)
     return raw, source
-

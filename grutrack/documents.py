@@ -42,7 +42,6 @@ from grutrack.errors import InputFormatError
 from grutrack.io import read_json, write_json_atomic, write_text_atomic
 from grutrack.provenance import sha256_file
 
-
 # -- metrics -----------------------------------------------------------------------------------------------
 
 #: how reports and ``grutrack check`` show a class without ground truth instead of its number
@@ -64,14 +63,19 @@ def _upgraded(d: dict) -> dict:
         return d
     overall = {k: v for k, v in overall.items() if not (k.endswith("_present") and k[:-8] in _PRESENT_AVERAGES)}
     overall.update({k: d["overall"][f"{k}_present"] for k in _PRESENT_AVERAGES if f"{k}_present" in d["overall"]})
-    per_class = {c: ({**m, "absent": not m["present"]} if isinstance(m.get("present"), bool) and "absent" not in m
-                     else m) for c, m in d["per_class"].items()}
+    per_class = {
+        c: ({**m, "absent": not m["present"]} if isinstance(m.get("present"), bool) and "absent" not in m else m)
+        for c, m in d["per_class"].items()
+    }
     if isinstance(overall.get("classes"), list):
         overall["absent_classes"] = [c for c in overall["classes"] if per_class.get(c, {}).get("absent") is True]
     settings = d.get("settings")
     if isinstance(settings, dict) and "average" in settings:
-        settings = {**settings, "average": "Table I: mean over the Table I classes with ground truth (absent "
-                                           "classes are left out; read from the document's *_present averages)"}
+        settings = {
+            **settings,
+            "average": "Table I: mean over the Table I classes with ground truth (absent "
+            "classes are left out; read from the document's *_present averages)",
+        }
     return {**d, "overall": overall, "per_class": per_class, **({"settings": settings} if settings else {})}
 
 
@@ -88,8 +92,8 @@ class MetricsDocument:
     overall: dict[str, Any]
     per_class: dict[str, dict[str, Any]]
     seconds: float | None = None
-    settings: dict[str, Any] | None = None       # AV2: rate, range, ROI, workers, how the average is taken
-    logs: int | None = None                      # AV2: logs and frames evaluated
+    settings: dict[str, Any] | None = None  # AV2: rate, range, ROI, workers, how the average is taken
+    logs: int | None = None  # AV2: logs and frames evaluated
     frames: int | None = None
     devkit_summary: dict[str, Any] | None = None  # nuScenes: the devkit's metrics_summary.json, NaN as null
 
@@ -177,13 +181,14 @@ class MetricsDocument:
 
 # -- submission manifest -----------------------------------------------------------------------------------
 
+
 @dataclass
 class FileRecord:
     """A file an output was made from: its path and content hash (sha256, hex)."""
 
     path: str
     sha256: str | None = None
-    config_hash: str | None = None   # tracker configs: the hash of the resolved configuration
+    config_hash: str | None = None  # tracker configs: the hash of the resolved configuration
 
     @classmethod
     def of(cls, path: str | Path | None, config_hash: str | None = None) -> FileRecord | None:
@@ -219,16 +224,23 @@ class Manifest:
     detections: FileRecord | None = None
     checkpoint: FileRecord | None = None
     code_version: str | None = None
-    counts: dict[str, int] = field(default_factory=dict)   # samples/boxes (nuScenes), logs/frames/boxes (AV2)
+    counts: dict[str, int] = field(default_factory=dict)  # samples/boxes (nuScenes), logs/frames/boxes (AV2)
     grutrack_version: str = __version__
 
     RECORDS = ("submission", "tracker_config", "detections", "checkpoint")
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON object (counts flattened to the top level, as readers have always found them)."""
-        d: dict[str, Any] = {"grutrack_version": self.grutrack_version, "code_version": self.code_version,
-                             "dataset": self.dataset, "dataroot": self.dataroot, "version": self.version,
-                             "split": self.split, **self.counts, "tracker": self.tracker}
+        d: dict[str, Any] = {
+            "grutrack_version": self.grutrack_version,
+            "code_version": self.code_version,
+            "dataset": self.dataset,
+            "dataroot": self.dataroot,
+            "version": self.version,
+            "split": self.split,
+            **self.counts,
+            "tracker": self.tracker,
+        }
         for key in self.RECORDS:
             rec = getattr(self, key)
             d[key] = rec.to_dict() if rec is not None else None
@@ -244,9 +256,17 @@ class Manifest:
                 raise InputFormatError(f"{where}: not a manifest of grutrack submit (no '{key}' record)")
         plain = {"dataset", "split", "tracker", "dataroot", "version", "code_version", "grutrack_version"}
         counts = {k: v for k, v in d.items() if k not in plain | set(cls.RECORDS) and isinstance(v, int)}
-        return cls(dataset=str(d.get("dataset", "")), split=str(d.get("split", "")), tracker=str(d.get("tracker", "")),
-                   dataroot=d.get("dataroot"), version=d.get("version"), code_version=d.get("code_version"),
-                   grutrack_version=str(d.get("grutrack_version", "")), counts=counts, **recs)
+        return cls(
+            dataset=str(d.get("dataset", "")),
+            split=str(d.get("split", "")),
+            tracker=str(d.get("tracker", "")),
+            dataroot=d.get("dataroot"),
+            version=d.get("version"),
+            code_version=d.get("code_version"),
+            grutrack_version=str(d.get("grutrack_version", "")),
+            counts=counts,
+            **recs,
+        )
 
     @staticmethod
     def path_for(submission: str | Path) -> Path:
@@ -266,6 +286,7 @@ class Manifest:
 
 
 # -- training log ------------------------------------------------------------------------------------------
+
 
 @dataclass
 class TrainingStep:
@@ -291,19 +312,26 @@ class TrainingStep:
     @classmethod
     def from_row(cls, row: dict[str, str], where: str) -> TrainingStep:
         try:
-            return cls(step=int(row["step"]), epoch=int(row["epoch"]), scene=row.get("scene") or "",
-                       loss=float(row["loss"]), gt_terms=int(row.get("gt_terms") or 0),
-                       pseudo_terms=int(row.get("pseudo_terms") or 0),
-                       prediction_terms=int(row.get("prediction_terms") or 0),
-                       lr=float(row.get("lr") or "nan"),
-                       val_amota=float(row["val_amota"]) if row.get("val_amota") not in ("", None) else None,
-                       seconds=float(row.get("seconds") or "nan"),
-                       val_amota_sets=tuple(float(x) for x in row["val_amota_sets"].split(";"))
-                       if row.get("val_amota_sets") else None,
-                       grad_norm=float(row.get("grad_norm") or "nan"))
+            return cls(
+                step=int(row["step"]),
+                epoch=int(row["epoch"]),
+                scene=row.get("scene") or "",
+                loss=float(row["loss"]),
+                gt_terms=int(row.get("gt_terms") or 0),
+                pseudo_terms=int(row.get("pseudo_terms") or 0),
+                prediction_terms=int(row.get("prediction_terms") or 0),
+                lr=float(row.get("lr") or "nan"),
+                val_amota=float(row["val_amota"]) if row.get("val_amota") not in ("", None) else None,
+                seconds=float(row.get("seconds") or "nan"),
+                val_amota_sets=tuple(float(x) for x in row["val_amota_sets"].split(";"))
+                if row.get("val_amota_sets")
+                else None,
+                grad_norm=float(row.get("grad_norm") or "nan"),
+            )
         except (TypeError, ValueError) as exc:
-            raise InputFormatError(f"{where}: step {row.get('step')!r}: not a number where one is expected "
-                                   f"({exc})") from exc
+            raise InputFormatError(
+                f"{where}: step {row.get('step')!r}: not a number where one is expected ({exc})"
+            ) from exc
 
     def to_row(self) -> dict[str, Any]:
         row = asdict(self)
@@ -367,12 +395,12 @@ class ValidationRecord:
     selected_step: int
     split: str | None = None
     scenes: list[str] = field(default_factory=list)
-    held_out: bool = False               # the scenes are part of the training split, held out of training
-    detection_sets: list[str] = field(default_factory=list)   # AMOTA is the mean over these detection sets
+    held_out: bool = False  # the scenes are part of the training split, held out of training
+    detection_sets: list[str] = field(default_factory=list)  # AMOTA is the mean over these detection sets
     reference: str | None = None
     reference_amota: float | None = None
     selected_amota: float | None = None
-    reference_amota_sets: list[float] | None = None      # per detection set, in detection_sets order
+    reference_amota_sets: list[float] | None = None  # per detection set, in detection_sets order
     selected_amota_sets: list[float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
@@ -387,15 +415,18 @@ class ValidationRecord:
         if not isinstance(d, dict) or "rule" not in d or "selected_step" not in d:
             raise InputFormatError(f"{path}: a validation record needs the fields 'rule' and 'selected_step'")
         if d["rule"] not in SELECTION_RULES or not isinstance(d["selected_step"], int):
-            raise InputFormatError(f"{path}: 'rule' must be one of {', '.join(map(repr, SELECTION_RULES))} and "
-                                   f"'selected_step' an integer, got {d['rule']!r} and {d['selected_step']!r}")
+            raise InputFormatError(
+                f"{path}: 'rule' must be one of {', '.join(map(repr, SELECTION_RULES))} and "
+                f"'selected_step' an integer, got {d['rule']!r} and {d['selected_step']!r}"
+            )
         for key in ("reference_amota", "selected_amota"):
             if not isinstance(d.get(key), (int, float, type(None))) or isinstance(d.get(key), bool):
                 raise InputFormatError(f"{path}: '{key}' must be a number or null, got {d.get(key)!r}")
         for key in ("reference_amota_sets", "selected_amota_sets"):
             v = d.get(key)
-            if v is not None and not (isinstance(v, list) and all(
-                    isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+            if v is not None and not (
+                isinstance(v, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+            ):
                 raise InputFormatError(f"{path}: '{key}' must be a list of numbers or null, got {v!r}")
         try:
             return cls(**{f.name: d[f.name] for f in fields(cls) if f.name in d})
@@ -404,6 +435,7 @@ class ValidationRecord:
 
 
 # -- evaluator cross-check ---------------------------------------------------------------------------------
+
 
 @dataclass
 class CrossCheckDocument:
@@ -431,7 +463,7 @@ class CrossCheckDocument:
 
     def __post_init__(self):
         if self.max_abs_difference is not None and not math.isfinite(self.max_abs_difference):
-            self.max_abs_difference = None        # JSON has no infinity
+            self.max_abs_difference = None  # JSON has no infinity
 
     @property
     def subset(self) -> bool:
@@ -449,11 +481,13 @@ class CrossCheckDocument:
     def read(cls, path: str | Path) -> CrossCheckDocument:
         """Read a cross-check JSON written by :meth:`write`."""
         d = read_json(path, "cross-check JSON")
-        need = [f.name for f in fields(cls) if f.default is dataclasses_MISSING and f.default_factory is
-                dataclasses_MISSING]
+        need = [
+            f.name for f in fields(cls) if f.default is dataclasses_MISSING and f.default_factory is dataclasses_MISSING
+        ]
         if not isinstance(d, dict) or any(k not in d for k in need):
-            raise InputFormatError(f"{path}: not a cross-check JSON of grutrack cross-check (it needs the fields "
-                                   f"{', '.join(need)})")
+            raise InputFormatError(
+                f"{path}: not a cross-check JSON of grutrack cross-check (it needs the fields {', '.join(need)})"
+            )
         if not isinstance(d["equal"], bool) or not isinstance(d["scenes"], list):
             raise InputFormatError(f"{path}: 'equal' must be true or false and 'scenes' a list")
         return cls(**{f.name: d[f.name] for f in fields(cls) if f.name in d})
@@ -544,18 +578,26 @@ class Checkpoint:
         """The training state, or :class:`InputFormatError` naming the first resume field the file lacks."""
         if self.training is None or self.train_config is None:
             missing = next((k for k in RESUME_FIELDS if k in self.absent), "train_state")
-            raise InputFormatError(f"{where}: not a resumable checkpoint (no '{missing}'; model.pt files of old "
-                                   f"versions cannot be resumed: train again with another --out)")
+            raise InputFormatError(
+                f"{where}: not a resumable checkpoint (no '{missing}'; model.pt files of old "
+                f"versions cannot be resumed: train again with another --out)"
+            )
         return self.training
 
     def to_dict(self) -> dict[str, Any]:
         """The file's object (fields that are None are left out)."""
-        d: dict[str, Any] = {"format": CHECKPOINT_FORMAT, "grutrack_version": self.grutrack_version,
-                             "arch": self.arch, "model": self.weights}
+        d: dict[str, Any] = {
+            "format": CHECKPOINT_FORMAT,
+            "grutrack_version": self.grutrack_version,
+            "arch": self.arch,
+            "model": self.weights,
+        }
         if self.selected is not None:
             s = self.selected
-            d["selected"] = ({"rule": s.rule} if s.rule is not None else {}) | {"step": s.step,
-                                                                                "val_amota": s.val_amota}
+            d["selected"] = ({"rule": s.rule} if s.rule is not None else {}) | {
+                "step": s.step,
+                "val_amota": s.val_amota,
+            }
         t = self.training
         if t is not None:
             d.update(optimizer=t.optimizer, scheduler=t.scheduler, rng=t.rng, train_state=asdict(t.position))
@@ -572,8 +614,10 @@ class Checkpoint:
     def from_dict(cls, d: Any, where: str = "checkpoint") -> Checkpoint:
         """Parse and check the layout (InputFormatError naming ``where`` and the field)."""
         if not isinstance(d, dict) or d.get("format") != CHECKPOINT_FORMAT:
-            raise InputFormatError(f"{where}: not a grutrack GRU-KF checkpoint (expected format {CHECKPOINT_FORMAT}; "
-                                   f"train one with `grutrack train`)")
+            raise InputFormatError(
+                f"{where}: not a grutrack GRU-KF checkpoint (expected format {CHECKPOINT_FORMAT}; "
+                f"train one with `grutrack train`)"
+            )
         if not isinstance(d.get("arch"), dict):
             raise InputFormatError(f"{where}: field 'arch' must be the network's architecture (a mapping)")
         if not isinstance(d.get("model"), dict):
@@ -590,17 +634,26 @@ class Checkpoint:
                 position = TrainingPosition(**d["train_state"])
             except TypeError as exc:
                 raise InputFormatError(f"{where}: field 'train_state' is not a training position ({exc})") from exc
-            training = TrainingState(position, d["optimizer"], d["scheduler"], d["rng"],
-                                     [TrainingStep.from_row(r, where) for r in d["log"]])
+            training = TrainingState(
+                position, d["optimizer"], d["scheduler"], d["rng"], [TrainingStep.from_row(r, where) for r in d["log"]]
+            )
         selected = None
         if d.get("selected") is not None:
             s = d["selected"]
             if not isinstance(s.get("step"), int):
                 raise InputFormatError(f"{where}: field 'selected.step' must be an integer, got {s.get('step')!r}")
             selected = CheckpointSelection(step=s["step"], val_amota=s.get("val_amota"), rule=s.get("rule"))
-        return cls(arch=d["arch"], weights=d["model"], train_config=d.get("train_config"), training=training,
-                   selected=selected, data_fingerprint=d.get("data_fingerprint"), data_source=d.get("data_source"),
-                   grutrack_version=str(d.get("grutrack_version", "")), absent=absent)
+        return cls(
+            arch=d["arch"],
+            weights=d["model"],
+            train_config=d.get("train_config"),
+            training=training,
+            selected=selected,
+            data_fingerprint=d.get("data_fingerprint"),
+            data_source=d.get("data_source"),
+            grutrack_version=str(d.get("grutrack_version", "")),
+            absent=absent,
+        )
 
     def write(self, path: str | Path) -> None:
         """Write the checkpoint atomically (torch's file format)."""

@@ -262,12 +262,20 @@ def _hull_area(cx, cy, c, s, al, aw, bl, bw, px, py, on, sup, keys) -> float:
         b_on = hb_nb[pi] >= ha_nb[pi] - TOL or hb_nb[i] >= ha_nb[i] - TOL
         for j in range(4):
             # b's normal j in the cone of a's corner i, and a reaches as far as b along it
-            if not a_on and _dot_nonneg(nax[pi], nay[pi], j) and _dot_nonneg(nax[i], nay[i], j) \
-                    and ha_nb[j] >= hb_nb[j] - TOL:
+            if (
+                not a_on
+                and _dot_nonneg(nax[pi], nay[pi], j)
+                and _dot_nonneg(nax[i], nay[i], j)
+                and ha_nb[j] >= hb_nb[j] - TOL
+            ):
                 a_on = True
             # a's normal j in the cone of b's corner i, and b reaches as far as a along it
-            if not b_on and _dot_nonneg(nax[j], nay[j], pi) and _dot_nonneg(nax[j], nay[j], i) \
-                    and hb_na[j] >= ha_na[j] - TOL:
+            if (
+                not b_on
+                and _dot_nonneg(nax[j], nay[j], pi)
+                and _dot_nonneg(nax[j], nay[j], i)
+                and hb_na[j] >= ha_na[j] - TOL
+            ):
                 b_on = True
         su, sv = _SU_T[i], _SV_T[i]
         px[i] = cx + su * (al * c) - sv * (aw * s)
@@ -331,8 +339,9 @@ def _pair_measures(ta, i, tb, j, want, out, k, work, flags, keys) -> None:
     px, py = work[0], work[1]
     inter = 0.0
     if dist <= reach + TOL and area_a > 0.0 and area_b > 0.0:
-        inter = _intersection_area(cx, cy, c, s, al, aw, bl, bw, work[2], work[3], work[4], work[5],
-                                   px, py, flags, keys)
+        inter = _intersection_area(
+            cx, cy, c, s, al, aw, bl, bw, work[2], work[3], work[4], work[5], px, py, flags, keys
+        )
     inter = min(max(inter, 0.0), min(area_a, area_b))
     hull = 0.0
     if want[_GIOU_BEV] or want[_GIOU_3D]:

@@ -5,9 +5,10 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 
 @contextmanager
@@ -38,8 +39,9 @@ def _check_output(path: Path) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError) as exc:
         blocker = next((q for q in [path.parent, *path.parent.parents] if q.exists() and not q.is_dir()), None)
-        raise OutputPathError(f"{path}: cannot create its folder: {blocker or exc.filename} is a file, not a "
-                              f"folder") from exc
+        raise OutputPathError(
+            f"{path}: cannot create its folder: {blocker or exc.filename} is a file, not a folder"
+        ) from exc
     except PermissionError as exc:
         raise OutputPathError(f"{path}: cannot create its folder ({exc.strerror}: {exc.filename})") from exc
     if not os.access(path.parent, os.W_OK | os.X_OK):
@@ -87,8 +89,10 @@ def _read_text(path: str | os.PathLike, what: str, fmt: str) -> tuple[Path, str]
     try:
         return path, path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
-        raise InputFormatError(f"{path}: {what} must be {fmt} text, but this file is binary (not UTF-8 at byte "
-                               f"{exc.start}; a feather or pickle file?)") from exc
+        raise InputFormatError(
+            f"{path}: {what} must be {fmt} text, but this file is binary (not UTF-8 at byte "
+            f"{exc.start}; a feather or pickle file?)"
+        ) from exc
 
 
 def _umask() -> int:

@@ -84,7 +84,7 @@ def _solve(c, nr, nc, u, v, spc, path, col4row, row4col, SR, SC, remaining) -> b
     return True
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _compiled():
     """The numba form of :func:`_solve` (compiled on first use, cached on disk)."""
     from numba import njit
@@ -118,8 +118,20 @@ def scipy_lsa(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if nr == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     col4row = [-1] * nr
-    if not _solve(c.tolist(), nr, nc, [0.0] * nr, [0.0] * nc, [math.inf] * nc, [-1] * nc, col4row, [-1] * nc,
-                  [False] * nr, [False] * nc, [0] * nc):
+    if not _solve(
+        c.tolist(),
+        nr,
+        nc,
+        [0.0] * nr,
+        [0.0] * nc,
+        [math.inf] * nc,
+        [-1] * nc,
+        col4row,
+        [-1] * nc,
+        [False] * nr,
+        [False] * nc,
+        [0] * nc,
+    ):
         raise ValueError("cost matrix is infeasible")
     return _pairs(col4row, transpose)
 
@@ -133,9 +145,20 @@ def scipy_lsa_compiled(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if not np.isfinite(c).all():
         raise ValueError("cost matrix contains NaN or inf")
     col4row = np.full(nr, -1, dtype=np.int64)
-    ok = _compiled()(np.ascontiguousarray(c), nr, nc, np.zeros(nr), np.zeros(nc), np.full(nc, math.inf),
-                     np.full(nc, -1, dtype=np.int64), col4row, np.full(nc, -1, dtype=np.int64),
-                     np.zeros(nr, dtype=np.bool_), np.zeros(nc, dtype=np.bool_), np.zeros(nc, dtype=np.int64))
+    ok = _compiled()(
+        np.ascontiguousarray(c),
+        nr,
+        nc,
+        np.zeros(nr),
+        np.zeros(nc),
+        np.full(nc, math.inf),
+        np.full(nc, -1, dtype=np.int64),
+        col4row,
+        np.full(nc, -1, dtype=np.int64),
+        np.zeros(nr, dtype=np.bool_),
+        np.zeros(nc, dtype=np.bool_),
+        np.zeros(nc, dtype=np.int64),
+    )
     if not ok:
         raise ValueError("cost matrix is infeasible")
     return _pairs(col4row, transpose)

@@ -7,7 +7,6 @@ import hashlib
 import json
 from pathlib import Path
 
-
 SHORT = 12  # hex digits shown in reports
 
 
@@ -24,4 +23,3 @@ def config_hash(obj) -> str:
     """Short hash of a configuration's content (key order and YAML layout do not matter)."""
     text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:SHORT]
-

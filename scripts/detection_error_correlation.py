@@ -62,7 +62,7 @@ def summary(errors: dict, class_names) -> list[tuple[str, int, float, float]]:
         if not sel:
             continue
         e0, e1 = np.array([p[0] for p in sel]), np.array([p[1] for p in sel])
-        rows.append((name, len(sel), lag_one_correlation(e0, e1), float(np.sqrt(np.mean(e0 ** 2) * 2))))
+        rows.append((name, len(sel), lag_one_correlation(e0, e1), float(np.sqrt(np.mean(e0**2) * 2))))
     return rows
 
 

@@ -41,15 +41,25 @@ import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-EVAL_SETS = (("centerpoint_s11", "centerpoint", 11), ("pointpillars_s12", "pointpillars", 12),
-             ("heavytail_s13", str(ROOT / "docs/results/grukf_eval/heavytail.yaml"), 13))
-MORE_SETS = (("centerpoint_s2", "centerpoint", 2), ("pointpillars_s3", "pointpillars", 3),
-             ("velfail_s14", "centerpoint_velfail", 14))
-SEED_BASE = 20   # --cp-seeds N: centerpoint seeds SEED_BASE + 1 .. SEED_BASE + N
-DRIFT_PROFILE, DRIFT_BASE = str(ROOT / "docs/results/grukf_eval/drift.yaml"), 40   # --drift-seeds N: 41 .. 40 + N
-HOLDOUT_SETS = (("centerpoint_s31", "centerpoint", 31), ("pointpillars_s32", "pointpillars", 32),
-                ("heavytail_s33", str(ROOT / "docs/results/grukf_eval/heavytail.yaml"), 33),
-                ("centerpoint_s34", "centerpoint", 34), ("pointpillars_s35", "pointpillars", 35))
+EVAL_SETS = (
+    ("centerpoint_s11", "centerpoint", 11),
+    ("pointpillars_s12", "pointpillars", 12),
+    ("heavytail_s13", str(ROOT / "docs/results/grukf_eval/heavytail.yaml"), 13),
+)
+MORE_SETS = (
+    ("centerpoint_s2", "centerpoint", 2),
+    ("pointpillars_s3", "pointpillars", 3),
+    ("velfail_s14", "centerpoint_velfail", 14),
+)
+SEED_BASE = 20  # --cp-seeds N: centerpoint seeds SEED_BASE + 1 .. SEED_BASE + N
+DRIFT_PROFILE, DRIFT_BASE = str(ROOT / "docs/results/grukf_eval/drift.yaml"), 40  # --drift-seeds N: 41 .. 40 + N
+HOLDOUT_SETS = (
+    ("centerpoint_s31", "centerpoint", 31),
+    ("pointpillars_s32", "pointpillars", 32),
+    ("heavytail_s33", str(ROOT / "docs/results/grukf_eval/heavytail.yaml"), 33),
+    ("centerpoint_s34", "centerpoint", 34),
+    ("pointpillars_s35", "pointpillars", 35),
+)
 
 
 def _overrides(text: str) -> dict:
@@ -84,8 +94,9 @@ def paired_difference(values: np.ndarray, reference: np.ndarray) -> tuple[float,
     return float(d.mean()), float(d.std(ddof=1) / np.sqrt(len(d))) if len(d) > 1 else 0.0
 
 
-def _score(nusc, tracker, scenes, dets, tokens, split: str = "mini_val", split_tokens=None,
-           per_class: dict | None = None) -> tuple[float, float]:
+def _score(
+    nusc, tracker, scenes, dets, tokens, split: str = "mini_val", split_tokens=None, per_class: dict | None = None
+) -> tuple[float, float]:
     """AMOTA, AMOTP of ``tracker`` on ``scenes``; with ``split_tokens`` (every sample of ``split``) the scenes
     are part of the split and only their tracks are scored. ``per_class``: filled with {class: AMOTP (m)}
     (classes without ground truth left out; mini_val only)."""
@@ -98,8 +109,9 @@ def _score(nusc, tracker, scenes, dets, tokens, split: str = "mini_val", split_t
         with contextlib.redirect_stdout(io.StringIO()):
             s = fast_tracking_eval(nusc, build_submission(results, tokens), split)
         if per_class is not None:
-            per_class.update({c: float(v) for c, v in s["label_metrics"]["amotp"].items()
-                              if v is not None and not np.isnan(v)})
+            per_class.update(
+                {c: float(v) for c, v in s["label_metrics"]["amotp"].items() if v is not None and not np.isnan(v)}
+            )
         return float(s["amota"]), float(s["amotp"])
     sub = build_submission(results, tokens)
     sub["results"].update({t: [] for t in split_tokens if t not in sub["results"]})
@@ -116,10 +128,13 @@ def _difference_table(rows: list[dict], classes: dict, sets: list[str], kind: st
     per class), with standard errors; ``classes[(model, set)]`` = {class: AMOTP}; ``kind`` names the sets."""
     ref = next(r for r in rows if r["model"] == "ekf")
     names = sorted({c for pc in classes.values() if pc for c in pc})
-    lines = [f"Difference to ekf over {len(sets)} {kind} sets (mean +- standard error; SYNTHETIC "
-             "detections, real mini_val motion):", "",
-             "| model | AMOTA | AMOTP (m) | " + " | ".join(f"{c} AMOTP" for c in names) + " |",
-             "|---" * (len(names) + 3) + "|"]
+    lines = [
+        f"Difference to ekf over {len(sets)} {kind} sets (mean +- standard error; SYNTHETIC "
+        "detections, real mini_val motion):",
+        "",
+        "| model | AMOTA | AMOTP (m) | " + " | ".join(f"{c} AMOTP" for c in names) + " |",
+        "|---" * (len(names) + 3) + "|",
+    ]
     for r in rows:
         cells = []
         for what in ("amota", "amotp"):
@@ -141,33 +156,56 @@ def main() -> None:
     ap.add_argument("--train", action="append", default=[], help="NAME=key:value,... (training config overrides)")
     ap.add_argument("--constant-gain", default=None, help="name of the constant-gain ablation row")
     ap.add_argument("--checkpoint", action="append", default=[], help="NAME=PATH: also evaluate a trained model")
-    ap.add_argument("--untrained", action="append", default=[],
-                    help="NAME=key:value,...: the network of that training config before any step (e.g. "
-                         "gain_prior:ekf, which is then the EKF with the GRU-KF's SS model)")
+    ap.add_argument(
+        "--untrained",
+        action="append",
+        default=[],
+        help="NAME=key:value,...: the network of that training config before any step (e.g. "
+        "gain_prior:ekf, which is then the EKF with the GRU-KF's SS model)",
+    )
     ap.add_argument("--no-ekf", action="store_true", help="leave out the ekf preset's row")
-    ap.add_argument("--holdout", default=None, help="SCENE,SCENE: train without these mini_train scenes and score "
-                    "on them (recipe selection; mini_val is not read)")
-    ap.add_argument("--more-sets", action="store_true",
-                    help="also centerpoint seed 2, pointpillars seed 3 (the sets options were compared on) and "
-                         "centerpoint_velfail seed 14 (velocity failing over whole tracks)")
-    ap.add_argument("--cp-seeds", type=int, default=0, metavar="N",
-                    help=f"also N CenterPoint-like sets on mini_val, seeds {SEED_BASE + 1}..{SEED_BASE} + N, and the "
-                         "mean difference to the ekf row with its standard error (needs the ekf row)")
-    ap.add_argument("--drift-seeds", type=int, default=0, metavar="N",
-                    help=f"also N sets of the drift profile on mini_val, seeds {DRIFT_BASE + 1}..{DRIFT_BASE} + N, "
-                         "and the mean difference to the ekf row over them (needs the ekf row)")
+    ap.add_argument(
+        "--holdout",
+        default=None,
+        help="SCENE,SCENE: train without these mini_train scenes and score "
+        "on them (recipe selection; mini_val is not read)",
+    )
+    ap.add_argument(
+        "--more-sets",
+        action="store_true",
+        help="also centerpoint seed 2, pointpillars seed 3 (the sets options were compared on) and "
+        "centerpoint_velfail seed 14 (velocity failing over whole tracks)",
+    )
+    ap.add_argument(
+        "--cp-seeds",
+        type=int,
+        default=0,
+        metavar="N",
+        help=f"also N CenterPoint-like sets on mini_val, seeds {SEED_BASE + 1}..{SEED_BASE} + N, and the "
+        "mean difference to the ekf row with its standard error (needs the ekf row)",
+    )
+    ap.add_argument(
+        "--drift-seeds",
+        type=int,
+        default=0,
+        metavar="N",
+        help=f"also N sets of the drift profile on mini_val, seeds {DRIFT_BASE + 1}..{DRIFT_BASE} + N, "
+        "and the mean difference to the ekf row over them (needs the ekf row)",
+    )
     args = ap.parse_args()
     for flag, n in (("--cp-seeds", args.cp_seeds), ("--drift-seeds", args.drift_seeds)):
         if n < 0 or (n and (args.holdout or args.no_ekf)):
-            ap.error(f"{flag}: expected a count >= 0, without --holdout and --no-ekf (it compares with the ekf "
-                     "row on mini_val)")
+            ap.error(
+                f"{flag}: expected a count >= 0, without --holdout and --no-ekf (it compares with the ekf "
+                "row on mini_val)"
+            )
 
     from grutrack.data.nusc_detections import load_detections
     from grutrack.data.nuscenes import load_scenes, open_nuscenes
-    from grutrack.tracking.factory import build_tracker
-    from grutrack.training.config import load_train_config
     from grutrack.datasets import DatasetOptions
     from grutrack.datasets.nuscenes import NuScenesDataset
+    from grutrack.tracking.factory import build_tracker
+    from grutrack.training.config import load_train_config
     from grutrack.training.resample import DetectionResampler, ResamplingTrainer
 
     out = Path(args.out)
@@ -186,22 +224,29 @@ def main() -> None:
         tr_scenes = [s for s in tr_scenes if s.name not in held]
         split, split_tokens, eval_sets = "mini_train", tr_tokens, HOLDOUT_SETS
         va_tokens = [f.token for s in va_scenes for f in s.frames]
-        sets = {name: _dets(nusc, "mini_train", prof, seed, tr_tokens, out / "detections")
-                for name, prof, seed in eval_sets}
+        sets = {
+            name: _dets(nusc, "mini_train", prof, seed, tr_tokens, out / "detections") for name, prof, seed in eval_sets
+        }
     else:
         va_scenes = load_scenes(nusc, "mini_val")
         va_tokens = [f.token for s in va_scenes for f in s.frames]
-        eval_sets = EVAL_SETS + (MORE_SETS if args.more_sets else ()) + tuple(
-            (f"centerpoint_s{SEED_BASE + i}", "centerpoint", SEED_BASE + i) for i in range(1, args.cp_seeds + 1)) \
+        eval_sets = (
+            EVAL_SETS
+            + (MORE_SETS if args.more_sets else ())
+            + tuple(
+                (f"centerpoint_s{SEED_BASE + i}", "centerpoint", SEED_BASE + i) for i in range(1, args.cp_seeds + 1)
+            )
             + tuple((f"drift_s{DRIFT_BASE + i}", DRIFT_PROFILE, DRIFT_BASE + i) for i in range(1, args.drift_seeds + 1))
-        sets = {name: _dets(nusc, "mini_val", prof, seed, va_tokens, out / "detections")
-                for name, prof, seed in eval_sets}
-        sets["real_pointpillars"] = load_detections(Path(args.dataroot) / "detections/pointpillars_mini_val.json",
-                                                    va_tokens)
+        )
+        sets = {
+            name: _dets(nusc, "mini_val", prof, seed, va_tokens, out / "detections") for name, prof, seed in eval_sets
+        }
+        sets["real_pointpillars"] = load_detections(
+            Path(args.dataroot) / "detections/pointpillars_mini_val.json", va_tokens
+        )
 
     models: list[tuple[str, dict, object]] = [] if args.no_ekf else [("ekf", {}, None)]
-    resampler = DetectionResampler(NuScenesDataset(DatasetOptions(args.dataroot, "v1.0-mini")), "mini_train",
-                                   tr_scenes)
+    resampler = DetectionResampler(NuScenesDataset(DatasetOptions(args.dataroot, "v1.0-mini")), "mini_train", tr_scenes)
     if args.constant_gain:
         cfg = load_train_config("paper", {"device": "cpu", "gap_bins": 0, "class_gain": False, "age_bins": 0})
         t = ResamplingTrainer(cfg, tr_scenes, tr_dets, out / args.constant_gain, resampler, progress=False)
@@ -209,15 +254,17 @@ def main() -> None:
     for spec in args.untrained:
         name, _, over = spec.partition("=")
         over = _overrides(over)
-        cfg = load_train_config(over.get("config", "grukf"), {"device": "cpu", **{k: v for k, v in over.items()
-                                                                               if k != "config"}})
+        cfg = load_train_config(
+            over.get("config", "grukf"), {"device": "cpu", **{k: v for k, v in over.items() if k != "config"}}
+        )
         t = ResamplingTrainer(cfg, tr_scenes, tr_dets, out / name, resampler, progress=False)
         models.append((name, {**over, "steps": 0}, t.save("model.pt")))
     for spec in args.train:
         name, _, over = spec.partition("=")
         over = _overrides(over)
-        cfg = load_train_config(over.get("config", "grukf"), {"device": "cpu", **{k: v for k, v in over.items()
-                                                                               if k != "config"}})
+        cfg = load_train_config(
+            over.get("config", "grukf"), {"device": "cpu", **{k: v for k, v in over.items() if k != "config"}}
+        )
         t0 = time.perf_counter()
         ck = ResamplingTrainer(cfg, tr_scenes, tr_dets, out / name, resampler, progress=False).run()
         print(f"trained {name} {over} in {time.perf_counter() - t0:.0f} s", flush=True)
@@ -237,30 +284,41 @@ def main() -> None:
             classes[(name, sname)] = pc
         rows.append(row)
         print(row, flush=True)
-        with open(out / "rows.jsonl", "a") as f:   # rows as they come (a long run can be read before it ends)
+        with open(out / "rows.jsonl", "a") as f:  # rows as they come (a long run can be read before it ends)
             f.write(json.dumps(row) + "\n")
     with open(out / "suite.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    lines = ["| model | " + " | ".join(sets) + " | mean simulated AMOTA / AMOTP | mean CenterPoint-like |",
-             "|---" * (len(sets) + 3) + "|"]
+    lines = [
+        "| model | " + " | ".join(sets) + " | mean simulated AMOTA / AMOTP | mean CenterPoint-like |",
+        "|---" * (len(sets) + 3) + "|",
+    ]
     sim = [n for n, _, _ in eval_sets]
-    cp_like = [n for n, prof, _ in eval_sets if prof == "centerpoint"]   # the acceptance's held-out kind
+    cp_like = [n for n, prof, _ in eval_sets if prof == "centerpoint"]  # the acceptance's held-out kind
 
     def mean(r, names, what):
         return np.mean([r[f"{s}_{what}"] for s in names])
 
     for r in rows:
         cells = [f"{r[f'{s}_amota']:.4f} / {r[f'{s}_amotp']:.3f}" for s in sets]
-        lines.append(f"| {r['model']} | " + " | ".join(cells) + f" | {mean(r, sim, 'amota'):.4f} / "
-                     f"{mean(r, sim, 'amotp'):.3f} | {mean(r, cp_like, 'amota'):.4f} / "
-                     f"{mean(r, cp_like, 'amotp'):.3f} |")
+        lines.append(
+            f"| {r['model']} | " + " | ".join(cells) + f" | {mean(r, sim, 'amota'):.4f} / "
+            f"{mean(r, sim, 'amotp'):.3f} | {mean(r, cp_like, 'amota'):.4f} / "
+            f"{mean(r, cp_like, 'amotp'):.3f} |"
+        )
     if args.cp_seeds:
         lines += ["", *_difference_table(rows, classes, cp_like)]
     if args.drift_seeds:
-        lines += ["", *_difference_table(rows, classes, [n for n, prof, _ in eval_sets if prof == DRIFT_PROFILE],
-                                         "drift (time-correlated centre error)")]
+        lines += [
+            "",
+            *_difference_table(
+                rows,
+                classes,
+                [n for n, prof, _ in eval_sets if prof == DRIFT_PROFILE],
+                "drift (time-correlated centre error)",
+            ),
+        ]
     (out / "suite.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

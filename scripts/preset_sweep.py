@@ -113,8 +113,10 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(res)
     for q in presets[1:]:
         d = np.array([r[q]["amota"] - r[presets[0]]["amota"] for r in rows])
-        print(f"{q} - {presets[0]}: mean {d.mean():+.4f}, lowest {d.min():+.4f}, highest {d.max():+.4f}, "
-              f"higher on {(d > 0).sum()}, lower on {(d < 0).sum()} of {len(d)}")
+        print(
+            f"{q} - {presets[0]}: mean {d.mean():+.4f}, lowest {d.min():+.4f}, highest {d.max():+.4f}, "
+            f"higher on {(d > 0).sum()}, lower on {(d < 0).sum()} of {len(d)}"
+        )
     return 0
 
 

@@ -20,8 +20,10 @@ def _data_root() -> Path:
 
 def _require(path: Path) -> Path:
     if not path.exists():
-        msg = (f"real test data missing: {path} (set GRUTRACK_TEST_DATA to the folder holding "
-               f"nuscenes/ and av2/; see ../shared/data/README.md)")
+        msg = (
+            f"real test data missing: {path} (set GRUTRACK_TEST_DATA to the folder holding "
+            f"nuscenes/ and av2/; see ../shared/data/README.md)"
+        )
         if os.environ.get("CI", "").lower() == "true":
             pytest.fail(msg)
         pytest.skip(msg)
@@ -65,3 +67,15 @@ def nusc_mini():
     from nuscenes import NuScenes
 
     return NuScenes(version="v1.0-mini", dataroot=str(root), verbose=False)
+
+
+#: fixtures that run a workflow target for real: every test that uses one is in the slow tier
+SLOW_FIXTURES = frozenset({"demo_run", "mini_run"})
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tier the suite: a test is slow (``-m "not slow"`` leaves it out) when it is marked so or uses a fixture of
+    :data:`SLOW_FIXTURES`."""
+    for item in items:
+        if SLOW_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)

@@ -24,8 +24,15 @@ from grutrack.data.lt3d_detections import detection_table, load_detections
 from grutrack.data.scene import BoxSet, Frame, Scene, Vocabulary
 from grutrack.errors import DatasetError, InputFormatError
 from grutrack.evaluation.av2_eval import default_workers, evaluate_sequences, metrics_from_result
-from grutrack.export.av2_tracks import (build_sequences, expected_frames, gt_sequences, read_tracks_pickle,
-                                        sequences_to_table, table_to_sequences, validate_sequences)
+from grutrack.export.av2_tracks import (
+    build_sequences,
+    expected_frames,
+    gt_sequences,
+    read_tracks_pickle,
+    sequences_to_table,
+    table_to_sequences,
+    validate_sequences,
+)
 from grutrack.tracking.baselines import greedy_association
 from grutrack.tracking.factory import build_tracker
 from grutrack.tracking.tracker import track_scenes
@@ -36,6 +43,7 @@ LOG_B = "adcf7d18-0510-35b0-a2fa-b4cea13a6d76"
 # ------------------------------------------------------------------------------------------------------------
 # helpers
 # ------------------------------------------------------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def scenes(av2_root):
@@ -52,24 +60,62 @@ def simulated_boxsets(scenes: list[Scene], vocab: Vocabulary, seed: int = 0) -> 
     """SIMULATED detections of every frame from its ground truth (grutrack.data.detection_sim, centerpoint)."""
     from grutrack.data.detection_sim import load_profile, simulate_scenes
 
-    return simulate_scenes(scenes, tuple(av2.SIMULATOR_CLASS[n] for n in vocab.names), load_profile("centerpoint"),
-                           seed)
+    return simulate_scenes(
+        scenes, tuple(av2.SIMULATOR_CLASS[n] for n in vocab.names), load_profile("centerpoint"), seed
+    )
 
 
 def _track(root, dets, out, tracker="ekf", *extra) -> None:
-    assert main(["track", "--dataset", "av2", "--dataroot", str(root), "--split", "val", "--detections", str(dets),
-                 "--tracker", tracker, "--out", str(out), "--no-progress", *extra]) == 0
+    assert (
+        main(
+            [
+                "track",
+                "--dataset",
+                "av2",
+                "--dataroot",
+                str(root),
+                "--split",
+                "val",
+                "--detections",
+                str(dets),
+                "--tracker",
+                tracker,
+                "--out",
+                str(out),
+                "--no-progress",
+                *extra,
+            ]
+        )
+        == 0
+    )
 
 
 def _evaluate(root, sub, out) -> dict:
-    assert main(["evaluate", "--dataset", "av2", "--dataroot", str(root), "--split", "val", "--submission",
-                 str(sub), "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "--dataset",
+                "av2",
+                "--dataroot",
+                str(root),
+                "--split",
+                "val",
+                "--submission",
+                str(sub),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     return json.loads(out.read_text())
 
 
 # ------------------------------------------------------------------------------------------------------------
 # adapter
 # ------------------------------------------------------------------------------------------------------------
+
 
 def test_category_lists_match_av2():
     from av2.datasets.sensor.constants import AnnotationCategories
@@ -119,8 +165,25 @@ def test_empty_and_missing_logs(av2_root, tmp_path):
     pd.read_feather(src / "annotations.feather").iloc[:0].to_feather(log / "annotations.feather")
     with pytest.raises(DatasetError, match="0000-empty: cannot determine its frames: its annotations.feather has no"):
         av2.load_scenes(root, "val")
-    assert main(["track", "--dataset", "av2", "--dataroot", str(root), "--split", "val", "--detections",
-                 str(tmp_path / "none.feather"), "--out", str(tmp_path / "o.pkl"), "--no-progress"]) == 2
+    assert (
+        main(
+            [
+                "track",
+                "--dataset",
+                "av2",
+                "--dataroot",
+                str(root),
+                "--split",
+                "val",
+                "--detections",
+                str(tmp_path / "none.feather"),
+                "--out",
+                str(tmp_path / "o.pkl"),
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
     with pytest.raises(DatasetError, match="no split folder 'test'"):
         av2.load_scenes(av2_root, "test")
     with pytest.raises(DatasetError, match="not in"):
@@ -130,6 +193,7 @@ def test_empty_and_missing_logs(av2_root, tmp_path):
 # ------------------------------------------------------------------------------------------------------------
 # detections
 # ------------------------------------------------------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def oracle_table(scenes):
@@ -145,8 +209,12 @@ def test_lt3d_roundtrip_and_drop_policy(av2_root, scenes, oracle_table, tmp_path
     path = tmp_path / "d.csv"
     pd.concat([oracle_table, extra], ignore_index=True).to_csv(path, index=False)
     dets, stats = load_detections(path, av2_root, "val", scenes, av2.vocabulary())
-    assert (stats.rows, stats.kept, stats.off_frame, stats.other_category) == (len(oracle_table) + 2,
-                                                                                len(oracle_table), 1, 1)
+    assert (stats.rows, stats.kept, stats.off_frame, stats.other_category) == (
+        len(oracle_table) + 2,
+        len(oracle_table),
+        1,
+        1,
+    )
     for s in scenes:
         for f in s.frames[::7]:
             d = dets[f.token]
@@ -155,20 +223,33 @@ def test_lt3d_roundtrip_and_drop_policy(av2_root, scenes, oracle_table, tmp_path
             assert np.allclose(d.boxes[:, 7:9], f.gt.boxes[:, 7:9], rtol=1e-2, atol=1e-3)
 
 
-@pytest.mark.parametrize("mutate, message", [
-    (lambda d: d.__setitem__("log_id", d["log_id"].where(d.index != 5, "00000000-not-a-log")),
-     "field 'log_id' has 1 log.*00000000-not-a-log"),
-    (lambda d: d.__setitem__("timestamp_ns", d["timestamp_ns"].where(d.index != 5, 123)),
-     "row 5 .*field 'timestamp_ns' 123 is not a sweep time"),
-    (lambda d: d.__setitem__("tx_m", d["tx_m"].where(d.index != 5, np.nan)), "row 5 .*field 'tx_m' is nan"),
-    (lambda d: d.__setitem__("qw", d["qw"].where(d.index != 5, 3.0)),
-     "row 5 .*'qw/qx/qy/qz' must be a unit quaternion"),
-    (lambda d: d.__setitem__("score", d["score"].where(d.index != 5, 1.5)),
-     "row 5 .*'score' must be in \\[0, 1\\]"),
-    (lambda d: d.__setitem__("category", d["category"].where(d.index != 5, "CAR")),
-     "row 5 .*'category' must be an AV2"),
-    (lambda d: d.drop(columns=["height_m"], inplace=True), "missing column\\(s\\) \\['height_m'\\]"),
-])
+@pytest.mark.parametrize(
+    "mutate, message",
+    [
+        (
+            lambda d: d.__setitem__("log_id", d["log_id"].where(d.index != 5, "00000000-not-a-log")),
+            "field 'log_id' has 1 log.*00000000-not-a-log",
+        ),
+        (
+            lambda d: d.__setitem__("timestamp_ns", d["timestamp_ns"].where(d.index != 5, 123)),
+            "row 5 .*field 'timestamp_ns' 123 is not a sweep time",
+        ),
+        (lambda d: d.__setitem__("tx_m", d["tx_m"].where(d.index != 5, np.nan)), "row 5 .*field 'tx_m' is nan"),
+        (
+            lambda d: d.__setitem__("qw", d["qw"].where(d.index != 5, 3.0)),
+            "row 5 .*'qw/qx/qy/qz' must be a unit quaternion",
+        ),
+        (
+            lambda d: d.__setitem__("score", d["score"].where(d.index != 5, 1.5)),
+            "row 5 .*'score' must be in \\[0, 1\\]",
+        ),
+        (
+            lambda d: d.__setitem__("category", d["category"].where(d.index != 5, "CAR")),
+            "row 5 .*'category' must be an AV2",
+        ),
+        (lambda d: d.drop(columns=["height_m"], inplace=True), "missing column\\(s\\) \\['height_m'\\]"),
+    ],
+)
 def test_lt3d_bad_input(av2_root, scenes, oracle_table, tmp_path, mutate, message):
     d = oracle_table.copy()
     mutate(d)
@@ -192,10 +273,14 @@ def test_lt3d_pickle_and_empty_file(av2_root, scenes, oracle_table, tmp_path):
 # export
 # ------------------------------------------------------------------------------------------------------------
 
+
 def test_pickle_layout_and_validation(scenes):
     vocab = av2.vocabulary()
-    res = {f.token: BoxSet(f.gt.boxes, np.full(len(f.gt), 0.5), f.gt.labels, np.arange(len(f.gt)))
-           for s in scenes for f in s.frames}
+    res = {
+        f.token: BoxSet(f.gt.boxes, np.full(len(f.gt), 0.5), f.gt.labels, np.arange(len(f.gt)))
+        for s in scenes
+        for f in s.frames
+    }
     seqs = build_sequences(scenes, res, vocab)
     exp = expected_frames(scenes)
     validate_sequences(seqs, exp)
@@ -232,6 +317,7 @@ def test_all_categories_track_and_export(av2_root, tmp_path):
 # tracking baselines
 # ------------------------------------------------------------------------------------------------------------
 
+
 def test_greedy_association_score_order_gate_and_labels():
     def dets(xy, scores, labels):
         b = np.zeros((len(xy), 9))
@@ -267,8 +353,10 @@ def test_ab3dmot_min_hits_and_zero_velocity_start():
     assert abs(t.groups[0].backend.boxes(t.groups[0].state)[0, 7] - 4.0) < 1.0  # velocity from positions (4 m/s)
     # a new track born late is hidden until its third hit
     t.reset()
-    late = {f"f{i}": BoxSet(box(2.0 * i) if i >= 3 else np.zeros((0, 9)), [0.9] * (i >= 3), [2] * (i >= 3))
-            for i in range(6)}
+    late = {
+        f"f{i}": BoxSet(box(2.0 * i) if i >= 3 else np.zeros((0, 9)), [0.9] * (i >= 3), [2] * (i >= 3))
+        for i in range(6)
+    }
     run = track_scenes(t, [scene], late)
     assert [len(run.results[f"f{i}"]) for i in range(6)] == [0, 0, 0, 0, 0, 1]
 
@@ -276,6 +364,7 @@ def test_ab3dmot_min_hits_and_zero_velocity_start():
 # ------------------------------------------------------------------------------------------------------------
 # official evaluation end to end
 # ------------------------------------------------------------------------------------------------------------
+
 
 def duplicated_tracks(scenes: list[Scene], radius_m: float = 0.2) -> set[str]:
     """Track uuids annotated twice: the second uuid of every same-class pair whose centres are within
@@ -300,11 +389,13 @@ def test_oracle_hota_pickle_feather_and_metrics(av2_root, scenes, oracle_table, 
     sub = tmp_path / "sub.pkl"
     _track(av2_root, tmp_path / "gt_dets.feather", sub, "ekf")
     seqs = read_tracks_pickle(sub)
-    labels = gt_sequences(av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True),
-                          av2.vocabulary(all_categories=True))
+    labels = gt_sequences(
+        av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True), av2.vocabulary(all_categories=True)
+    )
     assert list(seqs) == list(labels)
-    assert [[f["timestamp_ns"] for f in fs] for fs in seqs.values()] == \
-           [[f["timestamp_ns"] for f in fs] for fs in labels.values()]
+    assert [[f["timestamp_ns"] for f in fs] for fs in seqs.values()] == [
+        [f["timestamp_ns"] for f in fs] for fs in labels.values()
+    ]
     # the feather table holds the same tracks
     table = pd.read_feather(sub.with_suffix(".feather"))
     assert len(table) == sum(len(f["track_id"]) for fs in seqs.values() for f in fs)
@@ -312,8 +403,9 @@ def test_oracle_hota_pickle_feather_and_metrics(av2_root, scenes, oracle_table, 
     for log in seqs:
         for a, b in zip(seqs[log], back[log]):
             for key in ("track_id", "translation_m", "size", "velocity_m_per_s", "label", "name", "score"):
-                np.testing.assert_allclose(a[key], b[key]) if a[key].dtype.kind == "f" else \
-                    np.testing.assert_array_equal(a[key], b[key])
+                np.testing.assert_allclose(a[key], b[key]) if a[
+                    key
+                ].dtype.kind == "f" else np.testing.assert_array_equal(a[key], b[key])
             np.testing.assert_allclose(np.cos(a["yaw"] - b["yaw"]), 1.0, atol=1e-12)
     pd.testing.assert_frame_equal(sequences_to_table(back), table)
     # the official evaluator's own loader reads the leaderboard file
@@ -347,8 +439,9 @@ def test_oracle_without_the_doubly_annotated_car(av2_root, scenes):
     for s in all_scenes:
         for f in s.frames:
             f.gt = f.gt.subset(~np.isin(f.gt.ids, list(twins)))
-    out = evaluate_sequences(build_sequences(scenes, run.results, vocab), gt_sequences(all_scenes, all_vocab),
-                             av2_root / "val")
+    out = evaluate_sequences(
+        build_sequences(scenes, run.results, vocab), gt_sequences(all_scenes, all_vocab), av2_root / "val"
+    )
     overall, per_class = metrics_from_result(out)
     assert len(overall["present_classes"]) >= 5
     for c in overall["present_classes"]:
@@ -360,10 +453,12 @@ def simulated_ekf(av2_root, scenes):
     """(tracks, labels): the ekf tracker on SIMULATED detections (centerpoint profile, seed 0) of the Table I
     classes, and the labels of all 26 categories, both in the order the official evaluator regroups them."""
     vocab = av2.vocabulary()
-    run = track_scenes(build_tracker("ekf", param_classes=vocab.param_classes), scenes,
-                       simulated_boxsets(scenes, vocab, seed=0))
-    labels = gt_sequences(av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True),
-                          av2.vocabulary(all_categories=True))
+    run = track_scenes(
+        build_tracker("ekf", param_classes=vocab.param_classes), scenes, simulated_boxsets(scenes, vocab, seed=0)
+    )
+    labels = gt_sequences(
+        av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True), av2.vocabulary(all_categories=True)
+    )
     order = sorted(labels, key=lambda lg: labels[lg][0]["timestamp_ns"])
     tracks = build_sequences(scenes, run.results, vocab)
     return {lg: tracks[lg] for lg in order}, {lg: labels[lg] for lg in order}
@@ -383,9 +478,10 @@ def _assert_tree_equal(a, b, where=""):
         assert a == b, (where, a, b)
 
 
+@pytest.mark.slow
 def test_composition_equals_the_unpatched_official_evaluate(av2_root, simulated_ekf, tmp_path):
-    import copy
     import contextlib
+    import copy
 
     import av2.evaluation.tracking.eval as official
     from av2.evaluation.tracking import utils as official_utils
@@ -395,28 +491,31 @@ def test_composition_equals_the_unpatched_official_evaluate(av2_root, simulated_
     # the official function as shipped (it writes its TrackEval files under ./trackeval and fails on an empty frame,
     # which this input does not have)
     with contextlib.chdir(tmp_path):
-        res, tuned, mean = official.evaluate(copy.deepcopy(tracks), copy.deepcopy(labels), "HOTA", 50, ddir,
-                                             "trackeval/metrics.json")
+        res, tuned, mean = official.evaluate(
+            copy.deepcopy(tracks), copy.deepcopy(labels), "HOTA", 50, ddir, "trackeval/metrics.json"
+        )
     assert (tmp_path / "trackeval" / "TRACKER").is_dir()
     # its tuned thresholds: its own preprocessing and tuning, called as evaluate calls them
     ref_labels = official.filter_max_dist(copy.deepcopy(labels), 50)
     ref_tracks = copy.deepcopy(tracks)
-    official_utils.annotate_frame_metadata(official_utils.ungroup_frames(ref_tracks),
-                                           official_utils.ungroup_frames(ref_labels), ["ego_translation_m"])
+    official_utils.annotate_frame_metadata(
+        official_utils.ungroup_frames(ref_tracks), official_utils.ungroup_frames(ref_labels), ["ego_translation_m"]
+    )
     ref_tracks = official.filter_max_dist(ref_tracks, 50)
     assert all(len(f["yaw"]) for seqs in (ref_labels, ref_tracks) for fs in seqs.values() for f in fs)
     ref_labels = official.filter_drivable_area(ref_labels, ddir)
     ref_tracks = official.filter_drivable_area(ref_tracks, ddir)
     thresholds, tuned_again, mean_again = official._tune_score_thresholds(
-        ref_labels, ref_tracks, "HOTA", list(av2.COMPETITION_CATEGORIES), num_thresholds=10, match_distance_m=2)
-    assert tuned_again == tuned and mean_again == mean        # the same tuning as inside evaluate
+        ref_labels, ref_tracks, "HOTA", list(av2.COMPETITION_CATEGORIES), num_thresholds=10, match_distance_m=2
+    )
+    assert tuned_again == tuned and mean_again == mean  # the same tuning as inside evaluate
     ref_final = official_utils.filter_by_class_thresholds(ref_tracks, thresholds)
 
     combined = res["TrackEvalDataset"]["TRACKER"]["COMBINED_SEQ"]
     assert set(combined) >= set(av2.COMPETITION_CATEGORIES) and len(av2.COMPETITION_CATEGORIES) == 26
-    for workers in (1, 2):                                    # in this process; a pool of 2
+    for workers in (1, 2):  # in this process; a pool of 2
         out = evaluate_sequences(tracks, labels, av2_root / "val", workers=workers, keep_inputs=True)
-        _assert_tree_equal(out["result"], res)                # every sequence, class, HOTA / CLEAR / Count field
+        _assert_tree_equal(out["result"], res)  # every sequence, class, HOTA / CLEAR / Count field
         ours = out["result"]["TrackEvalDataset"]["TRACKER"]["COMBINED_SEQ"]
         for c in av2.COMPETITION_CATEGORIES:
             for k in ("CLR_TP", "CLR_FP", "CLR_FN", "IDSW", "MT", "ML", "Frag"):
@@ -456,26 +555,33 @@ def test_evaluation_patches_nothing(av2_root, tmp_path):
     assert not {m for m in imported if m and ("mock" in m or m.startswith("unittest"))}, imported
     assert not [n for n in ast.walk(tree) if isinstance(n, ast.Name) and n.id in ("setattr", "patch")]
     # attribute assignments only on the module's own metrics document
-    targets = [t for n in ast.walk(tree) if isinstance(n, (ast.Assign, ast.AugAssign))
-               for t in (n.targets if isinstance(n, ast.Assign) else [n.target])]
+    targets = [
+        t
+        for n in ast.walk(tree)
+        if isinstance(n, (ast.Assign, ast.AugAssign))
+        for t in (n.targets if isinstance(n, ast.Assign) else [n.target])
+    ]
     attrs = [e for t in targets for e in (t.elts if isinstance(t, ast.Tuple) else [t]) if isinstance(e, ast.Attribute)]
     assert attrs and all(isinstance(e.value, ast.Name) and e.value.id == "doc" for e in attrs)
     # a whole evaluation (ROI, one worker) in a fresh interpreter imports no unittest.mock
-    code = ("import sys, json; from grutrack.data import av2; from grutrack.export.av2_tracks import gt_sequences;"
-            "from grutrack.evaluation.av2_eval import evaluate_sequences, metrics_from_result;"
-            f"root = {str(av2_root)!r}; import numpy as np;"
-            "lab = gt_sequences(av2.load_scenes(root, 'val', with_gt=True, all_categories=True),"
-            " av2.vocabulary(all_categories=True));"
-            "trk = {lg: [dict(f, score=np.ones(len(f['track_id']))) for f in fs] for lg, fs in lab.items()};"
-            "out = evaluate_sequences(trk, lab, root + '/val', workers=1);"
-            "print(json.dumps([metrics_from_result(out)[1]['REGULAR_VEHICLE']['tp'],"
-            " sorted(m for m in sys.modules if m.startswith('unittest'))]))")
+    code = (
+        "import sys, json; from grutrack.data import av2; from grutrack.export.av2_tracks import gt_sequences;"
+        "from grutrack.evaluation.av2_eval import evaluate_sequences, metrics_from_result;"
+        f"root = {str(av2_root)!r}; import numpy as np;"
+        "lab = gt_sequences(av2.load_scenes(root, 'val', with_gt=True, all_categories=True),"
+        " av2.vocabulary(all_categories=True));"
+        "trk = {lg: [dict(f, score=np.ones(len(f['track_id']))) for f in fs] for lg, fs in lab.items()};"
+        "out = evaluate_sequences(trk, lab, root + '/val', workers=1);"
+        "print(json.dumps([metrics_from_result(out)[1]['REGULAR_VEHICLE']['tp'],"
+        " sorted(m for m in sys.modules if m.startswith('unittest'))]))"
+    )
     env = {**os.environ, "PYTHONPATH": str(Path(av2_eval.__file__).resolve().parents[2])}
-    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env,
-                         check=True)
+    run = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env, check=True
+    )
     tp, unittest_modules = json.loads(run.stdout.strip().splitlines()[-1])
     assert tp > 100 and "unittest.mock" not in unittest_modules
-    assert list(tmp_path.iterdir()) == []                    # nothing written to the working directory
+    assert list(tmp_path.iterdir()) == []  # nothing written to the working directory
 
 
 def test_simulated_detections_table(av2_root, scenes, tmp_path, capsys):
@@ -487,13 +593,20 @@ def test_simulated_detections_table(av2_root, scenes, tmp_path, capsys):
         sub = tmp_path / f"{tracker}.pkl"
         _track(av2_root, tmp_path / "sim.feather", sub, tracker)
         results[tracker] = _evaluate(av2_root, sub, tmp_path / f"{tracker}.json")
-    lines = ["SIMULATED detections (grutrack.data.detection_sim, centerpoint profile, seed 0) on the 2 AV2 val "
-             "logs at 2 Hz; official AV2 HOTA",
-             f"{'tracker':<9}" + "".join(f"{c[:10]:>11}" for c in av2.TABLE_I_CLASSES) + f"{'AVG':>9}"]
+    lines = [
+        "SIMULATED detections (grutrack.data.detection_sim, centerpoint profile, seed 0) on the 2 AV2 val "
+        "logs at 2 Hz; official AV2 HOTA",
+        f"{'tracker':<9}" + "".join(f"{c[:10]:>11}" for c in av2.TABLE_I_CLASSES) + f"{'AVG':>9}",
+    ]
     for tracker, m in results.items():
-        lines.append(f"{tracker:<9}" + "".join("absent".rjust(11) if m["per_class"][c]["absent"] else
-                                               f"{m['per_class'][c]['hota']:>11.3f}" for c in av2.TABLE_I_CLASSES)
-                     + f"{m['overall']['hota']:>9.3f}")
+        lines.append(
+            f"{tracker:<9}"
+            + "".join(
+                "absent".rjust(11) if m["per_class"][c]["absent"] else f"{m['per_class'][c]['hota']:>11.3f}"
+                for c in av2.TABLE_I_CLASSES
+            )
+            + f"{m['overall']['hota']:>9.3f}"
+        )
     with capsys.disabled():
         print("\n" + "\n".join(lines))
     (tmp_path / "table.txt").write_text("\n".join(lines))
@@ -513,8 +626,9 @@ def test_frames_without_detections_never_trip_the_evaluator(av2_root, scenes, or
     assert [len(f["track_id"]) for f in seqs[LOG_B]] == [0] * 32
     assert all(len(f["track_id"]) == 0 for f in seqs[LOG_A][5:13])  # greedy writes matched tracks only
     assert all(f["translation_m"].shape == (0, 3) for f in seqs[LOG_B])
-    labels = gt_sequences(av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True),
-                          av2.vocabulary(all_categories=True))
+    labels = gt_sequences(
+        av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True), av2.vocabulary(all_categories=True)
+    )
     out = evaluate_sequences(seqs, labels, None, workers=1)  # in-process, no ROI
     _, per_class = metrics_from_result(out)
     assert 0.2 < per_class["REGULAR_VEHICLE"]["hota"] < 0.9
@@ -522,8 +636,24 @@ def test_frames_without_detections_never_trip_the_evaluator(av2_root, scenes, or
     seqs[LOG_A] = seqs[LOG_A][1:]
     with open(tmp_path / "short.pkl", "wb") as fh:
         pickle.dump(seqs, fh)
-    assert main(["evaluate", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--submission",
-                 str(tmp_path / "short.pkl"), "--out", str(tmp_path / "m.json")]) == 2
+    assert (
+        main(
+            [
+                "evaluate",
+                "--dataset",
+                "av2",
+                "--dataroot",
+                str(av2_root),
+                "--split",
+                "val",
+                "--submission",
+                str(tmp_path / "short.pkl"),
+                "--out",
+                str(tmp_path / "m.json"),
+            ]
+        )
+        == 2
+    )
     assert not (tmp_path / "m.json").exists()
 
 
@@ -542,11 +672,43 @@ def test_empty_logs_are_named_by_track_and_evaluate_with_the_roi(av2_root, oracl
 
 
 def test_cli_dataset_options(av2_root, tmp_path, capsys):
-    assert main(["track", "--dataroot", str(av2_root), "--split", "val", "--detections", "x.json",
-                 "--out", str(tmp_path / "o.json")]) == 2
+    assert (
+        main(
+            [
+                "track",
+                "--dataroot",
+                str(av2_root),
+                "--split",
+                "val",
+                "--detections",
+                "x.json",
+                "--out",
+                str(tmp_path / "o.json"),
+            ]
+        )
+        == 2
+    )
     assert "--version is required with --dataset nuscenes" in capsys.readouterr().err
-    assert main(["evaluate", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--submission",
-                 "x.pkl", "--out", str(tmp_path / "m.json"), "--evaluator", "fast"]) == 2
+    assert (
+        main(
+            [
+                "evaluate",
+                "--dataset",
+                "av2",
+                "--dataroot",
+                str(av2_root),
+                "--split",
+                "val",
+                "--submission",
+                "x.pkl",
+                "--out",
+                str(tmp_path / "m.json"),
+                "--evaluator",
+                "fast",
+            ]
+        )
+        == 2
+    )
     assert "AV2 has the official evaluator only" in capsys.readouterr().err
 
 
@@ -556,7 +718,9 @@ def test_official_module_imports_without_the_numpy_alias_warnings():
     import subprocess
     import sys
 
-    code = ("from grutrack.evaluation.av2_eval import official_module; m = official_module(); "
-            "assert hasattr(m, 'TrackEvalDataset')")
+    code = (
+        "from grutrack.evaluation.av2_eval import official_module; m = official_module(); "
+        "assert hasattr(m, 'TrackEvalDataset')"
+    )
     r = subprocess.run([sys.executable, "-W", "error::FutureWarning", "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr[-2000:]

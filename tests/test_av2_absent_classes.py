@@ -26,7 +26,7 @@ from grutrack.export.av2_tracks import gt_sequences
 
 REPO = Path(__file__).resolve().parents[1]
 PAPER = REPO / "workflow/config/paper.yaml"
-LOG_A = "7fab2350-7eaf-3b7e-a39d-6937a4c1bede"   # no BUS, LARGE_VEHICLE or TRUCK in its annotations
+LOG_A = "7fab2350-7eaf-3b7e-a39d-6937a4c1bede"  # no BUS, LARGE_VEHICLE or TRUCK in its annotations
 FRAMES = 6
 BUS_OFFSETS = np.array([[8.0, 0.0, 0.0], [0.0, 8.0, 0.0], [-8.0, 0.0, 0.0]])
 AVERAGED = ("hota", "mota", "idf1")
@@ -46,16 +46,20 @@ def _submission(labels: dict) -> dict:
                 keep[car[::2]] = False
             xyz = f["translation_m"].copy()
             xyz[f["name"] == "PEDESTRIAN", 0] += 0.8
-            out[lg].append({
-                "seq_id": f["seq_id"], "timestamp_ns": f["timestamp_ns"],
-                "track_id": np.concatenate([f["track_id"][keep], [f"fp-bus-{k}" for k in range(n)]]).astype(object),
-                "translation_m": np.vstack([xyz[keep], np.asarray(f["ego_translation_m"]) + BUS_OFFSETS]),
-                "size": np.vstack([f["size"][keep], np.tile([12.0, 2.6, 3.2], (n, 1))]),
-                "yaw": np.concatenate([f["yaw"][keep], np.zeros(n)]),
-                "velocity_m_per_s": np.vstack([f["velocity_m_per_s"][keep], np.zeros((n, 3))]),
-                "label": np.concatenate([f["label"][keep], np.full(n, bus)]),
-                "name": np.concatenate([f["name"][keep], np.full(n, "BUS", dtype=object)]).astype(object),
-                "score": np.ones(int(keep.sum()) + n)})
+            out[lg].append(
+                {
+                    "seq_id": f["seq_id"],
+                    "timestamp_ns": f["timestamp_ns"],
+                    "track_id": np.concatenate([f["track_id"][keep], [f"fp-bus-{k}" for k in range(n)]]).astype(object),
+                    "translation_m": np.vstack([xyz[keep], np.asarray(f["ego_translation_m"]) + BUS_OFFSETS]),
+                    "size": np.vstack([f["size"][keep], np.tile([12.0, 2.6, 3.2], (n, 1))]),
+                    "yaw": np.concatenate([f["yaw"][keep], np.zeros(n)]),
+                    "velocity_m_per_s": np.vstack([f["velocity_m_per_s"][keep], np.zeros((n, 3))]),
+                    "label": np.concatenate([f["label"][keep], np.full(n, bus)]),
+                    "name": np.concatenate([f["name"][keep], np.full(n, "BUS", dtype=object)]).astype(object),
+                    "score": np.ones(int(keep.sum()) + n),
+                }
+            )
     return out
 
 
@@ -63,19 +67,21 @@ def _submission(labels: dict) -> dict:
 def evaluated(av2_root, tmp_path_factory):
     """(metrics JSON path, official per-class inputs): the official evaluation (ROI on, one worker) of the
     submission against the log's first frames, written as `grutrack evaluate` writes its document."""
-    all_labels = gt_sequences(av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True),
-                              av2.vocabulary(all_categories=True))
+    all_labels = gt_sequences(
+        av2.load_scenes(av2_root, "val", with_gt=True, all_categories=True), av2.vocabulary(all_categories=True)
+    )
     # the fixture's fact the test rests on: the whole log has no BUS label at all
     assert not any("BUS" in set(f["name"]) for f in all_labels[LOG_A])
     labels = {LOG_A: all_labels[LOG_A][:FRAMES]}
     out = evaluate_sequences(_submission(labels), labels, av2_root / "val", workers=1, keep_inputs=True)
-    doc = metrics_document(out, split="val", submission="bus_fp.pkl", rate_hz=2.0, max_range_m=50, roi=True,
-                           workers=1)
+    doc = metrics_document(out, split="val", submission="bus_fp.pkl", rate_hz=2.0, max_range_m=50, roi=True, workers=1)
     path = tmp_path_factory.mktemp("absent") / "metrics.json"
     doc.write(path)
     # ground truth per class as the final evaluation scored it (range + ROI), counted from its inputs
-    counts = {c: sum(int((f["name"] == c).sum()) for fs in out["final"]["labels"].values() for f in fs)
-              for c in av2.TABLE_I_CLASSES}
+    counts = {
+        c: sum(int((f["name"] == c).sum()) for fs in out["final"]["labels"].values() for f in fs)
+        for c in av2.TABLE_I_CLASSES
+    }
     return path, counts
 
 
@@ -107,7 +113,7 @@ def test_average_is_over_the_classes_with_ground_truth(evaluated):
         expected = float(np.mean([pc[c][k] for c in present]))
         assert overall[k] == pytest.approx(expected, abs=1e-12), k
         assert overall[k] != pytest.approx(float(np.mean([pc[c][k] for c in av2.TABLE_I_CLASSES])), abs=1e-3), k
-    assert overall["mota"] > 0                                # the -FP of BUS is in no average
+    assert overall["mota"] > 0  # the -FP of BUS is in no average
     assert not any(k.endswith("_present") for k in overall)
     assert "classes with ground truth" in raw["settings"]["average"]
     doc = MetricsDocument.read(path)
@@ -131,9 +137,12 @@ def test_an_older_document_is_read_with_the_same_average(evaluated, tmp_path):
     old_overall = {k: float(np.mean([pc[c][k] for c in av2.TABLE_I_CLASSES])) for k in AVERAGED}
     old_overall.update({f"{k}_present": new[k] for k in AVERAGED})
     old_overall.update({"classes": new["classes"], "present_classes": new["present_classes"]})
-    old = {**raw, "overall": old_overall, "per_class": old_pc,
-           "settings": {**raw["settings"], "average": "Table I: mean over the 7 Table I classes (absent classes "
-                                                      "score 0)"}}
+    old = {
+        **raw,
+        "overall": old_overall,
+        "per_class": old_pc,
+        "settings": {**raw["settings"], "average": "Table I: mean over the 7 Table I classes (absent classes score 0)"},
+    }
     (tmp_path / "old.json").write_text(json.dumps(old))
     doc = MetricsDocument.read(tmp_path / "old.json")
     for k in AVERAGED:
@@ -184,7 +193,7 @@ def test_check_marks_absent_classes_instead_of_failing(evaluated, tmp_path, caps
 
 def _md_table_after(text: str, marker: str) -> list[dict[str, str]]:
     """The rows (header -> cell) of the first markdown table after ``marker``."""
-    lines = text[text.index(marker):].splitlines()
+    lines = text[text.index(marker) :].splitlines()
     start = next(i for i, line in enumerate(lines) if line.startswith("|"))
     rows = []
     for line in lines[start:]:
@@ -203,8 +212,25 @@ def test_report_shows_absent_classes_and_the_present_average(evaluated, tmp_path
     doc = json.loads(path.read_text())
     paper = _paper_matching(path, counts, tmp_path)
     md = tmp_path / "rep" / "av2_val.md"
-    assert main(["report", "av2_val", "--out", str(md), "--paper", str(paper), "--experiment",
-                 "oracle_bus_fp:av2:val:annotations", "--run", f"ours={path}", "--row", "I:Ours=ours"]) == 0
+    assert (
+        main(
+            [
+                "report",
+                "av2_val",
+                "--out",
+                str(md),
+                "--paper",
+                str(paper),
+                "--experiment",
+                "oracle_bus_fp:av2:val:annotations",
+                "--run",
+                f"ours={path}",
+                "--row",
+                "I:Ours=ours",
+            ]
+        )
+        == 0
+    )
     text = md.read_text()
     present = _present(counts)
     absent = [c for c in av2.TABLE_I_CLASSES if c not in present]
@@ -223,7 +249,7 @@ def test_report_shows_absent_classes_and_the_present_average(evaluated, tmp_path
     assert f"Absent (no ground truth in the evaluated logs, left out of the averages): {', '.join(absent)}." in text
     checks = {r["metric"]: r for r in _md_table_after(text, "## Check against")}
     for c in absent:
-        if c in checks:                                      # the paper row reports the class
+        if c in checks:  # the paper row reports the class
             assert checks[c]["reproduced"] == ABSENT_TEXT and checks[c]["status"] == "absent, not checked"
     assert checks["BUS"]["status"] == "absent, not checked"
     assert all(checks[c]["status"] == "within" for c in present + ["average"])

@@ -28,13 +28,25 @@ def fails(capsys, argv: list[str], *fragments: str) -> str:
 @pytest.fixture()
 def mini_track(nusc_root, pointpillars_mini_val, tmp_path):
     """``grutrack track`` arguments on mini_val with the real PointPillars detections."""
-    return ["track", "--dataroot", nusc_root, "--version", "v1.0-mini", "--split", "mini_val", "--detections",
-            pointpillars_mini_val, "--out", tmp_path / "o.json", "--no-progress"]
+    return [
+        "track",
+        "--dataroot",
+        nusc_root,
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_val",
+        "--detections",
+        pointpillars_mini_val,
+        "--out",
+        tmp_path / "o.json",
+        "--no-progress",
+    ]
 
 
 def _checkpoint(path, mutate=None):
-    from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
     from grutrack.motion.checkpoint import save_checkpoint
+    from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
 
     net = GRUKalmanNet(GRUKFConfig())
     save_checkpoint(path, net)
@@ -50,16 +62,27 @@ def test_cuda_device_without_cuda_is_one_line(mini_track, tmp_path, capsys, monk
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     monkeypatch.setattr(torch.version, "cuda", None)
     ck = _checkpoint(tmp_path / "m.pt")
-    fails(capsys, [*mini_track, "--tracker", "grukf", "--checkpoint", ck, "--device", "cuda"],
-          "--device: 'cuda' asked for a GPU, but this torch build", "has no CUDA support", "use auto or cpu")
-    fails(capsys, [*mini_track, "--tracker", "grukf", "--checkpoint", ck, "--device", "gpu"],
-          "--device: unknown torch device 'gpu' (expected auto, cpu, cuda or cuda:N)")
+    fails(
+        capsys,
+        [*mini_track, "--tracker", "grukf", "--checkpoint", ck, "--device", "cuda"],
+        "--device: 'cuda' asked for a GPU, but this torch build",
+        "has no CUDA support",
+        "use auto or cpu",
+    )
+    fails(
+        capsys,
+        [*mini_track, "--tracker", "grukf", "--checkpoint", ck, "--device", "gpu"],
+        "--device: unknown torch device 'gpu' (expected auto, cpu, cuda or cuda:N)",
+    )
     assert not (tmp_path / "o.json").exists()
 
 
 def test_checkpoint_with_another_tracker_is_refused(mini_track, tmp_path, capsys):
-    fails(capsys, [*mini_track, "--tracker", "ekf", "--checkpoint", tmp_path / "m.pt"],
-          "--checkpoint is for --tracker grukf; --tracker ekf has no learned model")
+    fails(
+        capsys,
+        [*mini_track, "--tracker", "ekf", "--checkpoint", tmp_path / "m.pt"],
+        "--checkpoint is for --tracker grukf; --tracker ekf has no learned model",
+    )
 
 
 def test_checkpoint_with_a_mis_shaped_tensor(mini_track, tmp_path, capsys):
@@ -71,8 +94,13 @@ def test_checkpoint_with_a_mis_shaped_tensor(mini_track, tmp_path, capsys):
         ck["model"][k] = ck["model"][k][..., :1].clone()
 
     bad = _checkpoint(tmp_path / "bad.pt", shrink)
-    fails(capsys, [*mini_track, "--tracker", "grukf", "--checkpoint", bad, "--device", "cpu"],
-          "bad.pt: tensor 'model.", "has shape", "expected")
+    fails(
+        capsys,
+        [*mini_track, "--tracker", "grukf", "--checkpoint", bad, "--device", "cpu"],
+        "bad.pt: tensor 'model.",
+        "has shape",
+        "expected",
+    )
     gone = _checkpoint(tmp_path / "gone.pt", lambda ck: ck["model"].pop(next(iter(ck["model"]))))
     with pytest.raises(InputFormatError, match="gone.pt: field 'model' does not fit the architecture"):
         load_network(gone)
@@ -84,9 +112,17 @@ def test_checkpoint_with_a_mis_shaped_tensor(mini_track, tmp_path, capsys):
 
 # ----- submissions given to evaluate (the same one-line errors as leaderboard-zip) -----------------------------
 def _box(token, name="car", **over):
-    return {"sample_token": token, "translation": [600.0, 1600.0, 1.0], "size": [1.9, 4.5, 1.6],
-            "rotation": [1.0, 0.0, 0.0, 0.0], "velocity": [0.0, 0.0], "tracking_id": "1", "tracking_name": name,
-            "tracking_score": 0.5, **over}
+    return {
+        "sample_token": token,
+        "translation": [600.0, 1600.0, 1.0],
+        "size": [1.9, 4.5, 1.6],
+        "rotation": [1.0, 0.0, 0.0, 0.0],
+        "velocity": [0.0, 0.0],
+        "tracking_id": "1",
+        "tracking_name": name,
+        "tracking_score": 0.5,
+        **over,
+    }
 
 
 @pytest.fixture(scope="module")
@@ -99,14 +135,17 @@ def mini_val_tokens(nusc_mini):
 def _mini_train_submission(nusc_mini):
     from grutrack.data.nuscenes import load_scenes
 
-    return {"meta": {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False,
-                     "use_external": False},
-            "results": {f.token: [] for s in load_scenes(nusc_mini, "mini_train") for f in s.frames}}
+    return {
+        "meta": {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False, "use_external": False},
+        "results": {f.token: [] for s in load_scenes(nusc_mini, "mini_train") for f in s.frames},
+    }
 
 
 def _submission(tokens, mutate=None):
-    sub = {"meta": {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False,
-                    "use_external": False}, "results": {t: [_box(t)] for t in tokens}}
+    sub = {
+        "meta": {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False, "use_external": False},
+        "results": {t: [_box(t)] for t in tokens},
+    }
     if mutate:
         mutate(sub, tokens)
     return sub
@@ -116,43 +155,84 @@ BAD_SUBMISSIONS = {
     "missing_samples": (lambda s, t: [s["results"].pop(x) for x in t[:5]], "5 missing, 0 not in the split"),
     "unknown_name": (lambda s, t: s["results"][t[0]].append(_box(t[0], "van")), "tracking_name 'van' is not one of"),
     "over_500": (lambda s, t: s["results"][t[1]].extend([_box(t[1])] * 500), "has 501 boxes (max 500)"),
-    "string_number": (lambda s, t: s["results"][t[2]].append(_box(t[2], tracking_score="0.5")),
-                      "tracking_score must be a number in [0, 1], got '0.5'"),
-    "string_translation": (lambda s, t: s["results"][t[2]].append(_box(t[2], translation=["1", "2", "3"])),
-                           "'translation' must be 3 finite numbers, got ['1', '2', '3']"),
+    "string_number": (
+        lambda s, t: s["results"][t[2]].append(_box(t[2], tracking_score="0.5")),
+        "tracking_score must be a number in [0, 1], got '0.5'",
+    ),
+    "string_translation": (
+        lambda s, t: s["results"][t[2]].append(_box(t[2], translation=["1", "2", "3"])),
+        "'translation' must be 3 finite numbers, got ['1', '2', '3']",
+    ),
     "other_token": (lambda s, t: s["results"][t[3]].append(_box(t[4])), "box 1: sample_token is"),
 }
 
 
 @pytest.mark.parametrize("evaluator", ["fast", "devkit"])
 @pytest.mark.parametrize("case", sorted(BAD_SUBMISSIONS))
-def test_evaluate_rejects_bad_submissions_in_one_line(nusc_root, mini_val_tokens, tmp_path, capsys, case,
-                                                      evaluator):
+def test_evaluate_rejects_bad_submissions_in_one_line(nusc_root, mini_val_tokens, tmp_path, capsys, case, evaluator):
     mutate, message = BAD_SUBMISSIONS[case]
     sub = tmp_path / "sub.json"
     sub.write_text(json.dumps(_submission(mini_val_tokens, mutate)))
-    args = ["evaluate", "--dataroot", nusc_root, "--version", "v1.0-mini", "--split", "mini_val", "--submission",
-            sub, "--out", tmp_path / "m.json", "--evaluator", evaluator]
+    args = [
+        "evaluate",
+        "--dataroot",
+        nusc_root,
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_val",
+        "--submission",
+        sub,
+        "--out",
+        tmp_path / "m.json",
+        "--evaluator",
+        evaluator,
+    ]
     fails(capsys, args, f"{sub}: ", message)
     assert not (tmp_path / "m.json").exists()
-    zip_args = ["leaderboard-zip", "--dataroot", nusc_root, "--version", "v1.0-mini", "--split", "mini_val",
-                "--submission", sub, "--out", tmp_path / "z.zip"]
+    zip_args = [
+        "leaderboard-zip",
+        "--dataroot",
+        nusc_root,
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_val",
+        "--submission",
+        sub,
+        "--out",
+        tmp_path / "z.zip",
+    ]
     fails(capsys, zip_args, f"{sub}: ", message)
 
 
-def test_evaluate_rejects_wrong_split_truncated_json_and_detections(nusc_mini, nusc_root, pointpillars_mini_val,
-                                                                    mini_val_tokens, tmp_path, capsys):
-    common = ["--dataroot", nusc_root, "--version", "v1.0-mini", "--split", "mini_val", "--out",
-              tmp_path / "m.json", "--evaluator", "fast"]
+def test_evaluate_rejects_wrong_split_truncated_json_and_detections(
+    nusc_mini, nusc_root, pointpillars_mini_val, mini_val_tokens, tmp_path, capsys
+):
+    common = [
+        "--dataroot",
+        nusc_root,
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_val",
+        "--out",
+        tmp_path / "m.json",
+        "--evaluator",
+        "fast",
+    ]
     other = tmp_path / "train.json"
     other.write_text(json.dumps(_mini_train_submission(nusc_mini)))
-    fails(capsys, ["evaluate", *common, "--submission", other], "must hold exactly the 81 samples of the split",
-          "81 missing, 323 not in the split")
+    fails(
+        capsys,
+        ["evaluate", *common, "--submission", other],
+        "must hold exactly the 81 samples of the split",
+        "81 missing, 323 not in the split",
+    )
     cut = tmp_path / "cut.json"
     cut.write_text(json.dumps(_submission(mini_val_tokens))[:5000])
     fails(capsys, ["evaluate", *common, "--submission", cut], f"{cut}: cannot read a tracking submission JSON")
-    fails(capsys, ["evaluate", *common, "--submission", pointpillars_mini_val], "box 0: keys must be",
-          "tracking_id")
+    fails(capsys, ["evaluate", *common, "--submission", pointpillars_mini_val], "box 0: keys must be", "tracking_id")
     ok = tmp_path / "ok.json"
     ok.write_text(json.dumps(_submission(mini_val_tokens)))
     assert main(["evaluate", *map(str, common), "--submission", str(ok)]) == 0
@@ -175,8 +255,19 @@ def _with(pp_results, tmp_path, mutate, name="d.json"):
 
 
 def test_detection_json_bad_values(nusc_root, pp_results, tmp_path, capsys):
-    common = ["track", "--dataroot", nusc_root, "--version", "v1.0-mini", "--split", "mini_val", "--out",
-              tmp_path / "o.json", "--no-progress", "--detections"]
+    common = [
+        "track",
+        "--dataroot",
+        nusc_root,
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_val",
+        "--out",
+        tmp_path / "o.json",
+        "--no-progress",
+        "--detections",
+    ]
 
     def many(res, t):
         res[t] = [dict(res[t][0])] * 100_000
@@ -188,8 +279,12 @@ def test_detection_json_bad_values(nusc_root, pp_results, tmp_path, capsys):
         res[t][1]["translation"] = [str(x) for x in res[t][1]["translation"]]
 
     path, t = _with(pp_results, tmp_path, string_number)
-    fails(capsys, [*common, path], f"sample {t}, box 1: field 'translation' must hold JSON numbers",
-          "(a number written as a string)")
+    fails(
+        capsys,
+        [*common, path],
+        f"sample {t}, box 1: field 'translation' must hold JSON numbers",
+        "(a number written as a string)",
+    )
 
     def other_sample(res, t):
         res[t][2]["sample_token"] = "another"
@@ -216,9 +311,25 @@ def test_output_paths(mini_track, tmp_path, capsys):
 
 @pytest.mark.parametrize("rate", ["0", "-2", "nan"])
 def test_av2_rate(av2_root, tmp_path, capsys, rate):
-    fails(capsys, ["track", "--dataset", "av2", "--dataroot", av2_root, "--split", "val", "--detections",
-                   tmp_path / "d.feather", "--out", tmp_path / "o.pkl", "--rate", rate],
-          "--rate: the frame rate must be a positive number of frames per second")
+    fails(
+        capsys,
+        [
+            "track",
+            "--dataset",
+            "av2",
+            "--dataroot",
+            av2_root,
+            "--split",
+            "val",
+            "--detections",
+            tmp_path / "d.feather",
+            "--out",
+            tmp_path / "o.pkl",
+            "--rate",
+            rate,
+        ],
+        "--rate: the frame rate must be a positive number of frames per second",
+    )
 
 
 def test_lt3d_sweep_with_too_many_detections():
@@ -239,13 +350,13 @@ def test_lt3d_sweep_with_too_many_detections():
 def test_yaml_exponent_without_a_point_is_a_number(tmp_path):
     import yaml
 
-    from grutrack.errors import ConfigError
     from grutrack.config_loader import config_path
+    from grutrack.errors import ConfigError
     from grutrack.training.config import load_train_config
 
     text = config_path("training", "grukf").read_text()
     cfg_text = "\n".join("lr: 1e-5" if ln.startswith("lr:") else ln for ln in text.splitlines())
-    assert yaml.safe_load(cfg_text)["lr"] == "1e-5"          # what PyYAML makes of it
+    assert yaml.safe_load(cfg_text)["lr"] == "1e-5"  # what PyYAML makes of it
     (tmp_path / "t.yaml").write_text(cfg_text)
     assert load_train_config(tmp_path / "t.yaml").lr == 1e-5
     (tmp_path / "u.yaml").write_text(cfg_text.replace("lr: 1e-5", "lr: fast"))
@@ -257,31 +368,49 @@ def test_yaml_exponent_without_a_point_is_a_number(tmp_path):
 
 
 def test_bad_training_flags_are_blamed_on_the_flag(tmp_path, capsys):
-    base = ["train", "--dataroot", tmp_path, "--version", "v1.0-mini", "--split", "mini_train", "--detections",
-            tmp_path / "d.json", "--out", tmp_path / "ck"]
-    fails(capsys, [*base, "--epochs", "-1"], "grutrack train: error: --epochs must be an integer >= 0 (0: no step, the "
-          "initialised network), got -1")
+    base = [
+        "train",
+        "--dataroot",
+        tmp_path,
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_train",
+        "--detections",
+        tmp_path / "d.json",
+        "--out",
+        tmp_path / "ck",
+    ]
+    fails(
+        capsys,
+        [*base, "--epochs", "-1"],
+        "grutrack train: error: --epochs must be an integer >= 0 (0: no step, the initialised network), got -1",
+    )
     fails(capsys, [*base, "--val-every", "-1"], "--val-every must be an integer >= 0, got -1")
     # a bad value of a config key: the file and the key, what was expected
     for value, got in (("-1.0", "got -1.0"), ("far", "got 'far'")):
         cfg = tmp_path / f"gate{got[-3:-1]}.yaml"
-        cfg.write_text(config_path("training", "grukf").read_text().replace("gt_term_gate: 0.0",
-                                                                          f"gt_term_gate: {value}"))
-        fails(capsys, [*base, "--config", cfg], f"{cfg}: 'gt_term_gate' must be a distance in metres (0 for no "
-              f"gate)", got)
-    for key, value, expected in (("centre_huber_delta: 0.0", "-0.5", "a distance in metres (0 for the squared loss)"),
-                                 ("lr_min: 0.0", "low", "a learning rate >= 0"),
-                                 ("grad_clip_norm: 10.0", "-1", "a gradient norm >= 0 (0: no clipping)"),
-                                 ("yaw_loss: axis", "degrees", "'heading' or 'axis'"),
-                                 ("coast_yaw_rate: zero", "hold", "'keep' or 'zero'"),
-                                 ("coast_acceleration: zero", "hold", "'keep' or 'zero'")):
+        cfg.write_text(
+            config_path("training", "grukf").read_text().replace("gt_term_gate: 0.0", f"gt_term_gate: {value}")
+        )
+        fails(
+            capsys, [*base, "--config", cfg], f"{cfg}: 'gt_term_gate' must be a distance in metres (0 for no gate)", got
+        )
+    for key, value, expected in (
+        ("centre_huber_delta: 0.0", "-0.5", "a distance in metres (0 for the squared loss)"),
+        ("lr_min: 0.0", "low", "a learning rate >= 0"),
+        ("grad_clip_norm: 10.0", "-1", "a gradient norm >= 0 (0: no clipping)"),
+        ("yaw_loss: axis", "degrees", "'heading' or 'axis'"),
+        ("coast_yaw_rate: zero", "hold", "'keep' or 'zero'"),
+        ("coast_acceleration: zero", "hold", "'keep' or 'zero'"),
+    ):
         name = key.split(":")[0]
         cfg = tmp_path / f"{name}.yaml"
         shipped = config_path("training", "grukf").read_text()
-        line = re.search(rf"^( *){re.escape(key)}$", shipped, re.M)   # the shipped value, replaced by the bad one
+        line = re.search(rf"^( *){re.escape(key)}$", shipped, re.M)  # the shipped value, replaced by the bad one
         assert line, key
         cfg.write_text(shipped.replace(line.group(0), f"{line.group(1)}{name}: {value}"))
-        where = f"network.{name}" if line.group(1) else name            # the network's options are one section
+        where = f"network.{name}" if line.group(1) else name  # the network's options are one section
         fails(capsys, [*base, "--config", cfg], f"{cfg}: '{where}' must be {expected}")
 
 
@@ -293,11 +422,28 @@ def test_a_closed_stdout_is_not_a_traceback(nusc_root, tmp_path):
     import sys
 
     r, w = os.pipe()
-    os.close(r)                                          # nobody will read stdout
+    os.close(r)  # nobody will read stdout
     out = tmp_path / "d.json"
-    proc = subprocess.run([sys.executable, "-m", "grutrack", "simulate-detections", "--dataroot", str(nusc_root),
-                           "--version", "v1.0-mini", "--split", "mini_val", "--out", str(out)],
-                          stdout=w, stderr=subprocess.PIPE, text=True, timeout=300)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "grutrack",
+            "simulate-detections",
+            "--dataroot",
+            str(nusc_root),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "mini_val",
+            "--out",
+            str(out),
+        ],
+        stdout=w,
+        stderr=subprocess.PIPE,
+        text=True,
+        timeout=300,
+    )
     os.close(w)
     assert proc.returncode == 141 and "Traceback" not in proc.stderr and proc.stderr.strip() == "", proc.stderr
     assert out.stat().st_size > 10_000

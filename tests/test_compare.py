@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-
 from support.compare import entry_differences, flatten, value_difference
 
 
@@ -14,11 +13,21 @@ def test_flatten_uses_dotted_keys():
     assert flatten({"a": 1, "b": {"c": 2, "d": {"e": "x"}}}) == {"a": 1, "b.c": 2, "b.d.e": "x"}
 
 
-@pytest.mark.parametrize("a, b, want", [
-    (0.5, 0.25, 0.25), (np.float64(1.0), 1, 0.0), (np.int64(3), 5, 2.0),
-    (math.nan, math.nan, 0.0), (math.nan, 1.0, math.inf), ("car", "car", 0.0), ("car", "bus", math.inf),
-    (True, True, 0.0), (True, False, math.inf), ([1, 2], [1, 2], 0.0),
-])
+@pytest.mark.parametrize(
+    "a, b, want",
+    [
+        (0.5, 0.25, 0.25),
+        (np.float64(1.0), 1, 0.0),
+        (np.int64(3), 5, 2.0),
+        (math.nan, math.nan, 0.0),
+        (math.nan, 1.0, math.inf),
+        ("car", "car", 0.0),
+        ("car", "bus", math.inf),
+        (True, True, 0.0),
+        (True, False, math.inf),
+        ([1, 2], [1, 2], 0.0),
+    ],
+)
 def test_value_difference(a, b, want):
     assert value_difference(a, b) == want
 

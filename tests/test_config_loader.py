@@ -25,10 +25,12 @@ def test_the_papers_numbers_are_valid_and_given_by_path_only(tmp_path):
 
     assert set(load_paper()["tables"]) == {"I", "II", "III", "IV"}
     with pytest.raises(ConfigError, match="paper numbers file paper does not exist"):
-        config_path("paper", "paper")                   # no shipped names: a path only
+        config_path("paper", "paper")  # no shipped names: a path only
     bad = tmp_path / "paper.yaml"
     bad.write_text(default_paper_path().read_text().replace("tolerance: ", "tolerance: -", 1))
-    with pytest.raises(ConfigError, match=r"paper.yaml: 'tables\.[IV]+\.columns\.\w+\.tolerance' must be a number >= 0, got -"):
+    with pytest.raises(
+        ConfigError, match=r"paper.yaml: 'tables\.[IV]+\.columns\.\w+\.tolerance' must be a number >= 0, got -"
+    ):
         load_paper(bad)
 
 
@@ -38,7 +40,7 @@ def test_name_or_path_rule(tmp_path):
         config_path("tracker", "ekff")
     with pytest.raises(ConfigError, match="training config .*nope.yaml does not exist"):
         config_path("training", tmp_path / "nope.yaml")
-    own = tmp_path / "mine"                      # an existing file is a path even without a suffix
+    own = tmp_path / "mine"  # an existing file is a path even without a suffix
     own.write_text(config_path("training", "grukf").read_text())
     assert load_config("training", own)[1] == str(own)
 
@@ -51,17 +53,33 @@ def _tracker_with(tmp_path, edit) -> str:
     return str(p)
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda r: r["lifecycle"]["max_age"].__setitem__("car", 0), r"'lifecycle.max_age.car' must be an integer >= 1, got 0"),
-    (lambda r: r["lifecycle"]["max_age"].__setitem__("car", float("nan")), r"'lifecycle.max_age.car' must be an integer"),
-    (lambda r: r["association"]["first_threshold"].__setitem__("bus", math.inf),
-     r"'association.first_threshold.bus' must be a cost threshold in \[0, 2\]"),
-    (lambda r: r["association"]["first_threshold"].pop("bus"), r"missing key 'association.first_threshold.bus'"),
-    (lambda r: r["motion"].__setitem__("speed", 1), r"unknown key 'motion.speed' \(expected one of: motion.config,"),
-    (lambda r: r["preprocessing"].__setitem__("score_threshold", 0.1),
-     r"'preprocessing.score_threshold' must be a mapping over the tracking classes bicycle, bus,"),
-    (lambda r: r["motion"].__setitem__("time_step", -1), r"'motion.time_step' must be 'timestamps' or a positive"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (
+            lambda r: r["lifecycle"]["max_age"].__setitem__("car", 0),
+            r"'lifecycle.max_age.car' must be an integer >= 1, got 0",
+        ),
+        (
+            lambda r: r["lifecycle"]["max_age"].__setitem__("car", float("nan")),
+            r"'lifecycle.max_age.car' must be an integer",
+        ),
+        (
+            lambda r: r["association"]["first_threshold"].__setitem__("bus", math.inf),
+            r"'association.first_threshold.bus' must be a cost threshold in \[0, 2\]",
+        ),
+        (lambda r: r["association"]["first_threshold"].pop("bus"), r"missing key 'association.first_threshold.bus'"),
+        (
+            lambda r: r["motion"].__setitem__("speed", 1),
+            r"unknown key 'motion.speed' \(expected one of: motion.config,",
+        ),
+        (
+            lambda r: r["preprocessing"].__setitem__("score_threshold", 0.1),
+            r"'preprocessing.score_threshold' must be a mapping over the tracking classes bicycle, bus,",
+        ),
+        (lambda r: r["motion"].__setitem__("time_step", -1), r"'motion.time_step' must be 'timestamps' or a positive"),
+    ],
+)
 def test_tracker_errors_name_file_key_and_expectation(tmp_path, edit, message):
     path = _tracker_with(tmp_path, edit)
     with pytest.raises(ConfigError, match=message) as e:
@@ -72,8 +90,11 @@ def test_tracker_errors_name_file_key_and_expectation(tmp_path, edit, message):
 def test_an_error_inside_a_list_is_stated_for_the_list_and_overrides_name_their_flag():
     with pytest.raises(ConfigError, match=r"grukf.yaml: 'loss_weights' must be 9 non-negative numbers, got \[1, -1,"):
         load_config("training", "grukf", {"loss_weights": [1, -1, 1, 1, 1, 1, 1, 1, 1]})
-    with pytest.raises(ConfigError, match=r"^--epochs must be an integer >= 0 \(0: no step, the initialised "
-                                          r"network\), got -1$"):
+    with pytest.raises(
+        ConfigError,
+        match=r"^--epochs must be an integer >= 0 \(0: no step, the initialised "
+        r"network\), got -1$",
+    ):
         load_config("training", "grukf", {"epochs": -1}, flags={"epochs": "--epochs"})
 
 

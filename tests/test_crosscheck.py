@@ -32,8 +32,20 @@ def _grutrack(*args: str) -> subprocess.CompletedProcess:
 def tracks(tmp_path_factory, nusc_root, pointpillars_mini_val) -> Path:
     """The EKF's tracks of mini_val on the real PointPillars detections."""
     out = tmp_path_factory.mktemp("cc") / "tracks.json"
-    proc = _grutrack("track", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
-                     "--detections", str(pointpillars_mini_val), "--out", str(out), "--no-progress")
+    proc = _grutrack(
+        "track",
+        "--dataroot",
+        str(nusc_root),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_val",
+        "--detections",
+        str(pointpillars_mini_val),
+        "--out",
+        str(out),
+        "--no-progress",
+    )
     assert proc.returncode == 0, proc.stderr
     return out
 
@@ -42,11 +54,23 @@ def _listing(root: Path) -> dict[str, float]:
     return {str(p): p.stat().st_mtime for p in root.rglob("*")}
 
 
+@pytest.mark.slow
 def test_devkit_and_fast_agree_on_all_and_on_a_subset(tracks, nusc_root, tmp_path):
     before = _listing(nusc_root)
     full_out, sub_out = tmp_path / "full.json", tmp_path / "sub.json"
-    proc = _grutrack("cross-check", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
-                     "--submission", str(tracks), "--out", str(full_out))
+    proc = _grutrack(
+        "cross-check",
+        "--dataroot",
+        str(nusc_root),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_val",
+        "--submission",
+        str(tracks),
+        "--out",
+        str(full_out),
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "EQUAL at 1e-09" in proc.stdout
     full = CrossCheckDocument.read(full_out)
@@ -54,17 +78,46 @@ def test_devkit_and_fast_agree_on_all_and_on_a_subset(tracks, nusc_root, tmp_pat
     assert full.scenes == ["scene-0103", "scene-0916"] and full.samples == 81 and full.entries > 150
     # the same AMOTA as `grutrack evaluate --evaluator fast` on the whole split
     ev = tmp_path / "metrics.json"
-    assert _grutrack("evaluate", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
-                     "--submission", str(tracks), "--evaluator", "fast", "--out", str(ev)).returncode == 0
+    assert (
+        _grutrack(
+            "evaluate",
+            "--dataroot",
+            str(nusc_root),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "mini_val",
+            "--submission",
+            str(tracks),
+            "--evaluator",
+            "fast",
+            "--out",
+            str(ev),
+        ).returncode
+        == 0
+    )
     assert full.amota["fast"] == full.amota["devkit"] == json.loads(ev.read_text())["overall"]["amota"]
     # one scene of two: the submission is cut to its samples and both evaluators score it
-    proc = _grutrack("cross-check", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
-                     "--submission", str(tracks), "--scenes", "1", "--out", str(sub_out))
+    proc = _grutrack(
+        "cross-check",
+        "--dataroot",
+        str(nusc_root),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_val",
+        "--submission",
+        str(tracks),
+        "--scenes",
+        "1",
+        "--out",
+        str(sub_out),
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     sub = CrossCheckDocument.read(sub_out)
     assert sub.subset and sub.scenes == ["scene-0103"] and sub.samples == 40 and sub.equal
     assert sub.amota["devkit"] == sub.amota["fast"] != full.amota["fast"]
-    assert _listing(nusc_root) == before          # no splits.json or anything else written into the dataroot
+    assert _listing(nusc_root) == before  # no splits.json or anything else written into the dataroot
 
 
 def test_a_difference_is_reported_and_not_called_equal(tracks, nusc_root, monkeypatch):
@@ -86,8 +139,21 @@ def test_a_difference_is_reported_and_not_called_equal(tracks, nusc_root, monkey
 
 
 def test_bad_scene_count_exits_2_naming_the_flag(tracks, nusc_root, tmp_path):
-    proc = _grutrack("cross-check", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
-                     "--submission", str(tracks), "--scenes", "0", "--out", str(tmp_path / "x.json"))
+    proc = _grutrack(
+        "cross-check",
+        "--dataroot",
+        str(nusc_root),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_val",
+        "--submission",
+        str(tracks),
+        "--scenes",
+        "0",
+        "--out",
+        str(tmp_path / "x.json"),
+    )
     assert proc.returncode == 2 and "--scenes 0" in proc.stderr and "Traceback" not in proc.stderr
     assert not (tmp_path / "x.json").exists()
 

@@ -48,13 +48,15 @@ def test_nuscenes_tracks_round_trip_through_the_submission(nusc_root, tmp_path):
     scenes = ds.scenes("mini_val")
     assert [s.name for s in scenes] == ["scene-0103", "scene-0916"]
     assert all(s.vocabulary == NUSCENES_VOCABULARY for s in scenes)
-    results = _one_box_per_frame(scenes, label=2)            # car
+    results = _one_box_per_frame(scenes, label=2)  # car
     counts = ds.write_tracks(tmp_path / "tracks.json", scenes, results, max_boxes=500)
     n = sum(len(s) for s in scenes)
     assert counts == {"samples": n, "boxes": n, "scenes": 2}
-    assert ds.write_submission(tmp_path / "tracks.json", "mini_val", tmp_path / "sub.json") == {"samples": n,
-                                                                                                "boxes": n}
-    with pytest.raises(InputFormatError):                     # a split whose samples it does not hold
+    assert ds.write_submission(tmp_path / "tracks.json", "mini_val", tmp_path / "sub.json") == {
+        "samples": n,
+        "boxes": n,
+    }
+    with pytest.raises(InputFormatError):  # a split whose samples it does not hold
         ds.write_submission(tmp_path / "tracks.json", "mini_train", tmp_path / "sub2.json")
     assert not (tmp_path / "sub2.json").exists()
 
@@ -67,7 +69,7 @@ def test_av2_tracks_round_trip_and_a_pickle_of_other_frames_is_refused(av2_root,
     counts = ds.write_tracks(tmp_path / "tracks.pkl", scenes, results, max_boxes=500)
     n = sum(len(s) for s in scenes)
     assert counts == {"logs": len(scenes), "frames": n, "boxes": n}
-    assert (tmp_path / "tracks.feather").is_file()          # the same tracks as a table beside the pickle
+    assert (tmp_path / "tracks.feather").is_file()  # the same tracks as a table beside the pickle
     assert ds.write_submission(tmp_path / "tracks.pkl", "val", tmp_path / "sub.pkl") == counts
     with open(tmp_path / "sub.pkl", "rb") as f:
         assert set(pickle.load(f)) == {s.name for s in scenes}
@@ -84,8 +86,12 @@ def test_lt3d_table_round_trips_through_the_reader(av2_root, tmp_path):
 
     ds = open_dataset("av2", DatasetOptions(av2_root))
     scenes = ds.scenes("val", with_gt=True)
-    sim = simulate_scenes(scenes, ("car", "pedestrian", "bicycle", "construction_vehicle", "bus", "truck",
-                                   "trailer"), load_profile("centerpoint"), seed=3)
+    sim = simulate_scenes(
+        scenes,
+        ("car", "pedestrian", "bicycle", "construction_vehicle", "bus", "truck", "trailer"),
+        load_profile("centerpoint"),
+        seed=3,
+    )
     table = detection_table(scenes, sim)
     assert len(table) == sum(len(b) for b in sim.values()) > 100
     path = tmp_path / "dets.feather"
@@ -112,8 +118,25 @@ def test_av2_through_the_same_commands_as_nuscenes(av2_root, tmp_path, capsys):
     assert main(["track", *common, "--detections", str(dets), "--out", str(tracks), "--no-progress"]) == 0
     cfg = tmp_path / "ekf.yaml"
     assert main(["resolve-config", "tracker", "--base", "ekf", "--overrides", "{}", "--out", str(cfg)]) == 0
-    assert main(["submit", *common, "--tracks", str(tracks), "--out", str(sub), "--detections", str(dets),
-                 "--tracker-config", str(cfg), "--tracker", "ekf"]) == 0
+    assert (
+        main(
+            [
+                "submit",
+                *common,
+                "--tracks",
+                str(tracks),
+                "--out",
+                str(sub),
+                "--detections",
+                str(dets),
+                "--tracker-config",
+                str(cfg),
+                "--tracker",
+                "ekf",
+            ]
+        )
+        == 0
+    )
     assert main(["evaluate", *common, "--submission", str(sub), "--out", str(metrics), "--workers", "1"]) == 0
     from grutrack.documents import Manifest, MetricsDocument
 
@@ -135,25 +158,49 @@ def test_train_on_av2_then_track_av2_with_the_model(av2_root, tmp_path, capsys):
     dets, ck = tmp_path / "dets.feather", tmp_path / "ck"
     assert main(["simulate-detections", *common, "--seed", "4", "--out", str(dets)]) == 0
     cfg = tmp_path / "train.yaml"
-    over = ('{"epochs": 2, "device": "cpu", "resample_profiles": ["pointpillars"], "sources": [], '
-            '"validation_scenes": 1}')
+    over = (
+        '{"epochs": 2, "device": "cpu", "resample_profiles": ["pointpillars"], "sources": [], "validation_scenes": 1}'
+    )
     assert main(["resolve-config", "training", "--base", "grukf", "--overrides", over, "--out", str(cfg)]) == 0
-    assert main(["train", *common, "--detections", str(dets), "--config", str(cfg), "--out", str(ck),
-                 "--no-progress"]) == 0
+    assert (
+        main(["train", *common, "--detections", str(dets), "--config", str(cfg), "--out", str(ck), "--no-progress"])
+        == 0
+    )
     out = capsys.readouterr()
-    assert "after 2 steps" in out.out            # 1 log trained on (the other held out for validation) x 2 epochs
+    assert "after 2 steps" in out.out  # 1 log trained on (the other held out for validation) x 2 epochs
     assert "validating on 1 scenes held out of val" in out.out
-    assert main(["track", *common, "--detections", str(dets), "--tracker", "grukf", "--checkpoint",
-                 str(ck / "model.pt"), "--out", str(tmp_path / "t.pkl"), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "track",
+                *common,
+                "--detections",
+                str(dets),
+                "--tracker",
+                "grukf",
+                "--checkpoint",
+                str(ck / "model.pt"),
+                "--out",
+                str(tmp_path / "t.pkl"),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
 
     ds = open_dataset("av2", DatasetOptions(av2_root))
     scenes = ds.scenes("val", with_gt=True)
-    t = Trainer(load_train_config("grukf", {"device": "cpu"}), scenes, ds.load_detections(dets, "val", scenes).boxes,
-                tmp_path / "ck3", progress=False)
+    t = Trainer(
+        load_train_config("grukf", {"device": "cpu"}),
+        scenes,
+        ds.load_detections(dets, "val", scenes).boxes,
+        tmp_path / "ck3",
+        progress=False,
+    )
     # REGULAR_VEHICLE, PEDESTRIAN, BICYCLE, LARGE_VEHICLE, BUS, BOX_TRUCK, TRUCK -> car, pedestrian, bicycle,
     # truck, bus, truck, truck (indices of the 7 nuScenes tracking classes)
     assert t.index.tolist() == [2, 4, 0, 6, 1, 6, 6]
-    assert t.tracker_cfg.first_threshold[3] == t.tracker_cfg.first_threshold[6]   # LARGE_VEHICLE as TRUCK
+    assert t.tracker_cfg.first_threshold[3] == t.tracker_cfg.first_threshold[6]  # LARGE_VEHICLE as TRUCK
 
 
 def test_dataset_stats_of_av2_per_category(av2_root, tmp_path, capsys):
@@ -161,8 +208,10 @@ def test_dataset_stats_of_av2_per_category(av2_root, tmp_path, capsys):
     from grutrack.cli import main
 
     out = tmp_path / "s.json"
-    assert main(["dataset-stats", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--json",
-                 str(out)]) == 0
+    assert (
+        main(["dataset-stats", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--json", str(out)])
+        == 0
+    )
     text = capsys.readouterr().out
     assert "REGULAR_VEHICLE" in text and "7 classes" in text
     import json
@@ -174,4 +223,4 @@ def test_dataset_stats_of_av2_per_category(av2_root, tmp_path, capsys):
     assert stats["classes"]["all"]["boxes"] == n and stats["meta"]["dataset"] == "av2"
     assert sum(stats["classes"][c]["boxes"] for c in ds.vocabulary.names) == n
     car = stats["classes"]["REGULAR_VEHICLE"]
-    assert 3.5 < car["l"] < 6.0 and 1.5 < car["w"] < 2.5       # metres: a car's length and width
+    assert 3.5 < car["l"] < 6.0 and 1.5 < car["w"] < 2.5  # metres: a car's length and width

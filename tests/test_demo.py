@@ -63,7 +63,7 @@ def test_devkit_loads_and_tables_are_consistent(small_demo, small_nusc):
             token = nusc.get("sample", token)["next"]
         assert tokens[-1] == scene["last_sample_token"] and len(tokens) == scene["nbr_samples"] == 20
         stamps = [nusc.get("sample", t)["timestamp"] for t in tokens]
-        assert set(np.diff(stamps).tolist()) == {500_000}       # 2 Hz keyframes, microseconds
+        assert set(np.diff(stamps).tolist()) == {500_000}  # 2 Hz keyframes, microseconds
         for t in tokens:
             sample = nusc.get("sample", t)
             sd = nusc.get("sample_data", sample["data"]["LIDAR_TOP"])
@@ -98,8 +98,8 @@ def test_categories_attributes_and_points(small_nusc):
         zero += ann["num_lidar_pts"] == 0
         positive += ann["num_lidar_pts"] > 0
         if ann["num_lidar_pts"] == 0:
-            assert ann["num_radar_pts"] == 0                     # occluded: no points at all
-    assert positive > 2 * zero > 0                                # mini: 20 % of boxes without points
+            assert ann["num_radar_pts"] == 0  # occluded: no points at all
+    assert positive > 2 * zero > 0  # mini: 20 % of boxes without points
 
 
 def test_custom_splits(small_demo, small_nusc):
@@ -129,16 +129,44 @@ def test_tracking_eval_oracle_amota_is_one(small_demo, small_nusc, tmp_path):
             if name is None or ann["num_lidar_pts"] + ann["num_radar_pts"] == 0:
                 continue
             vel = np.nan_to_num(nusc.box_velocity(ann_token)[:2]).tolist()
-            results[token].append({"sample_token": token, "translation": ann["translation"], "size": ann["size"],
-                                   "rotation": ann["rotation"], "velocity": vel, "tracking_id": ann["instance_token"],
-                                   "tracking_name": name, "tracking_score": 1.0})
+            results[token].append(
+                {
+                    "sample_token": token,
+                    "translation": ann["translation"],
+                    "size": ann["size"],
+                    "rotation": ann["rotation"],
+                    "velocity": vel,
+                    "tracking_id": ann["instance_token"],
+                    "tracking_name": name,
+                    "tracking_score": 1.0,
+                }
+            )
         token = sample["next"]
     path = tmp_path / "oracle.json"
-    path.write_text(json.dumps({"meta": {"use_camera": False, "use_lidar": True, "use_radar": False,
-                                         "use_map": False, "use_external": False}, "results": results}))
+    path.write_text(
+        json.dumps(
+            {
+                "meta": {
+                    "use_camera": False,
+                    "use_lidar": True,
+                    "use_radar": False,
+                    "use_map": False,
+                    "use_external": False,
+                },
+                "results": results,
+            }
+        )
+    )
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        metrics = TrackingEval(config_factory("tracking_nips_2019"), str(path), "demo_val", str(tmp_path / "eval"),
-                               nusc_version=VERSION, nusc_dataroot=str(small_demo), verbose=False).main()
+        metrics = TrackingEval(
+            config_factory("tracking_nips_2019"),
+            str(path),
+            "demo_val",
+            str(tmp_path / "eval"),
+            nusc_version=VERSION,
+            nusc_dataroot=str(small_demo),
+            verbose=False,
+        ).main()
     assert metrics["amota"] == pytest.approx(1.0)
     assert metrics["tp"] > 300 and metrics["ids"] == 0
 
@@ -148,7 +176,7 @@ def test_deterministic_for_a_seed(tmp_path):
     demo.generate_demo(tmp_path / "b", scenes=2, frames=8, seed=3)
     demo.generate_demo(tmp_path / "c", scenes=2, frames=8, seed=4)
     files = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*") if p.is_file())
-    assert len(files) == 16                                       # 13 tables, splits, map, README
+    assert len(files) == 16  # 13 tables, splits, map, README
     for rel in files:
         assert filecmp.cmp(tmp_path / "a" / rel, tmp_path / "b" / rel, shallow=False), rel
     ann = Path(VERSION) / "sample_annotation.json"
@@ -166,9 +194,9 @@ def test_scene_content_does_not_depend_on_scene_count(tmp_path):
 def test_atomic_replace_and_refusal(tmp_path):
     out = tmp_path / "d"
     demo.generate_demo(out, scenes=1, frames=4, seed=0)
-    demo.generate_demo(out, scenes=2, frames=4, seed=0)          # a previous demo is replaced
+    demo.generate_demo(out, scenes=2, frames=4, seed=0)  # a previous demo is replaced
     assert len(json.loads((out / VERSION / "scene.json").read_text())) == 2
-    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]   # no temporary folders left
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary folders left
     other = tmp_path / "user_data"
     other.mkdir()
     (other / "keep.txt").write_text("x")
@@ -185,8 +213,9 @@ def _tracks(frames) -> dict[str, list]:
         dist = np.hypot(f.boxes[:, 0] - f.ego_translation[0], f.boxes[:, 1] - f.ego_translation[1])
         for i in range(len(f)):
             b = f.boxes[i]
-            tracks[f.instance_ids[i]].append((f.timestamp * 1e-6, f.names[i], b[0], b[1], b[6], np.hypot(b[7], b[8]),
-                                              f.num_lidar_pts[i], dist[i]))
+            tracks[f.instance_ids[i]].append(
+                (f.timestamp * 1e-6, f.names[i], b[0], b[1], b[6], np.hypot(b[7], b[8]), f.num_lidar_pts[i], dist[i])
+            )
     return tracks
 
 
@@ -196,17 +225,17 @@ def test_default_demo_is_rich_enough_for_tracking(default_frames):
     shares = {c: stats[c]["share"] for c in ("car", "pedestrian", "truck", "bus", "bicycle", "motorcycle", "trailer")}
     assert shares["car"] == max(shares.values()) and 0.4 < shares["car"] < 0.65
     assert shares["pedestrian"] == sorted(shares.values())[-2] and 0.25 < shares["pedestrian"] < 0.45
-    assert all(v > 0 for v in shares.values())                   # all 7 tracking classes present
-    assert stats["all"]["boxes"] / len(frames) > 25              # mini: 36 tracking-class boxes per keyframe
+    assert all(v > 0 for v in shares.values())  # all 7 tracking classes present
+    assert stats["all"]["boxes"] / len(frames) > 25  # mini: 36 tracking-class boxes per keyframe
     moved = [np.linalg.norm(frames[i + 39].ego_translation - frames[i].ego_translation) for i in range(0, 400, 40)]
-    assert sum(m > 20 for m in moved) >= 5                        # most scenes have a moving ego
+    assert sum(m > 20 for m in moved) >= 5  # most scenes have a moving ego
     tracks = _tracks(frames)
     turn = stop = occlusion_gap = crosses_50m = 0
     for rows in tracks.values():
         t, cls, x, y, yaw, speed, pts, dist = (np.array(v) for v in zip(*rows))
         heading = np.unwrap(yaw)
         turn += cls[0] in ("car", "bus", "truck") and np.ptp(heading) > 1.0 and speed.max() > 2.0
-        stop += cls[0] == "pedestrian" and speed.max() > 0.8 and speed[np.argmax(speed):].min() < 0.1
+        stop += cls[0] == "pedestrian" and speed.max() > 0.8 and speed[np.argmax(speed) :].min() < 0.1
         seen = np.flatnonzero(pts > 0)
         occlusion_gap += bool(((pts == 0) & (np.arange(len(pts)) > seen[0]) & (np.arange(len(pts)) < seen[-1])).any())
         crosses_50m += bool((dist < 50).any() and (dist > 50).any())
@@ -216,18 +245,31 @@ def test_default_demo_is_rich_enough_for_tracking(default_frames):
 
 def test_yaw_rates_and_statistics_table():
     inst = np.array(["a", "a", "a", "b", "b"], dtype=object)
-    t = np.array([0.0, 0.5, 1.0, 0.0, 3.0])                       # b's gap of 3 s is not differenced
+    t = np.array([0.0, 0.5, 1.0, 0.0, 3.0])  # b's gap of 3 s is not differenced
     yaw = np.array([3.0, -3.1, -3.0, 0.0, 1.0])
     rates, idx = yaw_rates(inst, t, yaw)
     assert np.allclose(rates, [(2 * np.pi - 6.1) / 0.5, 0.1 / 0.5]) and idx.tolist() == [1, 2]
-    stats = {"car": {"boxes": 2, "share": 1.0, "w": 1.9, "l": 4.6, "h": 1.7, "speed": 1.0, "moving": 0.5,
-                     "yaw_rate": 0.1, "zero_pts": 0.0, "instances": 1, "track_len": 2.0}}
+    stats = {
+        "car": {
+            "boxes": 2,
+            "share": 1.0,
+            "w": 1.9,
+            "l": 4.6,
+            "h": 1.7,
+            "speed": 1.0,
+            "moving": 0.5,
+            "yaw_rate": 0.1,
+            "zero_pts": 0.0,
+            "instances": 1,
+            "track_len": 2.0,
+        }
+    }
     assert "car" in format_table(stats) and "0.100" in format_comparison(stats, stats, ("a", "b"))
 
 
 def test_nuscenes_statistics_of_mini(nusc_mini):
     stats = class_statistics(nusc_gt_frames(nusc_mini, "mini_val"))
-    assert stats["car"]["boxes"] == 2568 and stats["pedestrian"]["boxes"] == 1358   # see shared/data NOTES.md
+    assert stats["car"]["boxes"] == 2568 and stats["pedestrian"]["boxes"] == 1358  # see shared/data NOTES.md
     assert stats["trailer"]["boxes"] == 0 and np.isnan(stats["trailer"]["speed"])
 
 
@@ -236,8 +278,22 @@ def test_cli_demo_data_and_stats(tmp_path, capsys):
     assert main(["demo-data", "--out", str(out), "--scenes", "2", "--frames-per-scene", "6", "--seed", "1"]) == 0
     assert "SYNTHETIC" in capsys.readouterr().out
     stats_json = tmp_path / "stats.json"
-    assert main(["dataset-stats", "--dataroot", str(out), "--split", "demo_train", "--split", "demo_val",
-                 "--json", str(stats_json)]) == 0
+    assert (
+        main(
+            [
+                "dataset-stats",
+                "--dataroot",
+                str(out),
+                "--split",
+                "demo_train",
+                "--split",
+                "demo_val",
+                "--json",
+                str(stats_json),
+            ]
+        )
+        == 0
+    )
     assert main(["dataset-stats", "--dataroot", str(out), "--split", "demo_all", "--compare", str(stats_json)]) == 0
     text = capsys.readouterr().out
     assert "pedestrian" in text and "|yaw rate|" in text and "this" in text
@@ -253,13 +309,13 @@ def test_the_same_demo_again_is_left_untouched(tmp_path, capsys):
     out = tmp_path / "demo"
     argv = ["demo-data", "--out", str(out), "--scenes", "2", "--frames-per-scene", "6", "--seed", "1"]
     assert main(argv) == 0 and capsys.readouterr().out.startswith("wrote SYNTHETIC")
-    (out / ".snakemake_timestamp").write_text("")                 # what the workflow adds to the folder
+    (out / ".snakemake_timestamp").write_text("")  # what the workflow adds to the folder
     stamp = {p: p.stat().st_mtime_ns for p in [out, *out.rglob("*")]}
-    os.utime(out / VERSION / "scene.json", ns=(1, 1))             # an old time that a rewrite would change
+    os.utime(out / VERSION / "scene.json", ns=(1, 1))  # an old time that a rewrite would change
     stamp[out / VERSION / "scene.json"] = 1
     assert main(argv) == 0 and capsys.readouterr().out.startswith("already up to date (left untouched)")
     assert {p: p.stat().st_mtime_ns for p in [out, *out.rglob("*")]} == stamp
-    (out / VERSION / "scene.json").write_text("[]")               # damaged: rewritten
+    (out / VERSION / "scene.json").write_text("[]")  # damaged: rewritten
     assert main(argv) == 0 and capsys.readouterr().out.startswith("wrote SYNTHETIC")
     assert len(json.loads((out / VERSION / "scene.json").read_text())) == 2
     assert main([*argv[:-1], "2"]) == 0 and capsys.readouterr().out.startswith("wrote SYNTHETIC")

@@ -16,8 +16,26 @@ def demo(tmp_path_factory):
     data = root / "data"
     assert main(["demo-data", "--out", str(data), "--scenes", "6", "--frames-per-scene", "30", "--seed", "3"]) == 0
     dets = root / "dets.json"
-    assert main(["simulate-detections", "--dataroot", str(data), "--version", "v1.0-demo", "--split", "demo_val",
-                 "--profile", "centerpoint", "--seed", "7", "--out", str(dets)]) == 0
+    assert (
+        main(
+            [
+                "simulate-detections",
+                "--dataroot",
+                str(data),
+                "--version",
+                "v1.0-demo",
+                "--split",
+                "demo_val",
+                "--profile",
+                "centerpoint",
+                "--seed",
+                "7",
+                "--out",
+                str(dets),
+            ]
+        )
+        == 0
+    )
     return root, data, dets
 
 

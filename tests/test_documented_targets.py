@@ -53,8 +53,14 @@ COMMANDS = readme_commands()
 
 def test_the_readme_names_the_main_targets():
     text = " ".join(COMMANDS)
-    for target in ("reports/demo_val.md", "reports/nusc_val.md", "reports/av2_val.md", "reports/nusc_test.md",
-                   "submissions/nusc_test_centerpoint.zip", "reports/semi_supervised.md"):
+    for target in (
+        "reports/demo_val.md",
+        "reports/nusc_val.md",
+        "reports/av2_val.md",
+        "reports/nusc_test.md",
+        "submissions/nusc_test_centerpoint.zip",
+        "reports/semi_supervised.md",
+    ):
         assert target in text, f"the README shows no snakemake command for {target}"
 
 

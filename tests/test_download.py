@@ -68,9 +68,20 @@ def server():
 
 
 def _source(url: str | None, host: str = "direct", sha: str | None = None) -> DetectionSource:
-    return DetectionSource(name="test_src", dataset="nuscenes", detector="cp", split="val", description="test file.",
-                           page="https://example.org", url=url, host=host, filename="dets.json", sha256=sha,
-                           format="nuscenes_json", member=None)
+    return DetectionSource(
+        name="test_src",
+        dataset="nuscenes",
+        detector="cp",
+        split="val",
+        description="test file.",
+        page="https://example.org",
+        url=url,
+        host=host,
+        filename="dets.json",
+        sha256=sha,
+        format="nuscenes_json",
+        member=None,
+    )
 
 
 def test_download_verifies_checksum_and_renames(server, tmp_path):
@@ -108,8 +119,22 @@ def test_fetch_source_and_cli(server, tmp_path, capsys):
     fetch_source(_source(f"{server}/x", sha=SHA), tmp_path, progress=False)
     assert len(_Handler.requests) == n
     out = tmp_path / "cli"
-    assert main(["download-detections", "centerpoint_val", "--out", str(out), "--url", f"{server}/cp.json",
-                 "--sha256", SHA, "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "download-detections",
+                "centerpoint_val",
+                "--out",
+                str(out),
+                "--url",
+                f"{server}/cp.json",
+                "--sha256",
+                SHA,
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert (out / "centerpoint_val.json").read_bytes() == DATA
     assert "ready" in capsys.readouterr().out
 
@@ -130,8 +155,14 @@ def test_cli_error_for_registry_source_on_google_drive(tmp_path, capsys):
 
 def test_registry_entries_and_validation(tmp_path):
     reg = load_registry()
-    assert {"centerpoint_val", "centerpoint_test", "centerpoint_train", "largekernel3d_val", "largekernel3d_test",
-            "lt3d_val"} <= set(reg)
+    assert {
+        "centerpoint_val",
+        "centerpoint_test",
+        "centerpoint_train",
+        "largekernel3d_val",
+        "largekernel3d_test",
+        "lt3d_val",
+    } <= set(reg)
     assert reg["lt3d_val"].dataset == "av2" and reg["centerpoint_test"].split == "test"
     bad = tmp_path / "reg.yaml"
     bad.write_text("sources:\n  x: {dataset: nuscenes, detecter: cp}\n")

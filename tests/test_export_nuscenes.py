@@ -14,8 +14,14 @@ from grutrack.export.nuscenes_json import build_submission, validate_submission,
 
 def _tracks(n, seed=0):
     rng = np.random.default_rng(seed)
-    boxes = np.column_stack([rng.uniform(-50, 50, (n, 3)), rng.uniform(0.5, 5, (n, 3)),
-                             rng.uniform(-np.pi, np.pi, n), rng.normal(0, 3, (n, 2))])
+    boxes = np.column_stack(
+        [
+            rng.uniform(-50, 50, (n, 3)),
+            rng.uniform(0.5, 5, (n, 3)),
+            rng.uniform(-np.pi, np.pi, n),
+            rng.normal(0, 3, (n, 2)),
+        ]
+    )
     return BoxSet(boxes, rng.uniform(0, 1, n), rng.integers(0, 7, n), np.arange(n))
 
 

@@ -50,8 +50,7 @@ def new_dataset(tmp_path, monkeypatch):
 
 def test_config_kinds_come_from_the_dataset_classes():
     kinds = config_kinds()
-    assert {k: name for k, (name, _) in kinds.items()} == {"nuscenes": "nuscenes", "demo": "nuscenes",
-                                                            "av2": "av2"}
+    assert {k: name for k, (name, _) in kinds.items()} == {"nuscenes": "nuscenes", "demo": "nuscenes", "av2": "av2"}
     assert all(schema["properties"]["kind"] == {"const": k} for k, (_, schema) in kinds.items())
 
 
@@ -63,15 +62,74 @@ def test_a_new_dataset_reaches_the_commands(new_dataset, nusc_root, tmp_path, ca
 
     common = ["--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val"]
     dets, tracks, sub = (tmp_path / n for n in ("dets.json", "tracks.json", "sub.json"))
-    assert main(["simulate-detections", "--dataset", new_dataset, *common, "--profile", "centerpoint",
-                 "--seed", "3", "--out", str(dets)]) == 0
-    assert main(["track", "--dataset", new_dataset, *common, "--detections", str(dets), "--out", str(tracks),
-                 "--no-progress"]) == 0
-    assert main(["submit", "--dataset", new_dataset, *common, "--tracks", str(tracks), "--out", str(sub),
-                 "--manifest", "none"]) == 0
+    assert (
+        main(
+            [
+                "simulate-detections",
+                "--dataset",
+                new_dataset,
+                *common,
+                "--profile",
+                "centerpoint",
+                "--seed",
+                "3",
+                "--out",
+                str(dets),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "track",
+                "--dataset",
+                new_dataset,
+                *common,
+                "--detections",
+                str(dets),
+                "--out",
+                str(tracks),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "submit",
+                "--dataset",
+                new_dataset,
+                *common,
+                "--tracks",
+                str(tracks),
+                "--out",
+                str(sub),
+                "--manifest",
+                "none",
+            ]
+        )
+        == 0
+    )
     for ds in (new_dataset, "nuscenes"):
-        assert main(["evaluate", "--dataset", ds, *common, "--submission", str(sub), "--evaluator", "fast",
-                     "--out", str(tmp_path / f"{ds}.json")]) == 0
+        assert (
+            main(
+                [
+                    "evaluate",
+                    "--dataset",
+                    ds,
+                    *common,
+                    "--submission",
+                    str(sub),
+                    "--evaluator",
+                    "fast",
+                    "--out",
+                    str(tmp_path / f"{ds}.json"),
+                ]
+            )
+            == 0
+        )
     new, ref = (MetricsDocument.read(tmp_path / f"{ds}.json") for ds in (new_dataset, "nuscenes"))
     assert new.dataset == "keyframes" and 0.3 < new.overall["amota"] <= 1.0
     assert json.dumps(new.overall) == json.dumps(ref.overall)
@@ -93,25 +151,31 @@ def test_a_new_dataset_reaches_the_workflow_config(new_dataset, tmp_path):
     cfg["experiments"]["kf_val"] = exp
     spec.validate_config(cfg, SCHEMA, files=[])
     spec.check_config(cfg, paper, load_registry())
-    assert spec.dataset_args(cfg, "kf", "val") == f"--dataset keyframes --dataroot {tmp_path} --split val " \
-                                                  "--version v2.0"
+    assert (
+        spec.dataset_args(cfg, "kf", "val") == f"--dataset keyframes --dataroot {tmp_path} --split val --version v2.0"
+    )
     assert spec.require_dataroot(cfg, "kf", "val") == str(tmp_path)
     bad = copy.deepcopy(cfg)
     bad["datasets"]["kf"]["rate_hz"] = 10
     with pytest.raises(ConfigError, match=r"config key datasets\.kf\.rate_hz .*: Additional properties"):
         spec.validate_config(bad, SCHEMA, files=[])
     bad["datasets"]["kf"] = {"kind": "kitti", "dataroot": "x"}
-    with pytest.raises(ConfigError, match=r"datasets\.kf\.kind .*'kitti' is not one of \['av2', 'demo', "
-                                          r"'keyframes', 'nuscenes'\]"):
+    with pytest.raises(
+        ConfigError,
+        match=r"datasets\.kf\.kind .*'kitti' is not one of \['av2', 'demo', "
+        r"'keyframes', 'nuscenes'\]",
+    ):
         spec.validate_config(bad, SCHEMA, files=[])
 
 
 def test_shipped_dataset_entries_are_still_checked_field_by_field():
     cfg = yaml.safe_load((REPO / "workflow/config/config.yaml").read_text())
     spec.validate_config(cfg, SCHEMA, files=[])
-    for dataset, key, value, message in (("av2", "rate_hz", 0, "less than or equal to the minimum of 0"),
-                                         ("demo", "scenes", 1, "less than the minimum of 2"),
-                                         ("nuscenes", "test_version", 3, "is not of type 'string', 'null'")):
+    for dataset, key, value, message in (
+        ("av2", "rate_hz", 0, "less than or equal to the minimum of 0"),
+        ("demo", "scenes", 1, "less than the minimum of 2"),
+        ("nuscenes", "test_version", 3, "is not of type 'string', 'null'"),
+    ):
         bad = copy.deepcopy(cfg)
         if dataset not in bad["datasets"]:
             continue
@@ -139,7 +203,7 @@ def test_a_new_motion_model_is_its_class_and_one_models_line(monkeypatch, nusc_r
             made.append(params)
             super().__init__(**params)
 
-    monkeypatch.setitem(models.MODELS, "TwinCV", TwinCV)             # the one registry line
+    monkeypatch.setitem(models.MODELS, "TwinCV", TwinCV)  # the one registry line
     motion = yaml.safe_load((REPO / "grutrack/configs/motion/polymot_nusc.yaml").read_text())
     motion["models"]["TwinCV"] = motion["models"]["CV"]
     (tmp_path / "motion.yaml").write_text(yaml.safe_dump(motion))
@@ -152,8 +216,22 @@ def test_a_new_motion_model_is_its_class_and_one_models_line(monkeypatch, nusc_r
     for model in ("TwinCV", "CV"):
         preset["motion"]["model_override"] = {"car": model, "truck": model}
         (tmp_path / f"{model}.yaml").write_text(yaml.safe_dump(preset))
-        assert main(["track", *common, "--config", str(tmp_path / f"{model}.yaml"), "--detections", str(dets),
-                     "--out", str(tmp_path / f"{model}.json"), "--no-progress"]) == 0
+        assert (
+            main(
+                [
+                    "track",
+                    *common,
+                    "--config",
+                    str(tmp_path / f"{model}.yaml"),
+                    "--detections",
+                    str(dets),
+                    "--out",
+                    str(tmp_path / f"{model}.json"),
+                    "--no-progress",
+                ]
+            )
+            == 0
+        )
         out[model] = json.loads((tmp_path / f"{model}.json").read_text())["results"]
     assert made, "the new model was never built"
     cars = [b for boxes in out["TwinCV"].values() for b in boxes if b["tracking_name"] == "car"]
@@ -161,8 +239,21 @@ def test_a_new_motion_model_is_its_class_and_one_models_line(monkeypatch, nusc_r
     assert out["TwinCV"] == out["CV"]
     preset["motion"]["model_override"] = {"car": "TwinCVX"}
     (tmp_path / "bad.yaml").write_text(yaml.safe_dump(preset))
-    assert main(["track", *common, "--config", str(tmp_path / "bad.yaml"), "--detections", str(dets),
-                 "--out", str(tmp_path / "bad.json")]) == 2
+    assert (
+        main(
+            [
+                "track",
+                *common,
+                "--config",
+                str(tmp_path / "bad.yaml"),
+                "--detections",
+                str(dets),
+                "--out",
+                str(tmp_path / "bad.json"),
+            ]
+        )
+        == 2
+    )
     assert "'motion.model_override.car' must be one of BICYCLE, CA, CTRA, CV, TWINCV" in capsys.readouterr().err
 
 
@@ -194,20 +285,43 @@ def test_a_new_report_is_its_module_and_one_kinds_line(monkeypatch, tmp_path, ca
     spec.check_config(cfg, paper, load_registry())
     bad = copy.deepcopy(cfg)
     bad["reports"]["short"]["experiment"] = "av2_val"
-    with pytest.raises(ConfigError, match=r"reports\.short\.experiment: a amota_list report needs a demo or "
-                                          r"nuscenes experiment, 'av2_val' is av2"):
+    with pytest.raises(
+        ConfigError,
+        match=r"reports\.short\.experiment: a amota_list report needs a demo or "
+        r"nuscenes experiment, 'av2_val' is av2",
+    ):
         spec.check_config(bad, paper, load_registry())
     bad["reports"]["short"]["kind"] = "amota_lst"
     with pytest.raises(ConfigError, match=r"reports\.short\.kind .*'amota_lst' is not one of"):
         spec.validate_config(bad, SCHEMA, files=[])
     metrics = tmp_path / "m.json"
-    MetricsDocument(dataset="nuscenes", version="v1.0-mini", split="mini_val", evaluator="fast",
-                    submission="sub.json", overall={"amota": 0.61234}, per_class={}).write(metrics)
+    MetricsDocument(
+        dataset="nuscenes",
+        version="v1.0-mini",
+        split="mini_val",
+        evaluator="fast",
+        submission="sub.json",
+        overall={"amota": 0.61234},
+        per_class={},
+    ).write(metrics)
     out = tmp_path / "short.md"
     assert main(["report", "amota_list", "--out", str(out), "--run", f"ekf={metrics}"]) == 0
     assert out.read_text() == "# short\n\n- ekf: AMOTA 0.6123\n"
-    assert main(["report", "amota_list", "--out", str(out), "--run", f"ekf={metrics}",
-                 "--render", f"ekf={tmp_path}/counts.json"]) == 2
+    assert (
+        main(
+            [
+                "report",
+                "amota_list",
+                "--out",
+                str(out),
+                "--run",
+                f"ekf={metrics}",
+                "--render",
+                f"ekf={tmp_path}/counts.json",
+            ]
+        )
+        == 2
+    )
     assert "--render: a amota_list report shows no key frames (it has no tracking run)" in capsys.readouterr().err
 
 
@@ -224,13 +338,15 @@ def test_a_new_av2_metric_is_one_line(monkeypatch, av2_root, tmp_path):
     assert main(["simulate-detections", *common, "--profile", "centerpoint", "--seed", "4", "--out", str(dets)]) == 0
     assert main(["track", *common, "--detections", str(dets), "--out", str(tracks), "--no-progress"]) == 0
     assert main(["submit", *common, "--tracks", str(tracks), "--out", str(sub), "--manifest", "none"]) == 0
-    assert main(["evaluate", *common, "--submission", str(sub), "--out", str(tmp_path / "a.json"),
-                 "--workers", "1"]) == 0
-    monkeypatch.setitem(av2_eval.TRACKEVAL_COLUMNS, "dets", ("Count", "Dets", "int"))    # the one line
-    assert main(["evaluate", *common, "--submission", str(sub), "--out", str(tmp_path / "b.json"),
-                 "--workers", "1"]) == 0
+    assert (
+        main(["evaluate", *common, "--submission", str(sub), "--out", str(tmp_path / "a.json"), "--workers", "1"]) == 0
+    )
+    monkeypatch.setitem(av2_eval.TRACKEVAL_COLUMNS, "dets", ("Count", "Dets", "int"))  # the one line
+    assert (
+        main(["evaluate", *common, "--submission", str(sub), "--out", str(tmp_path / "b.json"), "--workers", "1"]) == 0
+    )
     before, after = MetricsDocument.read(tmp_path / "a.json"), MetricsDocument.read(tmp_path / "b.json")
     for c, row in after.per_class.items():
-        assert row.pop("dets") == row["tp"] + row["fp"], c        # Count's detections: the scored tracks' boxes
+        assert row.pop("dets") == row["tp"] + row["fp"], c  # Count's detections: the scored tracks' boxes
         assert row == before.per_class[c]
     assert sum(r["tp"] for r in after.per_class.values()) > 500

@@ -15,15 +15,14 @@ import math
 import os
 import time
 from pathlib import Path
-from typing import Any, Dict, Optional, Tuple
+from typing import Any
 
 import numpy as np
 import pytest
-
 from support.compare import entry_differences, flatten
-from grutrack.evaluation.nuscenes_fast import (evaluate_tracks, exact_center_distances, fast_tracking_eval,
-                                               load_tracks)
 from support.fast_synth import corrupt_submission, gt_submission
+
+from grutrack.evaluation.nuscenes_fast import evaluate_tracks, exact_center_distances, fast_tracking_eval, load_tracks
 
 TOL = 1e-9
 
@@ -32,7 +31,8 @@ TOL = 1e-9
 # The devkit reference and the comparison
 # ----------------------------------------------------------------------------------------------------------------
 
-def devkit_evaluate(nusc, submission, split: str, config=None, workdir: Optional[str] = None):
+
+def devkit_evaluate(nusc, submission, split: str, config=None, workdir: str | None = None):
     """The official evaluation: ``TrackingEval.__init__``'s loading steps on the already loaded ``nusc`` (no
     second NuScenes load), then the devkit's own ``TrackingEval.evaluate``; no rendering, nothing printed.
 
@@ -44,9 +44,15 @@ def devkit_evaluate(nusc, submission, split: str, config=None, workdir: Optional
     import tempfile
 
     from nuscenes.eval.common.config import config_factory
-    from nuscenes.eval.common.loaders import (add_center_dist, filter_eval_boxes, get_samples_of_custom_split,
-                                              load_gt, load_gt_of_sample_tokens, load_prediction,
-                                              load_prediction_of_sample_tokens)
+    from nuscenes.eval.common.loaders import (
+        add_center_dist,
+        filter_eval_boxes,
+        get_samples_of_custom_split,
+        load_gt,
+        load_gt_of_sample_tokens,
+        load_prediction,
+        load_prediction_of_sample_tokens,
+    )
     from nuscenes.eval.tracking.data_classes import TrackingBox
     from nuscenes.eval.tracking.evaluate import TrackingEval
     from nuscenes.eval.tracking.loaders import create_tracks
@@ -69,10 +75,11 @@ def devkit_evaluate(nusc, submission, split: str, config=None, workdir: Optional
                 gt_boxes = load_gt(nusc, split, TrackingBox)
             else:
                 tokens = get_samples_of_custom_split(split_name=split, nusc=nusc)
-                pred_boxes, ev.meta = load_prediction_of_sample_tokens(path, cfg.max_boxes_per_sample,
-                                                                       TrackingBox, sample_tokens=tokens)
+                pred_boxes, ev.meta = load_prediction_of_sample_tokens(
+                    path, cfg.max_boxes_per_sample, TrackingBox, sample_tokens=tokens
+                )
                 gt_boxes = load_gt_of_sample_tokens(nusc, tokens, TrackingBox)
-        if set(pred_boxes.sample_tokens) != set(gt_boxes.sample_tokens):   # TrackingEval.__init__'s assert
+        if set(pred_boxes.sample_tokens) != set(gt_boxes.sample_tokens):  # TrackingEval.__init__'s assert
             raise AssertionError("Samples in split don't match samples in predicted tracks.")
         pred_boxes = filter_eval_boxes(nusc, add_center_dist(nusc, pred_boxes), cfg.class_range)
         gt_boxes = filter_eval_boxes(nusc, add_center_dist(nusc, gt_boxes), cfg.class_range)
@@ -85,7 +92,7 @@ def devkit_evaluate(nusc, submission, split: str, config=None, workdir: Optional
     return summary, md_list, ev.tracks_gt, ev.tracks_pred
 
 
-def compare_summaries(ref: Dict[str, Any], ours: Dict[str, Any]) -> Tuple[float, list]:
+def compare_summaries(ref: dict[str, Any], ours: dict[str, Any]) -> tuple[float, list]:
     """(max abs difference, [mismatches]) over every entry but eval_time; keys must be identical."""
     try:
         diffs = entry_differences(ref, ours)
@@ -101,7 +108,7 @@ def compare_summaries(ref: Dict[str, Any], ours: Dict[str, Any]) -> Tuple[float,
     return worst, bad
 
 
-def compare_metric_data(ref_list, our_list) -> Tuple[float, list]:
+def compare_metric_data(ref_list, our_list) -> tuple[float, list]:
     """The per-threshold metric data (metrics_details.json), every value."""
     ref, ours = ref_list.serialize(), our_list.serialize()
     assert set(ref) == set(ours)
@@ -125,7 +132,7 @@ def compare_metric_data(ref_list, our_list) -> Tuple[float, list]:
     return worst, bad
 
 
-def assert_parity(nusc, submission, split: str, config=None, reference=None) -> Dict[str, Any]:
+def assert_parity(nusc, submission, split: str, config=None, reference=None) -> dict[str, Any]:
     """Check ``fast_tracking_eval`` against the devkit on one input; return a small report.
 
     ``submission``: a tracking-submission dict or its JSON path; ``split``: predefined or custom split name;
@@ -147,18 +154,23 @@ def assert_parity(nusc, submission, split: str, config=None, reference=None) -> 
     assert not bad_md, "metric-data mismatches: %s" % bad_md[:5]
     worst2, bad2 = compare_summaries(ref_summary, dict(our_metrics.serialize(), meta=ref_summary["meta"]))
     assert not bad2, bad2[:20]
-    return {"max_abs_diff": max(worst, worst_md, worst2), "devkit_s": t1 - t0, "fast_s": t2 - t1,
-            "amota": ours["amota"]}
+    return {
+        "max_abs_diff": max(worst, worst_md, worst2),
+        "devkit_s": t1 - t0,
+        "fast_s": t2 - t1,
+        "amota": ours["amota"],
+    }
 
 
 # ----------------------------------------------------------------------------------------------------------------
 # Cases on the real nuScenes v1.0-mini fragment
 # ----------------------------------------------------------------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def devkit_reference():
     """Memoised devkit results, one run per (case name) for the whole module."""
-    cache: Dict[str, Any] = {}
+    cache: dict[str, Any] = {}
 
     def get(name: str, nusc, submission, split: str, config=None):
         if name not in cache:
@@ -170,7 +182,7 @@ def devkit_reference():
     return get
 
 
-DEVKIT_SECONDS: Dict[str, float] = {}
+DEVKIT_SECONDS: dict[str, float] = {}
 
 
 @pytest.fixture(scope="module")
@@ -178,10 +190,12 @@ def mini_val_gt(nusc_mini):
     return gt_submission(nusc_mini, "mini_val")
 
 
-def _case(nusc, name: str, split: str, submission, devkit_reference) -> Dict[str, Any]:
+def _case(nusc, name: str, split: str, submission, devkit_reference) -> dict[str, Any]:
     report = assert_parity(nusc, submission, split, reference=devkit_reference(name, nusc, submission, split))
-    print("\n%-28s AMOTA %.6f  max|diff| %.3g  devkit (whole) %.2fs  fast (whole) %.2fs"
-          % (name, report["amota"], report["max_abs_diff"], DEVKIT_SECONDS.get(name, math.nan), report["fast_s"]))
+    print(
+        "\n%-28s AMOTA %.6f  max|diff| %.3g  devkit (whole) %.2fs  fast (whole) %.2fs"
+        % (name, report["amota"], report["max_abs_diff"], DEVKIT_SECONDS.get(name, math.nan), report["fast_s"])
+    )
     return report
 
 
@@ -205,6 +219,7 @@ def test_oracle_mini_train(nusc_mini, devkit_reference):
     assert summary["amota"] == 1.0 and summary["tp"] == 7127.0
 
 
+@pytest.mark.slow
 def test_corrupted_tracks_mini_val(nusc_mini, mini_val_gt, devkit_reference):
     """Noise, id switches, fragments, dropped boxes and tracks, false-positive tracks, class changes, shadow
     tracks, empty samples, per-box scores."""
@@ -212,14 +227,23 @@ def test_corrupted_tracks_mini_val(nusc_mini, mini_val_gt, devkit_reference):
     report = _case(nusc_mini, "corrupted_mini_val", "mini_val", sub, devkit_reference)
     summary = devkit_reference("corrupted_mini_val", nusc_mini, sub, "mini_val")[0]
     assert 0.2 < report["amota"] < 0.9 and summary["ids"] > 0 and summary["frag"] > 0
-    assert math.isnan(summary["label_metrics"]["amota"]["trailer"])   # predictions but no GT
+    assert math.isnan(summary["label_metrics"]["amota"]["trailer"])  # predictions but no GT
 
 
+@pytest.mark.slow
 def test_contested_tracks_mini_val(nusc_mini, mini_val_gt, devkit_reference):
     """Many competing candidates: shadow tracks, exact duplicates (distance ties broken by the solver), an id
     used twice in a frame."""
-    sub = corrupt_submission(nusc_mini, "mini_val", seed=2, base=mini_val_gt, duplicate=0.3,
-                             exact_duplicate=0.15, repeated_id=0.01, noise=0.4)
+    sub = corrupt_submission(
+        nusc_mini,
+        "mini_val",
+        seed=2,
+        base=mini_val_gt,
+        duplicate=0.3,
+        exact_duplicate=0.15,
+        repeated_id=0.01,
+        noise=0.4,
+    )
     _case(nusc_mini, "contested_mini_val", "mini_val", sub, devkit_reference)
 
 
@@ -267,12 +291,19 @@ def test_custom_split(nusc_root, tmp_path):
 # Small synthetic tracks (no dataset): motmetrics' corner cases, the devkit's own accumulation as reference
 # ----------------------------------------------------------------------------------------------------------------
 
+
 def _box(name: str, tid: str, xy, score: float = -1.0):
     from nuscenes.eval.tracking.data_classes import TrackingBox
 
-    return TrackingBox(sample_token="s", translation=(float(xy[0]), float(xy[1]), 0.0), size=(1.0, 1.0, 1.0),
-                       rotation=(1.0, 0.0, 0.0, 0.0), tracking_id=tid, tracking_name=name,
-                       tracking_score=float(score))
+    return TrackingBox(
+        sample_token="s",
+        translation=(float(xy[0]), float(xy[1]), 0.0),
+        size=(1.0, 1.0, 1.0),
+        rotation=(1.0, 0.0, 0.0, 0.0),
+        tracking_id=tid,
+        tracking_name=name,
+        tracking_score=float(score),
+    )
 
 
 def _random_tracks(seed: int, n_scenes: int = 3, n_frames: int = 12, classes=("car", "pedestrian")):
@@ -280,18 +311,19 @@ def _random_tracks(seed: int, n_scenes: int = 3, n_frames: int = 12, classes=("c
     from collections import defaultdict
 
     rng = np.random.default_rng(seed)
-    tracks_gt: Dict[str, Dict[int, list]] = {}
+    tracks_gt: dict[str, dict[int, list]] = {}
     tracks_pred = defaultdict(lambda: defaultdict(list))
     for s in range(n_scenes):
         scene = "scene%d" % s
-        gt: Dict[int, list] = {}
-        pred: Dict[int, list] = {}
+        gt: dict[int, list] = {}
+        pred: dict[int, list] = {}
         n_obj = int(rng.integers(2, 9))
-        origin = 0.0 if s % 2 == 0 else 1234.0            # exact arithmetic (true ties) / rounding residues
+        origin = 0.0 if s % 2 == 0 else 1234.0  # exact arithmetic (true ties) / rounding residues
         pos = rng.integers(-4, 5, (n_obj, 2)).astype(float) * 0.5 + origin
         cls = [str(rng.choice(classes)) for _ in range(n_obj)]
-        alive = [(int(rng.integers(0, n_frames // 2)), int(rng.integers(n_frames // 2, n_frames + 1)))
-                 for _ in range(n_obj)]
+        alive = [
+            (int(rng.integers(0, n_frames // 2)), int(rng.integers(n_frames // 2, n_frames + 1))) for _ in range(n_obj)
+        ]
         hyp = ["h%d" % i for i in range(n_obj)]
         track_score = {h: float(rng.choice([0.3, 0.5, 0.5, 0.7, 0.9])) for h in hyp}
         for f in range(n_frames):
@@ -303,19 +335,26 @@ def _random_tracks(seed: int, n_scenes: int = 3, n_frames: int = 12, classes=("c
                     continue
                 gt[ts].append(_box(cls[i], "o%d-%d" % (s, i), pos[i]))
                 if rng.random() < 0.15:
-                    continue                                   # miss
+                    continue  # miss
                 if rng.random() < 0.08:
-                    hyp[i] = "h%d-%d" % (i, f)                 # new id (switch / fragment)
+                    hyp[i] = "h%d-%d" % (i, f)  # new id (switch / fragment)
                     track_score[hyp[i]] = float(rng.choice([0.3, 0.5, 0.7]))
                 off = rng.integers(-2, 3, 2) * 0.5 if rng.random() < 0.5 else rng.normal(0, 0.4, 2)
                 name = cls[i] if rng.random() > 0.05 else str(rng.choice(classes))
                 pred[ts].append(_box(name, hyp[i], pos[i] + off, track_score[hyp[i]]))
-                if rng.random() < 0.15:                        # a second hypothesis near the object
-                    pred[ts].append(_box(cls[i], hyp[int(rng.integers(n_obj))],
-                                         pos[i] + rng.integers(-2, 3, 2) * 0.5, 0.5))
-            for _ in range(int(rng.poisson(1.0))):             # false positives
-                pred[ts].append(_box(str(rng.choice(classes)), "fp%d-%d" % (f, int(rng.integers(3))),
-                                     origin + rng.integers(-6, 7, 2) * 0.5, float(rng.choice([0.2, 0.5]))))
+                if rng.random() < 0.15:  # a second hypothesis near the object
+                    pred[ts].append(
+                        _box(cls[i], hyp[int(rng.integers(n_obj))], pos[i] + rng.integers(-2, 3, 2) * 0.5, 0.5)
+                    )
+            for _ in range(int(rng.poisson(1.0))):  # false positives
+                pred[ts].append(
+                    _box(
+                        str(rng.choice(classes)),
+                        "fp%d-%d" % (f, int(rng.integers(3))),
+                        origin + rng.integers(-6, 7, 2) * 0.5,
+                        float(rng.choice([0.2, 0.5])),
+                    )
+                )
         tracks_gt[scene] = gt
         tracks_pred[scene] = defaultdict(list, pred)
     return tracks_gt, tracks_pred
@@ -327,9 +366,17 @@ def _devkit_metric_data(tracks_gt, tracks_pred, cfg):
 
     md_list = TrackingMetricDataList()
     for name in cfg.class_names:
-        ev = TrackingEvaluation(tracks_gt, tracks_pred, name, cfg.dist_fcn_callable, cfg.dist_th_tp,
-                                cfg.min_recall, num_thresholds=TrackingMetricData.nelem,
-                                metric_worst=cfg.metric_worst, verbose=False)
+        ev = TrackingEvaluation(
+            tracks_gt,
+            tracks_pred,
+            name,
+            cfg.dist_fcn_callable,
+            cfg.dist_th_tp,
+            cfg.min_recall,
+            num_thresholds=TrackingMetricData.nelem,
+            metric_worst=cfg.metric_worst,
+            verbose=False,
+        )
         md_list.set(name, ev.accumulate())
     return md_list
 
@@ -371,7 +418,7 @@ def test_exact_center_distances_bitwise():
         c = rng.uniform(300, 2500, 2)
         x = c + rng.normal(0, 20, (n, 2))
         y = c + rng.normal(0, 20, (m, 2))
-        y[: min(n, m) // 2] = x[: min(n, m) // 2]           # identical points: rounding residues
+        y[: min(n, m) // 2] = x[: min(n, m) // 2]  # identical points: rounding residues
         assert np.array_equal(exact_center_distances(x, y), euclidean_distances(x, y))
 
 
@@ -382,10 +429,14 @@ def _same_tracks(ref, ours) -> int:
     for scene in ref:
         assert list(ref[scene]) == list(ours[scene])
         for ts in ref[scene]:
-            a = [(b.tracking_id, b.tracking_name, tuple(map(float, b.translation)), float(b.tracking_score))
-                 for b in ref[scene][ts]]
-            b = [(b.tracking_id, b.tracking_name, tuple(map(float, b.translation)), float(b.tracking_score))
-                 for b in ours[scene][ts]]
+            a = [
+                (b.tracking_id, b.tracking_name, tuple(map(float, b.translation)), float(b.tracking_score))
+                for b in ref[scene][ts]
+            ]
+            b = [
+                (b.tracking_id, b.tracking_name, tuple(map(float, b.translation)), float(b.tracking_score))
+                for b in ours[scene][ts]
+            ]
             assert a == b, (scene, ts)
             n += len(a)
     return n
@@ -395,10 +446,22 @@ def _same_tracks(ref, ours) -> int:
 def test_load_tracks_matches_devkit(nusc_mini, mini_val_gt, devkit_reference, loader):
     """Both loaders give the devkit's tracks: same frames, same boxes in the same order (interpolated boxes
     included), same track-averaged scores."""
-    for name, sub in (("corrupted_mini_val", corrupt_submission(nusc_mini, "mini_val", seed=0, base=mini_val_gt)),
-                      ("contested_mini_val", corrupt_submission(
-                          nusc_mini, "mini_val", seed=2, base=mini_val_gt, duplicate=0.3, exact_duplicate=0.15,
-                          repeated_id=0.01, noise=0.4))):
+    for name, sub in (
+        ("corrupted_mini_val", corrupt_submission(nusc_mini, "mini_val", seed=0, base=mini_val_gt)),
+        (
+            "contested_mini_val",
+            corrupt_submission(
+                nusc_mini,
+                "mini_val",
+                seed=2,
+                base=mini_val_gt,
+                duplicate=0.3,
+                exact_duplicate=0.15,
+                repeated_id=0.01,
+                noise=0.4,
+            ),
+        ),
+    ):
         _, _, ref_gt, ref_pred = devkit_reference(name, nusc_mini, sub, "mini_val")
         tracks_gt, tracks_pred, meta = load_tracks(nusc_mini, sub, "mini_val", loader=loader)
         assert meta == sub["meta"]
@@ -409,13 +472,23 @@ def test_load_tracks_matches_devkit(nusc_mini, mini_val_gt, devkit_reference, lo
 def _devkit_error(nusc, submission, split):
     try:
         devkit_evaluate(nusc, submission, split)
-    except Exception as exc:   # noqa: BLE001 - whatever the devkit raises
+    except Exception as exc:  # noqa: BLE001 - whatever the devkit raises
         return exc
     return None
 
 
-@pytest.mark.parametrize("defect", ["nan_translation", "unknown_class", "string_translation", "missing_sample",
-                                    "no_boxes", "too_many_boxes", "missing_key"])
+@pytest.mark.parametrize(
+    "defect",
+    [
+        "nan_translation",
+        "unknown_class",
+        "string_translation",
+        "missing_sample",
+        "no_boxes",
+        "too_many_boxes",
+        "missing_key",
+    ],
+)
 def test_invalid_submissions_fail_like_the_devkit(nusc_mini, mini_val_gt, defect):
     """Input the devkit rejects: the fast loader hands over to the devkit's loaders, which raise their error."""
     sub = copy.deepcopy(mini_val_gt)
@@ -443,7 +516,7 @@ def test_invalid_submissions_fail_like_the_devkit(nusc_mini, mini_val_gt, defect
 
 
 # ----- the real tracker's output: EKF on the real PointPillars detections, and the synthetic demo ------------
-def _tracked_submission(nusc, split: str, detections) -> Dict[str, Any]:
+def _tracked_submission(nusc, split: str, detections) -> dict[str, Any]:
     from grutrack.data.nusc_detections import load_detections
     from grutrack.data.nuscenes import load_scenes
     from grutrack.export.nuscenes_json import build_submission
@@ -467,8 +540,26 @@ def test_ekf_on_simulated_demo_val(tmp_path):
 
     data, dets = tmp_path / "demo", tmp_path / "dets.json"
     assert main(["demo-data", "--out", str(data), "--scenes", "5", "--frames-per-scene", "20", "--seed", "4"]) == 0
-    assert main(["simulate-detections", "--dataroot", str(data), "--version", "v1.0-demo", "--split", "demo_val",
-                 "--profile", "centerpoint", "--seed", "9", "--out", str(dets)]) == 0
+    assert (
+        main(
+            [
+                "simulate-detections",
+                "--dataroot",
+                str(data),
+                "--version",
+                "v1.0-demo",
+                "--split",
+                "demo_val",
+                "--profile",
+                "centerpoint",
+                "--seed",
+                "9",
+                "--out",
+                str(dets),
+            ]
+        )
+        == 0
+    )
     nusc = open_nuscenes(data, "v1.0-demo")
     assert_parity(nusc, _tracked_submission(nusc, "demo_val", dets), "demo_val")
 
@@ -477,17 +568,22 @@ def test_ekf_on_simulated_demo_val(tmp_path):
 # Per-box decisions (what grutrack render draws)
 # ----------------------------------------------------------------------------------------------------------------
 
-def _decision_sums(decisions, class_name: str) -> Dict[str, float]:
+
+def _decision_sums(decisions, class_name: str) -> dict[str, float]:
     from grutrack.evaluation.nuscenes_fast import MATCH, MISS_OR_FP, SWITCH
 
     c = decisions.class_names.index(class_name)
     g = decisions.g_status[decisions.g_cls == c]
     p = decisions.p_status[decisions.p_cls == c]
-    return {"tp": float(np.sum(g == MATCH)), "fp": float(np.sum(p == MISS_OR_FP)),
-            "fn": float(np.sum(g == MISS_OR_FP)), "ids": float(np.sum(g == SWITCH))}
+    return {
+        "tp": float(np.sum(g == MATCH)),
+        "fp": float(np.sum(p == MISS_OR_FP)),
+        "fn": float(np.sum(g == MISS_OR_FP)),
+        "ids": float(np.sum(g == SWITCH)),
+    }
 
 
-def _assert_decisions_match(decisions, label_metrics: Dict[str, Dict[str, float]]) -> None:
+def _assert_decisions_match(decisions, label_metrics: dict[str, dict[str, float]]) -> None:
     for name in decisions.class_names:
         sums = _decision_sums(decisions, name)
         for key in ("tp", "fp", "fn", "ids"):
@@ -553,25 +649,36 @@ def _plugin_evaluate(reference, tmp_path):
     from grutrack.evaluation.devkit_plugin import FastTrackingEval
 
     ev = object.__new__(FastTrackingEval)
-    ev.cfg, ev.output_dir, ev.verbose, ev.render_classes = config_factory("tracking_nips_2019"), str(tmp_path), \
-        False, None
+    ev.cfg, ev.output_dir, ev.verbose, ev.render_classes = (
+        config_factory("tracking_nips_2019"),
+        str(tmp_path),
+        False,
+        None,
+    )
     ev.tracks_gt, ev.tracks_pred = reference[2], reference[3]
     return ev.evaluate()
 
 
 @pytest.mark.parametrize("case", ["corrupted_mini_val", "contested_mini_val"])
-def test_devkit_tracking_eval_with_the_fast_accumulation(nusc_mini, mini_val_gt, devkit_reference, case,
-                                                         tmp_path):
+def test_devkit_tracking_eval_with_the_fast_accumulation(nusc_mini, mini_val_gt, devkit_reference, case, tmp_path):
     """The devkit's own TrackingEval (its aggregation code) driving FastTrackingEvaluation gives the devkit's
     metrics and per-threshold data; the devkit's modules are left as they were."""
     import nuscenes.eval.tracking.algo as algo
     import nuscenes.eval.tracking.evaluate as evaluate
 
-    if case == "corrupted_mini_val":      # the submissions of the cases above (their devkit runs are reused)
+    if case == "corrupted_mini_val":  # the submissions of the cases above (their devkit runs are reused)
         sub = corrupt_submission(nusc_mini, "mini_val", seed=0, base=mini_val_gt)
     else:
-        sub = corrupt_submission(nusc_mini, "mini_val", seed=2, base=mini_val_gt, duplicate=0.3,
-                                 exact_duplicate=0.15, repeated_id=0.01, noise=0.4)
+        sub = corrupt_submission(
+            nusc_mini,
+            "mini_val",
+            seed=2,
+            base=mini_val_gt,
+            duplicate=0.3,
+            exact_duplicate=0.15,
+            repeated_id=0.01,
+            noise=0.4,
+        )
     ref = devkit_reference(case, nusc_mini, sub, "mini_val")
     metrics, md_list = _plugin_evaluate(ref, tmp_path)
     worst, bad = compare_summaries(ref[0], dict(metrics.serialize(), meta=ref[0]["meta"]))
@@ -594,12 +701,20 @@ def test_fast_tracking_evaluation_is_a_drop_in_per_class(seed):
     tracks_gt, tracks_pred = _random_tracks(seed)
     first = next(iter(tracks_gt.values()))
     ts = next(t for t, boxes in first.items() if boxes)
-    first[ts].append(copy.deepcopy(first[ts][0]))                # one class goes to the devkit's own class
+    first[ts].append(copy.deepcopy(first[ts][0]))  # one class goes to the devkit's own class
     ref = _devkit_metric_data(tracks_gt, tracks_pred, cfg)
     for name in ("car", "pedestrian", "bus"):
-        md = FastTrackingEvaluation(tracks_gt, tracks_pred, name, cfg.dist_fcn_callable, cfg.dist_th_tp,
-                                    cfg.min_recall, num_thresholds=TrackingMetricData.nelem,
-                                    metric_worst=cfg.metric_worst, verbose=False).accumulate()
+        md = FastTrackingEvaluation(
+            tracks_gt,
+            tracks_pred,
+            name,
+            cfg.dist_fcn_callable,
+            cfg.dist_th_tp,
+            cfg.min_recall,
+            num_thresholds=TrackingMetricData.nelem,
+            metric_worst=cfg.metric_worst,
+            verbose=False,
+        ).accumulate()
         assert isinstance(md, TrackingMetricData)
         assert md == ref[name] or not compare_metric_data(_one(ref[name], name), _one(md, name))[1], name
 
@@ -617,9 +732,9 @@ def test_fast_tracking_eval_main_on_a_submission_file(nusc_root, pointpillars_mi
     tracker's submission file: the summary equals the toolkit's fast evaluator's."""
     from nuscenes.eval.common.config import config_factory
 
+    from grutrack.data.nuscenes import open_nuscenes
     from grutrack.evaluation.devkit_plugin import FastTrackingEval
     from grutrack.evaluation.nuscenes_fast import fast_tracking_eval as fast
-    from grutrack.data.nuscenes import open_nuscenes
 
     sub = _tracked_submission(open_nuscenes(nusc_root, "v1.0-mini"), "mini_val", pointpillars_mini_val)
     path = tmp_path / "sub.json"
@@ -628,8 +743,15 @@ def test_fast_tracking_eval_main_on_a_submission_file(nusc_root, pointpillars_mi
     import io
 
     with contextlib.redirect_stdout(io.StringIO()):
-        summary = FastTrackingEval(config_factory("tracking_nips_2019"), str(path), "mini_val", str(tmp_path / "out"),
-                                   "v1.0-mini", str(nusc_root), verbose=False).main(render_curves=False)
+        summary = FastTrackingEval(
+            config_factory("tracking_nips_2019"),
+            str(path),
+            "mini_val",
+            str(tmp_path / "out"),
+            "v1.0-mini",
+            str(nusc_root),
+            verbose=False,
+        ).main(render_curves=False)
     assert (tmp_path / "out" / "metrics_summary.json").is_file()
     ours = fast(open_nuscenes(nusc_root, "v1.0-mini"), str(path), "mini_val")
     worst, bad = compare_summaries(summary, ours)

@@ -16,7 +16,7 @@ def box(x=0.0, y=0.0, z=0.0, w=1.0, l=1.0, h=1.0, yaw=0.0):
 def test_aligned_extents_of_rotated_and_scaled_boxes():
     b = np.stack([box(w=2.0, l=4.0), box(x=1.0, yaw=np.pi / 4)])
     e = aligned_extents(b)
-    np.testing.assert_allclose(e[0], [-2.0, -1.0, 2.0, 1.0])          # l along x, w along y
+    np.testing.assert_allclose(e[0], [-2.0, -1.0, 2.0, 1.0])  # l along x, w along y
     r = np.sqrt(0.5)
     np.testing.assert_allclose(e[1], [1 - r, -r, 1 + r, r])
     np.testing.assert_allclose(aligned_extents(b[:1], 1.5)[0], [-3.0, -1.5, 3.0, 1.5])
@@ -30,8 +30,8 @@ def test_a_giou_bev_values():
 
 
 def test_a_giou_bev_uses_the_enclosing_rectangle_of_a_rotated_box():
-    a = np.stack([box(yaw=np.pi / 4)])            # enclosing square of side sqrt(2), area 2
-    b = np.stack([box()])                         # unit square inside it: I 1, U 2, C 2
+    a = np.stack([box(yaw=np.pi / 4)])  # enclosing square of side sqrt(2), area 2
+    b = np.stack([box()])  # unit square inside it: I 1, U 2, C 2
     np.testing.assert_allclose(a_giou_bev(a, b), [[0.5]])
 
 
@@ -48,7 +48,7 @@ def test_a_giou_3d_values():
 def test_distance_mask_is_3d_and_strict():
     a = np.stack([box()])
     b = np.stack([box(x=3.0), box(x=2.9), box(x=2.0, z=2.5)])
-    assert distance_mask(a, b, 3.0).tolist() == [[False, True, False]]   # sqrt(4 + 6.25) > 3
+    assert distance_mask(a, b, 3.0).tolist() == [[False, True, False]]  # sqrt(4 + 6.25) > 3
 
 
 def test_scale_nms_enlarged_footprints_suppress():
@@ -80,8 +80,15 @@ def test_scale_nms_is_per_class_and_orders_by_class_then_score():
 
 def test_scale_nms_rejects_unknown_metric():
     with pytest.raises(ValueError, match="unknown NMS metric"):
-        scale_nms_keep(np.stack([box(), box()]), np.array([0.9, 0.8]), np.array([1, 1]), ("giou_3d",) * 7,
-                       np.full(7, 0.08), np.ones(7), np.full(7, 5.0))
+        scale_nms_keep(
+            np.stack([box(), box()]),
+            np.array([0.9, 0.8]),
+            np.array([1, 1]),
+            ("giou_3d",) * 7,
+            np.full(7, 0.08),
+            np.ones(7),
+            np.full(7, 5.0),
+        )
 
 
 def test_geometry_window_median_and_mean():
@@ -90,13 +97,14 @@ def test_geometry_window_median_and_mean():
     np.testing.assert_allclose(g.estimate(), z0)
     both = np.array([0, 1])
     g.push(both, np.full((2, 4), 2.0), np.array([3, 3]))
-    np.testing.assert_allclose(g.estimate(), np.full((2, 4), 1.5))          # median of 2 = mean of 2
+    np.testing.assert_allclose(g.estimate(), np.full((2, 4), 1.5))  # median of 2 = mean of 2
     g.push(both, np.full((2, 4), 10.0), np.array([3, 3]))
     np.testing.assert_allclose(g.estimate()[:, 0], [2.0, 13.0 / 3.0])
-    g.push(both[:1], np.full((1, 4), 4.0), np.array([3]))                   # 1 drops out: [2, 10, 4]
+    g.push(both[:1], np.full((1, 4), 4.0), np.array([3]))  # 1 drops out: [2, 10, 4]
     np.testing.assert_allclose(g.estimate()[:, 0], [4.0, 13.0 / 3.0])
-    sub = GeometryWindow.concat(g.select(np.array([False, True])), GeometryWindow.start(
-        np.full((1, 4), 7.0), np.array([2]), np.array([False])))
+    sub = GeometryWindow.concat(
+        g.select(np.array([False, True])), GeometryWindow.start(np.full((1, 4), 7.0), np.array([2]), np.array([False]))
+    )
     np.testing.assert_allclose(sub.estimate()[:, 0], [13.0 / 3.0, 7.0])
 
 
@@ -104,7 +112,7 @@ def test_geometry_window_respects_a_smaller_window():
     g = GeometryWindow.start(np.zeros((1, 4)), np.array([3]), np.array([True]))
     g.push(np.array([0]), np.full((1, 4), 3.0), np.array([2]))
     g.push(np.array([0]), np.full((1, 4), 6.0), np.array([2]))
-    np.testing.assert_allclose(g.estimate()[0], np.full(4, 4.5))   # mean of the last 2
+    np.testing.assert_allclose(g.estimate()[0], np.full(4, 4.5))  # mean of the last 2
 
 
 def _lifecycle(scores, rows, det_scores, multiply, average_score, totals=None, counts=None, delete=0.0):
@@ -115,10 +123,27 @@ def _lifecycle(scores, rows, det_scores, multiply, average_score, totals=None, c
     count = np.array(counts if counts is not None else [1] * n, dtype=np.int64)
     per_class = np.array([0.5, 0.2, 1, 1, 1, 1, 1], dtype=np.float64)
     matched, alive, emit = (np.empty(n, dtype=bool) for _ in range(3))
-    lifecycle_kernel(np.asarray(rows, dtype=np.int64), np.asarray(det_scores, dtype=np.float64),
-                     np.arange(n, dtype=np.int64), scores, np.zeros(n, dtype=np.int64), np.ones(n, dtype=np.int64),
-                     total, count, per_class, np.full(7, 5.0), np.ones(7), np.full(7, delete), multiply,
-                     average_score, np.ones(7), 2, matched, alive, emit)
+    lifecycle_kernel(
+        np.asarray(rows, dtype=np.int64),
+        np.asarray(det_scores, dtype=np.float64),
+        np.arange(n, dtype=np.int64),
+        scores,
+        np.zeros(n, dtype=np.int64),
+        np.ones(n, dtype=np.int64),
+        total,
+        count,
+        per_class,
+        np.full(7, 5.0),
+        np.ones(7),
+        np.full(7, delete),
+        multiply,
+        average_score,
+        np.ones(7),
+        2,
+        matched,
+        alive,
+        emit,
+    )
     return scores, total, count, alive
 
 
@@ -127,7 +152,7 @@ def test_score_update_and_average_termination():
     ('multiply'), or s+ = s_det ('detection'); the average termination keeps the running mean of the final scores
     since birth and ends a track whose mean falls below its class's delete threshold."""
     s, *_ = _lifecycle([0.6, 0.5], [], [], True, False)
-    np.testing.assert_allclose(s, [0.3, 0.1])                                        # predicted only
+    np.testing.assert_allclose(s, [0.3, 0.1])  # predicted only
     s, *_ = _lifecycle([0.6, 0.5], [0, 1], [0.4, 0.5], True, False)
     np.testing.assert_allclose(s, [1 - 0.6 * 0.7, 1 - 0.5 * 0.9])
     s, *_ = _lifecycle([0.6, 0.5], [0, 1], [0.4, 0.5], False, False)
@@ -135,9 +160,9 @@ def test_score_update_and_average_termination():
     s, total, count, alive = _lifecycle([0.6, 0.5], [1], [0.9], True, True, delete=0.4)
     np.testing.assert_allclose(total, [0.6 + 0.3, 0.5 + (1 - 0.1 * 0.9)])
     assert count.tolist() == [2, 2]
-    assert alive.tolist() == [True, True]       # means 0.45 and 0.7
+    assert alive.tolist() == [True, True]  # means 0.45 and 0.7
     *_, alive = _lifecycle([0.6, 0.5], [1], [0.9], True, True, delete=0.5)
-    assert alive.tolist() == [False, True]      # 0.45 < 0.5
+    assert alive.tolist() == [False, True]  # 0.45 < 0.5
 
 
 # ---- the pieces wired into the tracker ----------------------------------------------------------------------
@@ -165,12 +190,20 @@ def test_gated_costs_stage_one_gate_and_stage_two_rows_and_columns():
     metric = ("a_giou_3d",) * 7
     c1, c2 = gated_costs(dets, dl, trks, tl, metric, "a_giou_bev", np.full(7, 3.0))
     # stage 1: only same-class pairs within 3 m
-    assert np.isfinite(c1).tolist() == [[True, False, False], [False, True, False], [False, False, False],
-                                        [False, False, True]]
+    assert np.isfinite(c1).tolist() == [
+        [True, False, False],
+        [False, True, False],
+        [False, False, False],
+        [False, False, True],
+    ]
     np.testing.assert_allclose(c1[0, 0], 1.0 - a_giou_3d(dets[:1], trks[:1])[0, 0])
     # stage 2: every same-class pair between gated-in detections (0, 1, 3) and tracks (0, 1, 2), 10 m apart or not
-    assert np.isfinite(c2).tolist() == [[True, True, False], [True, True, False], [False, False, False],
-                                        [False, False, True]]
+    assert np.isfinite(c2).tolist() == [
+        [True, True, False],
+        [True, True, False],
+        [False, False, False],
+        [False, False, True],
+    ]
     np.testing.assert_allclose(c2[0, 1], 1.0 - a_giou_bev(dets[:1], trks[1:2])[0, 0])
     # no gate: every same-class pair is scored in stage 1
     c1, _ = gated_costs(dets, dl, trks, tl, metric, "a_giou_bev", np.zeros(7))
@@ -196,8 +229,11 @@ def test_geometry_filter_backend_takes_the_window_median():
 
 def test_preprocess_frame_scale_nms_order_and_score_filter():
     cfg = load_tracker_config("fastpoly")
-    dets = BoxSet(np.stack([box(), box(x=0.1), box(x=30.0), box(x=60.0, w=2.5, l=10.0, h=3.0)]),
-                  np.array([0.5, 0.9, 0.15, 0.2]), np.array([CAR, CAR, CAR, BUS]))
+    dets = BoxSet(
+        np.stack([box(), box(x=0.1), box(x=30.0), box(x=60.0, w=2.5, l=10.0, h=3.0)]),
+        np.array([0.5, 0.9, 0.15, 0.2]),
+        np.array([CAR, CAR, CAR, BUS]),
+    )
     kept = preprocess_frame(dets, cfg)
     # car 2 (0.15) is below the car threshold 0.16; the bus (label 1) comes before the cars (label 2); car 0 is
     # suppressed by car 1 (same class, 0.1 m apart)
@@ -209,7 +245,7 @@ def test_fastpoly_score_update_and_average_score_termination():
     car = BoxSet(np.array([box(z=1.0, w=1.8, l=4.5, h=1.6)]), np.array([0.5]), np.array([CAR]))
     none = BoxSet(np.zeros((0, 9)), np.zeros(0), np.zeros(0, dtype=np.int64))
     out = [tracker.step(car, 1_000_000), tracker.step(car, 1_500_000), tracker.step(none, 2_000_000)]
-    s1 = 1 - (1 - 0.5) * (1 - 0.5 * 0.52)          # multiply: 1 - (1 - s_det)(1 - s * decay)
+    s1 = 1 - (1 - 0.5) * (1 - 0.5 * 0.52)  # multiply: 1 - (1 - s_det)(1 - s * decay)
     assert [o.scores.tolist() for o in out] == [[0.5], [pytest.approx(s1)], [pytest.approx(s1 * 0.52)]]
 
     # a pedestrian at 0.2 decays by 0.56 per missed frame; its mean score drops below 0.1 at the 5th frame
@@ -238,19 +274,29 @@ def test_fastpoly_preset_values_and_comments():
             assert text[i - 1].strip().startswith("#"), f"key without a comment above it: {s}"
 
 
-@pytest.mark.parametrize("mutate, message", [
-    (lambda r: r["preprocessing"].__setitem__("nms_method", "soft"), "'preprocessing.nms_method' must be one of"),
-    (lambda r: r["preprocessing"]["nms_metric"].__setitem__("car", "giou_3d"),
-     "'preprocessing.nms_metric.car' must be one of"),
-    (lambda r: r["preprocessing"]["nms_scale"].__setitem__("car", 0), "must be a positive scale factor"),
-    (lambda r: r["association"]["distance_gate"].__setitem__("bus", -1), "'association.distance_gate.bus' must be"),
-    (lambda r: r["lifecycle"].__setitem__("termination", "score"), "'lifecycle.termination' must be one of"),
-    (lambda r: r["lifecycle"].__setitem__("score_update", "max"), "'lifecycle.score_update' must be one of"),
-    (lambda r: r["motion"]["geometry_filter"].__setitem__("truck", "mode"), "'motion.geometry_filter.truck' must be"),
-    (lambda r: r["motion"]["geometry_window"].__setitem__("truck", 0), "'motion.geometry_window.truck' must be"),
-    (lambda r: r["lifecycle"].pop("delete_threshold"),
-     "'lifecycle.delete_threshold' is required with 'lifecycle.termination: average_score'"),
-])
+@pytest.mark.parametrize(
+    "mutate, message",
+    [
+        (lambda r: r["preprocessing"].__setitem__("nms_method", "soft"), "'preprocessing.nms_method' must be one of"),
+        (
+            lambda r: r["preprocessing"]["nms_metric"].__setitem__("car", "giou_3d"),
+            "'preprocessing.nms_metric.car' must be one of",
+        ),
+        (lambda r: r["preprocessing"]["nms_scale"].__setitem__("car", 0), "must be a positive scale factor"),
+        (lambda r: r["association"]["distance_gate"].__setitem__("bus", -1), "'association.distance_gate.bus' must be"),
+        (lambda r: r["lifecycle"].__setitem__("termination", "score"), "'lifecycle.termination' must be one of"),
+        (lambda r: r["lifecycle"].__setitem__("score_update", "max"), "'lifecycle.score_update' must be one of"),
+        (
+            lambda r: r["motion"]["geometry_filter"].__setitem__("truck", "mode"),
+            "'motion.geometry_filter.truck' must be",
+        ),
+        (lambda r: r["motion"]["geometry_window"].__setitem__("truck", 0), "'motion.geometry_window.truck' must be"),
+        (
+            lambda r: r["lifecycle"].pop("delete_threshold"),
+            "'lifecycle.delete_threshold' is required with 'lifecycle.termination: average_score'",
+        ),
+    ],
+)
 def test_bad_fastpoly_keys(mutate, message):
     raw = copy.deepcopy(yaml.safe_load((PRESET_DIR / "fastpoly.yaml").read_text()))
     mutate(raw)
@@ -267,16 +313,20 @@ def test_aligned_extents_of_a_tilted_box_use_its_bottom_face():
     flat = np.stack([box(w=2.0, l=4.0, h=1.0)])
     roll_q = np.array([[np.cos(phi / 2), np.sin(phi / 2), 0.0, 0.0]])
     shift = 0.5 * np.sin(phi)
-    np.testing.assert_allclose(aligned_extents(flat, 1.0, roll_q),
-                               [[-2.0, -np.cos(phi) + shift, 2.0, np.cos(phi) + shift]], atol=1e-12)
+    np.testing.assert_allclose(
+        aligned_extents(flat, 1.0, roll_q), [[-2.0, -np.cos(phi) + shift, 2.0, np.cos(phi) + shift]], atol=1e-12
+    )
 
 
 def test_score_filter_above_drops_scores_equal_to_the_threshold():
     from grutrack.tracking.preprocess import score_filter
 
-    dets = BoxSet(np.stack([box(), box(x=10.0), box(x=20.0)]), np.array([0.0, 0.16, 0.17]),
-                  np.array([CLASS_INDEX["truck"], CAR, CAR]))
-    thr = load_tracker_config("fastpoly").score_threshold      # truck 0.0, car 0.16
+    dets = BoxSet(
+        np.stack([box(), box(x=10.0), box(x=20.0)]),
+        np.array([0.0, 0.16, 0.17]),
+        np.array([CLASS_INDEX["truck"], CAR, CAR]),
+    )
+    thr = load_tracker_config("fastpoly").score_threshold  # truck 0.0, car 0.16
     assert score_filter(dets, thr).scores.tolist() == [0.0, 0.16, 0.17]
     assert score_filter(dets, thr, strict=True).scores.tolist() == [0.17]
     assert preprocess_frame(dets, load_tracker_config("fastpoly")).scores.tolist() == [0.17]

@@ -24,15 +24,19 @@ MEASURES = {
 
 def _ref_corners(boxes: np.ndarray) -> np.ndarray:
     """(K, 4, 2) corners by rotation matrices: front-left, rear-left, rear-right, front-right."""
-    local = np.stack([
-        np.stack([boxes[:, 4] / 2, boxes[:, 3] / 2], axis=-1),
-        np.stack([-boxes[:, 4] / 2, boxes[:, 3] / 2], axis=-1),
-        np.stack([-boxes[:, 4] / 2, -boxes[:, 3] / 2], axis=-1),
-        np.stack([boxes[:, 4] / 2, -boxes[:, 3] / 2], axis=-1),
-    ], axis=1)
+    local = np.stack(
+        [
+            np.stack([boxes[:, 4] / 2, boxes[:, 3] / 2], axis=-1),
+            np.stack([-boxes[:, 4] / 2, boxes[:, 3] / 2], axis=-1),
+            np.stack([-boxes[:, 4] / 2, -boxes[:, 3] / 2], axis=-1),
+            np.stack([boxes[:, 4] / 2, -boxes[:, 3] / 2], axis=-1),
+        ],
+        axis=1,
+    )
     yaw = boxes[:, 6]
-    rot = np.stack([np.stack([np.cos(yaw), -np.sin(yaw)], -1),
-                    np.stack([np.sin(yaw), np.cos(yaw)], -1)], axis=1)  # (K, 2, 2)
+    rot = np.stack(
+        [np.stack([np.cos(yaw), -np.sin(yaw)], -1), np.stack([np.sin(yaw), np.cos(yaw)], -1)], axis=1
+    )  # (K, 2, 2)
     return np.einsum("kij,kpj->kpi", rot, local) + boxes[:, None, :2]
 
 
@@ -80,8 +84,8 @@ def _assert_matches_reference(a: np.ndarray, b: np.ndarray, atol: float = 1e-6) 
         err = np.abs(got[name] - ref[name])
         worst = int(np.argmax(err)) if err.size else 0
         assert err.size == 0 or err[worst] <= atol, (
-            f"{name}: error {err[worst]:.3g} at pair {worst}: "
-            f"a={a[worst].tolist()} b={b[worst].tolist()}")
+            f"{name}: error {err[worst]:.3g} at pair {worst}: a={a[worst].tolist()} b={b[worst].tolist()}"
+        )
     return got
 
 
@@ -172,8 +176,7 @@ def test_nearly_coincident_edges_match_shapely():
     base = _random_boxes(rng, 60)
     base[:, :2] = rng.uniform(-1000, 1000, (60, 2))
     pairs_a, pairs_b = [], []
-    for eps_shift, eps_yaw in itertools.product([0.0, 1e-12, -1e-12, 1e-9, -1e-7],
-                                                [0.0, 1e-12, -1e-10, 1e-7]):
+    for eps_shift, eps_yaw in itertools.product([0.0, 1e-12, -1e-12, 1e-9, -1e-7], [0.0, 1e-12, -1e-10, 1e-7]):
         for along, across in [(1.0, 0.0), (0.0, 1.0), (0.5, 0.0), (0.3, 1.0), (1.0, 1.0), (0.0, 0.0)]:
             b = base.copy()
             c, s = np.cos(b[:, 6]), np.sin(b[:, 6])
@@ -330,10 +333,20 @@ def test_degenerate_boxes_are_finite_and_follow_the_conventions():
 
 def test_special_cases_raise_no_floating_point_errors():
     """Parallel / collinear edges and zero sizes must not divide by zero or make NaN on the way."""
-    boxes = np.concatenate([
-        _box(), _box(x=4.0), _box(y=2.0), _box(x=4.0, y=2.0), _box(yaw=np.pi / 2), _box(w=0.0),
-        _box(l=0.0, h=0.0), _box(w=0.0, l=0.0, h=0.0), _box(x=1e4), _box(yaw=np.pi),
-    ])
+    boxes = np.concatenate(
+        [
+            _box(),
+            _box(x=4.0),
+            _box(y=2.0),
+            _box(x=4.0, y=2.0),
+            _box(yaw=np.pi / 2),
+            _box(w=0.0),
+            _box(l=0.0, h=0.0),
+            _box(w=0.0, l=0.0, h=0.0),
+            _box(x=1e4),
+            _box(yaw=np.pi),
+        ]
+    )
     with np.errstate(divide="raise", invalid="raise", over="raise"):
         for _, (_, pairwise) in MEASURES.items():
             assert np.all(np.isfinite(pairwise(boxes, boxes)))
@@ -470,12 +483,18 @@ def test_paired_similarities_equal_the_single_measures():
 
     rng = np.random.default_rng(11)
     n = 3000
-    a = np.column_stack([rng.uniform(-8, 8, (n, 2)), rng.uniform(-1, 1, n), rng.uniform(0.3, 6, (n, 3)),
-                         rng.uniform(-np.pi, np.pi, n)])
-    b = np.column_stack([rng.uniform(-8, 8, (n, 2)), rng.uniform(-1, 1, n), rng.uniform(0.3, 6, (n, 3)),
-                         rng.uniform(-np.pi, np.pi, n)])
+    a = np.column_stack(
+        [rng.uniform(-8, 8, (n, 2)), rng.uniform(-1, 1, n), rng.uniform(0.3, 6, (n, 3)), rng.uniform(-np.pi, np.pi, n)]
+    )
+    b = np.column_stack(
+        [rng.uniform(-8, 8, (n, 2)), rng.uniform(-1, 1, n), rng.uniform(0.3, 6, (n, 3)), rng.uniform(-np.pi, np.pi, n)]
+    )
     got = g.paired_similarities(a, b, g.SIMILARITIES)
-    for name, fn in (("iou_bev", g.paired_bev_iou), ("giou_bev", g.paired_bev_giou),
-                     ("iou_3d", g.paired_iou_3d), ("giou_3d", g.paired_giou_3d)):
+    for name, fn in (
+        ("iou_bev", g.paired_bev_iou),
+        ("giou_bev", g.paired_bev_giou),
+        ("iou_3d", g.paired_iou_3d),
+        ("giou_3d", g.paired_giou_3d),
+    ):
         np.testing.assert_array_equal(got[name], fn(a, b))
     assert set(g.paired_similarities(a[:5], b[:5], ["giou_3d"])) == {"giou_3d"}

@@ -18,8 +18,16 @@ from grutrack.training.gt_association import StickyGTAssociation
 
 def _states(n, seed=0):
     rng = np.random.default_rng(seed)
-    return np.column_stack([rng.normal(0, 500, (n, 3)), rng.uniform(0.5, 5, (n, 3)), rng.normal(0, 8, n),
-                            rng.normal(0, 1, n), rng.uniform(-3, 3, n), rng.uniform(-0.4, 0.4, n)])
+    return np.column_stack(
+        [
+            rng.normal(0, 500, (n, 3)),
+            rng.uniform(0.5, 5, (n, 3)),
+            rng.normal(0, 8, n),
+            rng.normal(0, 1, n),
+            rng.uniform(-3, 3, n),
+            rng.uniform(-0.4, 0.4, n),
+        ]
+    )
 
 
 def test_torch_ss_models_match_numpy():
@@ -40,7 +48,7 @@ def test_torch_piecewise_bicycle_matches_numpy_in_both_branches():
     from grutrack.motion.torch_models import TorchBicyclePiecewise, make_torch_model
 
     x = _states(2000, seed=5)
-    x[::3, 9] = np.random.default_rng(1).uniform(-1e-3, 1e-3, len(x[::3]))     # straight rows
+    x[::3, 9] = np.random.default_rng(1).uniform(-1e-3, 1e-3, len(x[::3]))  # straight rows
     ref, tm = BicyclePiecewise(), make_torch_model("bicycle", form="piecewise")
     assert isinstance(tm, TorchBicyclePiecewise)
     got = tm.f(torch.tensor(x), 0.5).numpy()
@@ -106,7 +114,7 @@ def test_initialisation_from_a_generator_is_torchs_default_and_leaves_the_global
     cfg = GRUKFConfig(**kw)
     before = torch.get_rng_state()
     net = GRUKalmanNet(cfg, generator=torch.Generator().manual_seed(7))
-    assert torch.equal(torch.get_rng_state(), before)      # nothing drawn from the global generator
+    assert torch.equal(torch.get_rng_state(), before)  # nothing drawn from the global generator
     # the reference: torch's own reset of every layer, in creation order, after a global seed
     ref = GRUKalmanNet(cfg, generator=torch.Generator().manual_seed(123))
     torch.manual_seed(7)
@@ -144,9 +152,9 @@ def test_batching_equals_one_by_one():
     with torch.no_grad():
         x_all, h_all, _ = net.correct(*args, hidden)
         for i in range(6):
-            xi, hi, _ = net.correct(*[a[i:i + 1] for a in args], {k: v[i:i + 1] for k, v in hidden.items()})
-            assert torch.allclose(xi, x_all[i:i + 1], atol=1e-9)
-            assert all(torch.allclose(hi[k], h_all[k][i:i + 1], atol=1e-9) for k in hi)
+            xi, hi, _ = net.correct(*[a[i : i + 1] for a in args], {k: v[i : i + 1] for k, v in hidden.items()})
+            assert torch.allclose(xi, x_all[i : i + 1], atol=1e-9)
+            assert all(torch.allclose(hi[k], h_all[k][i : i + 1], atol=1e-9) for k in hi)
 
 
 def test_a_network_used_in_inference_mode_then_trains_with_the_same_values():
@@ -208,8 +216,9 @@ def test_sticky_gt_association_no_index_bug():
     # near g2 gets g2 (the row of the *current* list, not of the free subset)
     ids2 = np.array(["g1", "g2"], dtype=object)
     xy2 = np.array([[10.0, 0.0], [20.0, 0.0]])
-    got = a.match(np.array([7, 8]), np.array([[13.0, 0.0], [20.5, 0.0]]), np.array([0, 0]), ids2, xy2,
-                  np.zeros(2, dtype=np.int64))
+    got = a.match(
+        np.array([7, 8]), np.array([[13.0, 0.0], [20.5, 0.0]]), np.array([0, 0]), ids2, xy2, np.zeros(2, dtype=np.int64)
+    )
     assert got.tolist() == [0, 1]
     # a free track cannot take a held instance, and classes must agree
     got = a.match(np.array([9]), np.array([[10.0, 0.0]]), np.array([0]), ids2, xy2, np.zeros(2, dtype=np.int64))
@@ -226,7 +235,10 @@ def small_training_set(nusc_mini):
     scenes = load_scenes(nusc_mini, "mini_train", with_gt=True)[:2]
     scenes = [Scene(s.name, s.token, s.frames[:12]) for s in scenes]
     sub = simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5, nusc=nusc_mini)
-    import json, tempfile, os
+    import json
+    import os
+    import tempfile
+
     with tempfile.TemporaryDirectory() as d:
         p = os.path.join(d, "dets.json")
         with open(p, "w") as f:
@@ -248,10 +260,10 @@ def test_training_is_deterministic_and_resumes_exactly(small_training_set, tmp_p
     a = _trainer(scenes, dets, tmp_path / "a")
     a.run()
     b = _trainer(scenes, dets, tmp_path / "b")
-    b.run(max_steps=3)            # stop mid-epoch 2 ...
+    b.run(max_steps=3)  # stop mid-epoch 2 ...
     c = _trainer(scenes, dets, tmp_path / "b")
     c.resume(tmp_path / "b" / "last.pt")
-    c.run()                       # ... and continue from the checkpoint
+    c.run()  # ... and continue from the checkpoint
     sa, sc = a.net.state_dict(), c.net.state_dict()
     assert all(torch.equal(sa[k], sc[k]) for k in sa)
     assert [r.loss for r in a.log.steps] == [r.loss for r in c.log.steps]
@@ -281,6 +293,7 @@ def test_training_uses_its_own_generators(small_training_set, tmp_path):
     first = GRUKalmanNet(again.net.cfg, generator=torch.Generator().manual_seed(again.cfg.seed)).state_dict()
     assert torch.equal(again.net.state_dict()["gru_q.weight_ih"], first["gru_q.weight_ih"])
     from grutrack.motion.checkpoint import read_checkpoint
+
     assert set(read_checkpoint(tmp_path / "last.pt")["rng"]) == {"numpy", "torch"}
 
 
@@ -293,20 +306,24 @@ def uninterrupted_run(small_training_set, tmp_path_factory):
     return a.net.state_dict(), a.log.steps
 
 
-@pytest.mark.parametrize("how,checkpoint_every,stop_at", [
-    ("crash", 2, 5),    # periodic checkpoint at step 4, the process dies inside step 5 (mid-epoch 3)
-    ("crash", 1, 3),    # checkpoint after step 2 (the end of epoch 1), dies inside step 3
-    ("crash", 5, 6),    # checkpoint at step 5 (mid-epoch), dies inside the last step
-    ("sigint", 0, 1),   # Ctrl-C during step 1, no periodic checkpoints at all
-    ("sigint", 2, 4),   # Ctrl-C during the last step of epoch 2
-])
-def test_resume_after_interruption_equals_uninterrupted_run(small_training_set, uninterrupted_run, tmp_path,
-                                                            monkeypatch, how, checkpoint_every, stop_at):
+@pytest.mark.parametrize(
+    "how,checkpoint_every,stop_at",
+    [
+        ("crash", 2, 5),  # periodic checkpoint at step 4, the process dies inside step 5 (mid-epoch 3)
+        ("crash", 1, 3),  # checkpoint after step 2 (the end of epoch 1), dies inside step 3
+        ("crash", 5, 6),  # checkpoint at step 5 (mid-epoch), dies inside the last step
+        ("sigint", 0, 1),  # Ctrl-C during step 1, no periodic checkpoints at all
+        ("sigint", 2, 4),  # Ctrl-C during the last step of epoch 2
+    ],
+)
+def test_resume_after_interruption_equals_uninterrupted_run(
+    small_training_set, uninterrupted_run, tmp_path, monkeypatch, how, checkpoint_every, stop_at
+):
     import os
     import signal
 
-    from grutrack.training import trainer as tr
     from grutrack.motion.checkpoint import read_checkpoint
+    from grutrack.training import trainer as tr
 
     scenes, dets = small_training_set
     ref_state, ref_log = uninterrupted_run
@@ -317,7 +334,7 @@ def test_resume_after_interruption_equals_uninterrupted_run(small_training_set, 
         if len(calls) == stop_at:
             if how == "crash":
                 raise RuntimeError("power cut")
-            os.kill(os.getpid(), signal.SIGINT)   # a real SIGINT, as Ctrl-C sends it
+            os.kill(os.getpid(), signal.SIGINT)  # a real SIGINT, as Ctrl-C sends it
         return real(*a, **k)
 
     monkeypatch.setattr(tr, "run_scene", interrupted)
@@ -330,18 +347,17 @@ def test_resume_after_interruption_equals_uninterrupted_run(small_training_set, 
     else:
         with pytest.raises(tr.TrainingInterrupted, match=f"after step {stop_at}.*last.pt"):
             t.run()
-        saved = stop_at                       # the step under way completes, then last.pt is written
-    assert signal.getsignal(signal.SIGINT) is before       # the trainer's handler is removed again
+        saved = stop_at  # the step under way completes, then last.pt is written
+    assert signal.getsignal(signal.SIGINT) is before  # the trainer's handler is removed again
     assert read_checkpoint(tmp_path / "last.pt")["train_state"]["step"] == saved
     monkeypatch.setattr(tr, "run_scene", real)
     r = _trainer(scenes, dets, tmp_path, epochs=3, checkpoint_every=checkpoint_every)
     r.resume(tmp_path / "last.pt")
     r.run()
     state = r.net.state_dict()
-    assert all(torch.equal(ref_state[k], state[k]) for k in ref_state)   # bit for bit
+    assert all(torch.equal(ref_state[k], state[k]) for k in ref_state)  # bit for bit
     assert r.state.step == 6 and [x.step for x in r.log.steps] == [1, 2, 3, 4, 5, 6]
-    assert [(x.scene, x.loss, x.lr) for x in r.log.steps] == [(x.scene, x.loss, x.lr)
-                                                                       for x in ref_log]
+    assert [(x.scene, x.loss, x.lr) for x in r.log.steps] == [(x.scene, x.loss, x.lr) for x in ref_log]
 
 
 def test_resume_on_other_data_or_settings_is_refused(small_training_set, tmp_path):
@@ -388,8 +404,8 @@ def test_checkpoint_loads_without_reinitialising(small_training_set, tmp_path):
 
 
 def test_nan_loss_stops_training_and_keeps_last_good_checkpoint(small_training_set, tmp_path, monkeypatch):
-    from grutrack.training import trainer as tr
     from grutrack.motion.checkpoint import read_checkpoint
+    from grutrack.training import trainer as tr
 
     scenes, dets = small_training_set
     t = _trainer(scenes, dets, tmp_path, epochs=2)
@@ -428,15 +444,16 @@ def test_a_non_finite_gradient_stops_training_before_the_step(small_training_set
     monkeypatch.setattr(grukf.DeferredWeightGrads, "backward", poisoned)
     with pytest.raises(TrainingDiverged, match="a gradient is NaN or infinite"):
         t.run()
-    assert all(torch.equal(t.net.state_dict()[k], good[k]) for k in good)   # the step was not applied
+    assert all(torch.equal(t.net.state_dict()[k], good[k]) for k in good)  # the step was not applied
 
 
-def test_a_singular_innovation_covariance_stops_training_with_the_last_good_checkpoint(small_training_set, tmp_path,
-                                                                                       monkeypatch):
+def test_a_singular_innovation_covariance_stops_training_with_the_last_good_checkpoint(
+    small_training_set, tmp_path, monkeypatch
+):
     # a network that has driven the filter's state far off makes the EKF gain prior's S = H P H^T + R singular
     # (numpy's LinAlgError in the tracking of a scene): a diverged training, not a traceback
-    from grutrack.tracking.grukf_backend import GRUKFBackend
     from grutrack.motion.checkpoint import read_checkpoint
+    from grutrack.tracking.grukf_backend import GRUKFBackend
     from grutrack.training.trainer import TrainingDiverged
 
     scenes, dets = small_training_set
@@ -478,18 +495,18 @@ def test_gain_table_cells_start_at_given_gains_and_are_looked_up_per_track():
     table = torch.full((7, 2, 3, 10, 9), float("nan"), dtype=torch.float64)
     for g in range(3):
         table[2, 1, g] = 0.0
-        table[2, 1, g, 0, 0] = table[2, 1, g, 1, 1] = 0.2 * (g + 1)   # position gain grows with the gap
+        table[2, 1, g, 0, 0] = table[2, 1, g, 1, 1] = 0.2 * (g + 1)  # position gain grows with the gap
     net.set_gain_prior(torch.zeros(10, 9, dtype=torch.float64), table)
     with torch.no_grad():
         net.fc_gain[2].weight.zero_()
     net.double()
     prior = torch.tensor(_states(4))
-    prior[:, 8] = 0.0                                                     # heading along global x
+    prior[:, 8] = 0.0  # heading along global x
     y = TorchCTRA().h(prior)
     y[:, 0] += 1.0
     labels = np.array([2, 2, 2, 4])
     n_upd = np.array([5, 5, 5, 5])
-    gaps = np.array([1, 2, 9, 1])                                         # 9 -> the last gap bin
+    gaps = np.array([1, 2, 9, 1])  # 9 -> the last gap bin
     cells = net.table_index(labels, n_upd, gaps)
     assert cells.tolist() == [(2 * 2 + 1) * 3 + 0, (2 * 2 + 1) * 3 + 1, (2 * 2 + 1) * 3 + 2, (4 * 2 + 1) * 3 + 0]
     with torch.no_grad():
@@ -512,9 +529,9 @@ def test_backend_counts_updates_and_frames_since_the_last_update():
     real = net.table_index
     net.table_index = lambda c, a, g: (seen.append((c.tolist(), a.tolist(), g.tolist())), real(c, a, g))[1]
     s = be.predict(s, 0.5)
-    s = be.update(s, np.array([0, 2]), z[[0, 2]])          # first update, after one frame
+    s = be.update(s, np.array([0, 2]), z[[0, 2]])  # first update, after one frame
     s = be.predict(be.predict(be.predict(s, 0.5), 0.5), 0.5)
-    s = be.update(s, np.array([1, 2]), z[[1, 2]])          # track 1: first update after 4 frames; 2: second
+    s = be.update(s, np.array([1, 2]), z[[1, 2]])  # track 1: first update after 4 frames; 2: second
     assert seen == [([0, 2], [1, 1], [1, 1]), ([1, 2], [1, 2], [4, 3])]
     assert s.n_updates.tolist() == [1, 1, 2] and s.since.tolist() == [3, 0, 0]
     both = be.concat(be.select(s, np.array([2])), be.select(s, np.array([0])))
@@ -524,11 +541,11 @@ def test_backend_counts_updates_and_frames_since_the_last_update():
 def test_correct_returns_the_gain_and_the_backend_keeps_each_tracks_largest_entry():
     from grutrack.tracking.grukf_backend import GRUKFBackend
 
-    net = _table_net()                                     # silent network: K = the prior K0 (largest entry 0.6)
+    net = _table_net()  # silent network: K = the prior K0 (largest entry 0.6)
     with torch.no_grad():
         _, _, K = net.correct(*_correct_inputs(2), net.init_hidden(2))
     assert K.shape == (2, 10, 9) and float(K.abs().max()) == pytest.approx(0.6)
-    assert not hasattr(net, "max_abs_gain")                # no state written during forward passes
+    assert not hasattr(net, "max_abs_gain")  # no state written during forward passes
     be = GRUKFBackend(net, "cpu")
     z = TorchCTRA().h(torch.tensor(_states(3))).numpy()
     s = be.predict(be.initiate(z, np.array([0, 1, 2])), 0.5)
@@ -542,10 +559,10 @@ def test_backend_maps_dataset_labels_to_tracking_classes():
     from grutrack.tracking.grukf_backend import GRUKFBackend
 
     net = _table_net(class_gain=True)
-    be = GRUKFBackend(net, "cpu", class_index=np.array([2, 2, 4]))   # e.g. three AV2 categories
+    be = GRUKFBackend(net, "cpu", class_index=np.array([2, 2, 4]))  # e.g. three AV2 categories
     s = be.initiate(TorchCTRA().h(torch.tensor(_states(3))).numpy(), np.array([0, 1, 2]))
     cells = be._cells(be.predict(s, 0.5), np.array([0, 1, 2]))
-    assert cells.tolist() == [2, 2, 4]   # flat cells of a (class, 1 age bin, 1 gap bin) table: the class
+    assert cells.tolist() == [2, 2, 4]  # flat cells of a (class, 1 age bin, 1 gap bin) table: the class
 
 
 def test_ekf_gain_table_grows_after_missed_frames(small_training_set):
@@ -574,8 +591,9 @@ def test_prediction_terms_are_added_when_weighted(small_training_set, tmp_path):
     assert [r.loss for r in plain.log.steps] != [r.loss for r in pred.log.steps]
 
 
-def test_progress_is_written_from_the_first_step_and_training_yaml_beside_the_checkpoint(small_training_set,
-                                                                                         tmp_path, monkeypatch):
+def test_progress_is_written_from_the_first_step_and_training_yaml_beside_the_checkpoint(
+    small_training_set, tmp_path, monkeypatch
+):
     import yaml
 
     from grutrack.cli.train import write_training_yaml
@@ -600,12 +618,16 @@ def test_progress_is_written_from_the_first_step_and_training_yaml_beside_the_ch
     write_training_yaml(t.cfg, "grukf", tmp_path / "training.yaml", {"split": "mini_train"})
     text = (tmp_path / "training.yaml").read_text()
     assert '# data {"split": "mini_train"}' in text
-    assert load_train_config(tmp_path / "training.yaml") == t.cfg == load_train_config(
-        "grukf", {k: v for k, v in yaml.safe_load(text).items()})
+    assert (
+        load_train_config(tmp_path / "training.yaml")
+        == t.cfg
+        == load_train_config("grukf", {k: v for k, v in yaml.safe_load(text).items()})
+    )
 
 
-def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(nusc_mini, nusc_root, tmp_path, capsys,
-                                                                       monkeypatch):
+def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(
+    nusc_mini, nusc_root, tmp_path, capsys, monkeypatch
+):
     import json
     import os
     import signal
@@ -613,12 +635,13 @@ def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(nusc_min
     from grutrack.cli import main
     from grutrack.data.detection_sim import simulate_nuscenes
     from grutrack.documents import TrainingLog
-    from grutrack.training import trainer as tr
     from grutrack.motion.checkpoint import read_checkpoint
+    from grutrack.training import trainer as tr
 
     dets = tmp_path / "d.json"
-    dets.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5,
-                                                 nusc=nusc_mini)))
+    dets.write_text(
+        json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5, nusc=nusc_mini))
+    )
     real, calls = tr.run_scene, []
 
     def ctrl_c_in_step_2(*a, **k):
@@ -628,9 +651,23 @@ def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(nusc_min
         return real(*a, **k)
 
     monkeypatch.setattr(tr, "run_scene", ctrl_c_in_step_2)
-    argv = ["train", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_train",
-            "--no-config-sources", "--detections", str(dets), "--out", str(tmp_path / "ck"), "--epochs", "1",
-            "--no-progress"]
+    argv = [
+        "train",
+        "--dataroot",
+        str(nusc_root),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_train",
+        "--no-config-sources",
+        "--detections",
+        str(dets),
+        "--out",
+        str(tmp_path / "ck"),
+        "--epochs",
+        "1",
+        "--no-progress",
+    ]
     assert main(argv) == 130
     err = capsys.readouterr().err
     assert "grutrack train: interrupted after step 2; resumable checkpoint" in err and "Traceback" not in err
@@ -653,7 +690,7 @@ def test_heading_frame_rotation_against_the_matrix_form_and_its_inverse():
     yaw = (torch.rand(50, generator=g, dtype=torch.float64) * 6.0 - 3.0).requires_grad_()
     out = to_heading_frame(v, yaw, MEAS_PLANAR)
     c, s = torch.cos(yaw), torch.sin(yaw)
-    rot = torch.stack([torch.stack([c, s], 1), torch.stack([-s, c], 1)], 1)        # (N, 2, 2) = R(-yaw)
+    rot = torch.stack([torch.stack([c, s], 1), torch.stack([-s, c], 1)], 1)  # (N, 2, 2) = R(-yaw)
     for i, j in MEAS_PLANAR:
         want = torch.einsum("nab,nb->na", rot, v[:, [i, j]])
         assert torch.allclose(out[:, [i, j]], want, atol=1e-12)
@@ -671,20 +708,20 @@ def test_scene_loss_is_the_mean_of_the_weighted_squared_residuals():
 
     weights = [1.0, 2.0, 1.0, 1.0, 1.0, 1.0, 3.0, 1.0, 1.0]
     loss = SceneLoss(load_train_config("grukf", {"loss_weights": weights}), torch.device("cpu"))
-    post = torch.zeros(2, 9, dtype=torch.float64, requires_grad=True)    # a frame's corrected tracks
-    prior = torch.zeros(3, 9, dtype=torch.float64, requires_grad=True)   # every track's predicted box
+    post = torch.zeros(2, 9, dtype=torch.float64, requires_grad=True)  # a frame's corrected tracks
+    prior = torch.zeros(3, 9, dtype=torch.float64, requires_grad=True)  # every track's predicted box
     target = np.zeros((3, 9))
-    target[0, 0], target[1, 1], target[2, 6] = 0.5, 0.25, 2 * np.pi - 0.1   # yaw residual wraps to 0.1
-    loss._add_rows(post, None, target[:2], 1.0)              # posterior terms, every row
-    loss._add_rows(prior, np.array([2]), target[2:], 0.5)    # a prediction term of row 2, weight 0.5
+    target[0, 0], target[1, 1], target[2, 6] = 0.5, 0.25, 2 * np.pi - 0.1  # yaw residual wraps to 0.1
+    loss._add_rows(post, None, target[:2], 1.0)  # posterior terms, every row
+    loss._add_rows(prior, np.array([2]), target[2:], 0.5)  # a prediction term of row 2, weight 0.5
     loss.gt_terms, loss.prediction_terms = 2, 1
-    expected = (0.5 ** 2 + 2.0 * 0.25 ** 2 + 0.5 * 3.0 * 0.1 ** 2) / 3
+    expected = (0.5**2 + 2.0 * 0.25**2 + 0.5 * 3.0 * 0.1**2) / 3
     value = loss.value()
     assert float(value.detach()) == pytest.approx(expected, rel=1e-12)
     value.backward()
-    assert float(post.grad[0, 0]) == pytest.approx(2 * (0.0 - 0.5) / 3, rel=1e-12)   # d/dpred of the first term
+    assert float(post.grad[0, 0]) == pytest.approx(2 * (0.0 - 0.5) / 3, rel=1e-12)  # d/dpred of the first term
     assert float(prior.grad[2, 6]) == pytest.approx(0.5 * 3.0 * 2 * 0.1 / 3, rel=1e-9)
-    assert float(prior.grad[:2].abs().sum()) == 0.0                                   # rows without a term
+    assert float(prior.grad[:2].abs().sum()) == 0.0  # rows without a term
 
 
 def test_centre_huber_delta_bounds_the_centre_terms_only():
@@ -694,10 +731,10 @@ def test_centre_huber_delta_bounds_the_centre_terms_only():
     from grutrack.training.loss import SceneLoss
 
     target = np.zeros((1, 9))
-    target[0, [0, 1, 6, 7]] = [3.0, -0.5, 2.0, 4.0]           # x 3 m off, y 0.5 m, yaw 2 rad, vx 4 m/s
+    target[0, [0, 1, 6, 7]] = [3.0, -0.5, 2.0, 4.0]  # x 3 m off, y 0.5 m, yaw 2 rad, vx 4 m/s
     values = {}
     for d in (0.0, 1.0):
-        cfg = load_train_config("grukf", {"centre_huber_delta": d, "yaw_loss": "heading"})   # yaw term: 2^2
+        cfg = load_train_config("grukf", {"centre_huber_delta": d, "yaw_loss": "heading"})  # yaw term: 2^2
         loss = SceneLoss(cfg, torch.device("cpu"))
         post = torch.zeros(1, 9, dtype=torch.float64, requires_grad=True)
         loss._add_rows(post, None, target, 1.0)
@@ -708,8 +745,8 @@ def test_centre_huber_delta_bounds_the_centre_terms_only():
     assert values[0.0][0] == pytest.approx(9.0 + 0.25 + 4.0 + 16.0, rel=1e-12)
     assert values[1.0][0] == pytest.approx((2 * 3.0 - 1.0) + 0.25 + 4.0 + 16.0, rel=1e-12)
     grad = values[1.0][1]
-    assert grad[0] == pytest.approx(-2.0) and grad[1] == pytest.approx(1.0)     # bounded; within d: 2 r
-    assert grad[6] == pytest.approx(-4.0) and grad[7] == pytest.approx(-8.0)    # squared as before
+    assert grad[0] == pytest.approx(-2.0) and grad[1] == pytest.approx(1.0)  # bounded; within d: 2 r
+    assert grad[6] == pytest.approx(-4.0) and grad[7] == pytest.approx(-8.0)  # squared as before
     assert values[0.0][1][0] == pytest.approx(-6.0)
 
 
@@ -726,8 +763,8 @@ def test_yaw_loss_axis_takes_a_reversed_heading_as_no_residual():
         loss._add_rows(torch.zeros(2, 9, dtype=torch.float64), None, target, 1.0)
         loss.gt_terms = 2
         got[kind] = float(loss.value())
-    assert got["heading"] == pytest.approx(((np.pi - 0.1) ** 2 + 0.3 ** 2) / 2, rel=1e-12)
-    assert got["axis"] == pytest.approx((0.1 ** 2 + 0.3 ** 2) / 2, rel=1e-12)
+    assert got["heading"] == pytest.approx(((np.pi - 0.1) ** 2 + 0.3**2) / 2, rel=1e-12)
+    assert got["axis"] == pytest.approx((0.1**2 + 0.3**2) / 2, rel=1e-12)
 
 
 def test_lr_min_is_the_learning_rate_of_the_last_step(small_training_set, tmp_path):
@@ -740,16 +777,22 @@ def test_lr_min_is_the_learning_rate_of_the_last_step(small_training_set, tmp_pa
         assert t.opt.param_groups[0]["lr"] == pytest.approx(lr_min, abs=1e-12)
 
 
-def test_grad_clip_norm_bounds_the_applied_gradient_and_logs_the_norm_before_it(small_training_set, tmp_path,
-                                                                             monkeypatch):
+def test_grad_clip_norm_bounds_the_applied_gradient_and_logs_the_norm_before_it(
+    small_training_set, tmp_path, monkeypatch
+):
     # every step logs ||g|| before clipping; with grad_clip_norm c the gradient AdamW sees has norm min(||g||, c)
     scenes, dets = small_training_set
     seen = []
     step = torch.optim.AdamW.step
 
     def spy(opt, *a, **k):
-        seen.append(float(torch.nn.utils.get_total_norm(
-            [p.grad for g in opt.param_groups for p in g["params"] if p.grad is not None])))
+        seen.append(
+            float(
+                torch.nn.utils.get_total_norm(
+                    [p.grad for g in opt.param_groups for p in g["params"] if p.grad is not None]
+                )
+            )
+        )
         return step(opt, *a, **k)
 
     monkeypatch.setattr(torch.optim.AdamW, "step", spy)
@@ -757,15 +800,15 @@ def test_grad_clip_norm_bounds_the_applied_gradient_and_logs_the_norm_before_it(
     free.run()
     logged = [r.grad_norm for r in free.log.steps]
     assert logged == pytest.approx(seen, rel=1e-5) and min(logged) > 0
-    cap = float(np.median(logged))                    # half the steps above it
+    cap = float(np.median(logged))  # half the steps above it
     seen.clear()
     clipped = _trainer(scenes, dets, tmp_path / "clip", epochs=1, validation_scenes=0, grad_clip_norm=cap)
     clipped.run()
-    first = clipped.log.steps[0].grad_norm            # the same network and scene: the same gradient
+    first = clipped.log.steps[0].grad_norm  # the same network and scene: the same gradient
     assert first == pytest.approx(logged[0], rel=1e-9)
     assert seen[0] == pytest.approx(min(first, cap), rel=1e-5)
     assert all(s <= cap * (1 + 1e-5) for s in seen)
-    assert any(r.grad_norm > cap * 1.01 for r in clipped.log.steps)   # some step was really clipped
+    assert any(r.grad_norm > cap * 1.01 for r in clipped.log.steps)  # some step was really clipped
 
 
 def test_gt_term_gate_drops_held_instances_the_track_has_left():
@@ -778,7 +821,7 @@ def test_gt_term_gate_drops_held_instances_the_track_has_left():
     gt_boxes[:, 0] = [0.0, 10.0, 20.0]
     gt = BoxSet(gt_boxes, np.ones(3), np.zeros(3, dtype=np.int64), np.array(["a", "b", "c"], dtype=object))
     rows = np.array([0, 1, -1, 2])
-    xy = np.array([[0.5, 0.0], [13.0, 0.0], [50.0, 0.0], [20.0, 1.99]])   # 0.5 m, 3 m, no GT, 1.99 m
+    xy = np.array([[0.5, 0.0], [13.0, 0.0], [50.0, 0.0], [20.0, 1.99]])  # 0.5 m, 3 m, no GT, 1.99 m
     gated = SceneLoss(load_train_config("grukf", {"gt_term_gate": 2.0}), torch.device("cpu"))
     assert gated._gated(rows, xy, gt).tolist() == [0, -1, -1, 2]
     off = SceneLoss(load_train_config("grukf", {"gt_term_gate": 0.0}), torch.device("cpu"))
@@ -804,8 +847,9 @@ def test_gt_term_gate_applies_to_the_prediction_terms(small_training_set, tmp_pa
     scenes, dets = small_training_set
     runs = {}
     for gate in (0.0, 0.05):
-        t = _trainer(scenes, dets, tmp_path / f"p{gate}", epochs=1, gt_term_gate=gate, validation_scenes=0,
-                     prediction_weight=1.0)
+        t = _trainer(
+            scenes, dets, tmp_path / f"p{gate}", epochs=1, gt_term_gate=gate, validation_scenes=0, prediction_weight=1.0
+        )
         t.run(max_steps=1)
         runs[gate] = t.log.steps[-1].prediction_terms
     assert 0 < runs[0.05] < runs[0.0]

@@ -27,7 +27,7 @@ def _turning_track(b: GRUKFBackend, turn: float = 0.4) -> GRUState:
     s = b.initiate(z, np.array([0]))
     x = s.x.clone()
     x[0, b.ss.turn_index] = turn
-    return GRUState(torch.cat([x, s.rows[:, s.m:]], dim=1), s.hid, s.labels, s.n_updates, np.zeros(1, np.int64), s.P)
+    return GRUState(torch.cat([x, s.rows[:, s.m :]], dim=1), s.hid, s.labels, s.n_updates, np.zeros(1, np.int64), s.P)
 
 
 @pytest.mark.parametrize("ss_model", ["CTRA", "Bicycle"])
@@ -81,13 +81,13 @@ def test_the_option_is_checked_stored_and_absent_means_keep(tmp_path):
         GRUKalmanNet(GRUKFConfig(coast_yaw_rate="hold"))
     with pytest.raises(ConfigError, match="'network.coast_yaw_rate' must be 'keep' or 'zero', got 'hold'"):
         load_train_config("grukf", {"coast_yaw_rate": "hold"})
-    assert load_train_config("grukf").network["coast_yaw_rate"] == "zero"          # the default recipe's
-    assert load_train_config("paper").network["coast_yaw_rate"] == "keep"          # the paper's
+    assert load_train_config("grukf").network["coast_yaw_rate"] == "zero"  # the default recipe's
+    assert load_train_config("paper").network["coast_yaw_rate"] == "keep"  # the paper's
     net = GRUKalmanNet(GRUKFConfig(coast_yaw_rate="zero"), generator=torch.Generator())
     save_checkpoint(tmp_path / "z.pt", net)
     assert load_network(tmp_path / "z.pt").cfg.coast_yaw_rate == "zero"
     ck = torch.load(tmp_path / "z.pt", weights_only=False)
-    del ck["arch"]["coast_yaw_rate"]                       # a checkpoint written before the key
+    del ck["arch"]["coast_yaw_rate"]  # a checkpoint written before the key
     torch.save(ck, tmp_path / "old.pt")
     assert load_network(tmp_path / "old.pt").cfg.coast_yaw_rate == "keep"
 
@@ -104,6 +104,7 @@ def test_the_trainer_builds_the_network_with_the_training_configs_value():
 # on, so that it coasts at the speed it had; "keep" (the paper, and every checkpoint written before the key)
 # extrapolates the acceleration, which can turn the speed's sign over a long gap.
 
+
 def _accelerating_track(b: GRUKFBackend, accel: float = -2.0) -> GRUState:
     """One car track at the origin heading along x at 5 m/s with acceleration ``accel`` m/s^2, as right after an
     update (since 0)."""
@@ -111,12 +112,13 @@ def _accelerating_track(b: GRUKFBackend, accel: float = -2.0) -> GRUState:
     s = b.initiate(z, np.array([0]))
     x = s.x.clone()
     x[0, b.ss.accel_index] = accel
-    return GRUState(torch.cat([x, s.rows[:, s.m:]], dim=1), s.hid, s.labels, s.n_updates, np.zeros(1, np.int64), s.P)
+    return GRUState(torch.cat([x, s.rows[:, s.m :]], dim=1), s.hid, s.labels, s.n_updates, np.zeros(1, np.int64), s.P)
 
 
 def _accel_backend(coast: str, ss_model: str = "CTRA", yaw: str = "keep") -> GRUKFBackend:
-    net = GRUKalmanNet(GRUKFConfig(ss_model=ss_model, coast_acceleration=coast, coast_yaw_rate=yaw),
-                       generator=torch.Generator())
+    net = GRUKalmanNet(
+        GRUKFConfig(ss_model=ss_model, coast_acceleration=coast, coast_yaw_rate=yaw), generator=torch.Generator()
+    )
     return GRUKFBackend(net, device="cpu")
 
 
@@ -128,7 +130,7 @@ def test_zero_acceleration_coasts_at_the_speed_of_the_first_prediction(ss_model)
     # the first prediction after an update is the SS model's under both: 5 - 2 * 0.5 = 4 m/s
     assert torch.equal(sk1.x, sz1.x) and float(sz1.x[0, vi]) == pytest.approx(4.0)
     sk, sz = sk1, sz1
-    for _ in range(5):                        # 3 s of coasting in all
+    for _ in range(5):  # 3 s of coasting in all
         sk, sz = keep.predict(sk, DT), zero.predict(sz, DT)
     # "keep" brakes through zero and drives backwards (5 - 2 * 3 = -1 m/s); "zero" holds 4 m/s
     assert float(sk.x[0, vi]) == pytest.approx(-1.0)
@@ -143,8 +145,8 @@ def test_both_options_hold_both_slots_and_nothing_else():
     s = _accelerating_track(both)
     x = s.x.clone()
     x[0, both.ss.turn_index] = 0.3
-    s = GRUState(torch.cat([x, s.rows[:, s.m:]], dim=1), s.hid, s.labels, s.n_updates, np.ones(1, np.int64), s.P)
-    held = both._coasted(s)                 # since 1: coasting
+    s = GRUState(torch.cat([x, s.rows[:, s.m :]], dim=1), s.hid, s.labels, s.n_updates, np.ones(1, np.int64), s.P)
+    held = both._coasted(s)  # since 1: coasting
     want = x.clone()
     want[0, both.ss.turn_index] = want[0, both.ss.accel_index] = 0.0
     assert torch.equal(held, want)
@@ -161,14 +163,14 @@ def test_coast_acceleration_is_checked_stored_and_absent_means_keep(tmp_path):
         GRUKalmanNet(GRUKFConfig(coast_acceleration="hold"))
     with pytest.raises(ConfigError, match="'network.coast_acceleration' must be 'keep' or 'zero', got 'hold'"):
         load_train_config("grukf", {"coast_acceleration": "hold"})
-    assert load_train_config("grukf").network["coast_acceleration"] == "zero"      # the default recipe's
-    assert load_train_config("paper").network["coast_acceleration"] == "keep"      # the paper's
+    assert load_train_config("grukf").network["coast_acceleration"] == "zero"  # the default recipe's
+    assert load_train_config("paper").network["coast_acceleration"] == "keep"  # the paper's
     assert _arch(load_train_config("grukf", {"coast_acceleration": "zero"})).coast_acceleration == "zero"
     assert _arch(load_train_config("grukf", {"coast_acceleration": "keep"})).coast_acceleration == "keep"
     net = GRUKalmanNet(GRUKFConfig(coast_acceleration="zero"), generator=torch.Generator())
     save_checkpoint(tmp_path / "z.pt", net)
     assert load_network(tmp_path / "z.pt").cfg.coast_acceleration == "zero"
     ck = torch.load(tmp_path / "z.pt", weights_only=False)
-    del ck["arch"]["coast_acceleration"]                   # a checkpoint written before the key
+    del ck["arch"]["coast_acceleration"]  # a checkpoint written before the key
     torch.save(ck, tmp_path / "old.pt")
     assert load_network(tmp_path / "old.pt").cfg.coast_acceleration == "keep"

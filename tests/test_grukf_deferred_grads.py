@@ -28,8 +28,9 @@ def _grads(t, scene, deferred: bool) -> dict[str, torch.Tensor]:
     return {k: p.grad.clone() for k, p in t.net.named_parameters() if p.grad is not None}
 
 
-@pytest.mark.parametrize("over", [{}, {"four_gru": True, "aux_inputs": True, "gain_prior": "ekf"}],
-                         ids=["paper", "four_gru-aux-ekf_prior"])
+@pytest.mark.parametrize(
+    "over", [{}, {"four_gru": True, "aux_inputs": True, "gain_prior": "ekf"}], ids=["paper", "four_gru-aux-ekf_prior"]
+)
 def test_deferred_weight_gradients_equal_plain_autograd(scenes_and_dets, tmp_path, over):
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer
@@ -37,7 +38,7 @@ def test_deferred_weight_gradients_equal_plain_autograd(scenes_and_dets, tmp_pat
     scenes, dets = scenes_and_dets
     cfg = load_train_config("grukf", {"epochs": 1, "checkpoint_every": 0, "device": "cpu", **over})
     t = Trainer(cfg, scenes, dets, tmp_path, progress=False)
-    with torch.no_grad():   # a trained-looking output layer: gradients reach every layer through K
+    with torch.no_grad():  # a trained-looking output layer: gradients reach every layer through K
         g = torch.Generator().manual_seed(3)
         t.net.fc_gain[2].weight.add_(torch.randn(t.net.fc_gain[2].weight.shape, generator=g) * 1e-2)
     plain, deferred = _grads(t, scenes[0], False), _grads(t, scenes[0], True)

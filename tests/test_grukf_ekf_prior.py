@@ -25,9 +25,19 @@ def _trainer(scenes, dets, out, **over):
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer
 
-    cfg = load_train_config("paper", {"epochs": 1, "checkpoint_every": 0, "device": "cpu", "lr": 1e-3,
-                                      "gap_bins": 5,
-                                      "gain_prior": "ekf", "yaw_flip": True, **over})
+    cfg = load_train_config(
+        "paper",
+        {
+            "epochs": 1,
+            "checkpoint_every": 0,
+            "device": "cpu",
+            "lr": 1e-3,
+            "gap_bins": 5,
+            "gain_prior": "ekf",
+            "yaw_flip": True,
+            **over,
+        },
+    )
     return Trainer(cfg, scenes, dets, out, progress=False)
 
 
@@ -61,10 +71,14 @@ def _paired_run(t, scenes, dets):
 def test_untrained_ekf_prior_grukf_is_the_ekf(scenes_and_dets, tmp_path):
     scenes, dets = scenes_and_dets
     t = _trainer(scenes, dets, tmp_path)
-    assert float(t.net.fc_gain[2].weight.detach().abs().max()) == 0.0 and float(t.net.fc_gain[2].bias.detach().abs().max()) == 0.0
+    assert (
+        float(t.net.fc_gain[2].weight.detach().abs().max()) == 0.0
+        and float(t.net.fc_gain[2].bias.detach().abs().max()) == 0.0
+    )
     assert float(t.net.gain_table.detach().abs().max()) == 0.0
     # the network carries the parallel EKF's noise: car's R is the motion config's
     from grutrack.training.network import ekf_backend
+
     assert torch.equal(t.net.ekf_R[2], torch.as_tensor(ekf_backend(t.cfg, t.index).R[2]))
     diff, p_rel, n = _paired_run(t, scenes, dets)
     assert n > 200
@@ -73,8 +87,7 @@ def test_untrained_ekf_prior_grukf_is_the_ekf(scenes_and_dets, tmp_path):
     assert diff < 1e-9 and p_rel < 1e-7
 
 
-def test_training_moves_the_ekf_prior_grukf_from_the_ekf_and_the_checkpoint_keeps_the_option(scenes_and_dets,
-                                                                                            tmp_path):
+def test_training_moves_the_ekf_prior_grukf_from_the_ekf_and_the_checkpoint_keeps_the_option(scenes_and_dets, tmp_path):
     from grutrack.motion.checkpoint import load_network
     from grutrack.tracking.factory import build_tracker, grukf_group
     from grutrack.tracking.tracker import Tracker, track_scenes
@@ -84,7 +97,7 @@ def test_training_moves_the_ekf_prior_grukf_from_the_ekf_and_the_checkpoint_keep
     final = t.run()
     assert all(r.gt_terms > 0 for r in t.log.steps)
     diff, _, _ = _paired_run(t, scenes, dets)
-    assert diff > 1e-4                       # the learned residual changes the posterior
+    assert diff > 1e-4  # the learned residual changes the posterior
     net = load_network(final)
     assert net.cfg.gain_prior == "ekf" and net.cfg.yaw_flip
     own = t.net.state_dict()
@@ -93,8 +106,9 @@ def test_training_moves_the_ekf_prior_grukf_from_the_ekf_and_the_checkpoint_keep
     # the tracker built from the checkpoint gives the boxes of the network trained in-process
     a = track_scenes(build_tracker("grukf", checkpoint=final, device="cpu"), scenes[:1], dets).results
     cfg = replace(t.tracker_cfg, matched_box=t.cfg.matched_box)
-    b = track_scenes(Tracker(cfg, [grukf_group(t.net, len(t.index), "cpu", class_index=t.index)]), scenes[:1],
-                     dets).results
+    b = track_scenes(
+        Tracker(cfg, [grukf_group(t.net, len(t.index), "cpu", class_index=t.index)]), scenes[:1], dets
+    ).results
     assert sum(len(r) for r in a.values()) > 0
     for tok in a:
         np.testing.assert_allclose(a[tok].boxes, b[tok].boxes, atol=1e-12)
@@ -118,5 +132,5 @@ def test_ekf_prior_needs_the_ekf_gain_and_is_a_named_option():
         GRUKalmanNet(GRUKFConfig(gain_prior="kalman"))
     with pytest.raises(ConfigError, match="'network.gain_prior' must be 'constant' or 'ekf'"):
         load_train_config("grukf", {"gain_prior": "kalman"})
-    assert load_train_config("paper").network["gain_prior"] == "constant"            # the paper's form
-    assert load_train_config("grukf").network["gain_prior"] == "ekf"                 # the default recipe
+    assert load_train_config("paper").network["gain_prior"] == "constant"  # the paper's form
+    assert load_train_config("grukf").network["gain_prior"] == "ekf"  # the default recipe

@@ -14,8 +14,9 @@ import torch
 def scenes_and_dets(nusc_mini, tmp_path_factory):
     """Three mini_train scenes of 10, 6 and 10 frames (the short one leaves the lockstep early) with simulated
     CenterPoint-like detections (SYNTHETIC, seed 5)."""
-    from grutrack.data.scene import Scene
     from support.grukf_data import mini_train_scenes_and_dets
+
+    from grutrack.data.scene import Scene
 
     scenes, dets = mini_train_scenes_and_dets(nusc_mini, tmp_path_factory.mktemp("dets"), 3, 10)
     scenes[1] = Scene(scenes[1].name, scenes[1].token, scenes[1].frames[:6])
@@ -27,10 +28,11 @@ def _trainer(scenes, dets, out, **over):
     from grutrack.training.trainer import Trainer
 
     # training_classes tracked: several scenes per step need one network group (own_model training has two)
-    cfg = load_train_config("grukf", {"epochs": 1, "checkpoint_every": 0, "device": "cpu",
-                                      "training_classes": "tracked", **over})
+    cfg = load_train_config(
+        "grukf", {"epochs": 1, "checkpoint_every": 0, "device": "cpu", "training_classes": "tracked", **over}
+    )
     t = Trainer(cfg, scenes, dets, out, progress=False)
-    with torch.no_grad():   # a trained-looking output layer: gradients reach every layer through K
+    with torch.no_grad():  # a trained-looking output layer: gradients reach every layer through K
         g = torch.Generator().manual_seed(3)
         t.net.fc_gain[2].weight.add_(torch.randn(t.net.fc_gain[2].weight.shape, generator=g) * 1e-2)
     return t
@@ -64,8 +66,9 @@ def _loss_and_grads(t, scenes, together: bool):
     return value.detach(), grads, [(lo.gt_terms, lo.pseudo_terms) for lo in losses]
 
 
-@pytest.mark.parametrize("over", [{}, {"four_gru": True, "aux_inputs": True, "gain_prior": "ekf"}],
-                         ids=["paper", "four_gru-aux-ekf_prior"])
+@pytest.mark.parametrize(
+    "over", [{}, {"four_gru": True, "aux_inputs": True, "gain_prior": "ekf"}], ids=["paper", "four_gru-aux-ekf_prior"]
+)
 def test_lockstep_equals_the_mean_of_one_scene_steps(scenes_and_dets, tmp_path, over):
     scenes, dets = scenes_and_dets
     t = _trainer(scenes, dets, tmp_path, **over)
@@ -91,13 +94,13 @@ def test_a_failing_scene_stops_the_step_with_its_own_error(scenes_and_dets, tmp_
     scenes, dets = scenes_and_dets
     t = _trainer(scenes, dets, tmp_path)
     missing = dict(dets)
-    del missing[scenes[1].frames[3].token]      # the second scene fails in its 4th frame
+    del missing[scenes[1].frames[3].token]  # the second scene fails in its 4th frame
     result: dict = {}
 
     def go():
         try:
             run_scenes(t.net, [(sc, t.index, t.tracker_cfg) for sc in scenes], t.cfg, missing, t.device)
-        except BaseException as exc:   # noqa: BLE001
+        except BaseException as exc:  # noqa: BLE001
             result["exc"] = exc
 
     th = threading.Thread(target=go, daemon=True)
@@ -123,7 +126,7 @@ def test_trainer_takes_scenes_per_step(scenes_and_dets, tmp_path):
     t2.run()
     assert t2.state.step == 4 and len(t2.log.steps[-1].scene.split("+")) == 1
     whole = _trainer(scenes, dets, tmp_path / "b", epochs=2, scenes_per_step=2)
-    whole.run()                                   # the same 4 steps without the interruption: the same weights
+    whole.run()  # the same 4 steps without the interruption: the same weights
     ref = whole.net.state_dict()
     assert all(torch.equal(t2.net.state_dict()[k], ref[k]) for k in ref)
 
@@ -132,6 +135,6 @@ def test_scenes_per_step_is_validated():
     from grutrack.errors import ConfigError
     from grutrack.training.config import load_train_config
 
-    assert load_train_config("grukf").scenes_per_step == 1        # the paper's one step per scene
+    assert load_train_config("grukf").scenes_per_step == 1  # the paper's one step per scene
     with pytest.raises(ConfigError, match="scenes_per_step"):
         load_train_config("grukf", {"scenes_per_step": 0})

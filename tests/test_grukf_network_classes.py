@@ -4,7 +4,6 @@ others (bicycle and motorcycle: Bicycle; trailer: CA), in tracking and in traini
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
@@ -28,8 +27,9 @@ def _trainer(scenes, dets, out, **over):
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer
 
-    cfg = load_train_config("paper", {"epochs": 1, "checkpoint_every": 0, "device": "cpu", "lr": 1e-3,
-                                      "gap_bins": 5, **over})
+    cfg = load_train_config(
+        "paper", {"epochs": 1, "checkpoint_every": 0, "device": "cpu", "lr": 1e-3, "gap_bins": 5, **over}
+    )
     return Trainer(cfg, scenes, dets, out, progress=False)
 
 
@@ -62,17 +62,17 @@ def test_untrained_ekf_prior_with_network_classes_ss_model_is_the_ekf_preset(sce
     hyb = build_tracker("grukf", checkpoint=ck, device="cpu")
     # the network's group takes the CTRA classes, the preset's Bicycle and CA groups the others
     assert [TRACKING_CLASSES[i] for i in np.flatnonzero(hyb.groups[0].classes)] == list(CTRA_CLASSES)
-    rest = {type(g.backend.model).__name__: [TRACKING_CLASSES[i] for i in np.flatnonzero(g.classes)]
-            for g in hyb.groups[1:]}
+    rest = {
+        type(g.backend.model).__name__: [TRACKING_CLASSES[i] for i in np.flatnonzero(g.classes)] for g in hyb.groups[1:]
+    }
     assert rest == {"BicyclePiecewise": ["bicycle", "motorcycle"], "CA": ["trailer"]}
     assert len(build_tracker("grukf", checkpoint=ck_all, device="cpu").groups) == 1
 
     ekf = _boxes_by_label(track_scenes(build_tracker("ekf"), scenes, dets).results)
     got = _boxes_by_label(track_scenes(hyb, scenes, dets).results)
-    every = _boxes_by_label(track_scenes(build_tracker("grukf", checkpoint=ck_all, device="cpu"), scenes,
-                                         dets).results)
+    every = _boxes_by_label(track_scenes(build_tracker("grukf", checkpoint=ck_all, device="cpu"), scenes, dets).results)
     assert len(ekf["car"]) > 100 and len(ekf["bicycle"]) + len(ekf["motorcycle"]) > 10
-    for name in TRACKING_CLASSES:       # untrained, the hybrid writes the preset's boxes for every class
+    for name in TRACKING_CLASSES:  # untrained, the hybrid writes the preset's boxes for every class
         assert got[name].shape == ekf[name].shape
         np.testing.assert_allclose(got[name], ekf[name], atol=1e-8)
     # with network_classes "all" the Bicycle classes run the network's CTRA and their boxes differ
@@ -82,8 +82,7 @@ def test_untrained_ekf_prior_with_network_classes_ss_model_is_the_ekf_preset(sce
     np.testing.assert_allclose(every["car"], ekf["car"], atol=1e-8)
 
 
-def test_training_with_network_classes_ss_model_takes_loss_terms_of_the_network_classes_only(scenes_and_dets,
-                                                                                             tmp_path):
+def test_training_with_network_classes_ss_model_takes_loss_terms_of_the_network_classes_only(scenes_and_dets, tmp_path):
     from grutrack.motion.checkpoint import load_network
 
     scenes, dets = scenes_and_dets
@@ -101,17 +100,18 @@ def test_training_with_network_classes_ss_model_takes_loss_terms_of_the_network_
 def test_network_classes_is_a_named_option():
     from grutrack.training.config import load_train_config
 
-    assert load_train_config("paper").network["network_classes"] == "all"            # the paper: one network for all
-    assert load_train_config("grukf").network["network_classes"] == "ss_model"       # the default recipe
-    assert GRUKFConfig().network_classes == "all"      # checkpoints written before the key: every class
+    assert load_train_config("paper").network["network_classes"] == "all"  # the paper: one network for all
+    assert load_train_config("grukf").network["network_classes"] == "ss_model"  # the default recipe
+    assert GRUKFConfig().network_classes == "all"  # checkpoints written before the key: every class
     with pytest.raises(ConfigError, match="'network.network_classes' must be 'all', 'ss_model' or 'own_model'"):
         load_train_config("grukf", {"network_classes": "ctra"})
     with pytest.raises(ValueError, match="network_classes"):
         GRUKalmanNet(GRUKFConfig(network_classes="ctra"))
 
 
-def test_untrained_ekf_prior_with_network_classes_own_model_runs_each_class_with_its_own_model(scenes_and_dets,
-                                                                                             tmp_path):
+def test_untrained_ekf_prior_with_network_classes_own_model_runs_each_class_with_its_own_model(
+    scenes_and_dets, tmp_path
+):
     """own_model: one network group per SS model (CTRA, Bicycle in the preset's piecewise form), the weights
     shared; untrained, each is the EKF of its classes' own model and noise, so the boxes are the preset's."""
     from grutrack.tracking.factory import build_tracker
@@ -123,7 +123,7 @@ def test_untrained_ekf_prior_with_network_classes_own_model_runs_each_class_with
     own = build_tracker("grukf", checkpoint=ck, device="cpu")
     nets = [(g.backend.ss.name, [TRACKING_CLASSES[i] for i in np.flatnonzero(g.classes)]) for g in own.groups[:2]]
     assert nets == [("CTRA", list(CTRA_CLASSES)), ("Bicycle", ["bicycle", "motorcycle"])]
-    assert own.groups[0].backend.net is own.groups[1].backend.net            # one network, two SS models
+    assert own.groups[0].backend.net is own.groups[1].backend.net  # one network, two SS models
     assert [type(g.backend.model).__name__ for g in own.groups[2:]] == ["CA"]
 
     ekf = _boxes_by_label(track_scenes(build_tracker("ekf"), scenes, dets).results)
@@ -142,11 +142,11 @@ def test_training_with_network_classes_own_model_takes_loss_terms_of_both_models
     own = _trainer(scenes, dets, tmp_path / "own", network_classes="own_model", **over)
     hyb = _trainer(scenes, dets, tmp_path / "hyb", network_classes="ss_model", **over)
     n_own, n_hyb = _loss_terms(own, scenes, dets), _loss_terms(hyb, scenes, dets)
-    assert n_own > n_hyb > 0            # the bicycles' and motorcycles' tracks add terms
+    assert n_own > n_hyb > 0  # the bicycles' and motorcycles' tracks add terms
     own.run()
     net = load_network(tmp_path / "own" / "model.pt")
     assert net.cfg.network_classes == "own_model"
-    assert net.cfg.model_params["BICYCLE"]["form"] == "piecewise"      # the ekf preset's form of the model
+    assert net.cfg.model_params["BICYCLE"]["form"] == "piecewise"  # the ekf preset's form of the model
     # the Bicycle classes keep their own noise in the network's EKF prior (not CTRA's)
     from grutrack.motion.config import load_motion_config
 
@@ -161,8 +161,9 @@ def test_network_classes_own_model_refuses_several_scenes_per_step():
         load_train_config("grukf", {"network_classes": "own_model", "scenes_per_step": 2})
 
 
-def test_training_classes_own_model_trains_on_the_two_wheelers_and_tracks_with_network_classes(scenes_and_dets,
-                                                                                               tmp_path):
+def test_training_classes_own_model_trains_on_the_two_wheelers_and_tracks_with_network_classes(
+    scenes_and_dets, tmp_path
+):
     """training_classes own_model with network_classes ss_model: training runs the Bicycle classes through the
     network too (their loss terms), while validation and the checkpoint track them with the preset's EKF."""
     from grutrack.motion.checkpoint import load_network
@@ -179,7 +180,7 @@ def test_training_classes_own_model_trains_on_the_two_wheelers_and_tracks_with_n
     untrained = build_tracker("grukf", checkpoint=both.save("untrained.pt"), device="cpu")
     ekf = _boxes_by_label(track_scenes(build_tracker("ekf"), scenes, dets).results)
     got = _boxes_by_label(track_scenes(untrained, scenes, dets).results)
-    for name in TRACKING_CLASSES:            # untrained it is the preset, as ss_model is
+    for name in TRACKING_CLASSES:  # untrained it is the preset, as ss_model is
         np.testing.assert_allclose(got[name], ekf[name], atol=1e-8, err_msg=name)
 
     both.run()
@@ -192,18 +193,19 @@ def test_training_classes_own_model_trains_on_the_two_wheelers_and_tracks_with_n
     # trained on the two-wheelers: its weights differ from the ss_model-only training of the same steps
     hyb.run()
     other = load_network(tmp_path / "hyb" / "model.pt")
-    assert any(not np.allclose(a.detach().numpy(), b.detach().numpy())
-               for a, b in zip(net.parameters(), other.parameters()))
+    assert any(
+        not np.allclose(a.detach().numpy(), b.detach().numpy()) for a, b in zip(net.parameters(), other.parameters())
+    )
     trained = _boxes_by_label(track_scenes(tracker, scenes, dets).results)
-    for name in ("bicycle", "motorcycle", "trailer"):   # tracked with the preset's EKF all the same
+    for name in ("bicycle", "motorcycle", "trailer"):  # tracked with the preset's EKF all the same
         np.testing.assert_allclose(trained[name], ekf[name], atol=1e-8, err_msg=name)
 
 
 def test_training_classes_own_model_is_refused_where_it_cannot_apply():
     from grutrack.training.config import load_train_config
 
-    assert load_train_config("grukf").training_classes == "own_model"   # the default recipe
-    assert load_train_config("paper").training_classes == "tracked"     # optional key, the paper's behaviour
+    assert load_train_config("grukf").training_classes == "own_model"  # the default recipe
+    assert load_train_config("paper").training_classes == "tracked"  # optional key, the paper's behaviour
     with pytest.raises(ConfigError, match="'training_classes' must be 'tracked' or 'own_model'"):
         load_train_config("grukf", {"training_classes": "all"})
     with pytest.raises(ConfigError, match="'scenes_per_step' must be 1 with training_classes 'own_model'"):

@@ -32,14 +32,14 @@ def _net(**kw) -> GRUKalmanNet:
 def _prior(n: int = 2) -> torch.Tensor:
     x = torch.zeros(n, 10, dtype=torch.float64)
     x[:, 3:6] = torch.tensor([2.0, 4.5, 1.7], dtype=torch.float64)
-    x[:, 6] = 5.0          # speed along the heading
-    x[:, 8] = 0.3          # heading
+    x[:, 6] = 5.0  # speed along the heading
+    x[:, 8] = 0.3  # heading
     return x
 
 
 def test_yaw_flip_turns_a_reversed_detection_instead_of_pulling_the_heading():
     y = TorchCTRA().h(_prior(1))
-    y[0, 6] = 0.3 + math.pi - 0.1            # the detector returned the reversed heading, 0.1 rad off
+    y[0, 6] = 0.3 + math.pi - 0.1  # the detector returned the reversed heading, 0.1 rad off
     steps = {}
     for flip in (False, True):
         net = _net(yaw_flip=flip)
@@ -53,21 +53,25 @@ def test_yaw_flip_turns_a_reversed_detection_instead_of_pulling_the_heading():
 
 
 def test_aux_features_are_log_norms_and_log_counts():
-    raw = {"innovation": torch.tensor([[3.0, 4.0], [0.0, 0.0]], dtype=torch.float64),
-           "obs_diff": torch.tensor([[1.0, 0.0], [0.0, 2.0]], dtype=torch.float64),
-           "fwd_evol": torch.zeros(2, 3, dtype=torch.float64),
-           "fwd_update": torch.ones(2, 4, dtype=torch.float64)}
+    raw = {
+        "innovation": torch.tensor([[3.0, 4.0], [0.0, 0.0]], dtype=torch.float64),
+        "obs_diff": torch.tensor([[1.0, 0.0], [0.0, 2.0]], dtype=torch.float64),
+        "fwd_evol": torch.zeros(2, 3, dtype=torch.float64),
+        "fwd_update": torch.ones(2, 4, dtype=torch.float64),
+    }
     a = aux_features(raw, torch.tensor([[1, 1], [8, 3]]))
     assert a.shape == (2, AUX_DIM)
-    expect = [[math.log(6), math.log(2), 0.0, math.log(3), 0.0, 0.0],
-              [0.0, math.log(3), 0.0, math.log(3), math.log(8), math.log(3)]]
+    expect = [
+        [math.log(6), math.log(2), 0.0, math.log(3), 0.0, 0.0],
+        [0.0, math.log(3), 0.0, math.log(3), math.log(8), math.log(3)],
+    ]
     assert torch.allclose(a, torch.tensor(expect, dtype=torch.float64), atol=1e-12)
 
 
 def test_aux_inputs_reach_the_gain_and_are_required():
     net = _net(aux_inputs=True)
     with torch.no_grad():
-        net.fc_gain[2].weight.normal_(0, 0.1)   # let the learned part speak
+        net.fc_gain[2].weight.normal_(0, 0.1)  # let the learned part speak
     prior = _prior(2)
     y = TorchCTRA().h(prior)
     y[:, 0] += 1.0
@@ -139,10 +143,11 @@ def test_resampling_trainer_draws_fresh_detections_after_the_first_epoch(tmp_pat
         calls.append((profile, seed))
         return {"fresh": (profile, seed)}
 
-    cfg = load_train_config("grukf", {"resample_profiles": ["centerpoint", "pointpillars"], "seed": 3,
-                                      "resample_mix": "epoch",
-                                      "device": "cpu"})
-    t = ResamplingTrainer.__new__(ResamplingTrainer)       # the data-free part: which detections per epoch
+    cfg = load_train_config(
+        "grukf",
+        {"resample_profiles": ["centerpoint", "pointpillars"], "seed": 3, "resample_mix": "epoch", "device": "cpu"},
+    )
+    t = ResamplingTrainer.__new__(ResamplingTrainer)  # the data-free part: which detections per epoch
     t.cfg, t.given, t.resampler = cfg, given, resampler
     assert t.detections_for(0) is given
     assert t.detections_for(1) == {"fresh": ("centerpoint", resample_seed(3, 1))}
@@ -164,10 +169,11 @@ def test_scene_mix_gives_every_epoch_every_profile_and_every_scene_every_profile
 
     def resampler(profile, seed):
         calls.append((profile, seed))
-        return {f"s{i}f{j}": (profile, seed) for i in range(6) for j in range(3)}   # s5: not a training scene
+        return {f"s{i}f{j}": (profile, seed) for i in range(6) for j in range(3)}  # s5: not a training scene
 
-    cfg = load_train_config("grukf", {"resample_profiles": profiles, "resample_mix": "scene", "seed": 2,
-                                      "device": "cpu"})
+    cfg = load_train_config(
+        "grukf", {"resample_profiles": profiles, "resample_mix": "scene", "seed": 2, "device": "cpu"}
+    )
     t = ResamplingTrainer.__new__(ResamplingTrainer)
     t.cfg, t.given, t.resampler, t.scenes = cfg, {"given": 1}, resampler, scenes
     assert t.detections_for(0) == {"given": 1}
@@ -179,7 +185,7 @@ def test_scene_mix_gives_every_epoch_every_profile_and_every_scene_every_profile
             got = {dets[f"s{i}f{j}"] for j in range(3)}
             assert got == {(profiles[(epoch - 1 + i) % 3], resample_seed(2, epoch))}
             seen[i] |= got
-        assert {p for p, _ in dets.values()} == set(profiles)          # every epoch mixes all three
+        assert {p for p, _ in dets.values()} == set(profiles)  # every epoch mixes all three
     assert all({p for p, _ in v} == set(profiles) for v in seen.values())
     assert load_train_config("grukf").resample_mix == "scene" and load_train_config("paper").resample_mix == "epoch"
     with pytest.raises(ConfigError, match="'resample_mix' must be 'epoch' or 'scene'"):
@@ -209,10 +215,10 @@ def test_network_options_are_read_nested_and_in_the_flat_layout_of_earlier_confi
     from grutrack.training.network import network_config
 
     nested = load_train_config("paper", {"network": {"gap_bins": 5}})
-    flat = load_train_config("paper", {"gap_bins": 5})                 # an override in the layout before the section
+    flat = load_train_config("paper", {"gap_bins": 5})  # an override in the layout before the section
     assert nested == flat and nested.network["gap_bins"] == 5 and network_config(nested).gap_bins == 5
     raw = yaml.safe_load(open(__import__("grutrack.config_loader", fromlist=["x"]).config_path("training", "paper")))
-    old = {k: v for k, v in raw.items() if k != "network"} | raw["network"]   # a config file written before it
+    old = {k: v for k, v in raw.items() if k != "network"} | raw["network"]  # a config file written before it
     (tmp_path / "old.yaml").write_text(yaml.safe_dump(old))
     assert load_train_config(tmp_path / "old.yaml") == load_train_config("paper")
     with pytest.raises(ConfigError, match=r"unknown key 'network.gap_bin'.*did you mean 'network.gap_bins'"):
@@ -230,7 +236,7 @@ def test_min_size_bounds_the_posterior_sizes_from_config_to_checkpoint_to_tracke
     cfg = load_train_config("paper", {"network": {"min_size": 0.3}, "device": "cpu"})
     assert network_config(cfg).min_size == 0.3
     y = TorchCTRA().h(_prior(1))
-    y[0, 3:6] = -10.0                                         # a detection that pulls every size below zero
+    y[0, 3:6] = -10.0  # a detection that pulls every size below zero
     for bound in (0.05, 0.3):
         net = _net(min_size=bound)
         with torch.no_grad():

@@ -42,16 +42,29 @@ class ScriptedValidator:
         return [0.75]
 
     def describe(self) -> ValidationRecord:
-        return ValidationRecord(rule="last", selected_step=0, split="mini_val", scenes=["scene-a", "scene-b"],
-                                detection_sets=list(self.detection_sets), reference="tracker preset 'ekf' (its EKF)")
+        return ValidationRecord(
+            rule="last",
+            selected_step=0,
+            split="mini_val",
+            scenes=["scene-a", "scene-b"],
+            detection_sets=list(self.detection_sets),
+            reference="tracker preset 'ekf' (its EKF)",
+        )
 
 
 #: validation AMOTA of three detection sets at validations 0, 1, ... (steps 0, 1, ... with val_every 1): the best
 #: mean is validation 3 (0.720); validation 5 (0.718) is within one standard error of the paired differences to it
 #: (d = (+0.004, -0.010, 0.000): s.e. 0.0042), validation 4 (0.7173, s.e. 0.0024) and 6 (0.701) are not: the
 #: 1-s.e. rule keeps validation 5, the best-AMOTA rule validation 3.
-SETS_CURVE = ((0.700, 0.705, 0.702), (0.705, 0.709, 0.707), (0.712, 0.716, 0.714), (0.720, 0.722, 0.718),
-              (0.716, 0.724, 0.712), (0.724, 0.712, 0.718), (0.700, 0.701, 0.702))
+SETS_CURVE = (
+    (0.700, 0.705, 0.702),
+    (0.705, 0.709, 0.707),
+    (0.712, 0.716, 0.714),
+    (0.720, 0.722, 0.718),
+    (0.716, 0.724, 0.712),
+    (0.724, 0.712, 0.718),
+    (0.700, 0.701, 0.702),
+)
 
 
 class ScriptedSetsValidator(ScriptedValidator):
@@ -65,7 +78,7 @@ class ScriptedSetsValidator(ScriptedValidator):
 
     def __init__(self, order: dict | None = None):
         super().__init__()
-        self.order = {} if order is None else order     # weights' fingerprint -> position on the curve
+        self.order = {} if order is None else order  # weights' fingerprint -> position on the curve
 
     def scores(self, net):
         import numpy as np
@@ -84,8 +97,10 @@ def _trainer(scenes, dets, out, validate=None, **over):
     from grutrack.training.config import load_train_config
     from grutrack.training.trainer import Trainer
 
-    cfg = load_train_config("grukf", {"epochs": 3, "checkpoint_every": 0, "device": "cpu", "lr": 3e-3,
-                                      "gain_prior": "ekf", "val_every": 1, **over})
+    cfg = load_train_config(
+        "grukf",
+        {"epochs": 3, "checkpoint_every": 0, "device": "cpu", "lr": 3e-3, "gain_prior": "ekf", "val_every": 1, **over},
+    )
     return Trainer(cfg, scenes, dets, out, validate=validate, progress=False)
 
 
@@ -98,7 +113,7 @@ def test_model_pt_holds_the_best_validated_step_and_last_pt_the_last(small_train
 
     scenes, dets = small_training_set
     v = ScriptedValidator()
-    assert isinstance(v, Validator) and isinstance(ScriptedSetsValidator(), Validator)   # the trainer's protocol
+    assert isinstance(v, Validator) and isinstance(ScriptedSetsValidator(), Validator)  # the trainer's protocol
     t = _trainer(scenes, dets, tmp_path, v, select_checkpoint="best_val_amota")
     final = t.run()
     log = TrainingLog.read(tmp_path / "train_log.csv")
@@ -106,7 +121,7 @@ def test_model_pt_holds_the_best_validated_step_and_last_pt_the_last(small_train
     assert [r.step for r in log.validated()] == list(range(0, 7))
     values = [r.val_amota for r in log.validated()]
     assert values == [x for x, _ in v.seen]
-    best = values.index(max(values))            # the earliest of equals
+    best = values.index(max(values))  # the earliest of equals
     assert len(set(values)) > 1, "the scripted values must differ for the test to mean anything"
     model, last = read_checkpoint(final), read_checkpoint(tmp_path / "last.pt")
     assert _same(model["model"], v.seen[best][1])
@@ -156,8 +171,9 @@ def _step(step: int, sets: list[float] | None, amota: float | None = None):
     from grutrack.documents import TrainingStep
 
     mean = round(sum(sets) / len(sets), 6) if sets else amota
-    return TrainingStep(step=step, epoch=0, scene="s", loss=1.0, val_amota=mean,
-                        val_amota_sets=None if sets is None else tuple(sets))
+    return TrainingStep(
+        step=step, epoch=0, scene="s", loss=1.0, val_amota=mean, val_amota_sets=None if sets is None else tuple(sets)
+    )
 
 
 def _select(rule: str, rows) -> int:
@@ -173,8 +189,8 @@ def test_one_se_rule_takes_the_latest_step_the_sets_do_not_agree_is_worse():
     from grutrack.training.selection import one_se
 
     best = _step(2, [0.80, 0.60, 0.70, 0.50])
-    noisy = _step(4, [0.79, 0.62, 0.66, 0.49])      # mean 0.010 lower; the sets disagree: s.e. 0.0122
-    worse = _step(6, [0.78, 0.58, 0.68, 0.48])      # 0.020 lower on every set: s.e. 0
+    noisy = _step(4, [0.79, 0.62, 0.66, 0.49])  # mean 0.010 lower; the sets disagree: s.e. 0.0122
+    worse = _step(6, [0.78, 0.58, 0.68, 0.48])  # 0.020 lower on every set: s.e. 0
     assert one_se(noisy, best) == pytest.approx(0.012247, abs=1e-6)
     assert one_se(worse, best) == pytest.approx(0.0, abs=1e-12)
     start = _step(0, [0.70, 0.55, 0.65, 0.45])
@@ -200,14 +216,14 @@ def test_one_se_rule_in_training_writes_the_chosen_step_with_its_sets(small_trai
     final = _trainer(scenes, dets, tmp_path, v, select_checkpoint="best_val_amota_1se").run()
     val = TrainingLog.read(tmp_path / "train_log.csv").validated()
     assert all(len(r.val_amota_sets) == 3 for r in val)
-    assert [r.val_amota for r in val] == [mean for mean, _ in v.seen]     # the mean of the sets' unrounded scores
+    assert [r.val_amota for r in val] == [mean for mean, _ in v.seen]  # the mean of the sets' unrounded scores
     # the log rounds the mean and each set to 6 decimals: the mean of the rounded sets is within 1e-6 of it
     assert [r.val_amota for r in val] == pytest.approx([float(np.mean(r.val_amota_sets)) for r in val], abs=1e-6)
     # the rule written out over the whole curve: the latest step within one s.e. of the (earliest) best
     best = max(val, key=lambda r: (r.val_amota, -r.step))
     expected = max(r.step for r in val if r.val_amota >= best.val_amota - one_se(r, best))
-    assert len(v.order) == len(val) == 7                      # every validation a network of its own
-    assert (best.step, expected) == (3, 5)                   # the scripted curve: the two rules differ
+    assert len(v.order) == len(val) == 7  # every validation a network of its own
+    assert (best.step, expected) == (3, 5)  # the scripted curve: the two rules differ
     assert _same(read_checkpoint(final)["model"], v.seen[expected][1])
     rec = ValidationRecord.read(tmp_path / "validation.json")
     assert (rec.rule, rec.selected_step) == ("best_val_amota_1se", expected)
@@ -235,23 +251,49 @@ def test_held_out_scenes_are_evenly_spaced_in_name_order():
     assert len({s.name for s in held_out_scenes(scenes, 8)}) == 8
 
 
+@pytest.mark.slow
 def test_cli_holds_scenes_out_of_training_and_validates_on_them(nusc_mini, nusc_root, tmp_path, capsys):
     import yaml
 
     from grutrack.cli import main
-    from grutrack.data.detection_sim import simulate_nuscenes
     from grutrack.config_loader import read_config
+    from grutrack.data.detection_sim import simulate_nuscenes
 
     dets = tmp_path / "d.json"
-    dets.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5,
-                                                 nusc=nusc_mini)))
+    dets.write_text(
+        json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=5, nusc=nusc_mini))
+    )
     cfg, _ = read_config("training", "grukf")
-    cfg.update(validation_scenes=2, select_checkpoint="best_val_amota", val_every=3, lr=3e-3, gain_prior="ekf",
-               network_classes="ss_model", yaw_flip=True, motion_config="grutrack_nusc", sources=[])
+    cfg.update(
+        validation_scenes=2,
+        select_checkpoint="best_val_amota",
+        val_every=3,
+        lr=3e-3,
+        gain_prior="ekf",
+        network_classes="ss_model",
+        yaw_flip=True,
+        motion_config="grutrack_nusc",
+        sources=[],
+    )
     (tmp_path / "t.yaml").write_text(yaml.safe_dump(cfg))
-    argv = ["train", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_train",
-            "--detections", str(dets), "--config", str(tmp_path / "t.yaml"), "--out", str(tmp_path / "ck"),
-            "--epochs", "1", "--no-progress"]
+    argv = [
+        "train",
+        "--dataroot",
+        str(nusc_root),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_train",
+        "--detections",
+        str(dets),
+        "--config",
+        str(tmp_path / "t.yaml"),
+        "--out",
+        str(tmp_path / "ck"),
+        "--epochs",
+        "1",
+        "--no-progress",
+    ]
     assert main(argv) == 0
     out = capsys.readouterr().out
     held = ["scene-0655", "scene-1094"]
@@ -277,12 +319,18 @@ def test_cli_holds_scenes_out_of_training_and_validates_on_them(nusc_mini, nusc_
     assert "t.yaml: validation_scenes 8 would leave no training scene (split 'mini_train' has 8)" in err
 
 
-@pytest.mark.parametrize("key, value, message", [
-    ("validation_scenes", -1, "'validation_scenes' must be an integer from 0 to 1000, got -1"),
-    ("validation_scenes", 2.5, "'validation_scenes' must be an integer from 0 to 1000, got 2.5"),
-    ("select_checkpoint", "best",
-     "'select_checkpoint' must be 'last', 'best_val_amota' or 'best_val_amota_1se', got 'best'"),
-])
+@pytest.mark.parametrize(
+    "key, value, message",
+    [
+        ("validation_scenes", -1, "'validation_scenes' must be an integer from 0 to 1000, got -1"),
+        ("validation_scenes", 2.5, "'validation_scenes' must be an integer from 0 to 1000, got 2.5"),
+        (
+            "select_checkpoint",
+            "best",
+            "'select_checkpoint' must be 'last', 'best_val_amota' or 'best_val_amota_1se', got 'best'",
+        ),
+    ],
+)
 def test_bad_selection_settings_are_refused_naming_the_key(key, value, message):
     from grutrack.errors import ConfigError
     from grutrack.training.config import load_train_config
@@ -290,10 +338,11 @@ def test_bad_selection_settings_are_refused_naming_the_key(key, value, message):
     with pytest.raises(ConfigError, match=message):
         load_train_config("grukf", {key: value})
     # the two shipped configs: the default recipe selects on held-out validation, the paper's keeps the last step
-    assert (load_train_config("grukf").validation_scenes, load_train_config("grukf").select_checkpoint) == \
-        (2, "best_val_amota_1se")
-    assert (load_train_config("paper").validation_scenes, load_train_config("paper").select_checkpoint) == \
-        (0, "last")
+    assert (load_train_config("grukf").validation_scenes, load_train_config("grukf").select_checkpoint) == (
+        2,
+        "best_val_amota_1se",
+    )
+    assert (load_train_config("paper").validation_scenes, load_train_config("paper").select_checkpoint) == (0, "last")
 
 
 def test_av2_training_validates_on_a_held_out_log_with_the_datasets_hota(av2_root, tmp_path, capsys):
@@ -309,10 +358,25 @@ def test_av2_training_validates_on_a_held_out_log_with_the_datasets_hota(av2_roo
     assert main(["simulate-detections", *common, "--seed", "4", "--out", str(dets)]) == 0
     over = {"epochs": 1, "device": "cpu", "validation_scenes": 1, "val_every": 1, "select_checkpoint": "best_val_amota"}
     cfg = tmp_path / "t.yaml"
-    assert main(["resolve-config", "training", "--base", "paper", "--overrides", json.dumps(over), "--out",
-                 str(cfg)]) == 0
-    assert main(["train", *common, "--detections", str(dets), "--config", str(cfg), "--out", str(tmp_path / "ck"),
-                 "--no-progress"]) == 0
+    assert (
+        main(["resolve-config", "training", "--base", "paper", "--overrides", json.dumps(over), "--out", str(cfg)]) == 0
+    )
+    assert (
+        main(
+            [
+                "train",
+                *common,
+                "--detections",
+                str(dets),
+                "--config",
+                str(cfg),
+                "--out",
+                str(tmp_path / "ck"),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     ds = open_dataset("av2", DatasetOptions(av2_root))
     scenes = ds.scenes("val")
@@ -322,7 +386,7 @@ def test_av2_training_validates_on_a_held_out_log_with_the_datasets_hota(av2_roo
     assert (rec.split, rec.scenes, rec.held_out, rec.detection_sets) == ("val", [logs[1]], True, ["given"])
     log = TrainingLog.read(tmp_path / "ck" / "train_log.csv")
     assert [r.step for r in log.validated()] == [0, 1] and all(0.0 < r.val_amota <= 1.0 for r in log.validated())
-    assert [r.scene for r in log.steps if r.step > 0] == [logs[0]]          # trained on the other log only
+    assert [r.scene for r in log.steps if r.step > 0] == [logs[0]]  # trained on the other log only
     assert f"validation HOTA {rec.selected_amota:.4f}" in out
     # the reference line: the preset's EKF on the held-out log, scored by the dataset
     ekf = build_tracker("ekf", param_classes=ds.vocabulary.param_classes)
@@ -332,5 +396,7 @@ def test_av2_training_validates_on_a_held_out_log_with_the_datasets_hota(av2_roo
     # scoring the whole split is the official evaluation of the same tracks written as the challenge pickle
     results = track_scenes(ekf, scenes, given).results
     ds.write_tracks(tmp_path / "t.pkl", scenes, results, 500)
-    assert ds.score_tracks("val", scenes, results, 500) == ds.evaluate(tmp_path / "t.pkl", "val",
-                                                                       workers=1).overall["hota"]
+    assert (
+        ds.score_tracks("val", scenes, results, 500)
+        == ds.evaluate(tmp_path / "t.pkl", "val", workers=1).overall["hota"]
+    )

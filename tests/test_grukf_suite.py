@@ -21,12 +21,28 @@ def test_paired_difference_is_the_mean_and_standard_error_of_the_set_by_set_diff
 
 def test_difference_table_pairs_every_model_with_the_ekf_row_set_by_set():
     sets = ["centerpoint_s21", "centerpoint_s22"]
-    rows = [{"model": "ekf", "centerpoint_s21_amota": 0.90, "centerpoint_s21_amotp": 0.40,
-             "centerpoint_s22_amota": 0.80, "centerpoint_s22_amotp": 0.50},
-            {"model": "grukf", "centerpoint_s21_amota": 0.91, "centerpoint_s21_amotp": 0.37,
-             "centerpoint_s22_amota": 0.80, "centerpoint_s22_amotp": 0.49}]
-    classes = {("ekf", sets[0]): {"car": 0.30, "bus": 0.5}, ("ekf", sets[1]): {"car": 0.32},
-               ("grukf", sets[0]): {"car": 0.28, "bus": 0.4}, ("grukf", sets[1]): {"car": 0.31}}
+    rows = [
+        {
+            "model": "ekf",
+            "centerpoint_s21_amota": 0.90,
+            "centerpoint_s21_amotp": 0.40,
+            "centerpoint_s22_amota": 0.80,
+            "centerpoint_s22_amotp": 0.50,
+        },
+        {
+            "model": "grukf",
+            "centerpoint_s21_amota": 0.91,
+            "centerpoint_s21_amotp": 0.37,
+            "centerpoint_s22_amota": 0.80,
+            "centerpoint_s22_amotp": 0.49,
+        },
+    ]
+    classes = {
+        ("ekf", sets[0]): {"car": 0.30, "bus": 0.5},
+        ("ekf", sets[1]): {"car": 0.32},
+        ("grukf", sets[0]): {"car": 0.28, "bus": 0.4},
+        ("grukf", sets[1]): {"car": 0.31},
+    }
     lines = suite._difference_table(rows, classes, sets)
     assert "2 CenterPoint-like sets" in lines[0] and "SYNTHETIC" in lines[0]
     assert lines[2] == "| model | AMOTA | AMOTP (m) | bus AMOTP | car AMOTP |"

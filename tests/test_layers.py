@@ -28,14 +28,14 @@ def import_graph(package: Path) -> dict[str, set[str]]:
                 targets = [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom):
                 base = node.module or ""
-                if node.level:   # relative import
-                    up = here.split(".")[:len(here.split(".")) - (node.level - 1)]
+                if node.level:  # relative import
+                    up = here.split(".")[: len(here.split(".")) - (node.level - 1)]
                     base = ".".join(up + ([node.module] if node.module else []))
                 targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
             else:
                 continue
             for target in targets:
-                while target and target not in modules:   # a name inside a module: that module
+                while target and target not in modules:  # a name inside a module: that module
                     target = target.rpartition(".")[0]
                 if target and target != name:
                     graph[name].add(target)
@@ -52,7 +52,7 @@ def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     for root in sorted(graph):
         if root in index:
             continue
-        work = [(root, iter(sorted(graph[root])))]          # iterative Tarjan
+        work = [(root, iter(sorted(graph[root])))]  # iterative Tarjan
         index[root] = low[root] = len(index)
         stack.append(root)
         on_stack.add(root)
@@ -89,7 +89,8 @@ def test_no_import_cycle_in_the_package():
     assert "grutrack.render.views" in graph and "grutrack.tracking.tracker" in graph
     cycles = import_cycles(graph)
     assert cycles == [], "modules importing one another (in a cycle): " + "; ".join(
-        " <-> ".join(c) + " [" + ", ".join(f"{m} -> {sorted(graph[m] & set(c))}" for m in c) + "]" for c in cycles)
+        " <-> ".join(c) + " [" + ", ".join(f"{m} -> {sorted(graph[m] & set(c))}" for m in c) + "]" for c in cycles
+    )
 
 
 def test_the_check_finds_a_cycle_through_a_lazy_import(tmp_path):

@@ -15,8 +15,12 @@ def _matrices(n: int, seed: int):
     rng = np.random.default_rng(seed)
     for t in range(n):
         nr, nc = rng.integers(1, 9, 2)
-        c = [rng.random((nr, nc)), rng.integers(0, 3, (nr, nc)).astype(float), np.round(rng.random((nr, nc)), 1),
-             np.full((nr, nc), 0.5)][t % 4]
+        c = [
+            rng.random((nr, nc)),
+            rng.integers(0, 3, (nr, nc)).astype(float),
+            np.round(rng.random((nr, nc)), 1),
+            np.full((nr, nc), 0.5),
+        ][t % 4]
         yield c, rng.random((nr, nc)) < (0.4 if t % 3 else 0.0)
 
 

@@ -160,9 +160,13 @@ def test_singular_limits_are_finite_and_continuous():
         assert np.all(np.isfinite(out)) and np.all(np.isfinite(ctra.F(x, DT)))
         np.testing.assert_allclose(out[0, 0:2], straight, atol=1e-7)
     bic = Bicycle()
-    xb = np.array([[1.0, 2.0, 0.0, 0.7, 1.8, 1.4, 5.0, 0.0, -1.0, 0.0],
-                   [1.0, 2.0, 0.0, 0.7, 0.0, 1.4, 5.0, 0.0, -1.0, 0.3],  # zero length: curvature capped, finite
-                   [1.0, 2.0, 0.0, 0.7, 1.8, 1.4, 0.0, 0.0, -1.0, np.pi / 2]])  # steering at 90 degrees
+    xb = np.array(
+        [
+            [1.0, 2.0, 0.0, 0.7, 1.8, 1.4, 5.0, 0.0, -1.0, 0.0],
+            [1.0, 2.0, 0.0, 0.7, 0.0, 1.4, 5.0, 0.0, -1.0, 0.3],  # zero length: curvature capped, finite
+            [1.0, 2.0, 0.0, 0.7, 1.8, 1.4, 0.0, 0.0, -1.0, np.pi / 2],
+        ]
+    )  # steering at 90 degrees
     for fn in (bic.f(xb, DT), bic.F(xb, DT), bic.h(xb), bic.H(xb)):
         assert np.all(np.isfinite(fn))
     np.testing.assert_allclose(bic.f(xb, DT)[0, 0:2], [1 + 2.5 * np.cos(-1.0), 2 + 2.5 * np.sin(-1.0)], atol=1e-12)
@@ -304,10 +308,10 @@ def test_batch_equals_one_track_at_a_time(model):
         xb, Pb = kf.predict(xb, Pb, Q, DT)
         xb, Pb = kf.update(xb, Pb, z, R)
     for i in range(n):
-        xi, Pi = kf.initiate(boxes[i:i + 1], P0[i:i + 1])
+        xi, Pi = kf.initiate(boxes[i : i + 1], P0[i : i + 1])
         for z in dets:
-            xi, Pi = kf.predict(xi, Pi, Q[i:i + 1], DT)
-            xi, Pi = kf.update(xi, Pi, z[i:i + 1], R[i:i + 1])
+            xi, Pi = kf.predict(xi, Pi, Q[i : i + 1], DT)
+            xi, Pi = kf.update(xi, Pi, z[i : i + 1], R[i : i + 1])
         np.testing.assert_allclose(xb[i], xi[0], rtol=0, atol=1e-12)
         np.testing.assert_allclose(Pb[i], Pi[0], rtol=1e-12, atol=1e-12)
 
@@ -346,8 +350,15 @@ def test_default_config_is_polymot_nuscenes():
     cfg = load_motion_config()
     assert set(cfg) == set(TRACKING_CLASSES)
     models = {c: cfg[c]["model"] for c in TRACKING_CLASSES}
-    assert models == {"bicycle": "Bicycle", "bus": "CTRA", "car": "CTRA", "motorcycle": "Bicycle",
-                      "pedestrian": "CTRA", "trailer": "CA", "truck": "CTRA"}
+    assert models == {
+        "bicycle": "Bicycle",
+        "bus": "CTRA",
+        "car": "CTRA",
+        "motorcycle": "Bicycle",
+        "pedestrian": "CTRA",
+        "trailer": "CA",
+        "truck": "CTRA",
+    }
     dims = {"CTRA": 10, "Bicycle": 10, "CA": 11, "CV": 9}
     for c in TRACKING_CLASSES:
         d = dims[cfg[c]["model"]]
@@ -384,18 +395,31 @@ def _write_variant(tmp_path, old: str, new: str):
 @pytest.mark.parametrize(
     ("old", "new", "key"),
     [
-        ("  car:\n    # model {2: 'CTRA'}, filter ExtendKalmanFilter.\n    model: CTRA\n    P0",
-         "  car:\n    # model {2: 'CTRA'}, filter ExtendKalmanFilter.\n    model: CTRA\n    PO", "classes.car.PO"),
+        (
+            "  car:\n    # model {2: 'CTRA'}, filter ExtendKalmanFilter.\n    model: CTRA\n    P0",
+            "  car:\n    # model {2: 'CTRA'}, filter ExtendKalmanFilter.\n    model: CTRA\n    PO",
+            "classes.car.PO",
+        ),
         ("  truck:\n", "  truk:\n", "classes.truk"),
         ("    # CTRA.getProcessNoiseQ: np.eye(10) * 1.\n    Q: 1.0\n", "", "models.CTRA.Q"),
         ("      wheelbase_ratio: 0.8", "      wheelbase_ration: 0.8", "models.Bicycle.params"),
         ("    model: CA\n", "    model: CAA\n", "classes.trailer.model"),
-        ("P0: [10, 10, 10, 10, 10, 10, 10000, 10, 10, 10]", "P0: [10, 10, 10, 10000, 10, 10, 10]",
-         "classes.bicycle.P0"),
+        (
+            "P0: [10, 10, 10, 10, 10, 10, 10000, 10, 10, 10]",
+            "P0: [10, 10, 10, 10000, 10, 10, 10]",
+            "classes.bicycle.P0",
+        ),
         ("    Q: 100.0\n    R: 0.001\n  truck:", "    Q: 100.0\n    R: -1\n  truck:", "classes.trailer.R"),
     ],
-    ids=["misspelt-class-key", "misspelt-class", "missing-model-key", "bad-param", "unknown-model", "wrong-size",
-         "not-positive"],
+    ids=[
+        "misspelt-class-key",
+        "misspelt-class",
+        "missing-model-key",
+        "bad-param",
+        "unknown-model",
+        "wrong-size",
+        "not-positive",
+    ],
 )
 def test_config_errors_name_file_and_key(tmp_path, old, new, key):
     path = _write_variant(tmp_path, old, new)
@@ -463,9 +487,19 @@ def test_compiled_ctra_transition_is_the_numpy_form():
         np.testing.assert_array_equal(CTRA().f(x, dt), f)
 
 
-@pytest.mark.parametrize("model", [CTRA(), Bicycle(), Bicycle(wheelbase_ratio=0.7, front_ratio=0.3),
-                                   make_model("Bicycle", "piecewise"), make_model("CTRA", "piecewise"), CA(), CV()],
-                         ids=["CTRA", "Bicycle", "Bicycle-offset", "Bicycle-piecewise", "CTRA-piecewise", "CA", "CV"])
+@pytest.mark.parametrize(
+    "model",
+    [
+        CTRA(),
+        Bicycle(),
+        Bicycle(wheelbase_ratio=0.7, front_ratio=0.3),
+        make_model("Bicycle", "piecewise"),
+        make_model("CTRA", "piecewise"),
+        CA(),
+        CV(),
+    ],
+    ids=["CTRA", "Bicycle", "Bicycle-offset", "Bicycle-piecewise", "CTRA-piecewise", "CA", "CV"],
+)
 def test_joint_passes_equal_the_separate_methods(model):
     """transition = (f, F), measurement = (h, H) and to_boxes = h with the yaw wrapped (the compiled measurement and
     box passes against the numpy h and H)."""

@@ -6,8 +6,14 @@ from __future__ import annotations
 import numpy as np
 
 from grutrack.data.nusc_tables import TABLE_NAMES, NuScenesTables, predefined_split_scenes
-from grutrack.data.nuscenes import (DETECTION_NAME_OF_CATEGORY, DETECTION_VOCABULARY, TRACKING_NAME_OF_CATEGORY,
-                                    category_to_tracking_name, load_scenes, open_nuscenes)
+from grutrack.data.nuscenes import (
+    DETECTION_NAME_OF_CATEGORY,
+    DETECTION_VOCABULARY,
+    TRACKING_NAME_OF_CATEGORY,
+    category_to_tracking_name,
+    load_scenes,
+    open_nuscenes,
+)
 
 
 def test_tables_equal_the_devkits(nusc_root, nusc_mini):
@@ -40,8 +46,15 @@ def test_split_lists_and_class_map_equal_the_devkits(nusc_mini):
     assert ours == ref and len(ours["val"]) == 150 and len(ours["train"]) == 700
     names = [c["name"] for c in nusc_mini.category] + ["no.such.category"]
     assert [category_to_tracking_name(n) for n in names] == [devkit_map(n) for n in names]
-    assert set(TRACKING_NAME_OF_CATEGORY.values()) == {"bicycle", "bus", "car", "motorcycle", "pedestrian",
-                                                       "trailer", "truck"}
+    assert set(TRACKING_NAME_OF_CATEGORY.values()) == {
+        "bicycle",
+        "bus",
+        "car",
+        "motorcycle",
+        "pedestrian",
+        "trailer",
+        "truck",
+    }
     from nuscenes.eval.detection.utils import category_to_detection_name
 
     assert [DETECTION_NAME_OF_CATEGORY.get(n) for n in names] == [category_to_detection_name(n) for n in names]
@@ -63,7 +76,7 @@ def test_one_reader_gives_tracking_and_detection_ground_truth(nusc_root):
             assert list(names[keep]) == [st.vocabulary.names[i] for i in ft.gt.labels]
             np.testing.assert_array_equal(fd.gt.extra["num_pts"][keep], ft.gt.extra["num_pts"])
             n_det, n_trk = n_det + len(fd.gt), n_trk + len(ft.gt)
-    assert n_det > n_trk > 3000          # barriers and cones are in the detection ground truth only
+    assert n_det > n_trk > 3000  # barriers and cones are in the detection ground truth only
 
 
 def test_scenes_from_tables_equal_scenes_from_the_devkit(nusc_root, nusc_mini):

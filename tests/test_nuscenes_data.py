@@ -87,9 +87,16 @@ def _write(tmp_path, results):
 
 
 def _box(token, **over):
-    b = {"sample_token": token, "translation": [1.0, 2.0, 0.5], "size": [1.8, 4.5, 1.6],
-         "rotation": [1.0, 0.0, 0.0, 0.0], "velocity": [0.0, 0.0], "detection_name": "car",
-         "detection_score": 0.9, "attribute_name": ""}
+    b = {
+        "sample_token": token,
+        "translation": [1.0, 2.0, 0.5],
+        "size": [1.8, 4.5, 1.6],
+        "rotation": [1.0, 0.0, 0.0, 0.0],
+        "velocity": [0.0, 0.0],
+        "detection_name": "car",
+        "detection_score": 0.9,
+        "attribute_name": "",
+    }
     b.update(over)
     return b
 

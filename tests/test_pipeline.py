@@ -10,10 +10,10 @@ import pytest
 import yaml
 
 from grutrack.cli import main
+from grutrack.config_loader import merge
 from grutrack.data.registry import load_registry
 from grutrack.errors import ConfigError
 from grutrack.pipeline import codever, spec
-from grutrack.config_loader import merge
 from grutrack.pipeline.presets import resolve_tracker, resolve_training
 from grutrack.provenance import config_hash
 from grutrack.tracking.config import load_tracker_config
@@ -40,14 +40,29 @@ def test_merge_keeps_the_rest():
 def test_resolved_tracker_preset_and_its_errors(tmp_path):
     raw = resolve_tracker("ekf", {"association": {"first_threshold": {"car": 1.2}}})
     assert raw["association"]["first_threshold"]["car"] == 1.2
-    assert raw["association"]["first_threshold"]["bus"] == 1.34   # the ekf preset takes Poly-MOT HEAD's stage-1 bus threshold
+    assert (
+        raw["association"]["first_threshold"]["bus"] == 1.34
+    )  # the ekf preset takes Poly-MOT HEAD's stage-1 bus threshold
     with pytest.raises(ConfigError, match="association.first_treshold"):
         resolve_tracker("ekf", {"association": {"first_treshold": {"car": 1.2}}})
     with pytest.raises(ConfigError, match="first_threshold.cra"):
         resolve_tracker("ekf", {"association": {"first_threshold": {"cra": 1.2}}})
     out = tmp_path / "t.yaml"
-    assert main(["resolve-config", "tracker", "--base", "ekf", "--overrides",
-                 '{"motion": {"model_override": {"car": "CA"}}}', "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "resolve-config",
+                "tracker",
+                "--base",
+                "ekf",
+                "--overrides",
+                '{"motion": {"model_override": {"car": "CA"}}}',
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     cfg = load_tracker_config(out)
     assert cfg.model_override == {"car": "CA"}
     assert f"config hash {config_hash(yaml.safe_load(out.read_text()))}" in out.read_text()
@@ -84,15 +99,21 @@ def test_default_config_cross_references(cfg, paper):
     spec.check_config(cfg, paper, load_registry())
 
 
-@pytest.mark.parametrize("path, value, message", [
-    (("experiments", "demo_val", "runs", "ekf", "preset"), "ekff", "experiments.demo_val.runs.ekf.preset"),
-    (("experiments", "demo_val", "runs", "grukf", "training"), "nope", "experiments.demo_val.runs.grukf.training"),
-    (("reports", "nusc_val", "tables", "IV", "CTRA+Ours"), "missing_run", "reports.nusc_val.tables.IV.CTRA+Ours"),
-    (("reports", "nusc_val", "extra_rows", "III", "Fast-Poly"), "missing_run",
-     "reports.nusc_val.extra_rows.III.Fast-Poly"),
-    (("detectors", "centerpoint", "sources", "val"), "no_such_source", "detectors.centerpoint.sources.val"),
-    (("trainings", "demo_grukf", "split"), "demo_test", "detectors.centerpoint_sim.seeds"),
-])
+@pytest.mark.parametrize(
+    "path, value, message",
+    [
+        (("experiments", "demo_val", "runs", "ekf", "preset"), "ekff", "experiments.demo_val.runs.ekf.preset"),
+        (("experiments", "demo_val", "runs", "grukf", "training"), "nope", "experiments.demo_val.runs.grukf.training"),
+        (("reports", "nusc_val", "tables", "IV", "CTRA+Ours"), "missing_run", "reports.nusc_val.tables.IV.CTRA+Ours"),
+        (
+            ("reports", "nusc_val", "extra_rows", "III", "Fast-Poly"),
+            "missing_run",
+            "reports.nusc_val.extra_rows.III.Fast-Poly",
+        ),
+        (("detectors", "centerpoint", "sources", "val"), "no_such_source", "detectors.centerpoint.sources.val"),
+        (("trainings", "demo_grukf", "split"), "demo_test", "detectors.centerpoint_sim.seeds"),
+    ],
+)
 def test_bad_references_name_the_key(cfg, paper, path, value, message):
     bad = copy.deepcopy(cfg)
     node = bad
@@ -138,22 +159,30 @@ def test_core_geometry_and_box_code_re_run_tracking():
     for stage in ("track", "train"):
         for path in ("geometry.py", "boxes.py", "data/scene.py", "tracking", "motion"):
             assert path in STAGE_SOURCES[stage], (stage, path)
-    assert "evaluation" in STAGE_SOURCES["evaluate"]   # every evaluator module, fast_loading.py included
+    assert "evaluation" in STAGE_SOURCES["evaluate"]  # every evaluator module, fast_loading.py included
 
 
 def test_every_listed_code_version_source_exists():
     """A renamed or moved module must be renamed in the stage lists too (a missing path hashes as nothing)."""
     from grutrack.pipeline.codever import _COMMON, PACKAGE, STAGE_SOURCES
 
-    missing = sorted({(stage, rel) for stage, paths in STAGE_SOURCES.items() for rel in (*_COMMON, *paths)
-                      if not (PACKAGE / rel).exists()})
+    missing = sorted(
+        {
+            (stage, rel)
+            for stage, paths in STAGE_SOURCES.items()
+            for rel in (*_COMMON, *paths)
+            if not (PACKAGE / rel).exists()
+        }
+    )
     assert missing == []
 
 
 def test_extra_row_that_is_a_paper_row_is_refused(cfg, paper):
     bad = copy.deepcopy(cfg)
     bad["reports"]["nusc_val"]["extra_rows"] = {"III": {"Poly-MOT": "polymot"}}
-    with pytest.raises(ConfigError, match=r"reports.nusc_val.extra_rows.III.Poly-MOT: 'Poly-MOT' is a row of the paper"):
+    with pytest.raises(
+        ConfigError, match=r"reports.nusc_val.extra_rows.III.Poly-MOT: 'Poly-MOT' is a row of the paper"
+    ):
         spec.check_config(bad, paper, load_registry())
 
 
@@ -177,8 +206,14 @@ def test_workflow_checks_ask_the_dataset_what_it_supports(monkeypatch):
     # does not validate trainings has validation refused
     c = copy.deepcopy(cfg)
     c["detectors"]["av2_sim"] = {"kind": "simulated", "profile": "centerpoint", "seeds": {"train": 1, "val": 2}}
-    c["trainings"]["av2_grukf"] = {"dataset": "av2", "split": "train", "detector": "av2_sim", "config": "grukf",
-                                   "overrides": {}, "validation": None}
+    c["trainings"]["av2_grukf"] = {
+        "dataset": "av2",
+        "split": "train",
+        "detector": "av2_sim",
+        "config": "grukf",
+        "overrides": {},
+        "validation": None,
+    }
     spec.check_config(c, paper, registry)
     c["trainings"]["av2_grukf"]["validation"] = {"split": "val", "every": 4}
     spec.check_config(c, paper, registry)

@@ -15,8 +15,7 @@ from grutrack.boxes import quaternion_from_yaw, rotation_angle_about_z, yaw_from
 from grutrack.data.scene import BoxSet
 from grutrack.errors import ConfigError
 from grutrack.evaluation.track_parity import compare_tracks
-from grutrack.motion.models import (CTRA, PIECEWISE_SWITCH, Bicycle, BicyclePiecewise, CTRAPiecewise,
-                                    make_model)
+from grutrack.motion.models import CTRA, PIECEWISE_SWITCH, Bicycle, BicyclePiecewise, CTRAPiecewise, make_model
 from grutrack.tracking.association import hungarian, threshold_margin
 from grutrack.tracking.config import config_from_dict, preset_path
 from grutrack.tracking.factory import ekf_groups
@@ -57,9 +56,9 @@ def test_threshold_margin_keeps_a_cheap_pair_that_most_pairs_gives_up():
     # det 0 fits track 0 very well; det 1 only fits track 0, det 0 also fits track 1 (poorly)
     cost = np.array([[0.1, 1.1], [1.15, 1e6]])
     thr = np.full((2, 1), 1.2)
-    r, c = hungarian(cost, thr)                  # two pairs: 1.1 + 1.15
+    r, c = hungarian(cost, thr)  # two pairs: 1.1 + 1.15
     assert sorted(zip(r.tolist(), c.tolist())) == [(0, 1), (1, 0)]
-    r, c = threshold_margin(cost, thr)           # margin 1.1 beats 0.1 + 0.05
+    r, c = threshold_margin(cost, thr)  # margin 1.1 beats 0.1 + 0.05
     assert list(zip(r.tolist(), c.tolist())) == [(0, 0)]
 
 
@@ -72,7 +71,7 @@ def test_rotation_angle_matches_pyquaternion_radians_with_axis_up():
     from pyquaternion import Quaternion
 
     rng = np.random.default_rng(0)
-    q = rng.normal(size=(200, 4)) * np.array([1, 0.05, 0.05, 1])   # mostly yaw, some pitch and roll
+    q = rng.normal(size=(200, 4)) * np.array([1, 0.05, 0.05, 1])  # mostly yaw, some pitch and roll
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     expected = []
     for row in q:
@@ -124,7 +123,7 @@ def test_ctra_piecewise_is_ctra_above_the_switch_and_straight_below():
     ds = small[:, 6] * 0.5 + 0.5 * small[:, 7] * 0.25
     np.testing.assert_allclose(out[:, 0] - small[:, 0], ds * np.cos(small[:, 8]), atol=1e-12)
     np.testing.assert_allclose(out[:, 8], small[:, 8] + small[:, 9] * 0.5, atol=1e-15)
-    assert np.max(np.abs(out[:, :2] - arc.f(small, 0.5)[:, :2])) > 1e-6   # the arc turns, the line does not
+    assert np.max(np.abs(out[:, :2] - arc.f(small, 0.5)[:, :2])) > 1e-6  # the arc turns, the line does not
     # F is the exact Jacobian of the straight-line branch: d(x, y)/d omega = 0
     F = pw.F(small, 0.5)
     np.testing.assert_allclose(F, _numeric_jacobian(lambda s: pw.f(s, 0.5), small, 1e-7), atol=1e-6)
@@ -136,9 +135,9 @@ def test_bicycle_piecewise_branches_and_jacobians():
     arc, pw = Bicycle(), BicyclePiecewise()
     turning = _states(40, rng, rng.choice([-1, 1], 40) * rng.uniform(0.01, 0.6, 40))
     out = pw.f(turning, 0.5)
-    np.testing.assert_array_equal(out[:, 6], turning[:, 6])          # v kept
-    np.testing.assert_array_equal(out[:, 7], 0.0)                    # a reset
-    np.testing.assert_allclose(pw.h(turning), arc.h(turning), atol=1e-12)   # same beta below |delta| < pi/2
+    np.testing.assert_array_equal(out[:, 6], turning[:, 6])  # v kept
+    np.testing.assert_array_equal(out[:, 7], 0.0)  # a reset
+    np.testing.assert_allclose(pw.h(turning), arc.h(turning), atol=1e-12)  # same beta below |delta| < pi/2
     no_accel = turning.copy()
     no_accel[:, 7] = 0.0
     np.testing.assert_allclose(out[:, [0, 1, 8]], arc.f(no_accel, 0.5)[:, [0, 1, 8]], atol=1e-9)
@@ -154,7 +153,7 @@ def test_bicycle_piecewise_branches_and_jacobians():
 
     straight = _states(40, rng, rng.uniform(-0.5, 0.5, 40) * PIECEWISE_SWITCH)
     out = pw.f(straight, 0.5)
-    np.testing.assert_array_equal(out[:, 8], straight[:, 8])         # yaw fixed
+    np.testing.assert_array_equal(out[:, 8], straight[:, 8])  # yaw fixed
     np.testing.assert_allclose(out[:, 6], straight[:, 6] + 0.5 * straight[:, 7], atol=1e-15)
     F = pw.F(straight, 0.5)
     np.testing.assert_allclose(F, _numeric_jacobian(lambda s: pw.f(s, 0.5), straight, 1e-7), atol=1e-6)
@@ -164,7 +163,7 @@ def test_make_model_forms():
     assert type(make_model("ctra", "piecewise")) is CTRAPiecewise
     assert type(make_model("Bicycle", "piecewise", wheelbase_ratio=0.8, front_ratio=0.5)) is BicyclePiecewise
     assert type(make_model("CTRA")) is CTRA
-    assert make_model("CA", "piecewise").name == "CA"   # the linear models have one form
+    assert make_model("CA", "piecewise").name == "CA"  # the linear models have one form
     with pytest.raises(ValueError, match="form"):
         make_model("CTRA", "curvy")
 
@@ -178,30 +177,48 @@ def _raw(name: str = "polymot") -> dict:
     return yaml.safe_load(preset_path(name).read_text())
 
 
-@pytest.mark.parametrize("section, key, value, message", [
-    ("association", "assignment", "lapjv", "'association.assignment' must be one of most_pairs, threshold_margin"),
-    ("motion", "time_step", 0, "'motion.time_step' must be 'timestamps' or a positive number of seconds"),
-    ("motion", "time_step", "0.5s", "'motion.time_step' must be 'timestamps'"),
-    ("motion", "ctra_form", "exact", "'motion.ctra_form' must be one of arc, piecewise"),
-    ("motion", "bicycle_form", None, "'motion.bicycle_form' must be one of arc, piecewise"),
-    ("preprocessing", "measured_yaw", "euler", "'preprocessing.measured_yaw' must be one of euler_z, rotation_angle"),
-])
+@pytest.mark.parametrize(
+    "section, key, value, message",
+    [
+        ("association", "assignment", "lapjv", "'association.assignment' must be one of most_pairs, threshold_margin"),
+        ("motion", "time_step", 0, "'motion.time_step' must be 'timestamps' or a positive number of seconds"),
+        ("motion", "time_step", "0.5s", "'motion.time_step' must be 'timestamps'"),
+        ("motion", "ctra_form", "exact", "'motion.ctra_form' must be one of arc, piecewise"),
+        ("motion", "bicycle_form", None, "'motion.bicycle_form' must be one of arc, piecewise"),
+        (
+            "preprocessing",
+            "measured_yaw",
+            "euler",
+            "'preprocessing.measured_yaw' must be one of euler_z, rotation_angle",
+        ),
+    ],
+)
 def test_new_keys_are_validated(section, key, value, message):
     raw = _raw()
     raw[section][key] = value
     with pytest.raises(ConfigError, match=message.replace("(", r"\(")):
         config_from_dict(raw, "p.yaml")
-    del raw[section][key]   # left out: the schema's default, the tracker's behaviour without the key
-    default = {"assignment": "most_pairs", "time_step": None, "ctra_form": "arc", "bicycle_form": "arc",
-               "measured_yaw": "euler_z"}[key]
+    del raw[section][key]  # left out: the schema's default, the tracker's behaviour without the key
+    default = {
+        "assignment": "most_pairs",
+        "time_step": None,
+        "ctra_form": "arc",
+        "bicycle_form": "arc",
+        "measured_yaw": "euler_z",
+    }[key]
     assert getattr(config_from_dict(raw, "p.yaml"), key) == default
 
 
 def test_polymot_preset_values():
     cfg = config_from_dict(_raw())
-    assert (cfg.assignment, cfg.time_step, cfg.ctra_form, cfg.bicycle_form, cfg.measured_yaw) == \
-        ("threshold_margin", 0.5, "piecewise", "piecewise", "rotation_angle")
-    assert cfg.first_threshold[1] == 1.34 and cfg.first_threshold[4] == 1.69   # bus, pedestrian (HEAD)
+    assert (cfg.assignment, cfg.time_step, cfg.ctra_form, cfg.bicycle_form, cfg.measured_yaw) == (
+        "threshold_margin",
+        0.5,
+        "piecewise",
+        "piecewise",
+        "rotation_angle",
+    )
+    assert cfg.first_threshold[1] == 1.34 and cfg.first_threshold[4] == 1.69  # bus, pedestrian (HEAD)
 
 
 @pytest.mark.parametrize("time_step, expected", [("timestamps", 0.4), (0.5, 0.5)])
@@ -213,7 +230,7 @@ def test_time_step(time_step, expected):
     car = np.array([[0.0, 0.0, 0.0, 2.0, 4.5, 1.6, 0.0, 10.0, 0.0]])
     tracker.step(BoxSet(car, np.array([0.9]), np.array([2])), 0)
     out = tracker.step(BoxSet(np.zeros((0, 9)), np.zeros(0), np.zeros(0, dtype=np.int64)), 400_000)
-    assert out.boxes[0, 0] == pytest.approx(10.0 * expected, abs=1e-9)   # coasting car predicted dt ahead
+    assert out.boxes[0, 0] == pytest.approx(10.0 * expected, abs=1e-9)  # coasting car predicted dt ahead
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -222,8 +239,15 @@ def test_time_step(time_step, expected):
 
 
 def _box(x: float, tid: str, name: str = "car", score: float = 0.5, yaw: float = 0.3) -> dict:
-    return {"translation": [x, 1.0, 0.5], "size": [2.0, 4.0, 1.5], "rotation": quaternion_from_yaw(yaw)[0].tolist(),
-            "velocity": [0.0, 0.0], "tracking_id": tid, "tracking_name": name, "tracking_score": score}
+    return {
+        "translation": [x, 1.0, 0.5],
+        "size": [2.0, 4.0, 1.5],
+        "rotation": quaternion_from_yaw(yaw)[0].tolist(),
+        "velocity": [0.0, 0.0],
+        "tracking_id": tid,
+        "tracking_name": name,
+        "tracking_score": score,
+    }
 
 
 def test_compare_tracks():
@@ -233,7 +257,7 @@ def test_compare_tracks():
     for boxes in renamed["results"].values():
         for b in boxes:
             b["tracking_id"] = "x" + b["tracking_id"]
-            b["velocity"] = [7.0, 0.1]                      # Poly-MOT's [v, a]: not compared
+            b["velocity"] = [7.0, 0.1]  # Poly-MOT's [v, a]: not compared
     assert compare_tracks(ref, renamed, scene).identical
     split = copy.deepcopy(ref)
     split["results"]["b"][0]["tracking_id"] = "9"
@@ -259,10 +283,12 @@ def test_report_poly_mot_rows_run_the_polymot_preset():
     cfg = yaml.safe_load((Path(__file__).resolve().parents[1] / "workflow/config/config.yaml").read_text())
     report = cfg["reports"]["nusc_val"]
     runs = cfg["experiments"][report["experiment"]]["runs"]
-    rows = [report["tables"]["III"]["Poly-MOT"]] + [report["tables"]["IV"][r] for r in
-                                                    ("Bicycle+EKF", "CTRA+EKF", "CA+KF")]
+    rows = [report["tables"]["III"]["Poly-MOT"]] + [
+        report["tables"]["IV"][r] for r in ("Bicycle+EKF", "CTRA+EKF", "CA+KF")
+    ]
     for run in rows:
         assert runs[run]["tracker"] == "ekf"
         assert cfg["tracker_presets"][runs[run]["preset"]]["base"] == "polymot", run
-    assert cfg["tracker_presets"][runs["ekf_ctra"]["preset"]]["overrides"] == \
-        {"motion": {"model_override": {"bicycle": "CTRA", "car": "CTRA"}}}
+    assert cfg["tracker_presets"][runs["ekf_ctra"]["preset"]]["overrides"] == {
+        "motion": {"model_override": {"bicycle": "CTRA", "car": "CTRA"}}
+    }

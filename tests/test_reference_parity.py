@@ -18,10 +18,10 @@ import math
 from pathlib import Path
 
 import pytest
+from support.compare import entry_differences
 
 from grutrack.data.nusc_detections import load_detections
 from grutrack.data.nuscenes import load_scenes
-from support.compare import entry_differences
 from grutrack.evaluation.nuscenes_fast import fast_tracking_eval
 from grutrack.evaluation.track_parity import compare_tracks
 from grutrack.export.nuscenes_json import build_submission
@@ -46,8 +46,10 @@ def track(nusc, preset: str, split: str, detections: Path) -> tuple[dict, dict[s
     tracker = build_tracker("ekf", preset)
     dets = load_detections(detections, tokens, tracker.cfg.measured_yaw)
     run = track_scenes(tracker, scenes, dets)
-    return (build_submission(run.results, tokens, tracker.cfg.max_boxes_per_sample),
-            {f.token: s.token for s in scenes for f in s.frames})
+    return (
+        build_submission(run.results, tokens, tracker.cfg.max_boxes_per_sample),
+        {f.token: s.token for s in scenes for f in s.frames},
+    )
 
 
 def _file(root: Path, name: str) -> Path:
@@ -74,7 +76,7 @@ def test_box_for_box(nusc_mini, nusc_reference, preset, name):
 
     summary = fast_tracking_eval(nusc_mini, ours, split)
     expected = json.loads(_file(nusc_reference, f"{prefix}_{name}.metrics_summary.json").read_text())
-    expected.pop("meta"), summary.pop("meta")   # use_camera differs by convention (both trackers write true)
+    expected.pop("meta"), summary.pop("meta")  # use_camera differs by convention (both trackers write true)
     diffs = entry_differences(expected, summary)
     worst = max(diffs, key=diffs.get)
     assert diffs[worst] <= 1e-9, f"{worst}: {diffs[worst]}"
@@ -84,8 +86,17 @@ def test_box_for_box(nusc_mini, nusc_reference, preset, name):
 def test_compare_tracks_cli(nusc_root, nusc_reference, tmp_path, capsys):
     from grutrack.cli import main
 
-    base = ["compare-tracks", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
-            "--reference", str(nusc_reference / "polymot_pointpillars_mini_val.json")]
+    base = [
+        "compare-tracks",
+        "--dataroot",
+        str(nusc_root),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_val",
+        "--reference",
+        str(nusc_reference / "polymot_pointpillars_mini_val.json"),
+    ]
     assert main(base + ["--submission", str(nusc_reference / "polymot_pointpillars_mini_val.json")]) == 0
     out = capsys.readouterr().out
     assert "1095/1095 reference boxes paired" in out and out.strip().endswith("identical")
@@ -99,8 +110,12 @@ def test_compare_tracks_cli(nusc_root, nusc_reference, tmp_path, capsys):
 
 #: the default preset's AMOTA on the reference sets (grutrack/configs/trackers/ekf.yaml gives the evidence for
 #: each of its choices); Poly-MOT's own AMOTA is read from the reference metrics
-EKF_AMOTA = {"mini_val_centerpoint_sim_s7": 0.8757, "mini_val_pointpillars_sim_s7": 0.5798,
-             "pointpillars_mini_val": 0.1842, "mini_train_centerpoint_sim_s7": 0.8656}
+EKF_AMOTA = {
+    "mini_val_centerpoint_sim_s7": 0.8757,
+    "mini_val_pointpillars_sim_s7": 0.5798,
+    "pointpillars_mini_val": 0.1842,
+    "mini_train_centerpoint_sim_s7": 0.8656,
+}
 
 
 @pytest.mark.parametrize("name", list(SETS))
@@ -114,4 +129,4 @@ def test_default_preset_against_polymot(nusc_mini, nusc_reference, name):
     assert amota == pytest.approx(EKF_AMOTA[name], abs=5e-5)
     assert amota >= polymot + 0.005
     if name == "pointpillars_mini_val":
-        assert amota >= polymot + 0.015   # 0.1842 vs 0.1676
+        assert amota >= polymot + 0.015  # 0.1842 vs 0.1676

@@ -24,11 +24,43 @@ def rendered(nusc_root, pointpillars_mini_val, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("render")
     common = ["--dataset", "nuscenes", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val"]
     sub, metrics, out = tmp / "ekf.json", tmp / "metrics.json", tmp / "render"
-    assert main(["track", *common, "--detections", str(pointpillars_mini_val), "--tracker", "ekf", "--config",
-                 "polymot", "--out", str(sub), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "track",
+                *common,
+                "--detections",
+                str(pointpillars_mini_val),
+                "--tracker",
+                "ekf",
+                "--config",
+                "polymot",
+                "--out",
+                str(sub),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert main(["evaluate", *common, "--submission", str(sub), "--out", str(metrics), "--evaluator", "devkit"]) == 0
-    assert main(["render", *common, "--submission", str(sub), "--detections", str(pointpillars_mini_val),
-                 "--scene", "scene-0103", "scene-0916", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "render",
+                *common,
+                "--submission",
+                str(sub),
+                "--detections",
+                str(pointpillars_mini_val),
+                "--scene",
+                "scene-0103",
+                "scene-0916",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     return out, json.loads(metrics.read_text()), json.loads(sub.read_text())
 
 
@@ -93,8 +125,8 @@ def test_frames_and_animations_written(rendered):
 def test_false_positive_drawn_in_fp_colour_where_its_box_is(rendered, nusc_root):
     """scene-0103, frame 3: the EKF's track 0 is a false positive (evaluator's decision); its box, taken from the
     submission and placed with the dataset's ego pose, is filled with the false-positive colour."""
-    from grutrack.render.draw import LAYOUT, to_plot
     from grutrack.boxes import yaw_from_quaternion
+    from grutrack.render.draw import LAYOUT, to_plot
 
     out, _, sub = rendered
     doc = json.loads((out / "counts.json").read_text())
@@ -105,9 +137,9 @@ def test_false_positive_drawn_in_fp_colour_where_its_box_is(rendered, nusc_root)
     box = next(b for b in sub["results"][rec["sample_token"]] if b["tracking_id"] == "0")
     yaw = yaw_from_quaternion(np.asarray(box["rotation"]))[0]
     back = np.asarray(box["translation"][:2]) - box["size"][1] / 4 * np.array([np.cos(yaw), np.sin(yaw)])
-    for point in (np.asarray(box["translation"][:2]), back):   # centre, and halfway to the rear edge
+    for point in (np.asarray(box["translation"][:2]), back):  # centre, and halfway to the rear edge
         col, row = np.round(LAYOUT.pixel(to_plot(point, ego_xy, ego_yaw))[0]).astype(int)
-        assert _near(img[row - 1:row + 2, col - 1:col + 2], FP_RGB).sum() >= 5, (point, img[row, col])
+        assert _near(img[row - 1 : row + 2, col - 1 : col + 2], FP_RGB).sum() >= 5, (point, img[row, col])
     # A matched track of the same frame is not drawn in that colour.
     tp_ids = {b["tracking_id"] for b in sub["results"][rec["sample_token"]]} - {"0"}
     for b in sub["results"][rec["sample_token"]]:
@@ -127,17 +159,22 @@ def test_id_switch_marked_on_its_ground_truth(rendered, nusc_root):
     rec = _frame(doc, "scene-0103", 6)
     assert [(s["previous_track_id"], s["track_id"]) for s in rec["id_switches"]] == [("7", "10")]
     nusc, ego_xy, ego_yaw = _ego(nusc_root, rec["sample_token"])
-    ann = next(nusc.get("sample_annotation", a) for a in nusc.get("sample", rec["sample_token"])["anns"]
-               if nusc.get("sample_annotation", a)["instance_token"] == rec["id_switches"][0]["instance"])
+    ann = next(
+        nusc.get("sample_annotation", a)
+        for a in nusc.get("sample", rec["sample_token"])["anns"]
+        if nusc.get("sample_annotation", a)["instance_token"] == rec["id_switches"][0]["instance"]
+    )
     col, row = LAYOUT.pixel(to_plot(np.asarray(ann["translation"][:2]), ego_xy, ego_yaw))[0]
     img = _pixels(out, rec)
-    rr, cc = np.mgrid[0:img.shape[0], 0:img.shape[1]]
+    rr, cc = np.mgrid[0 : img.shape[0], 0 : img.shape[1]]
     dist = np.hypot(rr - row, cc - col)
     magenta = _near(img, IDS_RGB, 60)
     assert magenta[(dist > 9) & (dist < 19)].sum() >= 60
     quiet = _frame(doc, "scene-0103", 0)
     assert not quiet["id_switches"]
-    view = _pixels(out, quiet)[LAYOUT.margin:LAYOUT.margin + LAYOUT.panel, LAYOUT.margin:LAYOUT.margin + LAYOUT.panel]
+    view = _pixels(out, quiet)[
+        LAYOUT.margin : LAYOUT.margin + LAYOUT.panel, LAYOUT.margin : LAYOUT.margin + LAYOUT.panel
+    ]
     assert _near(view, IDS_RGB, 60).sum() == 0
 
 
@@ -154,15 +191,32 @@ def test_worst_scenes_rank_by_errors(nusc_root, rendered):
     assert [s.name for s in worst] == [max(errors, key=errors.get)] == ["scene-0916"]
 
 
-@pytest.mark.parametrize("case", ["unknown_scene", "other_split", "missing_file", "worst_zero", "av2",
-                                  "detections_other_split"])
+@pytest.mark.parametrize(
+    "case", ["unknown_scene", "other_split", "missing_file", "worst_zero", "av2", "detections_other_split"]
+)
 def test_bad_inputs_exit_2_with_one_line(case, rendered, nusc_root, tmp_path, capsys):
     out, _, sub = rendered
-    args = ["render", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
-            "--submission", str(out.parent / "ekf.json"), "--out", str(tmp_path / "r")]
-    expect = {"unknown_scene": "--scene scene-9999", "other_split": "from other splits",
-              "missing_file": "does not exist", "worst_zero": "--worst", "av2": "has no split folder 'mini_val'",
-              "detections_other_split": "sample tokens of the split are missing"}[case]
+    args = [
+        "render",
+        "--dataroot",
+        str(nusc_root),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "mini_val",
+        "--submission",
+        str(out.parent / "ekf.json"),
+        "--out",
+        str(tmp_path / "r"),
+    ]
+    expect = {
+        "unknown_scene": "--scene scene-9999",
+        "other_split": "from other splits",
+        "missing_file": "does not exist",
+        "worst_zero": "--worst",
+        "av2": "has no split folder 'mini_val'",
+        "detections_other_split": "sample tokens of the split are missing",
+    }[case]
     if case == "unknown_scene":
         args += ["--scene", "scene-9999"]
     else:
@@ -196,9 +250,25 @@ def test_report_embeds_key_frames_of_the_worst_scene(rendered, tmp_path):
     metrics_path.write_text(json.dumps(metrics))
     paper = Path(__file__).resolve().parents[1] / "workflow/config/paper.yaml"
     md = tmp_path / "rep" / "r.md"
-    assert main(["report", "nusc_val", "--out", str(md), "--paper", str(paper), "--experiment",
-                 "mini_val:nuscenes:mini_val:pointpillars", "--run", f"ekf={metrics_path}",
-                 "--render", f"ekf={out / 'counts.json'}"]) == 0
+    assert (
+        main(
+            [
+                "report",
+                "nusc_val",
+                "--out",
+                str(md),
+                "--paper",
+                str(paper),
+                "--experiment",
+                "mini_val:nuscenes:mini_val:pointpillars",
+                "--run",
+                f"ekf={metrics_path}",
+                "--render",
+                f"ekf={out / 'counts.json'}",
+            ]
+        )
+        == 0
+    )
     text = md.read_text()
     # scene-0916 has the most IDS + FP + FN; its id-switch frames (19, 24, 29) are among the key frames shown
     assert "**ekf**: scene-0916, frames 8, 19, 24, 29" in text
@@ -208,7 +278,7 @@ def test_report_embeds_key_frames_of_the_worst_scene(rendered, tmp_path):
         side = int(LAYOUT.panel * 0.45)
         assert im.size == (4 * side + 3 * 6, side + 24)
         strip = np.asarray(im.convert("RGB")).astype(int)
-    assert _near(strip, IDS_RGB, 60).sum() > 100          # the id-switch rings are in the strip
+    assert _near(strip, IDS_RGB, 60).sum() > 100  # the id-switch rings are in the strip
 
 
 def test_report_rejects_a_folder_that_is_not_a_render(tmp_path, capsys):
@@ -217,8 +287,23 @@ def test_report_rejects_a_folder_that_is_not_a_render(tmp_path, capsys):
     m = tmp_path / "m.json"
     m.write_text(json.dumps({"dataset": "nuscenes", "overall": {}, "per_class": {}}))
     paper = Path(__file__).resolve().parents[1] / "workflow/config/paper.yaml"
-    assert main(["report", "demo", "--out", str(tmp_path / "r.md"), "--paper", str(paper),
-                 "--run", f"ekf={m}", "--render", f"ekf={bad}"]) == 2
+    assert (
+        main(
+            [
+                "report",
+                "demo",
+                "--out",
+                str(tmp_path / "r.md"),
+                "--paper",
+                str(paper),
+                "--run",
+                f"ekf={m}",
+                "--render",
+                f"ekf={bad}",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "counts.json" in err[0]
 
@@ -240,5 +325,6 @@ def test_rerun_layers_carry_the_submission_heights(rendered, nusc_root):
     n = len(boxes)
     assert n > 0 and len(lay["centers"]) == len(v.tr_ids) >= n
     np.testing.assert_allclose(lay["centers"][:n] + origin, [b["translation"] for b in boxes], atol=1e-3)
-    np.testing.assert_allclose(lay["half_sizes"][:n] * 2, [[b["size"][1], b["size"][0], b["size"][2]] for b in boxes],
-                               atol=1e-5)
+    np.testing.assert_allclose(
+        lay["half_sizes"][:n] * 2, [[b["size"][1], b["size"][0], b["size"][2]] for b in boxes], atol=1e-5
+    )

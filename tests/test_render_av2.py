@@ -13,14 +13,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_av2 import LOG_A, LOG_B, lt3d_table, simulated_boxsets  # the simulated-detection helpers
 
 from grutrack.cli import main
 from grutrack.data import av2
 
-from test_av2 import LOG_A, LOG_B, lt3d_table, simulated_boxsets   # the simulated-detection helpers
-
 FP_RGB = np.array([0xE6, 0x19, 0x4B])
-FP_FILL_RGB = np.round(0.9 * FP_RGB + 0.1 * 255)      # the fill: alpha 0.9 over the white background
+FP_FILL_RGB = np.round(0.9 * FP_RGB + 0.1 * 255)  # the fill: alpha 0.9 over the white background
 IDS_RGB = np.array([0xC0, 0x00, 0xC0])
 
 
@@ -35,11 +34,43 @@ def rendered(av2_root, tmp_path_factory):
     lt3d_table(scenes, simulated_boxsets(scenes, vocab, seed=0)).to_feather(dets)
     common = ["--dataset", "av2", "--dataroot", str(av2_root), "--split", "val"]
     sub, metrics, out = tmp / "ekf.pkl", tmp / "metrics.json", tmp / "render"
-    assert main(["track", *common, "--detections", str(dets), "--tracker", "ekf", "--config", "ekf",
-                 "--out", str(sub), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "track",
+                *common,
+                "--detections",
+                str(dets),
+                "--tracker",
+                "ekf",
+                "--config",
+                "ekf",
+                "--out",
+                str(sub),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert main(["evaluate", *common, "--submission", str(sub), "--out", str(metrics)]) == 0
-    assert main(["render", *common, "--submission", str(sub), "--detections", str(dets),
-                 "--scene", LOG_A, LOG_B, "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "render",
+                *common,
+                "--submission",
+                str(sub),
+                "--detections",
+                str(dets),
+                "--scene",
+                LOG_A,
+                LOG_B,
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     return out, json.loads(metrics.read_text()), sub, dets
 
 
@@ -137,9 +168,9 @@ def test_false_positive_drawn_in_fp_colour_where_its_box_is(rendered, av2_root):
     assert length > 3.0, "a vehicle-sized false positive"
     img = _pixels(out, rec)
     back = xy - length / 4 * np.array([np.cos(yaw), np.sin(yaw)])
-    for point in (xy, back):          # centre, and halfway to the rear edge
+    for point in (xy, back):  # centre, and halfway to the rear edge
         col, row = np.round(LAYOUT.pixel(to_plot(point, ego_xy, ego_yaw))[0]).astype(int)
-        assert _near(img[row - 1:row + 2, col - 1:col + 2], FP_FILL_RGB).sum() >= 5, (point, img[row, col])
+        assert _near(img[row - 1 : row + 2, col - 1 : col + 2], FP_FILL_RGB).sum() >= 5, (point, img[row, col])
     # the matched tracks' centres in that frame are not in that colour
     from grutrack.export.av2_tracks import read_tracks_pickle
 
@@ -168,7 +199,7 @@ def test_id_switch_marked_on_its_ground_truth(rendered, av2_root):
         frame = next(f for f in scenes[log].frames if f.token == rec["sample_token"])
         ego_xy, ego_yaw = _ego(av2_root, log, int(rec["sample_token"].rsplit(":", 1)[1]))
         img = _pixels(out, rec)
-        rr, cc = np.mgrid[0:img.shape[0], 0:img.shape[1]]
+        rr, cc = np.mgrid[0 : img.shape[0], 0 : img.shape[1]]
         magenta = _near(img, IDS_RGB, 60)
         for sw in rec["id_switches"]:
             assert sw["previous_track_id"] is not None and sw["previous_track_id"] != sw["track_id"]
@@ -177,7 +208,9 @@ def test_id_switch_marked_on_its_ground_truth(rendered, av2_root):
             dist = np.hypot(rr - row, cc - col)
             assert magenta[(dist > 9) & (dist < 19)].sum() >= 60, (log, rec["frame"], sw)
     quiet = next(rec for _, rec in _frames(doc) if not rec["id_switches"])
-    view = _pixels(out, quiet)[LAYOUT.margin:LAYOUT.margin + LAYOUT.panel, LAYOUT.margin:LAYOUT.margin + LAYOUT.panel]
+    view = _pixels(out, quiet)[
+        LAYOUT.margin : LAYOUT.margin + LAYOUT.panel, LAYOUT.margin : LAYOUT.margin + LAYOUT.panel
+    ]
     assert _near(view, IDS_RGB, 60).sum() == 0
 
 
@@ -187,8 +220,27 @@ def test_worst_log_ranks_by_errors(rendered, av2_root, tmp_path):
     doc = _doc(out)
     errors = {s["name"]: s["errors"] for s in doc["scenes"]}
     assert errors[LOG_A] != errors[LOG_B]
-    assert main(["render", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--submission",
-                 str(sub), "--worst", "1", "--no-animation", "--out", str(tmp_path / "w")]) == 0
+    assert (
+        main(
+            [
+                "render",
+                "--dataset",
+                "av2",
+                "--dataroot",
+                str(av2_root),
+                "--split",
+                "val",
+                "--submission",
+                str(sub),
+                "--worst",
+                "1",
+                "--no-animation",
+                "--out",
+                str(tmp_path / "w"),
+            ]
+        )
+        == 0
+    )
     worst = _doc(tmp_path / "w")
     assert [s["name"] for s in worst["scenes"]] == [max(errors, key=errors.get)]
     assert worst["scenes"][0]["animation"] is None
@@ -218,13 +270,20 @@ def test_clear_replay_equals_trackeval_on_random_sequences():
             d = np.linalg.norm(gt_pos[g][:, None] - tr_pos[t][None], axis=2)
             sim = np.maximum(0, 1 - d / 2)
             if trial % 5 == 0:
-                sim = np.round(sim, 1)           # ties
+                sim = np.round(sim, 1)  # ties
             gt_ids.append(g)
             tr_ids.append(t)
             sims.append(sim)
-        data = {"gt_ids": gt_ids, "tracker_ids": tr_ids, "similarity_scores": sims, "num_timesteps": int(T),
-                "num_gt_ids": int(n_gt), "num_tracker_ids": int(n_tr),
-                "num_gt_dets": sum(len(g) for g in gt_ids), "num_tracker_dets": sum(len(t) for t in tr_ids)}
+        data = {
+            "gt_ids": gt_ids,
+            "tracker_ids": tr_ids,
+            "similarity_scores": sims,
+            "num_timesteps": int(T),
+            "num_gt_ids": int(n_gt),
+            "num_tracker_ids": int(n_tr),
+            "num_gt_dets": sum(len(g) for g in gt_ids),
+            "num_tracker_dets": sum(len(t) for t in tr_ids),
+        }
         ref = metric.eval_sequence(data)
         steps = clear_decisions(gt_ids, tr_ids, sims, int(n_gt), 0.5)
         got = {k: sum(s.counts()[k] for s in steps) for k in ("tp", "fp", "fn", "ids")}
@@ -236,11 +295,26 @@ def test_bad_inputs_exit_2_with_one_line(case, rendered, av2_root, tmp_path, cap
     import pickle
 
     out, _, sub, dets = rendered
-    args = ["render", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--submission", str(sub),
-            "--out", str(tmp_path / "r")]
-    expect = {"unknown_log": "--scene 0000", "other_frames": "frames must be exactly",
-              "missing_file": "does not exist", "max_range": "--max-range",
-              "detections_log": "field 'log_id'"}[case]
+    args = [
+        "render",
+        "--dataset",
+        "av2",
+        "--dataroot",
+        str(av2_root),
+        "--split",
+        "val",
+        "--submission",
+        str(sub),
+        "--out",
+        str(tmp_path / "r"),
+    ]
+    expect = {
+        "unknown_log": "--scene 0000",
+        "other_frames": "frames must be exactly",
+        "missing_file": "does not exist",
+        "max_range": "--max-range",
+        "detections_log": "field 'log_id'",
+    }[case]
     args += ["--scene", "0000"] if case == "unknown_log" else ["--worst", "1"]
     if case == "other_frames":
         seqs = pickle.loads(sub.read_bytes())
@@ -282,9 +356,27 @@ def test_av2_report_embeds_key_frames_of_the_worst_log(rendered, tmp_path):
     metrics_path.write_text(json.dumps(metrics))
     paper = Path(__file__).resolve().parents[1] / "workflow/config/paper.yaml"
     md = tmp_path / "rep" / "r.md"
-    assert main(["report", "av2_val", "--out", str(md), "--paper", str(paper), "--experiment",
-                 "sim:av2:val:simulated", "--run", f"ekf={metrics_path}", "--row", "I:Ours=ekf",
-                 "--render", f"ekf={out / 'counts.json'}"]) == 0
+    assert (
+        main(
+            [
+                "report",
+                "av2_val",
+                "--out",
+                str(md),
+                "--paper",
+                str(paper),
+                "--experiment",
+                "sim:av2:val:simulated",
+                "--run",
+                f"ekf={metrics_path}",
+                "--row",
+                "I:Ours=ekf",
+                "--render",
+                f"ekf={out / 'counts.json'}",
+            ]
+        )
+        == 0
+    )
     text = md.read_text()
     assert "## Worst log per run (key frames)" in text and "CLEAR matching" in text
     assert f"**ekf**: {worst['name']}, frames {', '.join(map(str, shown))}" in text
@@ -293,7 +385,7 @@ def test_av2_report_embeds_key_frames_of_the_worst_log(rendered, tmp_path):
         side = int(LAYOUT.panel * 0.45)
         assert im.size == (4 * side + 3 * 6, side + 24)
         strip = np.asarray(im.convert("RGB")).astype(int)
-    assert _near(strip, IDS_RGB, 60).sum() > 100          # the id-switch rings are in the strip
+    assert _near(strip, IDS_RGB, 60).sum() > 100  # the id-switch rings are in the strip
 
 
 def test_nusc_test_report_says_it_has_no_key_frames(tmp_path, capsys):
@@ -305,8 +397,21 @@ def test_nusc_test_report_says_it_has_no_key_frames(tmp_path, capsys):
     assert "## Worst scene per run (key frames)\n\nNone: nuScenes test has no public ground truth" in text
     (tmp_path / "counts.json").write_text("{}")
     capsys.readouterr()
-    assert main(["report", "nusc_test", "--out", str(tmp_path / "u.md"), "--paper", str(paper),
-                 "--render", f"grukf={tmp_path / 'counts.json'}"]) == 2
+    assert (
+        main(
+            [
+                "report",
+                "nusc_test",
+                "--out",
+                str(tmp_path / "u.md"),
+                "--paper",
+                str(paper),
+                "--render",
+                f"grukf={tmp_path / 'counts.json'}",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--render" in err[0] and "no public ground truth" in err[0]
     assert not (tmp_path / "u.md").exists()
@@ -315,6 +420,7 @@ def test_nusc_test_report_says_it_has_no_key_frames(tmp_path, capsys):
 # ------------------------------------------------------------------------------------------------------------
 # --rerun (rerun-sdk is an optional extra: the recording test skips when it is not installed; the rest runs)
 # ------------------------------------------------------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def views_b(rendered, av2_root):
@@ -337,14 +443,16 @@ def test_rerun_layers_carry_the_frame_in_3d(rendered, views_b):
     _, _, sub, _ = rendered
     origin = scene_origin(views_b)
     first = frame_layers(views_b[0], origin)
-    assert np.allclose(first["world/ego"]["centers"][0, :2], 0) and abs(first["world/ego"]["centers"][0, 2] - 0.85) < 1e-4
+    assert (
+        np.allclose(first["world/ego"]["centers"][0, :2], 0) and abs(first["world/ego"]["centers"][0, 2] - 0.85) < 1e-4
+    )
     v = next(v for v in views_b if v.id_switches and v.false_positives)
     lay = frame_layers(v, origin)
     frame = next(f for f in read_tracks_pickle(sub)[LOG_B] if f["timestamp_ns"] == int(v.sample_token.split(":")[1]))
     tr = lay["world/tracks"]
     assert len(tr["centers"]) == len(frame["track_id"]) == len(v.tr_ids)
     np.testing.assert_allclose(tr["centers"] + origin, frame["translation_m"], atol=1e-3)
-    np.testing.assert_allclose(tr["half_sizes"] * 2, frame["size"], atol=1e-5)   # [l, w, h]
+    np.testing.assert_allclose(tr["half_sizes"] * 2, frame["size"], atol=1e-5)  # [l, w, h]
     fp = {f["track_id"] for f in v.false_positives}
     for tid, col, label in zip(v.tr_ids, tr["colors"], tr["labels"]):
         assert (tuple(col[:3]) == tuple(FP_RGB)) == (tid in fp) and label.endswith(" FP") == (tid in fp)
@@ -360,18 +468,37 @@ def test_rerun_layers_carry_the_frame_in_3d(rendered, views_b):
 def test_rerun_recording_written(rendered, av2_root, tmp_path):
     """--rerun writes <log>.rrd: 32 frames on the 'frame' timeline, each with the frame's tracks in their colours."""
     pytest.importorskip("rerun", reason="rerun-sdk is optional (pip install grutrack[rerun])")
-    import rerun.dataframe as rdf
-
     import warnings
 
+    import rerun.dataframe as rdf
     from rerun.error_utils import RerunWarning
 
     out, _, sub, _ = rendered
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        assert main(["render", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--submission",
-                     str(sub), "--scene", LOG_A, "--no-animation", "--rerun", "--out", str(tmp_path / "r")]) == 0
-    assert not [w for w in caught if issubclass(w.category, RerunWarning)]    # rerun drops what it warns about
+        assert (
+            main(
+                [
+                    "render",
+                    "--dataset",
+                    "av2",
+                    "--dataroot",
+                    str(av2_root),
+                    "--split",
+                    "val",
+                    "--submission",
+                    str(sub),
+                    "--scene",
+                    LOG_A,
+                    "--no-animation",
+                    "--rerun",
+                    "--out",
+                    str(tmp_path / "r"),
+                ]
+            )
+            == 0
+        )
+    assert not [w for w in caught if issubclass(w.category, RerunWarning)]  # rerun drops what it warns about
     doc = _doc(tmp_path / "r")
     assert doc["scenes"][0]["rerun"] == f"{LOG_A}.rrd"
     rec = rdf.load_recording(tmp_path / "r" / f"{LOG_A}.rrd")
@@ -388,10 +515,29 @@ def test_rerun_without_the_package_exits_2(rendered, av2_root, tmp_path, monkeyp
     import sys
 
     _, _, sub, _ = rendered
-    monkeypatch.setitem(sys.modules, "rerun", None)     # import rerun raises ImportError
+    monkeypatch.setitem(sys.modules, "rerun", None)  # import rerun raises ImportError
     capsys.readouterr()
-    assert main(["render", "--dataset", "av2", "--dataroot", str(av2_root), "--split", "val", "--submission",
-                 str(sub), "--worst", "1", "--rerun", "--out", str(tmp_path / "r")]) == 2
+    assert (
+        main(
+            [
+                "render",
+                "--dataset",
+                "av2",
+                "--dataroot",
+                str(av2_root),
+                "--split",
+                "val",
+                "--submission",
+                str(sub),
+                "--worst",
+                "1",
+                "--rerun",
+                "--out",
+                str(tmp_path / "r"),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "pip install grutrack[rerun]" in err[0], err
     assert not (tmp_path / "r").exists()
@@ -402,9 +548,26 @@ def test_relative_dataroot_evaluates_with_the_roi(rendered, av2_root, tmp_path, 
     in another folder): same counts as with the absolute path."""
     _, metrics, sub, _ = rendered
     monkeypatch.chdir(av2_root.parent)
-    assert main(["evaluate", "--dataset", "av2", "--dataroot", av2_root.name, "--split", "val", "--submission",
-                 str(sub), "--out", str(tmp_path / "m.json")]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                "--dataset",
+                "av2",
+                "--dataroot",
+                av2_root.name,
+                "--split",
+                "val",
+                "--submission",
+                str(sub),
+                "--out",
+                str(tmp_path / "m.json"),
+            ]
+        )
+        == 0
+    )
     again = json.loads((tmp_path / "m.json").read_text())
     assert again["settings"]["drivable_area_roi"] is True
-    assert {c: (m["tp"], m["fp"], m["fn"], m["ids"]) for c, m in again["per_class"].items()} == \
-        {c: (m["tp"], m["fp"], m["fn"], m["ids"]) for c, m in metrics["per_class"].items()}
+    assert {c: (m["tp"], m["fp"], m["fn"], m["ids"]) for c, m in again["per_class"].items()} == {
+        c: (m["tp"], m["fp"], m["fn"], m["ids"]) for c, m in metrics["per_class"].items()
+    }

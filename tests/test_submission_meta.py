@@ -41,7 +41,7 @@ def test_detection_meta_reaches_the_leaderboard_zip(mini_val, pointpillars_mini_
     raw = _with_meta(pointpillars_mini_val, tmp_path / "raw.json", dict(CAMERA_META, note="kept out"))
     dets, tracks, sub, zipped = (tmp_path / n for n in ("dets.json", "tracks.json", "sub.json", "sub.zip"))
     _run(["convert-detections", "--format", "nuscenes_json", "--raw", raw, *mini_val, "--out", dets])
-    assert json.loads(dets.read_text())["meta"] == CAMERA_META       # the five booleans, nothing else
+    assert json.loads(dets.read_text())["meta"] == CAMERA_META  # the five booleans, nothing else
     _run(["track", *mini_val, "--detections", dets, "--out", tracks, "--no-progress"])
     assert json.loads(tracks.read_text())["meta"] == CAMERA_META
     _run(["submit", *mini_val, "--tracks", tracks, "--out", sub, "--detections", dets, "--tracker", "ekf"])
@@ -59,13 +59,17 @@ def test_simulated_detections_declare_lidar_and_tracks_keep_it(mini_val, tmp_pat
 
 
 BAD_META = {
-    "missing_field": ({k: v for k, v in CAMERA_META.items() if k != "use_camera"},
-                      "field 'meta.use_camera' is missing; expected true or false"),
+    "missing_field": (
+        {k: v for k, v in CAMERA_META.items() if k != "use_camera"},
+        "field 'meta.use_camera' is missing; expected true or false",
+    ),
     "string": (dict(CAMERA_META, use_external="yes"), "field 'meta.use_external' must be true or false, got 'yes'"),
     "number": (dict(CAMERA_META, use_lidar=1), "field 'meta.use_lidar' must be true or false, got 1"),
     "null": (dict(CAMERA_META, use_map=None), "field 'meta.use_map' must be true or false, got None"),
-    "no_meta": (..., "field 'meta' must be an object with the booleans use_camera, use_lidar, use_radar, "
-                     "use_map, use_external"),
+    "no_meta": (
+        ...,
+        "field 'meta' must be an object with the booleans use_camera, use_lidar, use_radar, use_map, use_external",
+    ),
     "meta_list": ([True], "field 'meta' must be an object with the booleans"),
     "no_sensor": (dict(CAMERA_META, use_camera=False), "field 'meta' declares no sensor"),
 }
@@ -75,12 +79,12 @@ BAD_META = {
 def test_bad_meta_is_one_line_naming_the_field(mini_val, pointpillars_mini_val, tmp_path, capsys, case):
     meta, message = BAD_META[case]
     dets = _with_meta(pointpillars_mini_val, tmp_path / "d.json", meta)
-    for argv in (["track", *mini_val, "--detections", dets, "--out", tmp_path / "t.json", "--no-progress"],
-                 ["convert-detections", "--format", "nuscenes_json", "--raw", dets, *mini_val, "--out",
-                  tmp_path / "c.json"]):
+    for argv in (
+        ["track", *mini_val, "--detections", dets, "--out", tmp_path / "t.json", "--no-progress"],
+        ["convert-detections", "--format", "nuscenes_json", "--raw", dets, *mini_val, "--out", tmp_path / "c.json"],
+    ):
         assert main([str(a) for a in argv]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "Traceback" not in err[0], err
         assert f"{dets}: {message}" in err[0], err[0]
     assert not (tmp_path / "t.json").exists() and not (tmp_path / "c.json").exists()
-

@@ -7,8 +7,8 @@ import json
 from pathlib import Path
 from types import SimpleNamespace
 
-from grutrack.training.run import synthetic_inputs
 from grutrack.report.markdown import detections_line, synthetic_training_banner, training_synthetic
+from grutrack.training.run import synthetic_inputs
 
 
 def _ds(descriptions, name="nuscenes"):
@@ -31,17 +31,23 @@ def test_real_data_and_detector_output_is_not_synthetic():
 
 def test_each_synthetic_input_is_named():
     demo = _ds(["SYNTHETIC grutrack demo dataset: straight road"])
-    sim = SimpleNamespace(synthetic={"generator": "grutrack simulate-detections", "profile": "centerpoint",
-                                     "seed": 4})
-    got = synthetic_inputs(demo, sim, _cfg(["centerpoint", "pointpillars"]),
-                           [{"dataset": "demo", "scenes": 700}, {"dataset": "nuscenes", "detections": "x.json"}])
-    assert got == ["scenes of the SYNTHETIC grutrack demo dataset",
-                   "simulated detections (centerpoint profile, seed 4)",
-                   "detections simulated afresh every epoch after the first (centerpoint, pointpillars)",
-                   "1 SYNTHETIC training source(s) (700 demo scenes)"]
+    sim = SimpleNamespace(synthetic={"generator": "grutrack simulate-detections", "profile": "centerpoint", "seed": 4})
+    got = synthetic_inputs(
+        demo,
+        sim,
+        _cfg(["centerpoint", "pointpillars"]),
+        [{"dataset": "demo", "scenes": 700}, {"dataset": "nuscenes", "detections": "x.json"}],
+    )
+    assert got == [
+        "scenes of the SYNTHETIC grutrack demo dataset",
+        "simulated detections (centerpoint profile, seed 4)",
+        "detections simulated afresh every epoch after the first (centerpoint, pointpillars)",
+        "1 SYNTHETIC training source(s) (700 demo scenes)",
+    ]
     # AV2 has no demo tables: only its detections can be synthetic
     assert synthetic_inputs(_ds([], name="av2"), sim, _cfg(), []) == [
-        "simulated detections (centerpoint profile, seed 4)"]
+        "simulated detections (centerpoint profile, seed 4)"
+    ]
 
 
 def _training(folder: Path, synthetic: list[str] | None) -> Path:
@@ -55,7 +61,7 @@ def _training(folder: Path, synthetic: list[str] | None) -> Path:
 
 def test_report_banner_names_each_synthetic_training(tmp_path):
     real = _training(tmp_path / "real", [])
-    old = _training(tmp_path / "old", None)          # a training.yaml written before the list existed
+    old = _training(tmp_path / "old", None)  # a training.yaml written before the list existed
     sim = _training(tmp_path / "sim", ["simulated detections (centerpoint profile, seed 1)"])
     assert training_synthetic(real.parent / "training.yaml") == []
     assert synthetic_training_banner({"a": real, "b": old}) is None

@@ -25,10 +25,12 @@ def test_omp_num_threads_is_ignored(monkeypatch):
 def test_torch_runs_one_thread_under_snakemakes_environment():
     """In a fresh process started as Snakemake starts a `threads: 2` job, the policy leaves torch one intra-op
     thread and BLAS one thread."""
-    code = ("from grutrack.threads import apply_thread_policy; apply_thread_policy(); import torch; "
-            "from threadpoolctl import threadpool_info; "
-            "print(torch.get_num_threads(), max([p['num_threads'] for p in threadpool_info() "
-            "if p['user_api'] == 'blas'] or [1]))")
+    code = (
+        "from grutrack.threads import apply_thread_policy; apply_thread_policy(); import torch; "
+        "from threadpoolctl import threadpool_info; "
+        "print(torch.get_num_threads(), max([p['num_threads'] for p in threadpool_info() "
+        "if p['user_api'] == 'blas'] or [1]))"
+    )
     env = {"PATH": "/usr/bin:/bin", "OMP_NUM_THREADS": "2", "MKL_NUM_THREADS": "2"}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["1", "1"]
@@ -39,4 +41,4 @@ def test_training_and_tracking_rules_ask_for_one_core():
     train = (REPO / "workflow/rules/train.smk").read_text()
     assert re.search(r"^\s*threads:\s*1\b", train, re.M)
     track = (REPO / "workflow/rules/track.smk").read_text()
-    assert not re.search(r"^\s*threads:", track, re.M)     # Snakemake's default: one
+    assert not re.search(r"^\s*threads:", track, re.M)  # Snakemake's default: one

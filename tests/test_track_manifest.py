@@ -40,7 +40,7 @@ def test_track_then_manifest_needs_no_resolve_step(by_hand, tmp_path, capsys):
     m = json.loads((tmp_path / "sub.manifest.json").read_text())
     assert m["tracker_config"]["path"] == str(used) and m["tracker"] == "ekf" and m["samples"] == 81
     assert m["tracker_config"]["config_hash"] == _resolved_hash(tmp_path, "ekf")
-    assert not list(tmp_path.glob(".*.tmp"))                          # written atomically: no temp file left
+    assert not list(tmp_path.glob(".*.tmp"))  # written atomically: no temp file left
 
 
 def test_track_then_submit_writes_the_manifest(by_hand, tmp_path):
@@ -75,11 +75,24 @@ def test_grukf_records_the_matched_box_of_its_checkpoint(by_hand, tmp_path):
 
     data, prov = by_hand
     ck = tmp_path / "m.pt"
-    save_checkpoint(ck, GRUKalmanNet(GRUKFConfig()))    # no training config: matched_box "detection"
+    save_checkpoint(ck, GRUKalmanNet(GRUKFConfig()))  # no training config: matched_box "detection"
     _track(data, prov[1], tmp_path / "g.json", "--tracker", "grukf", "--checkpoint", str(ck), "--device", "cpu")
     used = read_yaml(tmp_path / "g.tracker.yaml")
     assert used["output"]["matched_box"] == "detection"
     ekf = tmp_path / "ekf.yaml"
-    assert main(["resolve-config", "tracker", "--base", "ekf", "--overrides",
-                 '{"output": {"matched_box": "detection"}}', "--out", str(ekf)]) == 0
+    assert (
+        main(
+            [
+                "resolve-config",
+                "tracker",
+                "--base",
+                "ekf",
+                "--overrides",
+                '{"output": {"matched_box": "detection"}}',
+                "--out",
+                str(ekf),
+            ]
+        )
+        == 0
+    )
     assert config_hash(used) == config_hash(read_yaml(ekf))

@@ -27,10 +27,18 @@ def _gt_as_detections(nusc, split: str, path) -> None:
         for f in scene.frames:
             q = quaternion_from_yaw(f.gt.boxes[:, 6])
             results[f.token] = [
-                {"sample_token": f.token, "translation": b[:3].tolist(), "size": b[3:6].tolist(),
-                 "rotation": qi.tolist(), "velocity": b[7:9].tolist(),
-                 "detection_name": TRACKING_CLASSES[lab], "detection_score": 1.0, "attribute_name": ""}
-                for b, qi, lab in zip(f.gt.boxes, q, f.gt.labels)]
+                {
+                    "sample_token": f.token,
+                    "translation": b[:3].tolist(),
+                    "size": b[3:6].tolist(),
+                    "rotation": qi.tolist(),
+                    "velocity": b[7:9].tolist(),
+                    "detection_name": TRACKING_CLASSES[lab],
+                    "detection_score": 1.0,
+                    "attribute_name": "",
+                }
+                for b, qi, lab in zip(f.gt.boxes, q, f.gt.labels)
+            ]
     path.write_text(json.dumps({"meta": LIDAR_META, "results": results}))
 
 
@@ -64,14 +72,16 @@ def test_cli_bad_input(nusc_root, tmp_path, capsys):
     common = ["--version", "v1.0-mini", "--out", str(tmp_path / "o.json"), "--no-progress"]
     det = tmp_path / "d.json"
     det.write_text(json.dumps({"meta": {}, "results": {}}))
-    assert main(["track", "--dataroot", str(tmp_path / "missing"), "--split", "mini_val", "--detections",
-                 str(det), *common]) == 2
+    assert (
+        main(
+            ["track", "--dataroot", str(tmp_path / "missing"), "--split", "mini_val", "--detections", str(det), *common]
+        )
+        == 2
+    )
     assert "dataroot" in capsys.readouterr().err
-    assert main(["track", "--dataroot", str(nusc_root), "--split", "mini_vall", "--detections", str(det),
-                 *common]) == 2
+    assert main(["track", "--dataroot", str(nusc_root), "--split", "mini_vall", "--detections", str(det), *common]) == 2
     assert "unknown split 'mini_vall'" in capsys.readouterr().err
-    assert main(["track", "--dataroot", str(nusc_root), "--split", "mini_val", "--detections", str(det),
-                 *common]) == 2
+    assert main(["track", "--dataroot", str(nusc_root), "--split", "mini_val", "--detections", str(det), *common]) == 2
     assert "81 of 81 sample tokens" in capsys.readouterr().err
     assert not (tmp_path / "o.json").exists()
 
@@ -82,8 +92,25 @@ def test_frames_without_detections_give_empty_samples(nusc_mini, nusc_root, tmp_
     det = tmp_path / "empty.json"
     det.write_text(json.dumps({"meta": LIDAR_META, "results": {t: [] for t in toks}}))
     out = tmp_path / "sub.json"
-    assert main(["track", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val",
-                 "--detections", str(det), "--out", str(out), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "track",
+                "--dataroot",
+                str(nusc_root),
+                "--version",
+                "v1.0-mini",
+                "--split",
+                "mini_val",
+                "--detections",
+                str(det),
+                "--out",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     sub = json.loads(out.read_text())
     assert set(sub["results"]) == set(toks) and all(v == [] for v in sub["results"].values())
 

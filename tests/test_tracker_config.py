@@ -47,33 +47,62 @@ def test_every_preset_key_has_a_comment(preset):
             assert text[i - 1].strip().startswith("#"), f"key without a comment above it: {s}"
 
 
-@pytest.mark.parametrize("mutate, message", [
-    (lambda r: r["association"].__setitem__("first_treshold", r["association"].pop("first_threshold")),
-     "unknown key 'association.first_treshold'"),
-    (lambda r: r["lifecycle"].pop("punish_num"), "missing key 'lifecycle.punish_num'"),
-    (lambda r: r["lifecycle"]["max_age"].pop("car"), "missing key 'lifecycle.max_age.car'"),
-    (lambda r: r["preprocessing"].__setitem__("nms_threshold", 1.5), "'preprocessing.nms_threshold' must be a number in"),
-    (lambda r: r["association"].__setitem__("second_metric", "giou"), "must be one of giou_3d"),
-    (lambda r: r["motion"].__setitem__("model_override", {"car": "CTRV"}), "'motion.model_override.car' must be one of"),
-    (lambda r: r["lifecycle"]["max_age"].__setitem__("bus", 2.5), "must be an integer"),
-    (lambda r: r["association"].__setitem__("algorithm", "greedyy"), "'association.algorithm' must be one of"),
-    (lambda r: r["association"].__setitem__("algorithm", "greedy"),
-     "'association.max_distance' is required with 'association.algorithm: greedy'"),
-    (lambda r: r["association"].update(algorithm="greedy", max_distance=dict.fromkeys(TRACKING_CLASSES, 2.0)),
-     "'association.two_stage' must be false"),
-    (lambda r: r["association"].__setitem__("max_distance", {**dict.fromkeys(TRACKING_CLASSES, 2.0), "car": -1}),
-     "'association.max_distance.car' must be a positive distance"),
-    (lambda r: r["association"].pop("second_threshold"),
-     "'association.second_threshold' is required with 'association.two_stage: true'"),
-    (lambda r: r["lifecycle"].__setitem__("termination", "average_score"),
-     "'lifecycle.delete_threshold' is required with 'lifecycle.termination: average_score'"),
-    (lambda r: r["lifecycle"]["min_hits"].__setitem__("car", 0), "'lifecycle.min_hits.car' must be an integer >= 1"),
-    (lambda r: r["lifecycle"].pop("min_hits"), "missing key 'lifecycle.min_hits'"),
-    (lambda r: r["lifecycle"].__setitem__("punish_num", -1),
-     "'lifecycle.punish_num' must be an integer >= 0 or a mapping over the tracking classes"),
-    (lambda r: r["lifecycle"]["punish_num"].pop("bus"), "missing key 'lifecycle.punish_num.bus'"),
-    (lambda r: r["lifecycle"]["punish_num"].__setitem__("car", 1.5), "'lifecycle.punish_num.car' must be an integer"),
-])
+@pytest.mark.parametrize(
+    "mutate, message",
+    [
+        (
+            lambda r: r["association"].__setitem__("first_treshold", r["association"].pop("first_threshold")),
+            "unknown key 'association.first_treshold'",
+        ),
+        (lambda r: r["lifecycle"].pop("punish_num"), "missing key 'lifecycle.punish_num'"),
+        (lambda r: r["lifecycle"]["max_age"].pop("car"), "missing key 'lifecycle.max_age.car'"),
+        (
+            lambda r: r["preprocessing"].__setitem__("nms_threshold", 1.5),
+            "'preprocessing.nms_threshold' must be a number in",
+        ),
+        (lambda r: r["association"].__setitem__("second_metric", "giou"), "must be one of giou_3d"),
+        (
+            lambda r: r["motion"].__setitem__("model_override", {"car": "CTRV"}),
+            "'motion.model_override.car' must be one of",
+        ),
+        (lambda r: r["lifecycle"]["max_age"].__setitem__("bus", 2.5), "must be an integer"),
+        (lambda r: r["association"].__setitem__("algorithm", "greedyy"), "'association.algorithm' must be one of"),
+        (
+            lambda r: r["association"].__setitem__("algorithm", "greedy"),
+            "'association.max_distance' is required with 'association.algorithm: greedy'",
+        ),
+        (
+            lambda r: r["association"].update(algorithm="greedy", max_distance=dict.fromkeys(TRACKING_CLASSES, 2.0)),
+            "'association.two_stage' must be false",
+        ),
+        (
+            lambda r: r["association"].__setitem__("max_distance", {**dict.fromkeys(TRACKING_CLASSES, 2.0), "car": -1}),
+            "'association.max_distance.car' must be a positive distance",
+        ),
+        (
+            lambda r: r["association"].pop("second_threshold"),
+            "'association.second_threshold' is required with 'association.two_stage: true'",
+        ),
+        (
+            lambda r: r["lifecycle"].__setitem__("termination", "average_score"),
+            "'lifecycle.delete_threshold' is required with 'lifecycle.termination: average_score'",
+        ),
+        (
+            lambda r: r["lifecycle"]["min_hits"].__setitem__("car", 0),
+            "'lifecycle.min_hits.car' must be an integer >= 1",
+        ),
+        (lambda r: r["lifecycle"].pop("min_hits"), "missing key 'lifecycle.min_hits'"),
+        (
+            lambda r: r["lifecycle"].__setitem__("punish_num", -1),
+            "'lifecycle.punish_num' must be an integer >= 0 or a mapping over the tracking classes",
+        ),
+        (lambda r: r["lifecycle"]["punish_num"].pop("bus"), "missing key 'lifecycle.punish_num.bus'"),
+        (
+            lambda r: r["lifecycle"]["punish_num"].__setitem__("car", 1.5),
+            "'lifecycle.punish_num.car' must be an integer",
+        ),
+    ],
+)
 def test_bad_preset_keys(mutate, message):
     raw = copy.deepcopy(_raw())
     mutate(raw)
@@ -97,10 +126,18 @@ def test_unknown_preset_name_lists_available():
 def test_presets_carry_only_what_their_algorithm_reads():
     """Keys a preset's settings never read are left out of the shipped presets (their schema default is a
     placeholder), and leaving out a key with a default gives the tracker's behaviour without it."""
-    unread = {"greedy": ("association.assignment", "association.two_stage", "association.first_metric",
-                         "association.first_threshold", "association.second_metric", "association.second_threshold",
-                         "association.distance_gate"),
-              "hungarian": ("association.max_distance",)}
+    unread = {
+        "greedy": (
+            "association.assignment",
+            "association.two_stage",
+            "association.first_metric",
+            "association.first_threshold",
+            "association.second_metric",
+            "association.second_threshold",
+            "association.distance_gate",
+        ),
+        "hungarian": ("association.max_distance",),
+    }
     for path in sorted(PRESET_DIR.glob("*.yaml")):
         raw = yaml.safe_load(path.read_text())
         keys = {f"{sec}.{k}" for sec, body in raw.items() for k in body}
@@ -113,7 +150,7 @@ def test_presets_carry_only_what_their_algorithm_reads():
         if life.get("termination", "age") == "age":
             never.add("lifecycle.delete_threshold")
         assert not keys & never, (path.name, sorted(keys & never))
-        assert ("motion" in raw) == (assoc["algorithm"] != "greedy"), path.name   # greedy: no motion filter
+        assert ("motion" in raw) == (assoc["algorithm"] != "greedy"), path.name  # greedy: no motion filter
     # a key left out takes its schema default: the same tracker as with the default written out
     raw = copy.deepcopy(_raw())
     raw["output"]["max_boxes_per_sample"] = 500
@@ -123,6 +160,9 @@ def test_presets_carry_only_what_their_algorithm_reads():
     assert full.max_boxes_per_sample == short.max_boxes_per_sample == 500
     # a preset without a motion section runs the default motion config with every motion default
     no_motion = config_from_dict({k: v for k, v in _raw().items() if k != "motion"})
-    assert (no_motion.motion_config, no_motion.time_step, no_motion.ctra_form, no_motion.yaw_flip) == \
-        ("polymot_nusc", None, "arc", False)
-
+    assert (no_motion.motion_config, no_motion.time_step, no_motion.ctra_form, no_motion.yaw_flip) == (
+        "polymot_nusc",
+        None,
+        "arc",
+        False,
+    )

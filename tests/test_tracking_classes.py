@@ -20,7 +20,11 @@ def test_config_and_constants_equal_the_devkits():
     assert ours.num_thresholds == 40 and len(ours.class_names) == 7
     assert ours.dist_fcn_callable is ref.dist_fcn_callable
     assert (tc.TRACKING_METRICS, tc.AMOT_METRICS, tc.AVG_METRIC_MAP, tc.MOT_METRIC_MAP) == (
-        constants.TRACKING_METRICS, constants.AMOT_METRICS, constants.AVG_METRIC_MAP, constants.MOT_METRIC_MAP)
+        constants.TRACKING_METRICS,
+        constants.AMOT_METRICS,
+        constants.AVG_METRIC_MAP,
+        constants.MOT_METRIC_MAP,
+    )
     assert tc.MD_METRICS == data_classes.TrackingMetricData.metrics
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from support.association_bounds import similarity_upper_bound
 
 from grutrack import geometry
 from grutrack.classes import CLASS_INDEX
@@ -13,7 +14,6 @@ from grutrack.tracking.config import load_tracker_config
 from grutrack.tracking.factory import build_tracker
 from grutrack.tracking.preprocess import nms_keep, score_filter
 from grutrack.tracking.tracker import track_scenes
-from support.association_bounds import similarity_upper_bound
 
 CAR, PED = CLASS_INDEX["car"], CLASS_INDEX["pedestrian"]
 
@@ -32,8 +32,11 @@ def test_nms_blend_class_aware():
 
 def test_score_filter_per_class():
     cfg = load_tracker_config("ekf")
-    dets = BoxSet(np.array([_box(0, 0), _box(10, 0), _box(20, 0)]), np.array([0.10, 0.20, 0.10]),
-                  np.array([CAR, CAR, CLASS_INDEX["bus"]]))
+    dets = BoxSet(
+        np.array([_box(0, 0), _box(10, 0), _box(20, 0)]),
+        np.array([0.10, 0.20, 0.10]),
+        np.array([CAR, CAR, CLASS_INDEX["bus"]]),
+    )
     kept = score_filter(dets, cfg.score_threshold)
     assert kept.scores.tolist() == [0.20, 0.10]  # car threshold 0.16, bus 0.0
 
@@ -41,12 +44,30 @@ def test_score_filter_per_class():
 def test_upper_bound_never_below_true_similarity():
     rng = np.random.default_rng(3)
     n = 4000
-    a = np.column_stack([rng.uniform(-15, 15, (n, 2)), rng.uniform(-1, 1, n), rng.uniform(0.3, 8, (n, 3)),
-                         rng.uniform(-np.pi, np.pi, n), np.zeros((n, 2))])
-    b = np.column_stack([rng.uniform(-15, 15, (n, 2)), rng.uniform(-1, 1, n), rng.uniform(0.3, 8, (n, 3)),
-                         rng.uniform(-np.pi, np.pi, n), np.zeros((n, 2))])
-    for name, fn in (("giou_3d", geometry.paired_giou_3d), ("giou_bev", geometry.paired_bev_giou),
-                     ("iou_bev", geometry.paired_bev_iou), ("iou_3d", geometry.paired_iou_3d)):
+    a = np.column_stack(
+        [
+            rng.uniform(-15, 15, (n, 2)),
+            rng.uniform(-1, 1, n),
+            rng.uniform(0.3, 8, (n, 3)),
+            rng.uniform(-np.pi, np.pi, n),
+            np.zeros((n, 2)),
+        ]
+    )
+    b = np.column_stack(
+        [
+            rng.uniform(-15, 15, (n, 2)),
+            rng.uniform(-1, 1, n),
+            rng.uniform(0.3, 8, (n, 3)),
+            rng.uniform(-np.pi, np.pi, n),
+            np.zeros((n, 2)),
+        ]
+    )
+    for name, fn in (
+        ("giou_3d", geometry.paired_giou_3d),
+        ("giou_bev", geometry.paired_bev_giou),
+        ("iou_bev", geometry.paired_bev_iou),
+        ("iou_3d", geometry.paired_iou_3d),
+    ):
         ub, true = similarity_upper_bound(a, b, name), fn(a, b)
         assert np.all(ub >= true - 1e-12), name
         assert (ub < 1).mean() > 0.5  # the bound prunes most far pairs
@@ -54,8 +75,13 @@ def test_upper_bound_never_below_true_similarity():
 
 def _assoc(det, dl, trk, tl, **kw):
     cfg = load_tracker_config("ekf")
-    args = dict(first_metric=cfg.first_metric, first_threshold=cfg.first_threshold, two_stage=True,
-                second_metric="giou_bev", second_threshold=cfg.second_threshold)
+    args = dict(
+        first_metric=cfg.first_metric,
+        first_threshold=cfg.first_threshold,
+        two_stage=True,
+        second_metric="giou_bev",
+        second_threshold=cfg.second_threshold,
+    )
     args.update(kw)
     return associate(np.array(det), np.array(dl), np.array(trk), np.array(tl), **args)
 
@@ -79,10 +105,14 @@ def test_second_stage_rescues_vertical_offset():
 
 
 def _scene(dets_per_frame):
-    frames = [Frame(f"s{i}", 1_000_000 + 500_000 * i, np.zeros(3), np.array([1.0, 0, 0, 0])) for i in
-              range(len(dets_per_frame))]
-    dets = {f.token: BoxSet(np.array(d).reshape(-1, 9), np.full(len(d), 0.9), np.full(len(d), CAR))
-            for f, d in zip(frames, dets_per_frame)}
+    frames = [
+        Frame(f"s{i}", 1_000_000 + 500_000 * i, np.zeros(3), np.array([1.0, 0, 0, 0]))
+        for i in range(len(dets_per_frame))
+    ]
+    dets = {
+        f.token: BoxSet(np.array(d).reshape(-1, 9), np.full(len(d), 0.9), np.full(len(d), CAR))
+        for f, d in zip(frames, dets_per_frame)
+    }
     return Scene("synthetic", "tok", frames), dets
 
 
@@ -96,7 +126,7 @@ def test_lifecycle_ids_punish_decay_and_death():
     ids = {int(i) for o in out for i in o.ids}
     assert ids == {0}  # one identity throughout
     assert [len(o) for o in out[:8]] == [1] * 7 + [0]  # punish_num = 1: one predicted box after the last hit
-    s = 0.9                        # born with the detection's score; matched: 1 - (1 - s_det)(1 - 0.52 s)
+    s = 0.9  # born with the detection's score; matched: 1 - (1 - s_det)(1 - 0.52 s)
     for _ in range(5):
         s = 1 - (1 - 0.9) * (1 - 0.52 * s)
     assert np.allclose([o.scores[0] for o in out[5:7]], [s, s * 0.52])  # car decay rate 0.52, multiply update
@@ -118,8 +148,9 @@ def test_punish_num_per_class():
 
 def test_track_ids_unique_across_scenes():
     scene, dets = _scene([[_box(0, 0)], [_box(0.5, 0)]])
-    scene2 = Scene("b", "t2", [Frame(f"b{i}", f.timestamp, f.ego_translation, f.ego_rotation)
-                               for i, f in enumerate(scene.frames)])
+    scene2 = Scene(
+        "b", "t2", [Frame(f"b{i}", f.timestamp, f.ego_translation, f.ego_rotation) for i, f in enumerate(scene.frames)]
+    )
     dets.update({f"b{i}": dets[f"s{i}"] for i in range(2)})
     run = track_scenes(build_tracker("ekf"), [scene, scene2], dets)
     assert int(run.results["s0"].ids[0]) != int(run.results["b0"].ids[0])
@@ -141,25 +172,34 @@ def test_param_classes_keep_labels_distinct():
 def test_step_with_updates_reports_each_groups_correction_before_the_lifecycle():
     # a car (matched in frames 0-2, missed in 3, matched in 4) and a bicycle of another track group (frames 0-1)
     bike = CLASS_INDEX["bicycle"]
-    frames = [[(_box(0, 0, vx=10.0), CAR), (_box(30, 5), bike)], [(_box(5.1, 0, vx=10.0), CAR), (_box(30, 5.2), bike)],
-              [(_box(10, 0, vx=10.0), CAR)], [], [(_box(20.2, 0, vx=10.0), CAR)]]
+    frames = [
+        [(_box(0, 0, vx=10.0), CAR), (_box(30, 5), bike)],
+        [(_box(5.1, 0, vx=10.0), CAR), (_box(30, 5.2), bike)],
+        [(_box(10, 0, vx=10.0), CAR)],
+        [],
+        [(_box(20.2, 0, vx=10.0), CAR)],
+    ]
     plain, recording, silent = build_tracker("ekf"), build_tracker("ekf"), build_tracker("ekf")
     car_group = int(recording.group_of_class[CAR])
     bike_group = int(recording.group_of_class[bike])
     assert car_group != bike_group
     reports = []
     for i, f in enumerate(frames):
-        d = BoxSet(np.array([b for b, _ in f]).reshape(-1, 9), np.full(len(f), 0.9),
-                   np.array([c for _, c in f], dtype=np.int64))
+        d = BoxSet(
+            np.array([b for b, _ in f]).reshape(-1, 9),
+            np.full(len(f), 0.9),
+            np.array([c for _, c in f], dtype=np.int64),
+        )
         out, updates = recording.step_with_updates(d, 1_000_000 + 500_000 * i)
         ref = plain.step(d, 1_000_000 + 500_000 * i)
         assert np.array_equal(out.boxes, ref.boxes) and np.array_equal(out.ids, ref.ids)  # same tracking
-        nothing, same = silent.step_with_updates(d, 1_000_000 + 500_000 * i, output=False)   # as training runs it
+        nothing, same = silent.step_with_updates(d, 1_000_000 + 500_000 * i, output=False)  # as training runs it
         assert nothing is None
-        assert [(u.group, u.rows.tolist(), u.ids.tolist(), u.hits.tolist(), u.posterior.x.tolist()) for u in same] == \
-            [(u.group, u.rows.tolist(), u.ids.tolist(), u.hits.tolist(), u.posterior.x.tolist()) for u in updates]
+        assert [(u.group, u.rows.tolist(), u.ids.tolist(), u.hits.tolist(), u.posterior.x.tolist()) for u in same] == [
+            (u.group, u.rows.tolist(), u.ids.tolist(), u.hits.tolist(), u.posterior.x.tolist()) for u in updates
+        ]
         reports.append({u.group: u for u in updates})
-    assert reports[0] == {}                               # no track existed at the first predict
+    assert reports[0] == {}  # no track existed at the first predict
     assert sorted(reports[1]) == sorted([car_group, bike_group])
     car = reports[1][car_group]
     assert (car.rows.tolist(), car.det_rows.tolist(), car.ids.tolist(), car.labels.tolist()) == ([0], [0], [0], [CAR])
@@ -168,7 +208,7 @@ def test_step_with_updates_reports_each_groups_correction_before_the_lifecycle()
     assert 5.0 < car.posterior.x[0, 0] < 5.1 and car.prior.x[0, 0] == pytest.approx(5.0)
     missed = reports[3][car_group]
     assert len(missed.rows) == 0 and missed.posterior is missed.prior and missed.misses.tolist() == [1]
-    late = reports[4][car_group]                           # hits and misses as they were before this frame
+    late = reports[4][car_group]  # hits and misses as they were before this frame
     assert (late.rows.tolist(), late.hits.tolist(), late.misses.tolist()) == ([0], [3], [2])
     assert late.prior.x[0, 0] < late.posterior.x[0, 0] < 20.2
     assert not hasattr(recording, "update_hook")

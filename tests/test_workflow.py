@@ -40,8 +40,9 @@ reports:
 """
 
 
-def snakemake(workdir: Path, *targets: str, options: tuple[str, ...] = (), configs: tuple[str, ...] = (),
-              timeout: int = 600):
+def snakemake(
+    workdir: Path, *targets: str, options: tuple[str, ...] = (), configs: tuple[str, ...] = (), timeout: int = 600
+):
     """Run snakemake on the repository's Snakefile in ``workdir``; returns the completed process."""
     cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(REPO / "Snakefile"), "--cores", "2", *options]
     if configs:
@@ -83,20 +84,30 @@ def test_demo_report_tables_match_metrics_json(demo_run):
         doc = json.loads((demo_run / f"reports/metrics/demo_val/centerpoint_sim/{run}.json").read_text())
         o = doc["overall"]
         row = re.search(rf"^\| {run} \| (.+) \|$", text, re.M).group(1).split(" | ")
-        assert row[:5] == [f"{100 * o['amota']:.1f}", f"{100 * o['amotp']:.1f}", f"{100 * o['mota']:.1f}",
-                           f"{100 * o['recall']:.1f}", f"{o['ids']:.0f}"]
-    assert re.search(r"^\| Ours \| 73\.2 \| 51\.1 \| 267 \|$", text, re.M)          # paper numbers, labelled
+        assert row[:5] == [
+            f"{100 * o['amota']:.1f}",
+            f"{100 * o['amotp']:.1f}",
+            f"{100 * o['mota']:.1f}",
+            f"{100 * o['recall']:.1f}",
+            f"{o['ids']:.0f}",
+        ]
+    assert re.search(r"^\| Ours \| 73\.2 \| 51\.1 \| 267 \|$", text, re.M)  # paper numbers, labelled
     # the constant-gain ablation: a training of no step, shown beside the EKF and the trained GRU-KF
-    assert "## Training 'demo_constant_gain'\n\nNo training step: the network as initialised, whose gain is one " \
-           "constant" in text
+    assert (
+        "## Training 'demo_constant_gain'\n\nNo training step: the network as initialised, whose gain is one "
+        "constant" in text
+    )
     assert re.search(r"^\| demo_constant_gain \| .* \| no step \(the initialised network\) \|", text, re.M)
     # the default recipe's learning curve on the scene held out of demo_train, with the EKF's line
-    assert re.search(r"Validated on 1 scene held out of demo_train \(demo-scene-\d+\) with 4 detection sets "
-                     r"\(given, centerpoint, pointpillars, centerpoint_velfail; AMOTA their mean\), not trained on; "
-                     r"step 0 is the network before training\. model\.pt holds step [01] \(the latest step within "
-                     r"one standard error of the best validation AMOTA, AMOTA 0\.\d{3}\); tracker preset 'ekf' "
-                     r"\(its EKF\) on the same scenes: 0\.\d{3}\.", text)
-    assert "model.pt holds step 1 (the last step" in text                      # demo_grukf_last
+    assert re.search(
+        r"Validated on 1 scene held out of demo_train \(demo-scene-\d+\) with 4 detection sets "
+        r"\(given, centerpoint, pointpillars, centerpoint_velfail; AMOTA their mean\), not trained on; "
+        r"step 0 is the network before training\. model\.pt holds step [01] \(the latest step within "
+        r"one standard error of the best validation AMOTA, AMOTA 0\.\d{3}\); tracker preset 'ekf' "
+        r"\(its EKF\) on the same scenes: 0\.\d{3}\.",
+        text,
+    )
+    assert "model.pt holds step 1 (the last step" in text  # demo_grukf_last
     assert "figures/demo_val/learning_curve_demo_grukf.png" in text
     assert "config hash" in text and "grutrack 0.1.0" in text and "centerpoint_sim.json" in text
     links = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", text)
@@ -116,32 +127,73 @@ def test_nothing_to_do_after_the_run(demo_run):
 
 def test_demo_data_by_hand_with_the_same_settings_reruns_nothing(demo_run):
     # the README's demo-data command, with the settings of the tiny config, over the workflow's demo dataset
-    proc = subprocess.run([sys.executable, "-m", "grutrack", "demo-data", "--out", "data/demo", "--scenes", "3",
-                           "--frames-per-scene", "12", "--seed", "0", "--version", "v1.0-demo"], cwd=demo_run,
-                          capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "grutrack",
+            "demo-data",
+            "--out",
+            "data/demo",
+            "--scenes",
+            "3",
+            "--frames-per-scene",
+            "12",
+            "--seed",
+            "0",
+            "--version",
+            "v1.0-demo",
+        ],
+        cwd=demo_run,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0 and "already up to date" in proc.stdout, proc.stdout + proc.stderr
-    assert planned(snakemake(demo_run, "reports/demo_val.md", "reports/demo_lb.md", options=("-n",),
-                             configs=("tiny.yaml",))) == {}
+    assert (
+        planned(
+            snakemake(demo_run, "reports/demo_val.md", "reports/demo_lb.md", options=("-n",), configs=("tiny.yaml",))
+        )
+        == {}
+    )
 
 
 def test_tracker_threshold_change_reruns_track_submit_evaluate_render_report(demo_run):
     (demo_run / "thr.yaml").write_text(
-        "tracker_presets:\n  ekf: {overrides: {preprocessing: {score_threshold: {car: 0.25}}}}\n")
-    proc = snakemake(demo_run, "reports/demo_val.md", options=("-n", "--quiet", "rules"),
-                     configs=("tiny.yaml", "thr.yaml"))
+        "tracker_presets:\n  ekf: {overrides: {preprocessing: {score_threshold: {car: 0.25}}}}\n"
+    )
+    proc = snakemake(
+        demo_run, "reports/demo_val.md", options=("-n", "--quiet", "rules"), configs=("tiny.yaml", "thr.yaml")
+    )
     # only the run whose preset is `ekf` reruns; the GRU-KF run has its own preset entry (`grukf`)
-    assert planned(proc) == {"resolve_tracker": 1, "track": 1, "submit": 1, "manifest": 1, "evaluate": 1,
-                             "render": 1, "report": 1}, proc.stdout[-2000:]
+    assert planned(proc) == {
+        "resolve_tracker": 1,
+        "track": 1,
+        "submit": 1,
+        "manifest": 1,
+        "evaluate": 1,
+        "render": 1,
+        "report": 1,
+    }, proc.stdout[-2000:]
 
 
 def test_training_change_reruns_train_and_its_dependents_only(demo_run):
     (demo_run / "lr.yaml").write_text("trainings:\n  demo_grukf: {overrides: {epochs: 1, lr: 2.0e-5}}\n")
-    proc = snakemake(demo_run, "reports/demo_val.md", options=("-n", "--quiet", "rules"),
-                     configs=("tiny.yaml", "lr.yaml"))
+    proc = snakemake(
+        demo_run, "reports/demo_val.md", options=("-n", "--quiet", "rules"), configs=("tiny.yaml", "lr.yaml")
+    )
     # only the GRU-KF run depends on the training (its evaluation, and the devkit cross-check of that run); the
     # EKF run is untouched
-    assert planned(proc) == {"train": 1, "track": 1, "submit": 1, "manifest": 1, "evaluate": 1, "cross_check": 1,
-                             "render": 1, "report": 1}
+    assert planned(proc) == {
+        "train": 1,
+        "track": 1,
+        "submit": 1,
+        "manifest": 1,
+        "evaluate": 1,
+        "cross_check": 1,
+        "render": 1,
+        "report": 1,
+    }
 
 
 def test_av2_report_through_the_same_rules_with_simulated_detections(demo_run, av2_root):
@@ -153,13 +205,14 @@ def test_av2_report_through_the_same_rules_with_simulated_detections(demo_run, a
         "experiments:\n  av2_val:\n    detectors: [centerpoint_sim]\n"
         "    runs: {greedy: {tracker: greedy, preset: greedy, training: null},\n"
         "           ab3dmot: {tracker: ab3dmot, preset: ab3dmot, training: null},\n"
-        "           grukf: {tracker: grukf, preset: grukf, training: demo_grukf}}\n")
+        "           grukf: {tracker: grukf, preset: grukf, training: demo_grukf}}\n"
+    )
     proc = snakemake(demo_run, "reports/av2_val.md", configs=("tiny.yaml", "av2.yaml"))
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert (demo_run / "detections/simulated/av2/val/centerpoint_sim.feather").is_file()
     text = (demo_run / "reports/av2_val.md").read_text()
     assert "SYNTHETIC DETECTIONS" in text and "centerpoint_sim" in text
-    for run in ("greedy", "ab3dmot", "grukf", "ekf"):          # ekf: the config's extra Table I row
+    for run in ("greedy", "ab3dmot", "grukf", "ekf"):  # ekf: the config's extra Table I row
         doc = json.loads((demo_run / f"reports/metrics/av2_val/centerpoint_sim/{run}.json").read_text())
         assert doc["dataset"] == "av2" and doc["logs"] == 2 and 0.2 < doc["overall"]["hota"] < 1.0
         assert f"{100 * doc['overall']['hota']:.1f}" in text
@@ -182,7 +235,7 @@ def test_leaderboard_zip_rule_and_report(demo_run):
     text = (demo_run / "reports/demo_lb.md").read_text()
     assert "submissions/demo_lb_centerpoint_sim.zip" in text and "Ours (LargeKernel3D)" in text
     assert re.search(r"^\| Ours \(CenterPoint\) \| 70\.0 \| 50\.4 \| 353 \|$", text, re.M)
-    assert not (demo_run / "reports/metrics/demo_lb").exists()       # no ground truth, no evaluation
+    assert not (demo_run / "reports/metrics/demo_lb").exists()  # no ground truth, no evaluation
 
 
 def test_leaderboard_zip_validates_before_zipping(demo_run, tmp_path):
@@ -191,8 +244,9 @@ def test_leaderboard_zip_validates_before_zipping(demo_run, tmp_path):
     from grutrack.export.leaderboard import build_zip
 
     sub = demo_run / "submissions/demo_val/centerpoint_sim/grukf.json"
-    tokens = [f.token for s in load_scenes(open_nuscenes(demo_run / "data/demo", "v1.0-demo"), "demo_val")
-              for f in s.frames]
+    tokens = [
+        f.token for s in load_scenes(open_nuscenes(demo_run / "data/demo", "v1.0-demo"), "demo_val") for f in s.frames
+    ]
     info = build_zip(sub, tokens, tmp_path / "lb.zip")
     with zipfile.ZipFile(tmp_path / "lb.zip") as zf:
         assert zf.namelist() == ["grukf.json"] and json.loads(zf.read("grukf.json"))["meta"]["use_lidar"]
@@ -205,30 +259,48 @@ def test_leaderboard_zip_validates_before_zipping(demo_run, tmp_path):
     assert not (tmp_path / "bad.zip").exists()
 
 
-@pytest.mark.parametrize("overlay, key", [
-    ("datasets:\n  demo: {scenez: 3}\n", "scenez"),
-    ("trakers: {}\n", "trakers"),
-    ("datasets:\n  demo: {scenes: three}\n", "config key datasets.demo.scenes (from --configfile "),
-    ("datasets:\n  demo: {scenes: three}\n", "bad.yaml): 'three' is not of type 'integer'"),
-    ("tracker_presets:\n  ekf: {overrides: {lifecycle: {punish_nun: 2}}}\n", "lifecycle.punish_nun"),
-])
+@pytest.mark.parametrize(
+    "overlay, key",
+    [
+        ("datasets:\n  demo: {scenez: 3}\n", "scenez"),
+        ("trakers: {}\n", "trakers"),
+        ("datasets:\n  demo: {scenes: three}\n", "config key datasets.demo.scenes (from --configfile "),
+        ("datasets:\n  demo: {scenes: three}\n", "bad.yaml): 'three' is not of type 'integer'"),
+        ("tracker_presets:\n  ekf: {overrides: {lifecycle: {punish_nun: 2}}}\n", "lifecycle.punish_nun"),
+    ],
+)
 def test_misspelt_config_key_fails_before_any_rule_runs(tmp_path, overlay, key):
     (tmp_path / "bad.yaml").write_text(overlay)
     proc = snakemake(tmp_path, "reports/demo_val.md", configs=("bad.yaml",))
     assert proc.returncode != 0
     assert key in proc.stderr + proc.stdout
-    assert not (tmp_path / "data").exists() and not (tmp_path / "logs").exists()   # nothing ran
+    assert not (tmp_path / "data").exists() and not (tmp_path / "logs").exists()  # nothing ran
 
 
 def test_config_overrides_on_the_command_line_are_typed(tmp_path):
     from grutrack.pipeline.spec import typed_cli_config
 
-    got = typed_cli_config({"a": {"n": "12", "x": "1.2", "e": "1e-5", "b": "true", "z": "null", "s": "v1.0-mini",
-                                  "p": "/data/12", "l": ["3", "CTRA"]}, "top": 7})
-    assert got == {"a": {"n": 12, "x": 1.2, "e": 1e-5, "b": True, "z": None, "s": "v1.0-mini", "p": "/data/12",
-                         "l": [3, "CTRA"]}, "top": 7}
+    got = typed_cli_config(
+        {
+            "a": {
+                "n": "12",
+                "x": "1.2",
+                "e": "1e-5",
+                "b": "true",
+                "z": "null",
+                "s": "v1.0-mini",
+                "p": "/data/12",
+                "l": ["3", "CTRA"],
+            },
+            "top": 7,
+        }
+    )
+    assert got == {
+        "a": {"n": 12, "x": 1.2, "e": 1e-5, "b": True, "z": None, "s": "v1.0-mini", "p": "/data/12", "l": [3, "CTRA"]},
+        "top": 7,
+    }
     # numbers inside --config values reach the schema and the preset check as numbers
-    train = "trainings={demo_grukf: {overrides: {epochs: 12, lr: 1e-4}}}"      # as the README shows it
+    train = "trainings={demo_grukf: {overrides: {epochs: 12, lr: 1e-4}}}"  # as the README shows it
     preset = "tracker_presets={ekf: {base: ekf, overrides: {association: {first_threshold: {car: 1.2}}}}}"
     proc = snakemake(tmp_path, "reports/demo_val.md", options=("-n", "--config", train, preset))
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -241,6 +313,7 @@ def test_missing_dataroot_names_the_config_key(tmp_path):
     proc = snakemake(tmp_path, "reports/nusc_val.md", options=("-n",))
     assert proc.returncode != 0
     assert "config key datasets.nuscenes.dataroot is not set" in proc.stderr + proc.stdout
-    proc = snakemake(tmp_path, "reports/av2_val.md",
-                     options=("-n", "--config", f"datasets={{nuscenes: {{dataroot: {tmp_path}}}}}"))
+    proc = snakemake(
+        tmp_path, "reports/av2_val.md", options=("-n", "--config", f"datasets={{nuscenes: {{dataroot: {tmp_path}}}}}")
+    )
     assert "datasets.av2.dataroot is not set" in proc.stderr + proc.stdout

@@ -4,8 +4,8 @@
 from __future__ import annotations
 
 import argparse
-import os
 import importlib
+import os
 import sys
 
 from grutrack import __version__
@@ -32,7 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="grutrack",
         description="3D multi-object tracking with a semi-supervised GRU-Kalman filter: "
-                    "tracking, official submissions and evaluation for nuScenes and Argoverse 2.")
+        "tracking, official submissions and evaluation for nuScenes and Argoverse 2.",
+    )
     parser.add_argument("--version", action="version", version=f"grutrack {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:
@@ -45,12 +46,12 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         status = int(args.func(args) or 0)
-        sys.stdout.flush()          # a closed stdout shows here, not at interpreter exit
+        sys.stdout.flush()  # a closed stdout shows here, not at interpreter exit
         return status
     except BrokenPipeError:
         # the reader of stdout went away (e.g. `| head -1`); outputs are already written (atomically): say no more
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 141                  # 128 + SIGPIPE, what a shell reports for a command killed by it
+        return 141  # 128 + SIGPIPE, what a shell reports for a command killed by it
     except GrutrackError as exc:
         print(f"grutrack {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -5,28 +5,41 @@ from __future__ import annotations
 
 import argparse
 
-from grutrack.datasets import DATASETS   # names only: the dataset modules are imported when one is opened
+from grutrack.datasets import DATASETS  # names only: the dataset modules are imported when one is opened
 
 
 def add_dataset_args(p: argparse.ArgumentParser, split_help: str, repeat: bool = False) -> None:
     """--dataset, --dataroot, --version, --split (``repeat``: once or more, a list) and the AV2 reading options,
     as every dataset-reading command takes them."""
     p.add_argument("--dataset", default="nuscenes", choices=tuple(DATASETS), help="dataset (default: nuscenes)")
-    p.add_argument("--dataroot", required=True,
-                   help="nuScenes dataroot (holds <version>/) or AV2 sensor root (holds <split>/<log_id>/)")
+    p.add_argument(
+        "--dataroot",
+        required=True,
+        help="nuScenes dataroot (holds <version>/) or AV2 sensor root (holds <split>/<log_id>/)",
+    )
     p.add_argument("--version", default=None, help="nuScenes version, e.g. v1.0-trainval, v1.0-mini (nuScenes only)")
     p.add_argument("--split", required=True, help=split_help, **({"action": "append"} if repeat else {}))
     g = p.add_argument_group("av2 only")
-    g.add_argument("--rate", type=float, default=2.0,
-                   help="frames per second tracked and evaluated: annotation sweeps sub-sampled to this rate "
-                        "(default 2)")
-    g.add_argument("--all-categories", action="store_true",
-                   help="all 26 AV2 competition categories (default: the 7 classes of Table I)")
+    g.add_argument(
+        "--rate",
+        type=float,
+        default=2.0,
+        help="frames per second tracked and evaluated: annotation sweeps sub-sampled to this rate (default 2)",
+    )
+    g.add_argument(
+        "--all-categories",
+        action="store_true",
+        help="all 26 AV2 competition categories (default: the 7 classes of Table I)",
+    )
 
 
 def dataset_of(args: argparse.Namespace):
     """The :class:`grutrack.datasets.Dataset` the arguments name."""
     from grutrack.datasets import DatasetOptions, open_dataset
 
-    return open_dataset(args.dataset, DatasetOptions(dataroot=args.dataroot, version=args.version,
-                                                     rate_hz=args.rate, all_categories=args.all_categories))
+    return open_dataset(
+        args.dataset,
+        DatasetOptions(
+            dataroot=args.dataroot, version=args.version, rate_hz=args.rate, all_categories=args.all_categories
+        ),
+    )

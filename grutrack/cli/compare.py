@@ -11,13 +11,16 @@ from grutrack.errors import ConfigError, InputFormatError
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``compare-tracks``."""
-    p = sub.add_parser("compare-tracks", help="compare a tracking submission with a reference one, box for box",
-                       description="Pair every box of a reference nuScenes tracking submission with a box of the "
-                                   "same class in the submission (centre and size within --tolerance metres), "
-                                   "per sample, and compare box counts, scores, yaws and the partition of boxes "
-                                   "into tracks (tracking ids may differ and may restart per scene; velocity, "
-                                   "pitch / roll and meta are not compared). Exit status 0 when identical, 1 "
-                                   "otherwise.")
+    p = sub.add_parser(
+        "compare-tracks",
+        help="compare a tracking submission with a reference one, box for box",
+        description="Pair every box of a reference nuScenes tracking submission with a box of the "
+        "same class in the submission (centre and size within --tolerance metres), "
+        "per sample, and compare box counts, scores, yaws and the partition of boxes "
+        "into tracks (tracking ids may differ and may restart per scene; velocity, "
+        "pitch / roll and meta are not compared). Exit status 0 when identical, 1 "
+        "otherwise.",
+    )
     add_dataset_args(p, "split whose samples are compared: mini_val, val, ... or a custom split")
     p.add_argument("--reference", required=True, help="reference tracking submission (JSON)")
     p.add_argument("--submission", required=True, help="tracking submission to check (JSON)")
@@ -30,8 +33,10 @@ def _results(path: str) -> dict:
 
     doc = read_json(path, "tracking submission")
     if not isinstance(doc, dict) or not isinstance(doc.get("results"), dict):
-        raise InputFormatError(f"{path}: expected a JSON object with a 'results' object "
-                               f"{{sample_token: [box, ...]}} (official nuScenes tracking format)")
+        raise InputFormatError(
+            f"{path}: expected a JSON object with a 'results' object "
+            f"{{sample_token: [box, ...]}} (official nuScenes tracking format)"
+        )
     return doc
 
 
@@ -49,9 +54,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         parity = compare_tracks(ref, ours, {f.token: s.token for s in scenes for f in s.frames}, args.tolerance)
     except (KeyError, TypeError, ValueError) as exc:
-        raise InputFormatError(f"{args.reference} / {args.submission}: a box lacks a well-formed field "
-                               f"(translation, size, rotation, tracking_id, tracking_name, tracking_score): "
-                               f"{exc}") from exc
+        raise InputFormatError(
+            f"{args.reference} / {args.submission}: a box lacks a well-formed field "
+            f"(translation, size, rotation, tracking_id, tracking_name, tracking_score): "
+            f"{exc}"
+        ) from exc
     print(parity.summary())
     print("identical" if parity.identical else "different")
     return 0 if parity.identical else 1

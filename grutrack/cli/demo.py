@@ -16,34 +16,50 @@ def add_parser(subparsers) -> None:
     """Register ``demo-data``, ``simulate-detections`` and ``dataset-stats``."""
     from grutrack.data.demo_defaults import DEFAULT_SCENES, FRAMES_PER_SCENE, VERSION
 
-    p = subparsers.add_parser("demo-data", help="write the SYNTHETIC nuScenes-format demo dataset",
-                              description="Generate a synthetic dataset in nuScenes table format (devkit-loadable, "
-                                          "custom splits demo_train / demo_val / demo_all). Deterministic per seed.")
+    p = subparsers.add_parser(
+        "demo-data",
+        help="write the SYNTHETIC nuScenes-format demo dataset",
+        description="Generate a synthetic dataset in nuScenes table format (devkit-loadable, "
+        "custom splits demo_train / demo_val / demo_all). Deterministic per seed.",
+    )
     p.add_argument("--out", required=True, help="dataroot to write (replaced if it is a previous demo)")
     p.add_argument("--scenes", type=int, default=DEFAULT_SCENES, help=f"number of scenes (default {DEFAULT_SCENES})")
-    p.add_argument("--frames-per-scene", type=int, default=FRAMES_PER_SCENE,
-                   help=f"keyframes per scene at 2 Hz (default {FRAMES_PER_SCENE})")
+    p.add_argument(
+        "--frames-per-scene",
+        type=int,
+        default=FRAMES_PER_SCENE,
+        help=f"keyframes per scene at 2 Hz (default {FRAMES_PER_SCENE})",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--version", default=VERSION, help=f"version folder name (default {VERSION})")
     p.set_defaults(func=run_demo_data)
 
-    p = subparsers.add_parser("simulate-detections", help="simulate detector output from ground truth",
-                              description="Sample SYNTHETIC detections from the ground truth of a split with a "
-                                          "detector profile, in the format the dataset's detections come in: "
-                                          "nuScenes, the official detection-submission JSON; av2, an LT3D "
-                                          "detection table (feather, ego frame) at the tracked frames (--rate).")
+    p = subparsers.add_parser(
+        "simulate-detections",
+        help="simulate detector output from ground truth",
+        description="Sample SYNTHETIC detections from the ground truth of a split with a "
+        "detector profile, in the format the dataset's detections come in: "
+        "nuScenes, the official detection-submission JSON; av2, an LT3D "
+        "detection table (feather, ego frame) at the tracked frames (--rate).",
+    )
     add_dataset_args(p, "split name (predefined, or from <version>/splits.json for nuScenes)")
     p.set_defaults(version=VERSION)
-    p.add_argument("--profile", default="centerpoint",
-                   help="detector profile: a shipped name (centerpoint, pointpillars, centerpoint_velfail, "
-                        "centerpoint_drift) or a YAML path")
+    p.add_argument(
+        "--profile",
+        default="centerpoint",
+        help="detector profile: a shipped name (centerpoint, pointpillars, centerpoint_velfail, "
+        "centerpoint_drift) or a YAML path",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--out", required=True, help="detection JSON to write")
     p.set_defaults(func=run_simulate)
 
-    p = subparsers.add_parser("dataset-stats", help="per-class statistics of a dataset's ground truth",
-                              description="Box share, mean size, speed, moving share, |yaw rate|, 0-point share per "
-                                          "tracking class, over the union of the given splits.")
+    p = subparsers.add_parser(
+        "dataset-stats",
+        help="per-class statistics of a dataset's ground truth",
+        description="Box share, mean size, speed, moving share, |yaw rate|, 0-point share per "
+        "tracking class, over the union of the given splits.",
+    )
     add_dataset_args(p, "split name; repeat for a union", repeat=True)
     p.set_defaults(version=VERSION)
     p.add_argument("--json", dest="json_out", help="also write the statistics to this JSON file")
@@ -55,12 +71,15 @@ def run_demo_data(args: argparse.Namespace) -> int:
     """``grutrack demo-data``."""
     from grutrack.data.demo import generate_demo
 
-    summary = generate_demo(args.out, scenes=args.scenes, frames=args.frames_per_scene, seed=args.seed,
-                            version=args.version)
+    summary = generate_demo(
+        args.out, scenes=args.scenes, frames=args.frames_per_scene, seed=args.seed, version=args.version
+    )
     verb = "already up to date (left untouched):" if summary["unchanged"] else "wrote"
-    print(f"{verb} SYNTHETIC demo dataset {summary['dataroot']}/{summary['version']}: {summary['scenes']} scenes, "
-          f"{summary['samples']} samples, {summary['instances']} instances, {summary['annotations']} annotations; "
-          f"splits " + ", ".join(f"{k} ({v} scenes)" for k, v in summary["splits"].items()))
+    print(
+        f"{verb} SYNTHETIC demo dataset {summary['dataroot']}/{summary['version']}: {summary['scenes']} scenes, "
+        f"{summary['samples']} samples, {summary['instances']} instances, {summary['annotations']} annotations; "
+        f"splits " + ", ".join(f"{k} ({v} scenes)" for k, v in summary["splits"].items())
+    )
     return 0
 
 
@@ -71,8 +90,10 @@ def run_simulate(args: argparse.Namespace) -> int:
     profile = load_profile(args.profile)
     ds = dataset_of(args)
     counts = ds.simulate_detections(args.split, profile, args.seed, args.out)
-    print(f"wrote {args.out}: {counts.pop('detections')} SYNTHETIC detections ({profile.name}, seed {args.seed}) "
-          f"on {', '.join(f'{v} {k}' for k, v in counts.items())}, split {args.split} of {ds.describe()}")
+    print(
+        f"wrote {args.out}: {counts.pop('detections')} SYNTHETIC detections ({profile.name}, seed {args.seed}) "
+        f"on {', '.join(f'{v} {k}' for k, v in counts.items())}, split {args.split} of {ds.describe()}"
+    )
     return 0
 
 
@@ -85,8 +106,11 @@ def run_stats(args: argparse.Namespace) -> int:
     label = f"{Path(args.dataroot).name}: {ds.describe()} {'+'.join(args.split)}"
     print(format_table(stats, title=f"ground truth of {label}, {len(stats) - 1} classes"))
     if args.json_out:
-        write_stats_json(args.json_out, stats, {"dataset": ds.name, "dataroot": str(args.dataroot),
-                                                "version": args.version, "splits": args.split})
+        write_stats_json(
+            args.json_out,
+            stats,
+            {"dataset": ds.name, "dataroot": str(args.dataroot), "version": args.version, "splits": args.split},
+        )
         print(f"wrote {args.json_out}")
     if args.compare:
         ref = _read_stats(Path(args.compare))
@@ -101,5 +125,8 @@ def _read_stats(path: Path) -> dict:
     data = read_json(path, "statistics file (write one with dataset-stats --json)")
     if not isinstance(data, dict) or not isinstance(data.get("classes"), dict):
         raise InputFormatError(f"{path}: expected an object with 'classes' (written by dataset-stats --json)")
-    return {"classes": {c: {k: (float("nan") if v is None else v) for k, v in row.items()}
-                        for c, row in data["classes"].items()}}
+    return {
+        "classes": {
+            c: {k: (float("nan") if v is None else v) for k, v in row.items()} for c, row in data["classes"].items()
+        }
+    }

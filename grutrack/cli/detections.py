@@ -12,12 +12,15 @@ from grutrack.errors import ConfigError
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``download-detections`` and ``convert-detections``."""
-    p = sub.add_parser("download-detections", help="download a registered detection file (or say where to put it)",
-                       description="Download a detection source of the registry (grutrack/configs/detections.yaml) "
-                                   "into --out with a progress bar, HTTP range resume and SHA-256 verification; "
-                                   "the file appears only when complete and verified. Sources on hosts that need "
-                                   "a browser (Google Drive, ...) are not downloaded: the error says where to put "
-                                   "the file by hand. --list shows the sources.")
+    p = sub.add_parser(
+        "download-detections",
+        help="download a registered detection file (or say where to put it)",
+        description="Download a detection source of the registry (grutrack/configs/detections.yaml) "
+        "into --out with a progress bar, HTTP range resume and SHA-256 verification; "
+        "the file appears only when complete and verified. Sources on hosts that need "
+        "a browser (Google Drive, ...) are not downloaded: the error says where to put "
+        "the file by hand. --list shows the sources.",
+    )
     p.add_argument("name", nargs="?", help="source name, e.g. centerpoint_val")
     p.add_argument("--out", help="folder to download into (the file keeps the registry's filename)")
     p.add_argument("--url", default=None, help="download from this URL instead (e.g. a mirror)")
@@ -29,14 +32,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_download)
 
-    p = sub.add_parser("convert-detections", help="convert a downloaded detection file into one split's detections",
-                       description="Validate a downloaded detection file of a registry source against a split and "
-                                   "write that split's detections: nuScenes detection JSON (every sample of the "
-                                   "split present, boxes valid) or, for LT3D (AV2), a feather table of the "
-                                   "split's logs. Written atomically.")
+    p = sub.add_parser(
+        "convert-detections",
+        help="convert a downloaded detection file into one split's detections",
+        description="Validate a downloaded detection file of a registry source against a split and "
+        "write that split's detections: nuScenes detection JSON (every sample of the "
+        "split present, boxes valid) or, for LT3D (AV2), a feather table of the "
+        "split's logs. Written atomically.",
+    )
     p.add_argument("name", nargs="?", help="registry source name (gives the format), e.g. centerpoint_val")
-    p.add_argument("--format", default=None, choices=FORMATS,
-                   help="format of a file that is not a registry source (instead of NAME)")
+    p.add_argument(
+        "--format",
+        default=None,
+        choices=FORMATS,
+        help="format of a file that is not a registry source (instead of NAME)",
+    )
     p.add_argument("--member", default=None, help="file inside the archive (with --format nuscenes_json_zip)")
     p.add_argument("--raw", required=True, help="the downloaded file")
     p.add_argument("--dataroot", required=True, help="nuScenes dataroot or AV2 sensor root")
@@ -59,8 +69,15 @@ def run_download(args: argparse.Namespace) -> int:
     if not args.name or not args.out:
         raise ConfigError("give a source NAME and --out DIR (or --list)")
     src = get_source(args.name, args.registry)
-    dest = fetch_source(src, args.out, url=args.url, sha256=args.sha256, progress=not args.no_progress,
-                        retries=args.retries, timeout=args.timeout)
+    dest = fetch_source(
+        src,
+        args.out,
+        url=args.url,
+        sha256=args.sha256,
+        progress=not args.no_progress,
+        retries=args.retries,
+        timeout=args.timeout,
+    )
     print(f"{dest}: ready ({src.description.split('.')[0]})")
     return 0
 
@@ -69,8 +86,11 @@ def run_convert(args: argparse.Namespace) -> int:
     """Convert by the source's format (a registry source's, or --format)."""
     if (args.name is None) == (args.format is None):
         raise ConfigError("give either a registry source NAME or --format")
-    fmt, member = (args.format, args.member) if args.format else \
-        (get_source(args.name, args.registry).format, get_source(args.name, args.registry).member)
+    fmt, member = (
+        (args.format, args.member)
+        if args.format
+        else (get_source(args.name, args.registry).format, get_source(args.name, args.registry).member)
+    )
     if fmt == "nuscenes_json_zip" and not member:
         raise ConfigError("--format nuscenes_json_zip needs --member (the JSON inside the archive)")
     if fmt == "lt3d":
@@ -82,7 +102,13 @@ def run_convert(args: argparse.Namespace) -> int:
 
         if not args.version or args.version == "none":
             raise ConfigError("--version is required for nuScenes detection sources")
-        stats = convert_nuscenes_detections(args.raw, args.dataroot, args.version, args.split, args.out,
-                                            member=member if fmt == "nuscenes_json_zip" else None)
+        stats = convert_nuscenes_detections(
+            args.raw,
+            args.dataroot,
+            args.version,
+            args.split,
+            args.out,
+            member=member if fmt == "nuscenes_json_zip" else None,
+        )
     print(f"wrote {args.out}: {describe(stats)}")
     return 0

@@ -11,11 +11,14 @@ from grutrack.errors import ConfigError
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``resolve-config``."""
-    p = sub.add_parser("resolve-config", help="write a preset / training config with overrides applied",
-                       description="Merge overrides (JSON, mappings merged key by key) into a shipped tracker "
-                                   "preset or training config, validate the result with the same checks as the "
-                                   "shipped files (a misspelt key is an error naming it) and write it as YAML, "
-                                   "with its config hash in the header.")
+    p = sub.add_parser(
+        "resolve-config",
+        help="write a preset / training config with overrides applied",
+        description="Merge overrides (JSON, mappings merged key by key) into a shipped tracker "
+        "preset or training config, validate the result with the same checks as the "
+        "shipped files (a misspelt key is an error naming it) and write it as YAML, "
+        "with its config hash in the header.",
+    )
     p.add_argument("kind", choices=("tracker", "training"), help="tracker preset or training config")
     p.add_argument("--base", required=True, help="shipped name (ekf, grukf, ...) or YAML path")
     p.add_argument("--overrides", default="{}", help='JSON object, e.g. \'{"lifecycle": {"punish_num": 2}}\'')

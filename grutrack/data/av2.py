@@ -32,43 +32,110 @@ from grutrack.errors import ConfigError, DatasetError, InputFormatError
 
 #: Table I classes, in the paper's column order.
 TABLE_I_CLASSES: tuple[str, ...] = (
-    "REGULAR_VEHICLE", "PEDESTRIAN", "BICYCLE", "LARGE_VEHICLE", "BUS", "BOX_TRUCK", "TRUCK",
+    "REGULAR_VEHICLE",
+    "PEDESTRIAN",
+    "BICYCLE",
+    "LARGE_VEHICLE",
+    "BUS",
+    "BOX_TRUCK",
+    "TRUCK",
 )
 #: The 26 categories of the AV2 sensor competition (``av2.evaluation.SensorCompetitionCategories``, same order);
 #: the official tracking evaluator indexes this list, so no other name may appear in its inputs.
 COMPETITION_CATEGORIES: tuple[str, ...] = (
-    "ARTICULATED_BUS", "BICYCLE", "BICYCLIST", "BOLLARD", "BOX_TRUCK", "BUS", "CONSTRUCTION_BARREL",
-    "CONSTRUCTION_CONE", "DOG", "LARGE_VEHICLE", "MESSAGE_BOARD_TRAILER", "MOBILE_PEDESTRIAN_CROSSING_SIGN",
-    "MOTORCYCLE", "MOTORCYCLIST", "PEDESTRIAN", "REGULAR_VEHICLE", "SCHOOL_BUS", "SIGN", "STOP_SIGN", "STROLLER",
-    "TRUCK", "TRUCK_CAB", "VEHICULAR_TRAILER", "WHEELCHAIR", "WHEELED_DEVICE", "WHEELED_RIDER",
+    "ARTICULATED_BUS",
+    "BICYCLE",
+    "BICYCLIST",
+    "BOLLARD",
+    "BOX_TRUCK",
+    "BUS",
+    "CONSTRUCTION_BARREL",
+    "CONSTRUCTION_CONE",
+    "DOG",
+    "LARGE_VEHICLE",
+    "MESSAGE_BOARD_TRAILER",
+    "MOBILE_PEDESTRIAN_CROSSING_SIGN",
+    "MOTORCYCLE",
+    "MOTORCYCLIST",
+    "PEDESTRIAN",
+    "REGULAR_VEHICLE",
+    "SCHOOL_BUS",
+    "SIGN",
+    "STOP_SIGN",
+    "STROLLER",
+    "TRUCK",
+    "TRUCK_CAB",
+    "VEHICULAR_TRAILER",
+    "WHEELCHAIR",
+    "WHEELED_DEVICE",
+    "WHEELED_RIDER",
 )
 #: Annotation categories outside the competition (``av2.datasets.sensor.constants.AnnotationCategories``).
 OTHER_ANNOTATION_CATEGORIES: tuple[str, ...] = (
-    "ANIMAL", "OFFICIAL_SIGNALER", "RAILED_VEHICLE", "TRAFFIC_LIGHT_TRAILER",
+    "ANIMAL",
+    "OFFICIAL_SIGNALER",
+    "RAILED_VEHICLE",
+    "TRAFFIC_LIGHT_TRAILER",
 )
 #: nuScenes tracking class whose tracker parameters each competition category uses (grutrack choice: the
 #: nuScenes class of the most similar size and motion; small static objects take pedestrian parameters).
 PARAM_CLASS: dict[str, str] = {
-    "REGULAR_VEHICLE": "car", "PEDESTRIAN": "pedestrian", "BICYCLE": "bicycle", "BICYCLIST": "bicycle",
-    "MOTORCYCLE": "motorcycle", "MOTORCYCLIST": "motorcycle", "WHEELED_RIDER": "bicycle",
-    "WHEELED_DEVICE": "bicycle", "BUS": "bus", "SCHOOL_BUS": "bus", "ARTICULATED_BUS": "bus",
-    "BOX_TRUCK": "truck", "TRUCK": "truck", "LARGE_VEHICLE": "truck", "TRUCK_CAB": "truck",
-    "VEHICULAR_TRAILER": "trailer", "MESSAGE_BOARD_TRAILER": "trailer",
-    "BOLLARD": "pedestrian", "CONSTRUCTION_CONE": "pedestrian", "CONSTRUCTION_BARREL": "pedestrian",
-    "SIGN": "pedestrian", "STOP_SIGN": "pedestrian", "MOBILE_PEDESTRIAN_CROSSING_SIGN": "pedestrian",
-    "WHEELCHAIR": "pedestrian", "STROLLER": "pedestrian", "DOG": "pedestrian",
+    "REGULAR_VEHICLE": "car",
+    "PEDESTRIAN": "pedestrian",
+    "BICYCLE": "bicycle",
+    "BICYCLIST": "bicycle",
+    "MOTORCYCLE": "motorcycle",
+    "MOTORCYCLIST": "motorcycle",
+    "WHEELED_RIDER": "bicycle",
+    "WHEELED_DEVICE": "bicycle",
+    "BUS": "bus",
+    "SCHOOL_BUS": "bus",
+    "ARTICULATED_BUS": "bus",
+    "BOX_TRUCK": "truck",
+    "TRUCK": "truck",
+    "LARGE_VEHICLE": "truck",
+    "TRUCK_CAB": "truck",
+    "VEHICULAR_TRAILER": "trailer",
+    "MESSAGE_BOARD_TRAILER": "trailer",
+    "BOLLARD": "pedestrian",
+    "CONSTRUCTION_CONE": "pedestrian",
+    "CONSTRUCTION_BARREL": "pedestrian",
+    "SIGN": "pedestrian",
+    "STOP_SIGN": "pedestrian",
+    "MOBILE_PEDESTRIAN_CROSSING_SIGN": "pedestrian",
+    "WHEELCHAIR": "pedestrian",
+    "STROLLER": "pedestrian",
+    "DOG": "pedestrian",
 }
 #: The nuScenes detection class whose detector-profile statistics simulate each Table I class
 #: (``grutrack simulate-detections --dataset av2``): distinct, so a simulated box's class maps back to exactly
 #: one AV2 category; the two AV2 truck-like classes take the two large nuScenes classes nearest in size and
 #: motion (LARGE_VEHICLE: construction_vehicle; TRUCK, the tractor units: trailer).
 SIMULATOR_CLASS: dict[str, str] = {
-    "REGULAR_VEHICLE": "car", "PEDESTRIAN": "pedestrian", "BICYCLE": "bicycle", "LARGE_VEHICLE": "construction_vehicle",
-    "BUS": "bus", "BOX_TRUCK": "truck", "TRUCK": "trailer",
+    "REGULAR_VEHICLE": "car",
+    "PEDESTRIAN": "pedestrian",
+    "BICYCLE": "bicycle",
+    "LARGE_VEHICLE": "construction_vehicle",
+    "BUS": "bus",
+    "BOX_TRUCK": "truck",
+    "TRUCK": "trailer",
 }
 DEFAULT_RATE_HZ = 2.0
-ANNOTATION_COLUMNS = ("timestamp_ns", "track_uuid", "category", "length_m", "width_m", "height_m",
-                      "qw", "qx", "qy", "qz", "tx_m", "ty_m", "tz_m")
+ANNOTATION_COLUMNS = (
+    "timestamp_ns",
+    "track_uuid",
+    "category",
+    "length_m",
+    "width_m",
+    "height_m",
+    "qw",
+    "qx",
+    "qy",
+    "qz",
+    "tx_m",
+    "ty_m",
+    "tz_m",
+)
 POSE_COLUMNS = ("timestamp_ns", "qw", "qx", "qy", "qz", "tx_m", "ty_m", "tz_m")
 
 
@@ -91,6 +158,7 @@ def token_timestamp_ns(token: str) -> int:
 # ------------------------------------------------------------------------------------------------------------
 # files
 # ------------------------------------------------------------------------------------------------------------
+
 
 def split_dir(root: str | Path, split: str) -> Path:
     """``<root>/<split>``, checked to exist and to hold at least one log."""
@@ -152,8 +220,9 @@ def read_poses(log_dir: str | Path) -> Poses:
     df = _read_feather(path, POSE_COLUMNS).sort_values("timestamp_ns", kind="stable")
     q = df[["qw", "qx", "qy", "qz"]].to_numpy(np.float64)
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return Poses(df["timestamp_ns"].to_numpy(np.int64), quat_to_matrix(q), q,
-                 df[["tx_m", "ty_m", "tz_m"]].to_numpy(np.float64))
+    return Poses(
+        df["timestamp_ns"].to_numpy(np.int64), quat_to_matrix(q), q, df[["tx_m", "ty_m", "tz_m"]].to_numpy(np.float64)
+    )
 
 
 def read_annotations(log_dir: str | Path) -> pd.DataFrame | None:
@@ -168,19 +237,24 @@ def read_annotations(log_dir: str | Path) -> pd.DataFrame | None:
 # geometry
 # ------------------------------------------------------------------------------------------------------------
 
+
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrices (N, 3, 3) of unit quaternions (N, 4) [w, x, y, z]."""
     q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
     w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-    ], axis=1)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+        ],
+        axis=1,
+    )
 
 
-def ego_to_city(poses: Poses, rows: np.ndarray, centre: np.ndarray, quat: np.ndarray,
-                velocity: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def ego_to_city(
+    poses: Poses, rows: np.ndarray, centre: np.ndarray, quat: np.ndarray, velocity: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ego-frame cuboids to the city frame.
 
     rows (N,) pose row of each box; centre (N, 3) metres, ego frame; quat (N, 4) [w, x, y, z] box -> ego;
@@ -226,6 +300,7 @@ def track_velocity(track_ids: np.ndarray, timestamps_ns: np.ndarray, xy: np.ndar
 # frames and scenes
 # ------------------------------------------------------------------------------------------------------------
 
+
 def subsample(timestamps_ns: np.ndarray, rate_hz: float | None) -> np.ndarray:
     """Sorted unique timestamps (T,) int64 ns kept at ``rate_hz``: every k-th from the first, k = round(period /
     median interval); all of them when ``rate_hz`` is None or not below the native rate."""
@@ -250,23 +325,30 @@ def log_frame_times(log_dir: Path, ann: pd.DataFrame | None, rate_hz: float | No
     native = ann["timestamp_ns"].to_numpy(np.int64) if ann is not None and len(ann) else _lidar_timestamps(log_dir)
     if len(native) == 0:
         why = "its annotations.feather has no rows" if ann is not None else "it has no annotations.feather"
-        raise DatasetError(f"log {log_dir.name}: cannot determine its frames: {why} and it has no lidar sweeps "
-                           f"under sensors/lidar/")
+        raise DatasetError(
+            f"log {log_dir.name}: cannot determine its frames: {why} and it has no lidar sweeps under sensors/lidar/"
+        )
     return subsample(native, rate_hz)
 
 
-def _gt_boxsets(ann: pd.DataFrame, poses: Poses, frame_ts: np.ndarray, vocab: Vocabulary,
-                log_dir: Path) -> list[BoxSet]:
+def _gt_boxsets(
+    ann: pd.DataFrame, poses: Poses, frame_ts: np.ndarray, vocab: Vocabulary, log_dir: Path
+) -> list[BoxSet]:
     """Ground truth of each frame (city frame, vocabulary categories only), velocity from the 10 Hz track."""
     ann = ann[ann["category"].isin(vocab.names)]
     ts = ann["timestamp_ns"].to_numpy(np.int64)
     rows = poses.index(ts)
     if (rows < 0).any():
         bad = int(ts[np.argmax(rows < 0)])
-        raise DatasetError(f"{log_dir}/annotations.feather: timestamp_ns {bad} has no ego pose in "
-                           f"city_SE3_egovehicle.feather")
-    centre, yaw, _ = ego_to_city(poses, rows, ann[["tx_m", "ty_m", "tz_m"]].to_numpy(np.float64),
-                                 ann[["qw", "qx", "qy", "qz"]].to_numpy(np.float64))
+        raise DatasetError(
+            f"{log_dir}/annotations.feather: timestamp_ns {bad} has no ego pose in city_SE3_egovehicle.feather"
+        )
+    centre, yaw, _ = ego_to_city(
+        poses,
+        rows,
+        ann[["tx_m", "ty_m", "tz_m"]].to_numpy(np.float64),
+        ann[["qw", "qx", "qy", "qz"]].to_numpy(np.float64),
+    )
     uuids = ann["track_uuid"].to_numpy(dtype=object)
     vel = track_velocity(uuids.astype(str), ts, centre[:, :2])
     boxes = np.column_stack([centre, ann[["width_m", "length_m", "height_m"]].to_numpy(np.float64), yaw, vel])
@@ -275,12 +357,21 @@ def _gt_boxsets(ann: pd.DataFrame, poses: Poses, frame_ts: np.ndarray, vocab: Vo
     order = np.argsort(ts, kind="stable")
     starts = np.searchsorted(ts[order], frame_ts, side="left")
     stops = np.searchsorted(ts[order], frame_ts, side="right")
-    return [BoxSet(boxes[order[a:b]], np.ones(b - a), labels[order[a:b]], uuids[order[a:b]],
-                   {"num_pts": pts[order[a:b]]}) for a, b in zip(starts, stops)]
+    return [
+        BoxSet(boxes[order[a:b]], np.ones(b - a), labels[order[a:b]], uuids[order[a:b]], {"num_pts": pts[order[a:b]]})
+        for a, b in zip(starts, stops)
+    ]
 
 
-def load_log(root: str | Path, split: str, log_id: str, *, rate_hz: float | None = DEFAULT_RATE_HZ,
-             with_gt: bool = False, vocab: Vocabulary | None = None) -> Scene:
+def load_log(
+    root: str | Path,
+    split: str,
+    log_id: str,
+    *,
+    rate_hz: float | None = DEFAULT_RATE_HZ,
+    with_gt: bool = False,
+    vocab: Vocabulary | None = None,
+) -> Scene:
     """One log as a canonical scene (frames in time order, ego poses, optional ground truth)."""
     log_dir = split_dir(root, split) / log_id
     if not log_dir.is_dir():
@@ -291,26 +382,44 @@ def load_log(root: str | Path, split: str, log_id: str, *, rate_hz: float | None
     frame_ts = log_frame_times(log_dir, ann, rate_hz)
     rows = poses.index(frame_ts)
     if (rows < 0).any():
-        raise DatasetError(f"{log_dir}: frame timestamp {int(frame_ts[np.argmax(rows < 0)])} has no ego pose in "
-                           f"city_SE3_egovehicle.feather")
+        raise DatasetError(
+            f"{log_dir}: frame timestamp {int(frame_ts[np.argmax(rows < 0)])} has no ego pose in "
+            f"city_SE3_egovehicle.feather"
+        )
     if with_gt and ann is None:
         raise DatasetError(f"{log_dir}: no annotations.feather, ground truth requested")
     gts = _gt_boxsets(ann, poses, frame_ts, vocab, log_dir) if with_gt else [None] * len(frame_ts)
-    frames = [Frame(token=frame_token(log_id, t), timestamp=int(t) // 1000,
-                    ego_translation=poses.translation[r].copy(), ego_rotation=poses.quaternion[r].copy(), gt=g)
-              for t, r, g in zip(frame_ts, rows, gts)]
+    frames = [
+        Frame(
+            token=frame_token(log_id, t),
+            timestamp=int(t) // 1000,
+            ego_translation=poses.translation[r].copy(),
+            ego_rotation=poses.quaternion[r].copy(),
+            gt=g,
+        )
+        for t, r, g in zip(frame_ts, rows, gts)
+    ]
     return Scene(name=log_id, token=log_id, frames=frames, vocabulary=vocab)
 
 
-def load_scenes(root: str | Path, split: str, *, rate_hz: float | None = DEFAULT_RATE_HZ, with_gt: bool = False,
-                all_categories: bool = False, log_ids: list[str] | None = None) -> list[Scene]:
+def load_scenes(
+    root: str | Path,
+    split: str,
+    *,
+    rate_hz: float | None = DEFAULT_RATE_HZ,
+    with_gt: bool = False,
+    all_categories: bool = False,
+    log_ids: list[str] | None = None,
+) -> list[Scene]:
     """Canonical scenes of the logs of ``split`` (sorted by log id, or the given ``log_ids``).
 
     Labels of the GT index :func:`vocabulary` (``all_categories``); boxes are in the city frame.
     """
     if rate_hz is not None and not (isinstance(rate_hz, (int, float)) and np.isfinite(rate_hz) and rate_hz > 0):
-        raise ConfigError(f"--rate: the frame rate must be a positive number of frames per second (the "
-                          f"annotations are at 10 Hz), got {rate_hz}")
+        raise ConfigError(
+            f"--rate: the frame rate must be a positive number of frames per second (the "
+            f"annotations are at 10 Hz), got {rate_hz}"
+        )
     known = list_logs(root, split)
     if log_ids is not None:
         unknown = [lg for lg in log_ids if lg not in known]

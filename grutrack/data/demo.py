@@ -39,10 +39,10 @@ from scipy.spatial import cKDTree
 from grutrack.data.demo_defaults import DEFAULT_SCENES, FRAMES_PER_SCENE, VERSION
 from grutrack.errors import ConfigError
 
-DT = 0.5                    # s between keyframes: nuScenes keyframes are at 2 Hz (mini: 0.40-0.60 s, mean 0.50)
-SUBSTEPS = 5                # motion integrated at 10 Hz, fine enough for manoeuvres seen at 2 Hz
-VAL_EVERY = 5               # every 5th scene is demo_val: 80/20 like nuScenes train/val (700/150); with fewer
-                            # than 5 scenes the last one is demo_val (1 scene: demo_val is empty)
+DT = 0.5  # s between keyframes: nuScenes keyframes are at 2 Hz (mini: 0.40-0.60 s, mean 0.50)
+SUBSTEPS = 5  # motion integrated at 10 Hz, fine enough for manoeuvres seen at 2 Hz
+VAL_EVERY = 5  # every 5th scene is demo_val: 80/20 like nuScenes train/val (700/150); with fewer
+# than 5 scenes the last one is demo_val (1 scene: demo_val is empty)
 TIME_ORIGIN_US = 1_533_000_000_000_000  # 2018-07-31, the nuScenes recording period (2018-07 .. 2018-11)
 LIDAR_TRANSLATION = [0.943713, 0.0, 1.84023]  # nuScenes n015 LIDAR_TOP extrinsics (mini calibrated_sensor)
 LIDAR_ROTATION = [0.7071067812, 0.0, 0.0, -0.7071067812]  # LIDAR_TOP is yawed -90 deg on nuScenes cars
@@ -50,16 +50,40 @@ MARKER = "SYNTHETIC grutrack demo dataset"
 
 #: the 23 nuScenes categories (v1.0 category.json), so the devkit's class mappings apply unchanged
 CATEGORIES = (
-    "animal", "human.pedestrian.adult", "human.pedestrian.child", "human.pedestrian.construction_worker",
-    "human.pedestrian.personal_mobility", "human.pedestrian.police_officer", "human.pedestrian.stroller",
-    "human.pedestrian.wheelchair", "movable_object.barrier", "movable_object.debris",
-    "movable_object.pushable_pullable", "movable_object.trafficcone", "static_object.bicycle_rack",
-    "vehicle.bicycle", "vehicle.bus.bendy", "vehicle.bus.rigid", "vehicle.car", "vehicle.construction",
-    "vehicle.emergency.ambulance", "vehicle.emergency.police", "vehicle.motorcycle", "vehicle.trailer",
+    "animal",
+    "human.pedestrian.adult",
+    "human.pedestrian.child",
+    "human.pedestrian.construction_worker",
+    "human.pedestrian.personal_mobility",
+    "human.pedestrian.police_officer",
+    "human.pedestrian.stroller",
+    "human.pedestrian.wheelchair",
+    "movable_object.barrier",
+    "movable_object.debris",
+    "movable_object.pushable_pullable",
+    "movable_object.trafficcone",
+    "static_object.bicycle_rack",
+    "vehicle.bicycle",
+    "vehicle.bus.bendy",
+    "vehicle.bus.rigid",
+    "vehicle.car",
+    "vehicle.construction",
+    "vehicle.emergency.ambulance",
+    "vehicle.emergency.police",
+    "vehicle.motorcycle",
+    "vehicle.trailer",
     "vehicle.truck",
 )
-ATTRIBUTES = ("vehicle.moving", "vehicle.stopped", "vehicle.parked", "cycle.with_rider", "cycle.without_rider",
-              "pedestrian.sitting_lying_down", "pedestrian.standing", "pedestrian.moving")
+ATTRIBUTES = (
+    "vehicle.moving",
+    "vehicle.stopped",
+    "vehicle.parked",
+    "cycle.with_rider",
+    "cycle.without_rider",
+    "pedestrian.sitting_lying_down",
+    "pedestrian.standing",
+    "pedestrian.moving",
+)
 VISIBILITY = (("1", "v0-40"), ("2", "v40-60"), ("3", "v60-80"), ("4", "v80-100"))  # nuScenes visibility.json
 
 
@@ -75,19 +99,19 @@ LANES = ((0.0, 0.0, 0.15, 3.5), (3.5, 0.0, 0.3, -3.5), (-3.5, np.pi, 0.3, -3.5),
 class ClassSpec:
     """How one detection class is generated (sizes in metres, speeds in m/s, densities per 100 m of road)."""
 
-    categories: tuple                 # ((nuScenes category, probability), ...)
-    size: tuple                       # mean (w, l, h)
-    size_logsd: tuple                 # per-instance log-normal spread of (w, l, h)
-    static_per_100m: float            # parked / standing objects per 100 m of road (both sides)
-    moving_per_100m: float            # moving objects per 100 m of (extended) road
-    motion: str = "static"            # "vehicle", "cycle" or "pedestrian" for the moving ones
-    speed: tuple = (0.0, 0.0)         # cruise speed mean, sd of the moving ones
-    kerb_offset: tuple = (1.0, 3.0)   # static ones: distance range beyond the kerb
-    lot_share: float = 0.0            # static vehicles: share parked in lots 8-30 m off the kerb, side by side
-    cluster: int = 1                  # static objects come in rows / groups of up to this many
+    categories: tuple  # ((nuScenes category, probability), ...)
+    size: tuple  # mean (w, l, h)
+    size_logsd: tuple  # per-instance log-normal spread of (w, l, h)
+    static_per_100m: float  # parked / standing objects per 100 m of road (both sides)
+    moving_per_100m: float  # moving objects per 100 m of (extended) road
+    motion: str = "static"  # "vehicle", "cycle" or "pedestrian" for the moving ones
+    speed: tuple = (0.0, 0.0)  # cruise speed mean, sd of the moving ones
+    kerb_offset: tuple = (1.0, 3.0)  # static ones: distance range beyond the kerb
+    lot_share: float = 0.0  # static vehicles: share parked in lots 8-30 m off the kerb, side by side
+    cluster: int = 1  # static objects come in rows / groups of up to this many
     points_fit: tuple = (10.0, -2.5, 0.8)  # ln(lidar pts) = a + b ln(d), residual sd
-    annot_range: float = 70.0         # annotated up to this distance from the ego
-    occlusion: float = 0.05           # per-keyframe probability of becoming occluded at 20 m (grows with d)
+    annot_range: float = 70.0  # annotated up to this distance from the ego
+    occlusion: float = 0.05  # per-keyframe probability of becoming occluded at 20 m (grows with d)
 
 
 # fmt: off
@@ -156,43 +180,72 @@ CLASS_SPECS: dict[str, ClassSpec] = {
 class MotionSpec:
     """Manoeuvre statistics of a motion family (durations in s, angles in rad, speeds as factors)."""
 
-    seg_duration: tuple        # manoeuvre segment duration range
-    p_turn: float              # per-segment probability of a turn (heading change 60-90 deg; peds 45-180 deg)
-    p_curve: float             # per-segment probability of a gentle curve (6-25 deg)
-    p_lane_change: float       # per-segment probability of a lane change (vehicles and cycles)
-    p_stop: float              # per-segment probability of braking to a stop (and waiting)
-    speed_jitter: tuple        # per-segment cruise speed factor range
-    tau: float                 # speed response time constant (s): acceleration = (v_target - v) / tau
-    accel_limits: tuple        # (max braking, max acceleration), m/s^2
-    min_radius: float          # smallest turning radius, m
-    wiggle: float              # std of the AR(1) curvature (1/m) or, for pedestrians, yaw-rate (rad/s) noise
+    seg_duration: tuple  # manoeuvre segment duration range
+    p_turn: float  # per-segment probability of a turn (heading change 60-90 deg; peds 45-180 deg)
+    p_curve: float  # per-segment probability of a gentle curve (6-25 deg)
+    p_lane_change: float  # per-segment probability of a lane change (vehicles and cycles)
+    p_stop: float  # per-segment probability of braking to a stop (and waiting)
+    speed_jitter: tuple  # per-segment cruise speed factor range
+    tau: float  # speed response time constant (s): acceleration = (v_target - v) / tau
+    accel_limits: tuple  # (max braking, max acceleration), m/s^2
+    min_radius: float  # smallest turning radius, m
+    wiggle: float  # std of the AR(1) curvature (1/m) or, for pedestrians, yaw-rate (rad/s) noise
 
 
 MOTION_SPECS = {
     # Cars: urban manoeuvres every 2-6 s; braking up to 4 m/s^2 and accelerating up to 2.5 m/s^2 (typical urban
     # driving); minimum radius 5 m (a passenger car's turning circle).
-    "vehicle": MotionSpec(seg_duration=(2.0, 6.0), p_turn=0.08, p_curve=0.12, p_lane_change=0.08, p_stop=0.08,
-                          speed_jitter=(0.75, 1.15), tau=1.5, accel_limits=(4.0, 2.5), min_radius=5.0,
-                          wiggle=0.001),
+    "vehicle": MotionSpec(
+        seg_duration=(2.0, 6.0),
+        p_turn=0.08,
+        p_curve=0.12,
+        p_lane_change=0.08,
+        p_stop=0.08,
+        speed_jitter=(0.75, 1.15),
+        tau=1.5,
+        accel_limits=(4.0, 2.5),
+        min_radius=5.0,
+        wiggle=0.001,
+    ),
     # Cyclists (bicycle model with a steering wobble): tighter turns, more steering noise.
-    "cycle": MotionSpec(seg_duration=(1.5, 5.0), p_turn=0.12, p_curve=0.25, p_lane_change=0.08, p_stop=0.06,
-                        speed_jitter=(0.7, 1.2), tau=1.2, accel_limits=(3.0, 1.5), min_radius=3.0, wiggle=0.01),
+    "cycle": MotionSpec(
+        seg_duration=(1.5, 5.0),
+        p_turn=0.12,
+        p_curve=0.25,
+        p_lane_change=0.08,
+        p_stop=0.06,
+        speed_jitter=(0.7, 1.2),
+        tau=1.2,
+        accel_limits=(3.0, 1.5),
+        min_radius=3.0,
+        wiggle=0.01,
+    ),
     # Pedestrians: walk / stop / turn around; mini pedestrians move in 72 % of boxes.
-    "pedestrian": MotionSpec(seg_duration=(1.5, 5.0), p_turn=0.08, p_curve=0.2, p_lane_change=0.0, p_stop=0.08,
-                             speed_jitter=(0.8, 1.2), tau=0.5, accel_limits=(2.0, 1.5), min_radius=0.0,
-                             wiggle=0.03),
+    "pedestrian": MotionSpec(
+        seg_duration=(1.5, 5.0),
+        p_turn=0.08,
+        p_curve=0.2,
+        p_lane_change=0.0,
+        p_stop=0.08,
+        speed_jitter=(0.8, 1.2),
+        tau=0.5,
+        accel_limits=(2.0, 1.5),
+        min_radius=0.0,
+        wiggle=0.03,
+    ),
 }
 
 # Ego vehicle: mini ego mean speed 5.6 m/s over 10 scenes, 2 of them (almost) stationary; cruise 6-13 m/s.
 EGO_SPEED_CHOICES = ((0.0, 0.15), (4.0, 0.3), (8.0, 0.4), (12.0, 0.15))  # (cruise speed, probability)
-EGO_TURN_PROB = 0.35        # share of scenes with an intersection turn (mini descriptions: 5 of 10 mention turns)
-ANNOT_NOISE_POS = 0.015     # m; nuScenes boxes are drawn per keyframe (centres on a mm grid, ~cm consistency)
-ANNOT_NOISE_YAW = 0.003     # rad; keeps the |yaw rate| of parked cars well below mini's car mean of 0.013 rad/s
+EGO_TURN_PROB = 0.35  # share of scenes with an intersection turn (mini descriptions: 5 of 10 mention turns)
+ANNOT_NOISE_POS = 0.015  # m; nuScenes boxes are drawn per keyframe (centres on a mm grid, ~cm consistency)
+ANNOT_NOISE_YAW = 0.003  # rad; keeps the |yaw rate| of parked cars well below mini's car mean of 0.013 rad/s
 
 
 # ----------------------------------------------------------------------------------------------------------------
 # motion
 # ----------------------------------------------------------------------------------------------------------------
+
 
 @dataclass
 class Controls:
@@ -245,8 +298,9 @@ def _ar1(rng: np.random.Generator, shape: tuple, sigma: float, corr_time: float,
     return lfilter([1.0], [1.0, -rho], eps, axis=1, zi=rho * y_prev)[0]
 
 
-def _segments(rng: np.random.Generator, spec: "MotionSpec", m: int, n_steps: int, dt: float,
-              forced_turn: np.ndarray | None) -> dict[str, np.ndarray]:
+def _segments(
+    rng: np.random.Generator, spec: MotionSpec, m: int, n_steps: int, dt: float, forced_turn: np.ndarray | None
+) -> dict[str, np.ndarray]:
     """Random manoeuvre segments of M agents: per-segment kinds and parameters (M, K), and for every substep
     the segment index ``seg`` (M, S) and the phase ``u`` in [0, 1] within it."""
     t = np.arange(n_steps) * dt
@@ -256,8 +310,12 @@ def _segments(rng: np.random.Generator, spec: "MotionSpec", m: int, n_steps: int
     offset = rng.uniform(0, spec.seg_duration[0], (m, 1))
     draw = rng.random((m, k_max))
     c_turn, c_curve, c_lc, c_stop = np.cumsum([spec.p_turn, spec.p_curve, spec.p_lane_change, spec.p_stop])
-    kinds = {"turn": draw < c_turn, "curve": (draw >= c_turn) & (draw < c_curve),
-             "lc": (draw >= c_curve) & (draw < c_lc), "stop": (draw >= c_lc) & (draw < c_stop)}
+    kinds = {
+        "turn": draw < c_turn,
+        "curve": (draw >= c_turn) & (draw < c_curve),
+        "lc": (draw >= c_curve) & (draw < c_lc),
+        "stop": (draw >= c_lc) & (draw < c_stop),
+    }
     sign = rng.choice([-1.0, 1.0], size=(m, k_max))
     turn_range = (np.pi / 4, np.pi) if spec.min_radius == 0 else (np.pi / 3, np.pi / 2)
     dpsi = np.where(kinds["turn"], rng.uniform(*turn_range, (m, k_max)), 0.0)
@@ -277,8 +335,14 @@ def _segments(rng: np.random.Generator, spec: "MotionSpec", m: int, n_steps: int
     return {"seg": seg, "u": u, "seg_dur": seg_dur, "psi": sign * dpsi, "sign": sign, **kinds}
 
 
-def manoeuvre_controls(rng: np.random.Generator, kind: str, cruise: np.ndarray, n_steps: int, dt: float,
-                       forced_turn: np.ndarray | None = None) -> Controls:
+def manoeuvre_controls(
+    rng: np.random.Generator,
+    kind: str,
+    cruise: np.ndarray,
+    n_steps: int,
+    dt: float,
+    forced_turn: np.ndarray | None = None,
+) -> Controls:
     """Controls of M agents of one motion family ("vehicle", "cycle", "pedestrian") over n_steps substeps.
 
     cruise: (M,) cruise speed m/s. forced_turn: optional (M,) heading change (rad) made in the segment covering
@@ -295,7 +359,7 @@ def manoeuvre_controls(rng: np.random.Generator, kind: str, cruise: np.ndarray, 
 
     speed_f = rng.uniform(*spec.speed_jitter, size=sg["turn"].shape)
     if kind != "pedestrian":
-        speed_f = np.where(sg["turn"], speed_f * 0.6, speed_f)          # slow down for turns
+        speed_f = np.where(sg["turn"], speed_f * 0.6, speed_f)  # slow down for turns
     v_target = cruise[:, None] * per_step(np.where(sg["stop"], 0.0, speed_f))
     free = np.maximum.accumulate(per_step(sg["turn"]), axis=1)
     lc_done = np.concatenate([np.zeros((m, 1)), np.cumsum(sg["lc"], axis=1)[:, :-1]], axis=1)
@@ -303,7 +367,7 @@ def manoeuvre_controls(rng: np.random.Generator, kind: str, cruise: np.ndarray, 
     lane_phase = per_step(lc_done) + per_step(sg["lc"].astype(float)) * smooth
     zeros = np.zeros((m, n_steps))
     if kind == "pedestrian":
-        turn_time = np.minimum(seg_dur, 2.0)                            # pedestrians turn within 2 s
+        turn_time = np.minimum(seg_dur, 2.0)  # pedestrians turn within 2 s
         tu = np.clip(u * seg_dur / turn_time, 0.0, 1.0)
         yaw_rate = per_step(sg["psi"]) * 2.0 / turn_time * np.sin(np.pi * tu) ** 2
         wiggle = _ar1(rng, (m, n_steps), spec.wiggle, 1.0, dt)
@@ -366,6 +430,7 @@ def integrate(agents: Agents, dt: float, record_every: int, road: np.ndarray | N
 # one scene
 # ----------------------------------------------------------------------------------------------------------------
 
+
 @dataclass
 class SceneObjects:
     """Simulated objects of a scene: M objects over F keyframes.
@@ -402,14 +467,28 @@ def _ego(rng: np.random.Generator, frames: int) -> tuple[np.ndarray, str]:
     n_steps = (frames - 1) * SUBSTEPS
     ctl = manoeuvre_controls(rng, "vehicle", np.array([cruise]), n_steps, DT / SUBSTEPS, forced)
     if not turn:
-        ctl.curvature *= 0.3                              # the ego mostly keeps to its road
-    x0, y0 = rng.uniform(300.0, 2000.0, 2)                # nuScenes map coordinates are positive, 0-3000 m
+        ctl.curvature *= 0.3  # the ego mostly keeps to its road
+    x0, y0 = rng.uniform(300.0, 2000.0, 2)  # nuScenes map coordinates are positive, 0-3000 m
     one, zero = np.ones(1), np.zeros(1)
-    agents = Agents(np.array([x0]), np.array([y0]), np.array([rng.uniform(-np.pi, np.pi)]), ctl.v_target[:, 0].copy(),
-                    ctl, 1.5 * one, np.array([[4.0, 2.5]]), 5.0 * one, np.zeros(1, bool), zero, zero, one, zero)
+    agents = Agents(
+        np.array([x0]),
+        np.array([y0]),
+        np.array([rng.uniform(-np.pi, np.pi)]),
+        ctl.v_target[:, 0].copy(),
+        ctl,
+        1.5 * one,
+        np.array([[4.0, 2.5]]),
+        5.0 * one,
+        np.zeros(1, bool),
+        zero,
+        zero,
+        one,
+        zero,
+    )
     states = integrate(agents, DT / SUBSTEPS, SUBSTEPS)[0]
     what = ("stationary ego" if cruise == 0 else f"ego at ~{cruise:.0f} m/s") + (
-        ", ego turns " + ("left" if forced[0] > 0 else "right") + " at an intersection" if turn else "")
+        ", ego turns " + ("left" if forced[0] > 0 else "right") + " at an intersection" if turn else ""
+    )
     return states, what
 
 
@@ -450,9 +529,9 @@ def _sizes(rng: np.random.Generator, spec: ClassSpec, n: int, categories: np.nda
     """Per-instance sizes (n, 3): log-normal around the class mean; children and bendy buses rescaled."""
     size = np.asarray(spec.size) * np.exp(rng.normal(size=(n, 3)) * np.asarray(spec.size_logsd))
     child = categories == "human.pedestrian.child"
-    size[child] *= np.array([0.65, 0.6, 0.8])            # mini child mean (0.44, 0.41, 1.41) vs adult
+    size[child] *= np.array([0.65, 0.6, 0.8])  # mini child mean (0.44, 0.41, 1.41) vs adult
     bendy = categories == "vehicle.bus.bendy"
-    size[bendy, 1] *= 1.6                                 # articulated buses are ~18 m long
+    size[bendy, 1] *= 1.6  # articulated buses are ~18 m long
     return size
 
 
@@ -473,13 +552,15 @@ def _static_objects(rng, name: str, spec: ClassSpec, road: np.ndarray, s_lo: flo
     group = np.repeat(np.arange(n_groups), counts)
     lot = (rng.random(n_groups) < spec.lot_share)[group]
     side = rng.choice([-1.0, 1.0], n_groups)[group]
-    offset = np.where(lot, rng.uniform(8.0, 30.0, n_groups)[group],
-                      rng.uniform(*spec.kerb_offset, n_groups)[group]) + rng.normal(size=n) * 0.15
+    offset = (
+        np.where(lot, rng.uniform(8.0, 30.0, n_groups)[group], rng.uniform(*spec.kerb_offset, n_groups)[group])
+        + rng.normal(size=n) * 0.15
+    )
     cats = _categories(rng, spec, n)
     size = _sizes(rng, spec, n, cats)
     if name in ("pedestrian", "traffic_cone"):
         gap = rng.uniform(0.8, 2.0, n)
-    else:                                                 # rows along the kerb, side by side in lots
+    else:  # rows along the kerb, side by side in lots
         gap = np.where(lot, size[:, 0], size[:, 1]) + rng.uniform(0.6, 2.5, n)
     cum = np.cumsum(gap)
     s = rng.uniform(s_lo, s_hi, n_groups)[group] + cum - np.repeat(cum[np.cumsum(counts) - counts], counts)
@@ -501,8 +582,9 @@ def _categories(rng: np.random.Generator, spec: ClassSpec, n: int) -> np.ndarray
     return np.asarray(names, dtype=object)[rng.choice(len(names), size=n, p=probs)]
 
 
-def _moving_objects(rng, name: str, spec: ClassSpec, road: np.ndarray, s_lo: float, s_hi: float, frames: int,
-                    crossing_s: float | None):
+def _moving_objects(
+    rng, name: str, spec: ClassSpec, road: np.ndarray, s_lo: float, s_hi: float, frames: int, crossing_s: float | None
+):
     """Moving agents placed on lanes, sidewalks or crossing the road, then simulated."""
     n = rng.poisson(spec.moving_per_100m * (s_hi - s_lo) / 100.0)
     if n == 0:
@@ -511,12 +593,12 @@ def _moving_objects(rng, name: str, spec: ClassSpec, road: np.ndarray, s_lo: flo
     size = _sizes(rng, spec, n, cats)
     s = rng.uniform(s_lo, s_hi, n)
     side = rng.choice([-1.0, 1.0], n)
-    if spec.motion == "pedestrian":                                            # sidewalks, 2.5-6 m off the kerb
+    if spec.motion == "pedestrian":  # sidewalks, 2.5-6 m off the kerb
         lat = _kerb(side, rng.uniform(2.5, 6.0, n))
         along = rng.choice([0.0, np.pi], n)
-        crossing = rng.random(n) < 0.2                                         # crossing the road
+        crossing = rng.random(n) < 0.2  # crossing the road
         along = np.where(crossing, np.where(side > 0, -np.pi / 2, np.pi / 2), along)
-    elif spec.motion == "cycle":                                               # kerb-side, with the traffic
+    elif spec.motion == "cycle":  # kerb-side, with the traffic
         lat = _kerb(side, -0.8 + rng.normal(size=n) * 0.2)
         along = np.where(side > 0, 0.0, np.pi)
     step = np.zeros(n)
@@ -526,7 +608,7 @@ def _moving_objects(rng, name: str, spec: ClassSpec, road: np.ndarray, s_lo: flo
         lat, along, step = offsets[lane] + rng.normal(size=n) * 0.2, headings[lane], steps[lane]
     follow = np.full(n, spec.motion != "pedestrian")
     if crossing_s is not None and spec.motion != "pedestrian":
-        cross = rng.random(n) < 0.25                                           # cross traffic at the junction
+        cross = rng.random(n) < 0.25  # cross traffic at the junction
         s = np.where(cross, crossing_s + rng.choice([-1.75, 1.75], n) + rng.normal(size=n) * 0.3, s)
         lat = np.where(cross, side * rng.uniform(30.0, 90.0, n), lat)
         along = np.where(cross, np.where(side > 0, -np.pi / 2, np.pi / 2), along)
@@ -536,22 +618,44 @@ def _moving_objects(rng, name: str, spec: ClassSpec, road: np.ndarray, s_lo: flo
     cruise = np.maximum(rng.normal(spec.speed[0], spec.speed[1], n), 0.3 * spec.speed[0])
     ctl = manoeuvre_controls(rng, spec.motion, cruise, (frames - 1) * SUBSTEPS, DT / SUBSTEPS)
     ms = MOTION_SPECS[spec.motion]
-    agents = Agents(x, y, yaw, ctl.v_target[:, 0].copy(), ctl, np.full(n, ms.tau),
-                    np.tile(np.asarray(ms.accel_limits, float), (n, 1)), np.full(n, ms.min_radius), follow,
-                    lat, step, np.where(np.cos(along) >= 0, 1.0, -1.0), s)
+    agents = Agents(
+        x,
+        y,
+        yaw,
+        ctl.v_target[:, 0].copy(),
+        ctl,
+        np.full(n, ms.tau),
+        np.tile(np.asarray(ms.accel_limits, float), (n, 1)),
+        np.full(n, ms.min_radius),
+        follow,
+        lat,
+        step,
+        np.where(np.cos(along) >= 0, 1.0, -1.0),
+        s,
+    )
     return [np.full(n, name, dtype=object), cats, size, agents]
 
 
 def _concat_agents(parts: list[Agents]) -> Agents:
     """One Agents batch from several (integrated together: one loop per scene)."""
+
     def cat(objs, name):
         return np.concatenate([getattr(o, name) for o in objs])
 
-    ctl = Controls(*(cat([p.controls for p in parts], f) for f in
-                     ("v_target", "curvature", "wiggle", "yaw_rate", "lane_phase", "free")))
-    return Agents(*(cat(parts, f) for f in ("x", "y", "yaw", "v")), ctl,
-                  *(cat(parts, f) for f in ("tau", "accel_limits", "min_radius", "follow", "lane", "lane_step",
-                                            "direction", "s")))
+    ctl = Controls(
+        *(
+            cat([p.controls for p in parts], f)
+            for f in ("v_target", "curvature", "wiggle", "yaw_rate", "lane_phase", "free")
+        )
+    )
+    return Agents(
+        *(cat(parts, f) for f in ("x", "y", "yaw", "v")),
+        ctl,
+        *(
+            cat(parts, f)
+            for f in ("tau", "accel_limits", "min_radius", "follow", "lane", "lane_step", "direction", "s")
+        ),
+    )
 
 
 def _remove_overlaps(size: np.ndarray, states: np.ndarray, ego: np.ndarray) -> np.ndarray:
@@ -561,14 +665,14 @@ def _remove_overlaps(size: np.ndarray, states: np.ndarray, ego: np.ndarray) -> n
     the ego always stays.
     """
     m, frames = states.shape[:2]
-    lengths, widths = np.append(size[:, 1], 4.6), np.append(size[:, 0], 1.95)   # the ego is a car
+    lengths, widths = np.append(size[:, 1], 4.6), np.append(size[:, 0], 1.95)  # the ego is a car
     counts = np.clip(np.ceil(lengths / np.maximum(widths, 0.1)), 1, 6).astype(int)
     owner = np.repeat(np.arange(m + 1), counts)
     rank = np.arange(len(owner)) - np.repeat(np.cumsum(counts) - counts, counts)
     frac = np.where(counts[owner] > 1, rank / np.maximum(counts[owner] - 1, 1) - 0.5, 0.0)
     offs = frac * np.maximum(lengths[owner] - widths[owner], 0.0)
     radius = 0.45 * widths[owner]
-    all_states = np.concatenate([states, ego[None]], axis=0)[owner]          # (C, F, 4)
+    all_states = np.concatenate([states, ego[None]], axis=0)[owner]  # (C, F, 4)
     cx = all_states[:, :, 0] + offs[:, None] * np.cos(all_states[:, :, 2])
     cy = all_states[:, :, 1] + offs[:, None] * np.sin(all_states[:, :, 2])
     found = []
@@ -582,7 +686,7 @@ def _remove_overlaps(size: np.ndarray, states: np.ndarray, ego: np.ndarray) -> n
     if found:
         for a, b in np.unique(np.concatenate(found), axis=0):
             if keep[a] and keep[b]:
-                keep[a if b == m else b] = False          # never drop the ego (index m)
+                keep[a if b == m else b] = False  # never drop the ego (index m)
     return keep[:m]
 
 
@@ -591,7 +695,7 @@ def simulate_scene(index: int, frames: int, seed: int) -> SimScene:
     rng = np.random.default_rng(np.random.SeedSequence([int(seed) & 0xFFFFFFFF, int(index)]))
     ego, what = _ego(rng, frames)
     margin = 90.0
-    road, s0, s1 = _road(ego, 500.0)                    # long enough for agents that follow it for 20 s
+    road, s0, s1 = _road(ego, 500.0)  # long enough for agents that follow it for 20 s
     crossing_s = 0.5 * (s0 + s1) + rng.uniform(-20, 20) if rng.random() < 0.5 else None
     movers = []
     for name, spec in CLASS_SPECS.items():
@@ -603,8 +707,9 @@ def simulate_scene(index: int, frames: int, seed: int) -> SimScene:
     if movers:
         states = integrate(_concat_agents([g[3] for g in movers]), DT / SUBSTEPS, SUBSTEPS, road)
         n = len(states)
-        parts.append([np.concatenate([g[i] for g in movers]) for i in range(3)] +
-                     [states, np.ones(n, bool), np.zeros(n, bool)])
+        parts.append(
+            [np.concatenate([g[i] for g in movers]) for i in range(3)] + [states, np.ones(n, bool), np.zeros(n, bool)]
+        )
     for name, spec in CLASS_SPECS.items():
         if spec.static_per_100m > 0:
             parts.append(_static_objects(rng, name, spec, road, s0 - margin, s1 + margin, frames))
@@ -619,6 +724,7 @@ def simulate_scene(index: int, frames: int, seed: int) -> SimScene:
 # ----------------------------------------------------------------------------------------------------------------
 # sensing: lidar points, occlusion, visibility, annotation runs
 # ----------------------------------------------------------------------------------------------------------------
+
 
 def sense(rng: np.random.Generator, scene: SimScene) -> dict[str, np.ndarray]:
     """Lidar / radar point counts and visibility level of every object at every keyframe.
@@ -639,7 +745,7 @@ def sense(rng: np.random.Generator, scene: SimScene) -> dict[str, np.ndarray]:
         u = rng.random(m)
         state = np.where(state, u > 0.45, u < p_enter)  # leave occlusion with p 0.45 per keyframe
         occluded[:, f] = state
-    frac = rng.beta(3.0, 1.0, (m, frames))                # partially occluded share of the object
+    frac = rng.beta(3.0, 1.0, (m, frames))  # partially occluded share of the object
     frac = np.where(occluded, rng.uniform(0.0, 0.2, (m, frames)), frac)
     log_mean = fit[:, :1] + fit[:, 1:2] * np.log(np.maximum(dist, 2.0))
     noise = rng.normal(size=(m, 1)) * fit[:, 2:3] * 0.75 + rng.normal(size=(m, frames)) * fit[:, 2:3] * 0.66
@@ -663,7 +769,7 @@ def annotation_runs(dist: np.ndarray, lidar: np.ndarray, annot_range: np.ndarray
         starts = np.flatnonzero(np.diff(pad) == 1)
         ends = np.flatnonzero(np.diff(pad) == -1) - 1
         for a, b in zip(starts, ends):
-            seen = np.flatnonzero(lidar[i, a:b + 1] > 0)
+            seen = np.flatnonzero(lidar[i, a : b + 1] > 0)
             if len(seen):
                 runs.append((i, int(a + seen[0]), int(a + seen[-1])))
     return runs
@@ -672,6 +778,7 @@ def annotation_runs(dist: np.ndarray, lidar: np.ndarray, annot_range: np.ndarray
 # ----------------------------------------------------------------------------------------------------------------
 # tables
 # ----------------------------------------------------------------------------------------------------------------
+
 
 class _Tokens:
     """Deterministic 32-hex tokens: md5 of (seed, version, kind, key)."""
@@ -709,12 +816,22 @@ def _attribute(det_class: str, moving_agent: bool, speed: float, sitting: bool) 
 def static_tables(tok: _Tokens) -> dict[str, list]:
     """category, attribute, visibility and sensor tables."""
     return {
-        "category": [{"token": tok("category", n), "name": n, "description": f"{MARKER}; nuScenes category {n}"}
-                     for n in CATEGORIES],
-        "attribute": [{"token": tok("attribute", n), "name": n, "description": f"{MARKER}; nuScenes attribute {n}"}
-                      for n in ATTRIBUTES],
-        "visibility": [{"token": t, "level": lvl, "description": f"visibility of whole object is between "
-                        f"{lvl[1:].replace('-', ' and ')}%"} for t, lvl in VISIBILITY],
+        "category": [
+            {"token": tok("category", n), "name": n, "description": f"{MARKER}; nuScenes category {n}"}
+            for n in CATEGORIES
+        ],
+        "attribute": [
+            {"token": tok("attribute", n), "name": n, "description": f"{MARKER}; nuScenes attribute {n}"}
+            for n in ATTRIBUTES
+        ],
+        "visibility": [
+            {
+                "token": t,
+                "level": lvl,
+                "description": f"visibility of whole object is between {lvl[1:].replace('-', ' and ')}%",
+            }
+            for t, lvl in VISIBILITY
+        ],
         "sensor": [{"token": tok("sensor", "LIDAR_TOP"), "channel": "LIDAR_TOP", "modality": "lidar"}],
     }
 
@@ -731,35 +848,86 @@ def scene_tables(scene: SimScene, seed: int, version: str, tok: _Tokens) -> dict
     samples = [tok("sample", i, f) for f in range(frames)]
     sds = [tok("sample_data", i, f) for f in range(frames)]
     logfile = f"demo-{i:04d}-synthetic"
-    out: dict[str, list] = {k: [] for k in ("scene", "log", "sample", "sample_data", "ego_pose",
-                                            "calibrated_sensor", "instance", "sample_annotation")}
-    out["log"].append({"token": log_tok, "logfile": logfile, "vehicle": "demo-ego",
-                       "date_captured": "2018-07-31", "location": "synthetic-demo"})
-    out["calibrated_sensor"].append({"token": cs_tok, "sensor_token": tok("sensor", "LIDAR_TOP"),
-                                     "translation": LIDAR_TRANSLATION, "rotation": LIDAR_ROTATION,
-                                     "camera_intrinsic": []})
+    out: dict[str, list] = {
+        k: []
+        for k in (
+            "scene",
+            "log",
+            "sample",
+            "sample_data",
+            "ego_pose",
+            "calibrated_sensor",
+            "instance",
+            "sample_annotation",
+        )
+    }
+    out["log"].append(
+        {
+            "token": log_tok,
+            "logfile": logfile,
+            "vehicle": "demo-ego",
+            "date_captured": "2018-07-31",
+            "location": "synthetic-demo",
+        }
+    )
+    out["calibrated_sensor"].append(
+        {
+            "token": cs_tok,
+            "sensor_token": tok("sensor", "LIDAR_TOP"),
+            "translation": LIDAR_TRANSLATION,
+            "rotation": LIDAR_ROTATION,
+            "camera_intrinsic": [],
+        }
+    )
     ego_q = _quat(scene.ego[:, 2])
     ego_xy = np.round(scene.ego[:, :2], 6).tolist()
     for f in range(frames):
-        out["sample"].append({"token": samples[f], "timestamp": stamps[f], "prev": samples[f - 1] if f else "",
-                              "next": samples[f + 1] if f + 1 < frames else "", "scene_token": scene_tok})
-        out["sample_data"].append({
-            "token": sds[f], "sample_token": samples[f], "ego_pose_token": sds[f], "calibrated_sensor_token": cs_tok,
-            "timestamp": stamps[f], "fileformat": "pcd", "is_key_frame": True, "height": 0, "width": 0,
-            "filename": f"samples/LIDAR_TOP/{logfile}__LIDAR_TOP__{stamps[f]}.pcd.bin",
-            "prev": sds[f - 1] if f else "", "next": sds[f + 1] if f + 1 < frames else ""})
-        out["ego_pose"].append({"token": sds[f], "timestamp": stamps[f], "rotation": ego_q[f],
-                                "translation": [*ego_xy[f], 0.0]})
+        out["sample"].append(
+            {
+                "token": samples[f],
+                "timestamp": stamps[f],
+                "prev": samples[f - 1] if f else "",
+                "next": samples[f + 1] if f + 1 < frames else "",
+                "scene_token": scene_tok,
+            }
+        )
+        out["sample_data"].append(
+            {
+                "token": sds[f],
+                "sample_token": samples[f],
+                "ego_pose_token": sds[f],
+                "calibrated_sensor_token": cs_tok,
+                "timestamp": stamps[f],
+                "fileformat": "pcd",
+                "is_key_frame": True,
+                "height": 0,
+                "width": 0,
+                "filename": f"samples/LIDAR_TOP/{logfile}__LIDAR_TOP__{stamps[f]}.pcd.bin",
+                "prev": sds[f - 1] if f else "",
+                "next": sds[f + 1] if f + 1 < frames else "",
+            }
+        )
+        out["ego_pose"].append(
+            {"token": sds[f], "timestamp": stamps[f], "rotation": ego_q[f], "translation": [*ego_xy[f], 0.0]}
+        )
     n_anns = _annotations(scene, rng, tok, samples, out)
-    out["scene"].append({"token": scene_tok, "log_token": log_tok, "nbr_samples": frames,
-                         "first_sample_token": samples[0], "last_sample_token": samples[-1], "name": name,
-                         "description": f"{scene.description}; {len(out['instance'])} annotated objects, "
-                                        f"{n_anns} boxes"})
+    out["scene"].append(
+        {
+            "token": scene_tok,
+            "log_token": log_tok,
+            "nbr_samples": frames,
+            "first_sample_token": samples[0],
+            "last_sample_token": samples[-1],
+            "name": name,
+            "description": f"{scene.description}; {len(out['instance'])} annotated objects, {n_anns} boxes",
+        }
+    )
     return out
 
 
-def _annotations(scene: SimScene, rng: np.random.Generator, tok: _Tokens, samples: list[str],
-                 out: dict[str, list]) -> int:
+def _annotations(
+    scene: SimScene, rng: np.random.Generator, tok: _Tokens, samples: list[str], out: dict[str, list]
+) -> int:
     """Append instance and sample_annotation records of a scene to ``out``; returns the box count."""
     obj = scene.objects
     sensed = sense(rng, scene)
@@ -777,20 +945,34 @@ def _annotations(scene: SimScene, rng: np.random.Generator, tok: _Tokens, sample
     for k, (o, a, b) in enumerate(runs):
         inst = tok("instance", scene.index, k)
         anns = [tok("ann", scene.index, k, f) for f in range(a, b + 1)]
-        quats = _quat(yaw[o, a:b + 1])
+        quats = _quat(yaw[o, a : b + 1])
         for j, f in enumerate(range(a, b + 1)):
             attr = _attribute(obj.det_class[o], bool(obj.moving[o]), float(obj.states[o, f, 3]), bool(obj.sitting[o]))
-            out["sample_annotation"].append({
-                "token": anns[j], "sample_token": samples[f], "instance_token": inst,
-                "visibility_token": str(int(sensed["visibility"][o, f])),
-                "attribute_tokens": [att_tok[attr]] if attr else [],
-                "translation": [*jitter_xy[o, f].tolist(), float(jitter_z[o, f])], "size": size[o].tolist(),
-                "rotation": quats[j], "num_lidar_pts": int(sensed["lidar"][o, f]),
-                "num_radar_pts": int(sensed["radar"][o, f]), "prev": anns[j - 1] if j else "",
-                "next": anns[j + 1] if j + 1 < len(anns) else ""})
-        out["instance"].append({"token": inst, "category_token": cat_tok[obj.category[o]],
-                                "nbr_annotations": len(anns), "first_annotation_token": anns[0],
-                                "last_annotation_token": anns[-1]})
+            out["sample_annotation"].append(
+                {
+                    "token": anns[j],
+                    "sample_token": samples[f],
+                    "instance_token": inst,
+                    "visibility_token": str(int(sensed["visibility"][o, f])),
+                    "attribute_tokens": [att_tok[attr]] if attr else [],
+                    "translation": [*jitter_xy[o, f].tolist(), float(jitter_z[o, f])],
+                    "size": size[o].tolist(),
+                    "rotation": quats[j],
+                    "num_lidar_pts": int(sensed["lidar"][o, f]),
+                    "num_radar_pts": int(sensed["radar"][o, f]),
+                    "prev": anns[j - 1] if j else "",
+                    "next": anns[j + 1] if j + 1 < len(anns) else "",
+                }
+            )
+        out["instance"].append(
+            {
+                "token": inst,
+                "category_token": cat_tok[obj.category[o]],
+                "nbr_annotations": len(anns),
+                "first_annotation_token": anns[0],
+                "last_annotation_token": anns[-1],
+            }
+        )
         count += len(anns)
     return count
 
@@ -799,8 +981,16 @@ def build_tables(scenes: int, frames: int, seed: int, version: str) -> tuple[dic
     """All 13 tables and the splits (``demo_train``, ``demo_val``, ``demo_all``) of a demo dataset."""
     tok = _Tokens(seed, version)
     tables = static_tables(tok)
-    for key in ("scene", "log", "sample", "sample_data", "ego_pose", "calibrated_sensor", "instance",
-                "sample_annotation"):
+    for key in (
+        "scene",
+        "log",
+        "sample",
+        "sample_data",
+        "ego_pose",
+        "calibrated_sensor",
+        "instance",
+        "sample_annotation",
+    ):
         tables[key] = []
     names = []
     for i in range(scenes):
@@ -809,11 +999,17 @@ def build_tables(scenes: int, frames: int, seed: int, version: str) -> tuple[dic
             tables[key].extend(recs)
         names.append(part["scene"][0]["name"])
     map_tok = tok("map", "demo")
-    tables["map"] = [{"token": map_tok, "log_tokens": [r["token"] for r in tables["log"]],
-                      "category": "semantic_prior", "filename": f"maps/{map_tok}.png"}]
+    tables["map"] = [
+        {
+            "token": map_tok,
+            "log_tokens": [r["token"] for r in tables["log"]],
+            "category": "semantic_prior",
+            "filename": f"maps/{map_tok}.png",
+        }
+    ]
     val = [n for i, n in enumerate(names) if i % VAL_EVERY == VAL_EVERY - 1]
     if not val and len(names) > 1:
-        val = names[-1:]                                  # small demos still get a validation scene
+        val = names[-1:]  # small demos still get a validation scene
     splits = {"demo_train": [n for n in names if n not in val], "demo_val": val, "demo_all": names}
     return tables, splits
 
@@ -821,6 +1017,7 @@ def build_tables(scenes: int, frames: int, seed: int, version: str) -> tuple[dic
 # ----------------------------------------------------------------------------------------------------------------
 # writing
 # ----------------------------------------------------------------------------------------------------------------
+
 
 def is_demo_tables(nusc) -> bool:
     """Whether nuScenes-format tables (anything with a ``scene`` list of records) are a grutrack demo dataset:
@@ -830,11 +1027,17 @@ def is_demo_tables(nusc) -> bool:
 
 def placeholder_png() -> bytes:
     """A valid 1x1 grayscale PNG (the devkit only checks that the map file exists)."""
+
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
     ihdr = struct.pack(">IIBBBBB", 1, 1, 8, 0, 0, 0, 0)
-    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\x00\x00", 9)) + \
-        chunk(b"IEND", b"")
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", ihdr)
+        + chunk(b"IDAT", zlib.compress(b"\x00\x00", 9))
+        + chunk(b"IEND", b"")
+    )
 
 
 def readme_text(scenes: int, frames: int, seed: int, version: str, splits: dict, tables: dict) -> str:
@@ -848,11 +1051,17 @@ def readme_text(scenes: int, frames: int, seed: int, version: str, splits: dict,
         f"({len(splits['demo_val'])}), demo_all.\n"
         "There are no point clouds, images or maps: sample_data filenames point to files that do not exist and\n"
         "the map PNG is a 1x1 placeholder. Every object, pose and point count is simulated; category and\n"
-        "attribute names are nuScenes' so that the devkit's class mappings and evaluators apply.\n")
+        "attribute names are nuScenes' so that the devkit's class mappings and evaluators apply.\n"
+    )
 
 
-def generate_demo(out: str | os.PathLike, scenes: int = DEFAULT_SCENES, frames: int = FRAMES_PER_SCENE,
-                  seed: int = 0, version: str = VERSION) -> dict:
+def generate_demo(
+    out: str | os.PathLike,
+    scenes: int = DEFAULT_SCENES,
+    frames: int = FRAMES_PER_SCENE,
+    seed: int = 0,
+    version: str = VERSION,
+) -> dict:
     """Write a demo dataset to ``out`` atomically (built in a temporary folder beside it, then renamed).
 
     An existing ``out`` is replaced only if it is empty or a previous demo (has the README marker); one that
@@ -866,19 +1075,27 @@ def generate_demo(out: str | os.PathLike, scenes: int = DEFAULT_SCENES, frames: 
     out = Path(out)
     _check_replaceable(out)
     tables, splits = build_tables(scenes, frames, seed, version)
-    files = {f"{version}/{name}.json": json.dumps(recs, separators=(",", ":")).encode()
-             for name, recs in tables.items()}
+    files = {
+        f"{version}/{name}.json": json.dumps(recs, separators=(",", ":")).encode() for name, recs in tables.items()
+    }
     files[f"{version}/splits.json"] = json.dumps(splits, indent=1).encode()
     files[tables["map"][0]["filename"]] = placeholder_png()
     files["README.txt"] = readme_text(scenes, frames, seed, version, splits, tables).encode()
-    summary = {"dataroot": str(out), "version": version, "scenes": scenes, "samples": len(tables["sample"]),
-               "instances": len(tables["instance"]), "annotations": len(tables["sample_annotation"]),
-               "splits": {k: len(v) for k, v in splits.items()}, "unchanged": _same_files(out, files)}
+    summary = {
+        "dataroot": str(out),
+        "version": version,
+        "scenes": scenes,
+        "samples": len(tables["sample"]),
+        "instances": len(tables["instance"]),
+        "annotations": len(tables["sample_annotation"]),
+        "splits": {k: len(v) for k, v in splits.items()},
+        "unchanged": _same_files(out, files),
+    }
     if summary["unchanged"]:
-        return summary      # byte for byte the same dataset: leave it (and its times) alone
+        return summary  # byte for byte the same dataset: leave it (and its times) alone
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
-    os.chmod(tmp, 0o755)                                  # mkdtemp makes it private; a dataset is for reading
+    os.chmod(tmp, 0o755)  # mkdtemp makes it private; a dataset is for reading
     try:
         for rel, data in files.items():
             (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
@@ -908,8 +1125,10 @@ def _check_replaceable(out: Path) -> None:
     if out.is_dir() and any(out.iterdir()):
         readme = out / "README.txt"
         if not (readme.is_file() and readme.read_text(errors="replace").startswith(MARKER)):
-            raise ConfigError(f"demo-data: --out {out} exists and is not a grutrack demo dataset "
-                              f"(no {readme} starting with '{MARKER}'); choose an empty or new folder")
+            raise ConfigError(
+                f"demo-data: --out {out} exists and is not a grutrack demo dataset "
+                f"(no {readme} starting with '{MARKER}'); choose an empty or new folder"
+            )
 
 
 def _swap_in(tmp: Path, out: Path) -> None:

@@ -32,13 +32,13 @@ import functools
 import hashlib
 import json
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable
 
 import numpy as np
 
-from grutrack.boxes import BOX_DIM, VX, VY, W, H, YAW, quaternion_from_yaw, wrap_angle
+from grutrack.boxes import BOX_DIM, VX, VY, YAW, H, W, quaternion_from_yaw, wrap_angle
 from grutrack.classes import DETECTION_CLASSES
 from grutrack.data.nusc_detections import LIDAR_META
 from grutrack.data.scene import BoxSet
@@ -55,6 +55,7 @@ MOVING_SPEED = 0.5  # m/s; above it a vehicle/pedestrian attribute is "moving" (
 # ----------------------------------------------------------------------------------------------------------------
 # canonical ground truth and detections
 # ----------------------------------------------------------------------------------------------------------------
+
 
 @dataclass
 class GTFrame:
@@ -102,47 +103,49 @@ class DetFrame:
 # profiles
 # ----------------------------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class ClassProfile:
     """Detector behaviour for one detection class. Units: metres, radians, m/s; rates are per frame."""
 
-    recall_max: float = 0.9            # recall of well-observed objects
-    points_half: float = 5.0           # lidar points at which recall is recall_max / 2
-    points_slope: float = 1.5          # logistic slope in ln(points)
-    recall_drop_per_10m: float = 0.0   # linear recall loss per 10 m of distance
-    recall_zero_points: float = 0.02   # recall of boxes with no lidar point
-    pos_sigma_m: float = 0.1           # centre noise (per axis) at the sensor
-    pos_sigma_per_m: float = 0.003     # centre noise growth per metre of distance
-    pos_tail_prob: float = 0.05        # probability of a heavy-tailed (Laplace) centre error
-    pos_tail_scale_m: float = 0.6      # Laplace scale of that error
-    pos_drift_sigma_m: float = 0.0     # centre error (per axis) drifting over the object's life (0: none)
-    pos_drift_time_s: float = 2.0      # its correlation time: errors dt apart correlate by exp(-dt / this)
-    z_sigma_m: float = 0.1             # height-of-centre noise
-    size_sigma_rel: float = 0.06       # log-normal sigma of w, l, h
-    yaw_sigma_rad: float = 0.08        # yaw noise
-    yaw_flip_prob: float = 0.02        # probability of a 180 degree heading flip
-    vel_sigma_mps: float = 0.2         # velocity noise per axis for a static object
-    vel_sigma_rel: float = 0.1         # velocity noise growth, fraction of the speed
-    vel_tail_prob: float = 0.03        # probability of a heavy-tailed velocity error
-    vel_tail_scale_mps: float = 1.5    # Laplace scale of that error
-    vel_track_fail_prob: float = 0.0   # probability that an object's velocity is under-reported its whole life
+    recall_max: float = 0.9  # recall of well-observed objects
+    points_half: float = 5.0  # lidar points at which recall is recall_max / 2
+    points_slope: float = 1.5  # logistic slope in ln(points)
+    recall_drop_per_10m: float = 0.0  # linear recall loss per 10 m of distance
+    recall_zero_points: float = 0.02  # recall of boxes with no lidar point
+    pos_sigma_m: float = 0.1  # centre noise (per axis) at the sensor
+    pos_sigma_per_m: float = 0.003  # centre noise growth per metre of distance
+    pos_tail_prob: float = 0.05  # probability of a heavy-tailed (Laplace) centre error
+    pos_tail_scale_m: float = 0.6  # Laplace scale of that error
+    pos_drift_sigma_m: float = 0.0  # centre error (per axis) drifting over the object's life (0: none)
+    pos_drift_time_s: float = 2.0  # its correlation time: errors dt apart correlate by exp(-dt / this)
+    z_sigma_m: float = 0.1  # height-of-centre noise
+    size_sigma_rel: float = 0.06  # log-normal sigma of w, l, h
+    yaw_sigma_rad: float = 0.08  # yaw noise
+    yaw_flip_prob: float = 0.02  # probability of a 180 degree heading flip
+    vel_sigma_mps: float = 0.2  # velocity noise per axis for a static object
+    vel_sigma_rel: float = 0.1  # velocity noise growth, fraction of the speed
+    vel_tail_prob: float = 0.03  # probability of a heavy-tailed velocity error
+    vel_tail_scale_mps: float = 1.5  # Laplace scale of that error
+    vel_track_fail_prob: float = 0.0  # probability that an object's velocity is under-reported its whole life
     vel_track_fail_scale: float = 0.3  # ... then its (noisy) velocity times u, u ~ U(0, this) drawn per object
     confusion: dict = field(default_factory=dict)  # {other detection class: probability}
     confusion_logit_penalty: float = 1.0  # score logit lowered for a confused label
-    duplicate_prob: float = 0.05       # probability that a detection has a duplicate
-    duplicate_offset_m: float = 0.3    # centre offset sigma of a duplicate
+    duplicate_prob: float = 0.05  # probability that a detection has a duplicate
+    duplicate_offset_m: float = 0.3  # centre offset sigma of a duplicate
     duplicate_other_class_prob: float = 0.3  # share of duplicates carrying a confused class
-    near_fp_rate: float = 0.05         # false positives per GT object per frame, 1.5-5 m away from it
-    free_fp_per_frame: float = 0.5     # false positives per frame anywhere within range
-    score_logit_base: float = 0.0      # TP score logit at 0 lidar points ...
+    near_fp_rate: float = 0.05  # false positives per GT object per frame, 1.5-5 m away from it
+    free_fp_per_frame: float = 0.5  # false positives per frame anywhere within range
+    score_logit_base: float = 0.0  # TP score logit at 0 lidar points ...
     score_logit_per_log_pts: float = 0.6  # ... plus this times ln(1 + points)
-    score_logit_sigma: float = 1.0     # TP score logit noise
+    score_logit_sigma: float = 1.0  # TP score logit noise
     fp_score_logit_mean: float = -2.0  # FP score logit mean
     fp_score_logit_sigma: float = 1.0  # FP score logit noise
     mean_size: tuple = (1.0, 1.0, 1.0)  # [w, l, h] of free-space false positives
 
 
 CLASS_KEYS = tuple(f.name for f in dataclasses.fields(ClassProfile))
+
 
 @dataclass(frozen=True)
 class DetectorProfile:
@@ -172,7 +175,7 @@ def load_profile(name_or_path: str | os.PathLike) -> DetectorProfile:
     from grutrack.config_loader import read_config, validate
 
     raw, source = read_config("detector_profile", name_or_path)
-    for key in ("defaults", "classes"):          # an empty YAML section reads as None
+    for key in ("defaults", "classes"):  # an empty YAML section reads as None
         if raw.get(key) is None and key in raw:
             raw[key] = {}
     if isinstance(raw.get("classes"), dict):
@@ -185,16 +188,30 @@ def _parse_profile(raw: dict, path: str) -> DetectorProfile:
     """Build the dataclasses of a schema-checked profile."""
     defaults = raw.get("defaults") or {}
     classes = {name: _class_profile({**defaults, **values}, path, name) for name, values in raw["classes"].items()}
-    return DetectorProfile(name=str(raw["name"]), description=str(raw.get("description", "")),
-                           reference=dict(raw.get("reference") or {}), detection_range_m=float(raw["detection_range_m"]),
-                           score_threshold=float(raw["score_threshold"]),
-                           max_boxes_per_sample=int(raw["max_boxes_per_sample"]), classes=classes, path=path)
+    return DetectorProfile(
+        name=str(raw["name"]),
+        description=str(raw.get("description", "")),
+        reference=dict(raw.get("reference") or {}),
+        detection_range_m=float(raw["detection_range_m"]),
+        score_threshold=float(raw["score_threshold"]),
+        max_boxes_per_sample=int(raw["max_boxes_per_sample"]),
+        classes=classes,
+        path=path,
+    )
 
 
 def _class_profile(values: dict, path: str, name: str) -> ClassProfile:
     """One ClassProfile; checks what the schema cannot: no class confused with itself, confusions sum <= 1."""
-    conv = {k: ({str(c): float(p) for c, p in (v or {}).items()} if k == "confusion"
-                else tuple(float(x) for x in v) if k == "mean_size" else float(v)) for k, v in values.items()}
+    conv = {
+        k: (
+            {str(c): float(p) for c, p in (v or {}).items()}
+            if k == "confusion"
+            else tuple(float(x) for x in v)
+            if k == "mean_size"
+            else float(v)
+        )
+        for k, v in values.items()
+    }
     prof = ClassProfile(**conv)
     if name in prof.confusion:
         raise ConfigError(f"{path}: classes.{name}.confusion has '{name}', expected another detection class")
@@ -206,6 +223,7 @@ def _class_profile(values: dict, path: str, name: str) -> ClassProfile:
 # ----------------------------------------------------------------------------------------------------------------
 # the format-free core
 # ----------------------------------------------------------------------------------------------------------------
+
 
 class _Tables:
     """Per-class profile values as arrays indexed by detection class index (vectorised lookups)."""
@@ -225,8 +243,7 @@ class _Tables:
         off = conf.copy()
         np.fill_diagonal(off, 0.0)
         rows = off.sum(axis=1, keepdims=True)
-        self.other_cdf = np.cumsum(np.where(rows > 0, off / np.where(rows > 0, rows, 1.0), np.eye(len(conf))),
-                                   axis=1)
+        self.other_cdf = np.cumsum(np.where(rows > 0, off / np.where(rows > 0, rows, 1.0), np.eye(len(conf))), axis=1)
         free = self.free_fp_per_frame
         self.free_total = float(free.sum())
         self.free_cdf = np.cumsum(free / self.free_total) if self.free_total > 0 else None
@@ -235,7 +252,7 @@ class _Tables:
 def frame_rng(seed: int, profile_name: str, token: str) -> np.random.Generator:
     """The random stream of one frame: a function of (seed, profile name, frame token) only."""
     digest = hashlib.md5(f"{profile_name}|{token}".encode()).digest()
-    words = [int.from_bytes(digest[i:i + 4], "little") for i in range(0, 16, 4)]
+    words = [int.from_bytes(digest[i : i + 4], "little") for i in range(0, 16, 4)]
     return np.random.default_rng(np.random.SeedSequence([int(seed) & 0xFFFFFFFF, *words]))
 
 
@@ -259,14 +276,16 @@ def _drift_features(seed: int, profile_name: str, instance) -> tuple[np.ndarray,
     phases in [0, 2 pi), a function of (seed, profile name, instance id) only (cached: an object appears in
     many frames)."""
     d = hashlib.md5(f"{int(seed)}|{profile_name}|drift|{instance}".encode()).digest()
-    rng = np.random.default_rng(np.random.SeedSequence([int.from_bytes(d[i:i + 4], "little")
-                                                        for i in range(0, 16, 4)]))
+    rng = np.random.default_rng(
+        np.random.SeedSequence([int.from_bytes(d[i : i + 4], "little") for i in range(0, 16, 4)])
+    )
     omega = np.tan(np.pi * (rng.random((2, DRIFT_FEATURES)) - 0.5))
     return omega, rng.uniform(0.0, 2.0 * np.pi, (2, DRIFT_FEATURES))
 
 
-def centre_drift(seed: int, profile_name: str, instance_ids, t_s: float, sigma: np.ndarray,
-                 tau: np.ndarray) -> np.ndarray:
+def centre_drift(
+    seed: int, profile_name: str, instance_ids, t_s: float, sigma: np.ndarray, tau: np.ndarray
+) -> np.ndarray:
     """The slowly drifting centre error ``(K, 2)`` metres (x, y, global frame) of K objects at time ``t_s``
     (seconds): per axis ``e(t) = sigma sqrt(2/J) sum_j cos(w_j t / tau + phi_j)`` with J = DRIFT_FEATURES,
     ``w_j`` standard Cauchy and ``phi_j`` uniform, drawn once per object (:func:`_drift_features`).
@@ -278,7 +297,7 @@ def centre_drift(seed: int, profile_name: str, instance_ids, t_s: float, sigma: 
     feats = [_drift_features(seed, profile_name, inst) for inst in instance_ids]
     if not feats:
         return np.zeros((0, 2))
-    omega = np.stack([f[0] for f in feats])              # (K, 2, J)
+    omega = np.stack([f[0] for f in feats])  # (K, 2, J)
     phase = np.stack([f[1] for f in feats])
     arg = omega * (float(t_s) / np.asarray(tau, np.float64))[:, None, None] + phase
     return np.asarray(sigma, np.float64)[:, None] * np.sqrt(2.0 / DRIFT_FEATURES) * np.cos(arg).sum(axis=2)
@@ -290,7 +309,7 @@ def _under_reported_velocity(boxes: np.ndarray, cls: np.ndarray, u: np.ndarray, 
     persistently reports a moving object as nearly static."""
     fail = u[:, 0] < tab.vel_track_fail_prob[cls]
     out = boxes.copy()
-    out[fail, VX:VY + 1] *= (u[fail, 1] * tab.vel_track_fail_scale[cls[fail]])[:, None]
+    out[fail, VX : VY + 1] *= (u[fail, 1] * tab.vel_track_fail_scale[cls[fail]])[:, None]
     return out
 
 
@@ -303,8 +322,9 @@ def _sample_cdf(cdf_rows: np.ndarray, u: np.ndarray) -> np.ndarray:
     return np.minimum((u[:, None] > cdf_rows).sum(axis=1), cdf_rows.shape[1] - 1)
 
 
-def detection_probability(cls: np.ndarray, dist: np.ndarray, pts: np.ndarray, tab: _Tables,
-                          det_range: float) -> np.ndarray:
+def detection_probability(
+    cls: np.ndarray, dist: np.ndarray, pts: np.ndarray, tab: _Tables, det_range: float
+) -> np.ndarray:
     """Probability that each GT box is detected.
 
     cls: (N,) detection class index; dist: (N,) metres from the ego (xy); pts: (N,) lidar points.
@@ -317,8 +337,9 @@ def detection_probability(cls: np.ndarray, dist: np.ndarray, pts: np.ndarray, ta
     return np.where(dist <= det_range, p, 0.0)
 
 
-def _noisy_boxes(boxes: np.ndarray, cls: np.ndarray, dist: np.ndarray, tab: _Tables,
-                 rng: np.random.Generator) -> np.ndarray:
+def _noisy_boxes(
+    boxes: np.ndarray, cls: np.ndarray, dist: np.ndarray, tab: _Tables, rng: np.random.Generator
+) -> np.ndarray:
     """Detected versions of GT boxes (K, 9): centre, size, yaw and velocity noise, heavy tails, yaw flips."""
     k = len(boxes)
     out = boxes.copy()
@@ -328,7 +349,7 @@ def _noisy_boxes(boxes: np.ndarray, cls: np.ndarray, dist: np.ndarray, tab: _Tab
     err += np.where(tail[:, None], rng.laplace(size=(k, 2)) * tab.pos_tail_scale_m[cls][:, None], 0.0)
     out[:, 0:2] += err
     out[:, 2] += rng.normal(size=k) * tab.z_sigma_m[cls]
-    out[:, W:H + 1] *= np.exp(rng.normal(size=(k, 3)) * tab.size_sigma_rel[cls][:, None])
+    out[:, W : H + 1] *= np.exp(rng.normal(size=(k, 3)) * tab.size_sigma_rel[cls][:, None])
     flip = rng.random(k) < tab.yaw_flip_prob[cls]
     out[:, YAW] = wrap_angle(out[:, YAW] + rng.normal(size=k) * tab.yaw_sigma_rad[cls] + np.pi * flip)
     speed = np.hypot(boxes[:, VX], boxes[:, VY])
@@ -336,14 +357,17 @@ def _noisy_boxes(boxes: np.ndarray, cls: np.ndarray, dist: np.ndarray, tab: _Tab
     verr = rng.normal(size=(k, 2)) * vsig[:, None]
     vtail = rng.random(k) < tab.vel_tail_prob[cls]
     verr += np.where(vtail[:, None], rng.laplace(size=(k, 2)) * tab.vel_tail_scale_mps[cls][:, None], 0.0)
-    out[:, VX:VY + 1] += verr
+    out[:, VX : VY + 1] += verr
     return out
 
 
 def _tp_scores(cls: np.ndarray, pts: np.ndarray, tab: _Tables, rng: np.random.Generator) -> np.ndarray:
     """Score logits (K,) of true positives: rising with ln(1 + lidar points), Gaussian noise."""
-    return (tab.score_logit_base[cls] + tab.score_logit_per_log_pts[cls] * np.log1p(pts)
-            + rng.normal(size=len(cls)) * tab.score_logit_sigma[cls])
+    return (
+        tab.score_logit_base[cls]
+        + tab.score_logit_per_log_pts[cls] * np.log1p(pts)
+        + rng.normal(size=len(cls)) * tab.score_logit_sigma[cls]
+    )
 
 
 def _fp_scores(cls: np.ndarray, tab: _Tables, rng: np.random.Generator) -> np.ndarray:
@@ -360,9 +384,9 @@ def _near_fps(gt: GTFrame, cls: np.ndarray, tab: _Tables, rng: np.random.Generat
     ang, rad = rng.uniform(-np.pi, np.pi, k), rng.uniform(1.5, 5.0, k)
     boxes[:, 0] += rad * np.cos(ang)
     boxes[:, 1] += rad * np.sin(ang)
-    boxes[:, W:H + 1] *= np.exp(rng.normal(size=(k, 3)) * 0.15)
+    boxes[:, W : H + 1] *= np.exp(rng.normal(size=(k, 3)) * 0.15)
     boxes[:, YAW] = wrap_angle(boxes[:, YAW] + rng.normal(size=k) * 0.5)
-    boxes[:, VX:VY + 1] += rng.normal(size=(k, 2)) * 0.5
+    boxes[:, VX : VY + 1] += rng.normal(size=(k, 2)) * 0.5
     fcls = _sample_cdf(tab.confusion_cdf[cls[src]], rng.random(k))
     return boxes, fcls, _fp_scores(fcls, tab, rng)
 
@@ -376,15 +400,16 @@ def _free_fps(ego: np.ndarray, det_range: float, tab: _Tables, rng: np.random.Ge
     boxes[:, 0] = ego[0] + rad * np.cos(ang)
     boxes[:, 1] = ego[1] + rad * np.sin(ang)
     size = tab.mean_size[cls] * np.exp(rng.normal(size=(k, 3)) * 0.15)
-    boxes[:, W:H + 1] = size
+    boxes[:, W : H + 1] = size
     boxes[:, 2] = ego[2] + size[:, 2] / 2.0 + rng.normal(size=k) * 0.3
     boxes[:, YAW] = rng.uniform(-np.pi, np.pi, k)
-    boxes[:, VX:VY + 1] = rng.normal(size=(k, 2)) * 0.3
+    boxes[:, VX : VY + 1] = rng.normal(size=(k, 2)) * 0.3
     return boxes, cls, _fp_scores(cls, tab, rng)
 
 
-def simulate_frame(gt: GTFrame, profile: DetectorProfile, rng: np.random.Generator,
-                   tables: _Tables | None = None, seed: int = 0) -> DetFrame:
+def simulate_frame(
+    gt: GTFrame, profile: DetectorProfile, rng: np.random.Generator, tables: _Tables | None = None, seed: int = 0
+) -> DetFrame:
     """Detections of one frame sampled from its ground truth.
 
     gt: canonical GT arrays; profile: the simulated detector; rng: this frame's stream (:func:`frame_rng`);
@@ -404,9 +429,14 @@ def simulate_frame(gt: GTFrame, profile: DetectorProfile, rng: np.random.Generat
         u = object_uniforms(seed, profile.name, np.asarray(gt.instance_ids, dtype=object)[idx])
         tp_boxes = _under_reported_velocity(tp_boxes, cls[idx], u, tab)
     if tab.pos_drift_sigma_m[cls[idx]].any():
-        tp_boxes[:, 0:2] += centre_drift(seed, profile.name, np.asarray(gt.instance_ids, dtype=object)[idx],
-                                         gt.timestamp * 1e-6, tab.pos_drift_sigma_m[cls[idx]],
-                                         tab.pos_drift_time_s[cls[idx]])
+        tp_boxes[:, 0:2] += centre_drift(
+            seed,
+            profile.name,
+            np.asarray(gt.instance_ids, dtype=object)[idx],
+            gt.timestamp * 1e-6,
+            tab.pos_drift_sigma_m[cls[idx]],
+            tab.pos_drift_time_s[cls[idx]],
+        )
     tp_cls = _sample_cdf(tab.confusion_cdf[cls[idx]], rng.random(len(idx)))
     tp_logit = _tp_scores(cls[idx], pts[idx], tab, rng) - tab.confusion_logit_penalty[cls[idx]] * (tp_cls != cls[idx])
 
@@ -420,8 +450,9 @@ def simulate_frame(gt: GTFrame, profile: DetectorProfile, rng: np.random.Generat
     d_logit = tp_logit[dup] - rng.uniform(0.5, 3.0, len(d_boxes))
 
     n_boxes, n_cls, n_logit = _near_fps(gt, cls, tab, rng)
-    f_boxes, f_cls, f_logit = _free_fps(np.asarray(gt.ego_translation, dtype=np.float64),
-                                        profile.detection_range_m, tab, rng)
+    f_boxes, f_cls, f_logit = _free_fps(
+        np.asarray(gt.ego_translation, dtype=np.float64), profile.detection_range_m, tab, rng
+    )
     boxes = np.concatenate([tp_boxes, d_boxes, n_boxes, f_boxes])
     labels = np.concatenate([tp_cls, d_cls, n_cls, f_cls]).astype(np.int64)
     scores = _sigmoid(np.concatenate([tp_logit, d_logit, n_logit, f_logit]))
@@ -429,7 +460,7 @@ def simulate_frame(gt: GTFrame, profile: DetectorProfile, rng: np.random.Generat
     ego = np.asarray(gt.ego_translation, dtype=np.float64)
     in_range = np.hypot(boxes[:, 0] - ego[0], boxes[:, 1] - ego[1]) <= profile.detection_range_m
     order = np.argsort(-scores, kind="stable")
-    order = order[(scores[order] >= profile.score_threshold) & in_range[order]][:profile.max_boxes_per_sample]
+    order = order[(scores[order] >= profile.score_threshold) & in_range[order]][: profile.max_boxes_per_sample]
     names = np.asarray(DETECTION_CLASSES, dtype=object)[labels[order]]
     return DetFrame(gt.token, boxes[order], scores[order], names, is_tp[order])
 
@@ -444,6 +475,7 @@ def simulate(frames: Iterable[GTFrame], profile: DetectorProfile, seed: int) -> 
 # any dataset: canonical scenes in, canonical detections out
 # ----------------------------------------------------------------------------------------------------------------
 
+
 def scene_gt_frames(scenes: Iterable, sim_class: tuple[str, ...]) -> list[GTFrame]:
     """GT frames of canonical scenes with ground truth (any dataset). ``sim_class[label]``: the detection
     class (:data:`DETECTION_CLASSES`) whose profile statistics a box of that label is simulated with; lidar
@@ -456,11 +488,19 @@ def scene_gt_frames(scenes: Iterable, sim_class: tuple[str, ...]) -> list[GTFram
             gt = f.gt
             none = np.zeros(len(gt), np.int64)
             lidar = gt.extra.get("num_lidar_pts", gt.extra.get("num_pts", none))
-            frames.append(GTFrame(token=f.token, scene=s.name, timestamp=f.timestamp,
-                                  ego_translation=f.ego_translation, boxes=gt.boxes, names=to_sim[gt.labels],
-                                  num_lidar_pts=np.asarray(lidar, np.int64),
-                                  num_radar_pts=np.asarray(gt.extra.get("num_radar_pts", none), np.int64),
-                                  instance_ids=gt.ids if gt.ids is not None else np.arange(len(gt)).astype(object)))
+            frames.append(
+                GTFrame(
+                    token=f.token,
+                    scene=s.name,
+                    timestamp=f.timestamp,
+                    ego_translation=f.ego_translation,
+                    boxes=gt.boxes,
+                    names=to_sim[gt.labels],
+                    num_lidar_pts=np.asarray(lidar, np.int64),
+                    num_radar_pts=np.asarray(gt.extra.get("num_radar_pts", none), np.int64),
+                    instance_ids=gt.ids if gt.ids is not None else np.arange(len(gt)).astype(object),
+                )
+            )
     return frames
 
 
@@ -470,8 +510,9 @@ def simulate_scenes(scenes: list, sim_class: tuple[str, ...], profile: DetectorP
     distinct detection class, so a simulated box's class maps back to exactly one label; boxes the simulator
     gives a class no label maps to (class confusion, ghosts of other classes) are dropped."""
     if len(set(sim_class)) != len(sim_class) or not set(sim_class) <= set(DETECTION_CLASSES):
-        raise ConfigError(f"simulator classes {sim_class} must be distinct detection classes "
-                          f"({', '.join(DETECTION_CLASSES)})")
+        raise ConfigError(
+            f"simulator classes {sim_class} must be distinct detection classes ({', '.join(DETECTION_CLASSES)})"
+        )
     back = {c: i for i, c in enumerate(sim_class)}
     out = {}
     for det in simulate(scene_gt_frames(scenes, sim_class), profile, seed):
@@ -484,6 +525,7 @@ def simulate_scenes(scenes: list, sim_class: tuple[str, ...], profile: DetectorP
 # ----------------------------------------------------------------------------------------------------------------
 # the nuScenes edge: GT in, detection-submission JSON out
 # ----------------------------------------------------------------------------------------------------------------
+
 
 def open_dataset(dataroot: str | os.PathLike, version: str):
     """``NuScenes(version, dataroot)`` quietly; :class:`grutrack.errors.DatasetError` when the folder or version
@@ -526,14 +568,24 @@ def _frame_records(det: DetFrame) -> list[dict]:
         return []
     b = det.boxes
     trans = np.round(b[:, 0:3], 4).tolist()
-    size = np.round(b[:, W:H + 1], 4).tolist()
+    size = np.round(b[:, W : H + 1], 4).tolist()
     rot = np.round(quaternion_from_yaw(b[:, YAW]), 8).tolist()
-    vel = np.round(b[:, VX:VY + 1], 4).tolist()
+    vel = np.round(b[:, VX : VY + 1], 4).tolist()
     score = np.round(det.scores, 6).tolist()
     attrs = attribute_names(det.names, b)
-    return [{"sample_token": det.token, "translation": trans[i], "size": size[i], "rotation": rot[i],
-             "velocity": vel[i], "detection_name": str(det.names[i]), "detection_score": score[i],
-             "attribute_name": attrs[i]} for i in range(len(det))]
+    return [
+        {
+            "sample_token": det.token,
+            "translation": trans[i],
+            "size": size[i],
+            "rotation": rot[i],
+            "velocity": vel[i],
+            "detection_name": str(det.names[i]),
+            "detection_score": score[i],
+            "attribute_name": attrs[i],
+        }
+        for i in range(len(det))
+    ]
 
 
 def detection_json(dets: list[DetFrame], profile: DetectorProfile, seed: int) -> dict:
@@ -543,14 +595,25 @@ def detection_json(dets: list[DetFrame], profile: DetectorProfile, seed: int) ->
     return {
         "meta": dict(LIDAR_META),
         "results": {d.token: _frame_records(d) for d in dets},
-        "synthetic": {"generator": "grutrack simulate-detections", "profile": profile.name, "seed": int(seed),
-                      "note": "SYNTHETIC detections sampled from ground truth by a detector simulator; "
-                              "not the output of a real detector"},
+        "synthetic": {
+            "generator": "grutrack simulate-detections",
+            "profile": profile.name,
+            "seed": int(seed),
+            "note": "SYNTHETIC detections sampled from ground truth by a detector simulator; "
+            "not the output of a real detector",
+        },
     }
 
 
-def simulate_nuscenes(dataroot: str | os.PathLike, version: str, split: str, profile: str | DetectorProfile,
-                      seed: int, out: str | os.PathLike | None = None, nusc=None) -> dict:
+def simulate_nuscenes(
+    dataroot: str | os.PathLike,
+    version: str,
+    split: str,
+    profile: str | DetectorProfile,
+    seed: int,
+    out: str | os.PathLike | None = None,
+    nusc=None,
+) -> dict:
     """Simulate detections for every sample of a nuScenes(-format) split; write them atomically to ``out``.
 
     Returns the detection-submission object. ``nusc`` may be passed to reuse a loaded database.
@@ -566,6 +629,6 @@ def simulate_nuscenes(dataroot: str | os.PathLike, version: str, split: str, pro
 
 def write_detection_json(path: str | os.PathLike, sub: dict) -> None:
     """Write a detection-submission object atomically (compact JSON)."""
-    text = json.dumps(sub, separators=(",", ":"))          # dumps uses the C encoder, dump does not
+    text = json.dumps(sub, separators=(",", ":"))  # dumps uses the C encoder, dump does not
     with atomic_path(path) as tmp:
         Path(tmp).write_text(text)

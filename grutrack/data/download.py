@@ -12,7 +12,6 @@ from __future__ import annotations
 import http.client
 import os
 import re
-import socket
 import sys
 import time
 import urllib.error
@@ -28,8 +27,16 @@ from grutrack.errors import GrutrackError
 from grutrack.provenance import sha256_file
 
 #: hosts whose links open a web page (sign-in, virus-scan interstitial, folder view) rather than the file
-BROWSER_HOSTS = ("drive.google.com", "docs.google.com", "drive.usercontent.google.com", "onedrive.live.com",
-                 "1drv.ms", "sharepoint.com", "pan.baidu.com", "dropbox.com")
+BROWSER_HOSTS = (
+    "drive.google.com",
+    "docs.google.com",
+    "drive.usercontent.google.com",
+    "onedrive.live.com",
+    "1drv.ms",
+    "sharepoint.com",
+    "pan.baidu.com",
+    "dropbox.com",
+)
 CHUNK = 1 << 16
 
 
@@ -49,16 +56,25 @@ def needs_browser(url: str) -> bool:
 
 def manual_instructions(src: DetectionSource, dest: Path, reason: str) -> str:
     """The message for a file that has to be put in place by hand."""
-    where = f"open {src.url} in a browser, download the file" if src.url else \
-        "obtain the file as described below"
+    where = f"open {src.url} in a browser, download the file" if src.url else "obtain the file as described below"
     check = f" Its SHA-256 must be {src.sha256}." if src.sha256 else ""
-    return (f"detection source '{src.name}' cannot be downloaded automatically: {reason}. To use it, {where} "
-            f"and put it at {dest} (then re-run).{check} About the file: {' '.join(src.description.split())} "
-            f"(source: {src.page})")
+    return (
+        f"detection source '{src.name}' cannot be downloaded automatically: {reason}. To use it, {where} "
+        f"and put it at {dest} (then re-run).{check} About the file: {' '.join(src.description.split())} "
+        f"(source: {src.page})"
+    )
 
 
-def fetch_source(src: DetectionSource, out_dir: str | Path, *, url: str | None = None, sha256: str | None = None,
-                 progress: bool = True, retries: int = 5, timeout: float = 30.0) -> Path:
+def fetch_source(
+    src: DetectionSource,
+    out_dir: str | Path,
+    *,
+    url: str | None = None,
+    sha256: str | None = None,
+    progress: bool = True,
+    retries: int = 5,
+    timeout: float = 30.0,
+) -> Path:
     """Make ``out_dir/<src.filename>`` exist and verified: keep a file already there (checked against the
     expected SHA-256 when one is known), else download it. ``url`` / ``sha256`` override the registry's."""
     dest = src.raw_path(out_dir)
@@ -72,12 +88,15 @@ def fetch_source(src: DetectionSource, out_dir: str | Path, *, url: str | None =
     if url is None and (src.host == "browser" or needs_browser(link)):
         raise DownloadError(manual_instructions(src, dest, f"its host ({urlparse(link).hostname}) needs a browser"))
     if needs_browser(link):
-        raise DownloadError(f"{link}: this host ({urlparse(link).hostname}) needs a browser; download the file by "
-                            f"hand and put it at {dest}")
+        raise DownloadError(
+            f"{link}: this host ({urlparse(link).hostname}) needs a browser; download the file by "
+            f"hand and put it at {dest}"
+        )
     digest = download(link, dest, expected, progress=progress, retries=retries, timeout=timeout)
     if not expected:
-        print(f"note: no SHA-256 is registered for '{src.name}'; the downloaded file has sha256 {digest}",
-              file=sys.stderr)
+        print(
+            f"note: no SHA-256 is registered for '{src.name}'; the downloaded file has sha256 {digest}", file=sys.stderr
+        )
     return dest
 
 
@@ -86,12 +105,21 @@ def _verify_existing(dest: Path, expected: str | None) -> None:
     if expected:
         got = sha256_file(dest)
         if got != expected:
-            raise DownloadError(f"{dest}: SHA-256 is {got}, expected {expected}; the file is not the registered "
-                                f"one (remove it and download again)")
+            raise DownloadError(
+                f"{dest}: SHA-256 is {got}, expected {expected}; the file is not the registered "
+                f"one (remove it and download again)"
+            )
 
 
-def download(url: str, dest: str | Path, sha256: str | None = None, *, progress: bool = True, retries: int = 5,
-             timeout: float = 30.0) -> str:
+def download(
+    url: str,
+    dest: str | Path,
+    sha256: str | None = None,
+    *,
+    progress: bool = True,
+    retries: int = 5,
+    timeout: float = 30.0,
+) -> str:
     """Download ``url`` to ``dest`` (resuming ``dest.part``), verify, rename atomically; returns the SHA-256."""
     dest = Path(dest)
     dest.parent.mkdir(parents=True, exist_ok=True)
@@ -100,21 +128,24 @@ def download(url: str, dest: str | Path, sha256: str | None = None, *, progress:
         try:
             _transfer(url, part, timeout, progress)
             break
-        except (_Interrupted, socket.timeout, ConnectionError, http.client.HTTPException,
-                urllib.error.URLError) as exc:
+        except (TimeoutError, _Interrupted, ConnectionError, http.client.HTTPException, urllib.error.URLError) as exc:
             if isinstance(exc, urllib.error.HTTPError):
                 raise DownloadError(f"{url}: HTTP {exc.code} {exc.reason}") from exc
             if attempt == retries:
                 size = part.stat().st_size if part.exists() else 0
-                raise DownloadError(f"{url}: transfer failed after {retries + 1} attempts ({exc}); {size} bytes are "
-                                    f"kept in {part} and the next run resumes from there") from exc
+                raise DownloadError(
+                    f"{url}: transfer failed after {retries + 1} attempts ({exc}); {size} bytes are "
+                    f"kept in {part} and the next run resumes from there"
+                ) from exc
             print(f"download interrupted ({exc}); resuming", file=sys.stderr)
-            time.sleep(min(0.2 * 2 ** attempt, 5.0))
+            time.sleep(min(0.2 * 2**attempt, 5.0))
     digest = sha256_file(part)
     if sha256 and digest != sha256:
         part.unlink()
-        raise DownloadError(f"{url}: SHA-256 mismatch: got {digest}, expected {sha256} (the partial file was "
-                            f"removed; {dest} was not written)")
+        raise DownloadError(
+            f"{url}: SHA-256 mismatch: got {digest}, expected {sha256} (the partial file was "
+            f"removed; {dest} was not written)"
+        )
     os.replace(part, dest)
     return digest
 
@@ -157,9 +188,19 @@ def _complete_size(content_range: str | None) -> int | None:
 def _copy_body(resp, part: Path, start: int, total: int | None, progress: bool, url: str) -> None:
     """Append the body to ``part`` (or rewrite it when ``start`` is 0), with a progress bar."""
     name = Path(urlparse(url).path).name or "download"
-    with open(part, "r+b" if start and part.exists() else "wb") as f, \
-            tqdm(total=total, initial=start, unit="B", unit_scale=True, unit_divisor=1024, desc=name,
-                 disable=not progress, file=sys.stderr) as bar:
+    with (
+        open(part, "r+b" if start and part.exists() else "wb") as f,
+        tqdm(
+            total=total,
+            initial=start,
+            unit="B",
+            unit_scale=True,
+            unit_divisor=1024,
+            desc=name,
+            disable=not progress,
+            file=sys.stderr,
+        ) as bar,
+    ):
         f.seek(start)
         f.truncate()
         while True:

@@ -10,7 +10,7 @@ the same instance, share of boxes without lidar points, instances and mean annot
 from __future__ import annotations
 
 import os
-from typing import Iterable
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -18,8 +18,8 @@ from grutrack.boxes import VX, VY, YAW, wrap_angle
 from grutrack.classes import DETECTION_TO_TRACKING, TRACKING_CLASSES
 from grutrack.io import write_json_atomic
 
-MAX_YAW_RATE_DT = 1.5   # s; consecutive annotations further apart are not differenced (devkit box_velocity limit)
-MOVING_SPEED = 0.5      # m/s; a box faster than this counts as moving
+MAX_YAW_RATE_DT = 1.5  # s; consecutive annotations further apart are not differenced (devkit box_velocity limit)
+MOVING_SPEED = 0.5  # m/s; a box faster than this counts as moving
 
 COLUMNS = (  # (key, header, format)
     ("boxes", "boxes", "{:>7d}"),
@@ -78,8 +78,13 @@ def _flatten(frames: Iterable) -> dict[str, np.ndarray]:
         parts["t"].append(np.full(int(keep.sum()), f.timestamp * 1e-6))
         parts["pts"].append(np.asarray(f.num_lidar_pts)[keep])
     if not parts["boxes"]:
-        return {"boxes": np.zeros((0, 9)), "cls": np.zeros(0, object), "inst": np.zeros(0, object),
-                "t": np.zeros(0), "pts": np.zeros(0, np.int64)}
+        return {
+            "boxes": np.zeros((0, 9)),
+            "cls": np.zeros(0, object),
+            "inst": np.zeros(0, object),
+            "t": np.zeros(0),
+            "pts": np.zeros(0, np.int64),
+        }
     return {k: np.concatenate(v) for k, v in parts.items()}
 
 
@@ -117,11 +122,17 @@ def _statistics(flat: dict[str, np.ndarray], classes: tuple[str, ...]) -> dict[s
         r = rates[mask[rate_idx]] if len(rates) else np.zeros(0)
         n_inst = len(set(flat["inst"][mask].tolist()))
         stats[name] = {
-            "boxes": n, "share": n / total if total else float("nan"),
-            "w": _mean(flat["boxes"][mask, 3]), "l": _mean(flat["boxes"][mask, 4]), "h": _mean(flat["boxes"][mask, 5]),
-            "speed": _mean(speed[mask]), "moving": _mean(speed[mask] > MOVING_SPEED),
-            "yaw_rate": _mean(r), "zero_pts": _mean(flat["pts"][mask] == 0),
-            "instances": n_inst, "track_len": n / n_inst if n_inst else float("nan"),
+            "boxes": n,
+            "share": n / total if total else float("nan"),
+            "w": _mean(flat["boxes"][mask, 3]),
+            "l": _mean(flat["boxes"][mask, 4]),
+            "h": _mean(flat["boxes"][mask, 5]),
+            "speed": _mean(speed[mask]),
+            "moving": _mean(speed[mask] > MOVING_SPEED),
+            "yaw_rate": _mean(r),
+            "zero_pts": _mean(flat["pts"][mask] == 0),
+            "instances": n_inst,
+            "track_len": n / n_inst if n_inst else float("nan"),
         }
     return stats
 
@@ -132,8 +143,7 @@ def _mean(x: np.ndarray) -> float:
 
 def format_table(stats: dict[str, dict], title: str = "") -> str:
     """A fixed-width text table of :func:`class_statistics` output."""
-    head = f"{'class':<11}" + " ".join(f"{h:>{len(fmt.format(0 if 'd}' in fmt else 0.0))}}"
-                                        for _, h, fmt in COLUMNS)
+    head = f"{'class':<11}" + " ".join(f"{h:>{len(fmt.format(0 if 'd}' in fmt else 0.0))}}" for _, h, fmt in COLUMNS)
     lines = [title] if title else []
     lines += [head, "-" * len(head)]
     for name, row in stats.items():
@@ -168,8 +178,10 @@ def _cell(value, fmt: str) -> str:
 
 def write_stats_json(path: str | os.PathLike, stats: dict[str, dict], meta: dict) -> None:
     """Write statistics (NaN as null) with a ``meta`` block, atomically."""
-    clean = {c: {k: (None if isinstance(v, float) and np.isnan(v) else v) for k, v in row.items()}
-             for c, row in stats.items()}
+    clean = {
+        c: {k: (None if isinstance(v, float) and np.isnan(v) else v) for k, v in row.items()}
+        for c, row in stats.items()
+    }
     write_json_atomic(path, {"meta": meta, "classes": clean}, indent=1)
 
 

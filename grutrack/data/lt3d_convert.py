@@ -19,8 +19,9 @@ def convert_lt3d_detections(raw: str | Path, dataroot: str | Path, split: str, o
     logs = set(list_logs(dataroot, split))
     keep = df["log_id"].astype(str).isin(logs)
     if not keep.any():
-        raise InputFormatError(f"{raw}: none of its {len(df)} rows belongs to a log of split '{split}' under "
-                               f"{dataroot} ({len(logs)} logs)")
+        raise InputFormatError(
+            f"{raw}: none of its {len(df)} rows belongs to a log of split '{split}' under {dataroot} ({len(logs)} logs)"
+        )
     sub = df[keep].reset_index(drop=True)
     with atomic_path(out) as tmp:
         sub.to_feather(tmp)

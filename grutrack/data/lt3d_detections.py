@@ -26,14 +26,35 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from grutrack.data.av2 import (COMPETITION_CATEGORIES, OTHER_ANNOTATION_CATEGORIES, ego_to_city, quat_to_matrix,
-                               read_poses, split_dir, token_timestamp_ns)
+from grutrack.data.av2 import (
+    COMPETITION_CATEGORIES,
+    OTHER_ANNOTATION_CATEGORIES,
+    ego_to_city,
+    quat_to_matrix,
+    read_poses,
+    split_dir,
+    token_timestamp_ns,
+)
 from grutrack.data.scene import BoxSet, Scene, Vocabulary
 from grutrack.errors import InputFormatError
 from grutrack.io import atomic_path
 
-REQUIRED_COLUMNS = ("tx_m", "ty_m", "tz_m", "length_m", "width_m", "height_m", "qw", "qx", "qy", "qz", "score",
-                    "log_id", "timestamp_ns", "category")
+REQUIRED_COLUMNS = (
+    "tx_m",
+    "ty_m",
+    "tz_m",
+    "length_m",
+    "width_m",
+    "height_m",
+    "qw",
+    "qx",
+    "qy",
+    "qz",
+    "score",
+    "log_id",
+    "timestamp_ns",
+    "category",
+)
 NUMERIC_COLUMNS = ("tx_m", "ty_m", "tz_m", "length_m", "width_m", "height_m", "qw", "qx", "qy", "qz", "score")
 VELOCITY_COLUMNS = ("vx", "vy")
 #: LT3D writes OTHER for a label outside its class list; such boxes are dropped like untracked categories
@@ -51,9 +72,9 @@ class DetectionStats:
 
     rows: int = 0
     kept: int = 0
-    other_category: int = 0   # category valid but not tracked
-    off_frame: int = 0        # valid sweep time, not a tracked frame (dropped, see module docstring)
-    empty_logs: list = field(default_factory=list)   # logs without any tracked detection
+    other_category: int = 0  # category valid but not tracked
+    off_frame: int = 0  # valid sweep time, not a tracked frame (dropped, see module docstring)
+    empty_logs: list = field(default_factory=list)  # logs without any tracked detection
 
 
 def read_detection_table(path: str | Path) -> pd.DataFrame:
@@ -71,16 +92,19 @@ def read_detection_table(path: str | Path) -> pd.DataFrame:
             with open(path, "rb") as fh:
                 df = pickle.load(fh)
         else:
-            raise InputFormatError(f"{path}: unknown detection file type '{suffix}' (expected .feather, .csv or "
-                                   f".pkl holding a pandas DataFrame)")
+            raise InputFormatError(
+                f"{path}: unknown detection file type '{suffix}' (expected .feather, .csv or "
+                f".pkl holding a pandas DataFrame)"
+            )
     except (OSError, ValueError, pickle.UnpicklingError, EOFError) as exc:
         raise InputFormatError(f"{path}: cannot read the detection table ({exc})") from exc
     if not isinstance(df, pd.DataFrame):
         raise InputFormatError(f"{path}: expected a pandas DataFrame of LT3D detections, got {type(df).__name__}")
     missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
     if missing:
-        raise InputFormatError(f"{path}: missing column(s) {missing}; LT3D detections need {list(REQUIRED_COLUMNS)}"
-                               f" (+ optional vx, vy)")
+        raise InputFormatError(
+            f"{path}: missing column(s) {missing}; LT3D detections need {list(REQUIRED_COLUMNS)} (+ optional vx, vy)"
+        )
     return df.reset_index(drop=True)
 
 
@@ -93,26 +117,36 @@ def _numbers(path: Path, df: pd.DataFrame, columns: tuple[str, ...]) -> np.ndarr
     bad = ~np.isfinite(arr)
     if bad.any():
         i, j = np.argwhere(bad)[0]
-        raise InputFormatError(f"{path}: row {i} (log {df['log_id'].iat[i]}, timestamp_ns {df['timestamp_ns'].iat[i]}):"
-                               f" field '{columns[j]}' is {arr[i, j]}; a finite number is required")
+        raise InputFormatError(
+            f"{path}: row {i} (log {df['log_id'].iat[i]}, timestamp_ns {df['timestamp_ns'].iat[i]}):"
+            f" field '{columns[j]}' is {arr[i, j]}; a finite number is required"
+        )
     return arr
 
 
 def _check_values(path: Path, df: pd.DataFrame, num: np.ndarray) -> None:
     """Sizes positive, quaternions unit, scores in [0, 1], categories known."""
+
     def fail(mask: np.ndarray, field: str, expect: str, value) -> None:
         i = int(np.argmax(mask))
-        raise InputFormatError(f"{path}: row {i} (log {df['log_id'].iat[i]}, timestamp_ns {df['timestamp_ns'].iat[i]})"
-                               f": field '{field}' {expect}, got {value(i)}")
+        raise InputFormatError(
+            f"{path}: row {i} (log {df['log_id'].iat[i]}, timestamp_ns {df['timestamp_ns'].iat[i]})"
+            f": field '{field}' {expect}, got {value(i)}"
+        )
 
     size = num[:, 3:6]
     if (size <= 0).any():
-        fail((size <= 0).any(axis=1), "length_m/width_m/height_m", "must be positive metres",
-             lambda i: size[i].tolist())
+        fail(
+            (size <= 0).any(axis=1), "length_m/width_m/height_m", "must be positive metres", lambda i: size[i].tolist()
+        )
     norm = np.linalg.norm(num[:, 6:10], axis=1)
     if (np.abs(norm - 1.0) > QUATERNION_TOLERANCE).any():
-        fail(np.abs(norm - 1.0) > QUATERNION_TOLERANCE, "qw/qx/qy/qz", "must be a unit quaternion",
-             lambda i: f"norm {norm[i]:.4f}")
+        fail(
+            np.abs(norm - 1.0) > QUATERNION_TOLERANCE,
+            "qw/qx/qy/qz",
+            "must be a unit quaternion",
+            lambda i: f"norm {norm[i]:.4f}",
+        )
     score = num[:, 10]
     if ((score < 0) | (score > 1)).any():
         fail((score < 0) | (score > 1), "score", "must be in [0, 1]", lambda i: score[i])
@@ -128,13 +162,15 @@ def _timestamps(path: Path, df: pd.DataFrame) -> np.ndarray:
     bad = ~np.isfinite(ts.astype(np.float64)) | (ts.astype(np.float64) != np.round(ts.astype(np.float64)))
     if bad.any():
         i = int(np.argmax(bad))
-        raise InputFormatError(f"{path}: row {i}: field 'timestamp_ns' must be an integer (nanoseconds), got "
-                               f"{df['timestamp_ns'].iat[i]!r}")
+        raise InputFormatError(
+            f"{path}: row {i}: field 'timestamp_ns' must be an integer (nanoseconds), got {df['timestamp_ns'].iat[i]!r}"
+        )
     return df["timestamp_ns"].to_numpy().astype(np.int64)
 
 
-def load_detections(path: str | Path, root: str | Path, split: str, scenes: list[Scene],
-                    vocab: Vocabulary) -> tuple[dict[str, BoxSet], DetectionStats]:
+def load_detections(
+    path: str | Path, root: str | Path, split: str, scenes: list[Scene], vocab: Vocabulary
+) -> tuple[dict[str, BoxSet], DetectionStats]:
     """Detections of every frame of ``scenes`` as canonical city-frame box sets, and what was dropped.
 
     ``root``/``split``: the AV2 dataset the scenes come from (ego poses are read per log). Labels index
@@ -150,13 +186,15 @@ def load_detections(path: str | Path, root: str | Path, split: str, scenes: list
     logs = df["log_id"].astype(str).to_numpy()
     _check_sweep_counts(path, logs, ts)
     known = {s.name for s in scenes}
-    outside = set(logs) - known          # logs of the split that are not tracked now (a held-out subset) are ignored
+    outside = set(logs) - known  # logs of the split that are not tracked now (a held-out subset) are ignored
     ddir = split_dir(root, split)
     unknown = sorted(outside - {p.name for p in ddir.iterdir() if p.is_dir()}) if outside else []
     if unknown:
-        raise InputFormatError(f"{path}: field 'log_id' has {len(unknown)} log(s) that are not logs of split "
-                               f"'{split}' under {root} (first: {unknown[0]}); expected one of the {len(known)} "
-                               f"logs being tracked")
+        raise InputFormatError(
+            f"{path}: field 'log_id' has {len(unknown)} log(s) that are not logs of split "
+            f"'{split}' under {root} (first: {unknown[0]}); expected one of the {len(known)} "
+            f"logs being tracked"
+        )
     tracked = np.isin(logs, list(known)) if outside else np.ones(len(df), dtype=bool)
     stats = DetectionStats(rows=int(tracked.sum()))
     labels = vocab.labels(df["category"].astype(str).to_numpy())
@@ -174,28 +212,41 @@ def load_detections(path: str | Path, root: str | Path, split: str, scenes: list
 def _check_sweep_counts(path: Path, logs: np.ndarray, ts: np.ndarray) -> None:
     """Refuse a sweep with more than :data:`MAX_DETECTIONS_PER_SWEEP` rows before any per-frame work."""
     if len(ts) <= MAX_DETECTIONS_PER_SWEEP or np.unique(ts, return_counts=True)[1].max() <= MAX_DETECTIONS_PER_SWEEP:
-        return    # no timestamp has that many rows, so no (log, sweep) has
+        return  # no timestamp has that many rows, so no (log, sweep) has
     codes = pd.factorize(logs)[0]
-    order = np.lexsort((ts, codes))                        # rows of one (log, sweep) are now adjacent
+    order = np.lexsort((ts, codes))  # rows of one (log, sweep) are now adjacent
     c, t = codes[order], ts[order]
     starts = np.flatnonzero(np.r_[True, (c[1:] != c[:-1]) | (t[1:] != t[:-1])])
     counts = np.diff(np.r_[starts, len(order)])
     if counts.max() > MAX_DETECTIONS_PER_SWEEP:
         i = int(order[starts[np.argmax(counts)]])
-        raise InputFormatError(f"{path}: log {logs[i]}, timestamp_ns {ts[i]} has {int(counts.max())} detections; at "
-                               f"most {MAX_DETECTIONS_PER_SWEEP} per sweep are accepted (the tracker compares "
-                               f"every pair of a frame's boxes; keep the highest-scoring ones)")
+        raise InputFormatError(
+            f"{path}: log {logs[i]}, timestamp_ns {ts[i]} has {int(counts.max())} detections; at "
+            f"most {MAX_DETECTIONS_PER_SWEEP} per sweep are accepted (the tracker compares "
+            f"every pair of a frame's boxes; keep the highest-scoring ones)"
+        )
 
 
-def _log_boxes(path: Path, log_dir: Path, scene: Scene, rows: np.ndarray, ts: np.ndarray, num: np.ndarray,
-               vel: np.ndarray, labels: np.ndarray, stats: DetectionStats) -> dict[str, BoxSet]:
+def _log_boxes(
+    path: Path,
+    log_dir: Path,
+    scene: Scene,
+    rows: np.ndarray,
+    ts: np.ndarray,
+    num: np.ndarray,
+    vel: np.ndarray,
+    labels: np.ndarray,
+    stats: DetectionStats,
+) -> dict[str, BoxSet]:
     """The frames of one log: pose check, ego -> city, binning to the tracked frames."""
     poses = read_poses(log_dir)
     prow = poses.index(ts[rows])
     if (prow < 0).any():
         i = int(rows[np.argmax(prow < 0)])
-        raise InputFormatError(f"{path}: row {i} (log {scene.name}): field 'timestamp_ns' {ts[i]} is not a sweep "
-                               f"time of this log (no ego pose at it in {log_dir}/city_SE3_egovehicle.feather)")
+        raise InputFormatError(
+            f"{path}: row {i} (log {scene.name}): field 'timestamp_ns' {ts[i]} is not a sweep "
+            f"time of this log (no ego pose at it in {log_dir}/city_SE3_egovehicle.feather)"
+        )
     frame_ts = np.array([token_timestamp_ns(f.token) for f in scene.frames], dtype=np.int64)
     fidx = np.searchsorted(frame_ts, ts[rows]).clip(0, max(len(frame_ts) - 1, 0))
     on_frame = (frame_ts[fidx] == ts[rows]) if len(frame_ts) else np.zeros(len(rows), dtype=bool)
@@ -208,13 +259,16 @@ def _log_boxes(path: Path, log_dir: Path, scene: Scene, rows: np.ndarray, ts: np
     order = np.argsort(f, kind="stable")
     starts = np.searchsorted(f[order], np.arange(len(frame_ts)), side="left")
     stops = np.searchsorted(f[order], np.arange(len(frame_ts)), side="right")
-    return {fr.token: BoxSet(boxes[order[a:b]], num[r[order[a:b]], 10], labels[r[order[a:b]]])
-            for fr, a, b in zip(scene.frames, starts, stops)}
+    return {
+        fr.token: BoxSet(boxes[order[a:b]], num[r[order[a:b]], 10], labels[r[order[a:b]]])
+        for fr, a, b in zip(scene.frames, starts, stops)
+    }
 
 
 # ------------------------------------------------------------------------------------------------------------
 # writing
 # ------------------------------------------------------------------------------------------------------------
+
 
 def detection_table(scenes: list[Scene], boxsets: dict[str, BoxSet]) -> pd.DataFrame:
     """Canonical city-frame detections of ``scenes`` as an LT3D table (the ego frame of each frame's sweep):
@@ -226,22 +280,42 @@ def detection_table(scenes: list[Scene], boxsets: dict[str, BoxSet]) -> pd.DataF
             b = boxsets.get(f.token)
             if b is None or len(b) == 0:
                 continue
-            R = quat_to_matrix(f.ego_rotation)[0]                       # ego -> city
-            centre = (b.boxes[:, 0:3] - f.ego_translation) @ R          # R^T (c - t), row-wise
+            R = quat_to_matrix(f.ego_rotation)[0]  # ego -> city
+            centre = (b.boxes[:, 0:3] - f.ego_translation) @ R  # R^T (c - t), row-wise
             box_to_city = _yaw_matrices(b.boxes[:, 6])
-            q = _matrix_to_quat(np.einsum("ji,njk->nik", R, box_to_city))   # box -> ego
+            q = _matrix_to_quat(np.einsum("ji,njk->nik", R, box_to_city))  # box -> ego
             # (vx, vy) in ego axes that the reader maps back to the city-frame (vx, vy) exactly: it rotates
             # [vx, vy, 0] by R and keeps x, y, so solve with R's upper-left 2x2 block
             v = np.linalg.solve(R[:2, :2], b.boxes[:, 7:9].T).T
-            parts.append(pd.DataFrame({
-                "tx_m": centre[:, 0], "ty_m": centre[:, 1], "tz_m": centre[:, 2],
-                "length_m": b.boxes[:, 4], "width_m": b.boxes[:, 3], "height_m": b.boxes[:, 5],
-                "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3], "vx": v[:, 0], "vy": v[:, 1],
-                "score": b.scores, "log_id": s.name, "timestamp_ns": token_timestamp_ns(f.token),
-                "category": names[b.labels]}))
+            parts.append(
+                pd.DataFrame(
+                    {
+                        "tx_m": centre[:, 0],
+                        "ty_m": centre[:, 1],
+                        "tz_m": centre[:, 2],
+                        "length_m": b.boxes[:, 4],
+                        "width_m": b.boxes[:, 3],
+                        "height_m": b.boxes[:, 5],
+                        "qw": q[:, 0],
+                        "qx": q[:, 1],
+                        "qy": q[:, 2],
+                        "qz": q[:, 3],
+                        "vx": v[:, 0],
+                        "vy": v[:, 1],
+                        "score": b.scores,
+                        "log_id": s.name,
+                        "timestamp_ns": token_timestamp_ns(f.token),
+                        "category": names[b.labels],
+                    }
+                )
+            )
     if not parts:
-        return pd.DataFrame({c: pd.Series(dtype=object if c in ("log_id", "category") else float)
-                             for c in (*REQUIRED_COLUMNS, *VELOCITY_COLUMNS)})
+        return pd.DataFrame(
+            {
+                c: pd.Series(dtype=object if c in ("log_id", "category") else float)
+                for c in (*REQUIRED_COLUMNS, *VELOCITY_COLUMNS)
+            }
+        )
     return pd.concat(parts, ignore_index=True)
 
 

@@ -21,8 +21,9 @@ def extract_member(archive: str | Path, member: str, out_dir: str | Path) -> Pat
     try:
         with zipfile.ZipFile(archive) as zf:
             if member not in zf.namelist():
-                raise InputFormatError(f"{archive}: archive has no member '{member}' "
-                                       f"(members: {', '.join(zf.namelist()[:10])})")
+                raise InputFormatError(
+                    f"{archive}: archive has no member '{member}' (members: {', '.join(zf.namelist()[:10])})"
+                )
             target = Path(out_dir) / Path(member).name
             with atomic_path(target) as tmp, zf.open(member) as src, open(tmp, "wb") as dst:
                 shutil.copyfileobj(src, dst)
@@ -31,8 +32,9 @@ def extract_member(archive: str | Path, member: str, out_dir: str | Path) -> Pat
     return target
 
 
-def convert_nuscenes_detections(raw: str | Path, dataroot: str | Path, version: str, split: str,
-                                out: str | Path, member: str | None = None) -> dict:
+def convert_nuscenes_detections(
+    raw: str | Path, dataroot: str | Path, version: str, split: str, out: str | Path, member: str | None = None
+) -> dict:
     """Validate ``raw`` against the split and write the split's detections to ``out`` with the file's meta
     (checked: the five booleans of the official meta); returns counts."""
     nusc = open_nuscenes(dataroot, version)
@@ -44,11 +46,16 @@ def convert_nuscenes_detections(raw: str | Path, dataroot: str | Path, version: 
         meta = detection_meta(data, path)
     results = {t: data["results"][t] for t in tokens}
     write_json_atomic(out, {"meta": meta, "results": results})
-    return {"samples": len(tokens), "boxes": sum(len(v) for v in results.values()),
-            "dropped_samples": len(data["results"]) - len(tokens)}
+    return {
+        "samples": len(tokens),
+        "boxes": sum(len(v) for v in results.values()),
+        "dropped_samples": len(data["results"]) - len(tokens),
+    }
 
 
 def describe(stats: dict) -> str:
     """One line about a conversion."""
-    return (f"{stats['samples']} samples, {stats['boxes']} boxes "
-            f"({stats['dropped_samples']} samples of other splits dropped)")
+    return (
+        f"{stats['samples']} samples, {stats['boxes']} boxes "
+        f"({stats['dropped_samples']} samples of other splits dropped)"
+    )

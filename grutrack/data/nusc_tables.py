@@ -21,8 +21,21 @@ import numpy as np
 #: table bytes above which reading shows a progress bar (on a terminal)
 PROGRESS_BYTES = 200 * 2**20
 #: the tables ``NuScenes.__init__`` loads, in its order
-TABLE_NAMES = ("category", "attribute", "visibility", "instance", "sensor", "calibrated_sensor", "ego_pose",
-               "log", "scene", "sample", "sample_data", "sample_annotation", "map")
+TABLE_NAMES = (
+    "category",
+    "attribute",
+    "visibility",
+    "instance",
+    "sensor",
+    "calibrated_sensor",
+    "ego_pose",
+    "log",
+    "scene",
+    "sample",
+    "sample_data",
+    "sample_annotation",
+    "map",
+)
 
 
 class NuScenesTables:
@@ -44,16 +57,16 @@ class NuScenesTables:
         if progress:
             from tqdm import tqdm
 
-            bar = tqdm(total=sum(sizes.values()), unit="B", unit_scale=True, desc=f"reading {version} tables",
-                       file=sys.stderr)
+            bar = tqdm(
+                total=sum(sizes.values()), unit="B", unit_scale=True, desc=f"reading {version} tables", file=sys.stderr
+            )
         for name in TABLE_NAMES:
             setattr(self, name, json.loads((root / f"{name}.json").read_text()))
             if bar is not None:
                 bar.update(sizes[name])
         if bar is not None:
             bar.close()
-        self._token2ind = {name: {rec["token"]: i for i, rec in enumerate(getattr(self, name))}
-                           for name in TABLE_NAMES}
+        self._token2ind = {name: {rec["token"]: i for i, rec in enumerate(getattr(self, name))} for name in TABLE_NAMES}
         self._reverse_index()
 
     def _reverse_index(self) -> None:
@@ -119,8 +132,12 @@ def predefined_split_scenes() -> dict[str, list[str]]:
     source = Path(next(iter(spec.submodule_search_locations))) / "utils" / "splits.py"
     lists: dict[str, list[str]] = {}
     for node in ast.parse(source.read_text()).body:
-        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name) \
-                and isinstance(node.value, ast.List):
+        if (
+            isinstance(node, ast.Assign)
+            and len(node.targets) == 1
+            and isinstance(node.targets[0], ast.Name)
+            and isinstance(node.value, ast.List)
+        ):
             lists[node.targets[0].id] = ast.literal_eval(node.value)
     lists["train"] = sorted(set(lists["train_detect"] + lists["train_track"]))  # splits.py: train = sorted(set(...))
     names = ("train", "val", "test", "mini_train", "mini_val", "train_detect", "train_track")

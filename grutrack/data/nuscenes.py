@@ -36,8 +36,9 @@ def open_nuscenes(dataroot: str | Path, version: str, verbose: bool = False, dev
         raise DatasetError(f"nuScenes dataroot {root} does not exist (expected a folder holding {version}/)")
     if not (root / version).is_dir():
         found = sorted(p.name for p in root.iterdir() if p.is_dir() and (p / "scene.json").exists())
-        raise DatasetError(f"nuScenes dataroot {root} has no version folder {version}/ "
-                           f"(found: {', '.join(found) or 'none'})")
+        raise DatasetError(
+            f"nuScenes dataroot {root} has no version folder {version}/ (found: {', '.join(found) or 'none'})"
+        )
     if not devkit:
         from grutrack.data.nusc_tables import NuScenesTables
 
@@ -73,16 +74,20 @@ def split_scene_names(nusc, split: str) -> list[str]:
 
     if split in PREDEFINED_SPLITS:
         if not _split_matches_version(split, nusc.version):
-            raise DatasetError(f"split '{split}' does not belong to nuScenes version {nusc.version} "
-                               f"(available: {', '.join(available_splits(nusc))})")
+            raise DatasetError(
+                f"split '{split}' does not belong to nuScenes version {nusc.version} "
+                f"(available: {', '.join(available_splits(nusc))})"
+            )
         names = predefined_split_scenes()[split]
     else:
         custom = Path(nusc.dataroot) / nusc.version / "splits.json"
         splits = json.loads(custom.read_text()) if custom.is_file() else {}
         if split not in splits:
-            raise DatasetError(f"unknown split '{split}' for {nusc.dataroot}/{nusc.version} "
-                               f"(available: {', '.join(available_splits(nusc))}; custom splits are read "
-                               f"from {custom})")
+            raise DatasetError(
+                f"unknown split '{split}' for {nusc.dataroot}/{nusc.version} "
+                f"(available: {', '.join(available_splits(nusc))}; custom splits are read "
+                f"from {custom})"
+            )
         names = list(splits[split])
     present = {s["name"] for s in nusc.scene}
     missing = [n for n in names if n not in present]
@@ -91,8 +96,7 @@ def split_scene_names(nusc, split: str) -> list[str]:
     return [n for n in names if n in present]
 
 
-def load_scenes(nusc, split: str, with_gt: bool = False,
-                vocabulary: Vocabulary = NUSCENES_VOCABULARY) -> list[Scene]:
+def load_scenes(nusc, split: str, with_gt: bool = False, vocabulary: Vocabulary = NUSCENES_VOCABULARY) -> list[Scene]:
     """Canonical scenes of ``split`` in the order of the dataset's scene table.
 
     Each frame is a keyframe (sample) with its LIDAR_TOP ego pose; ``gt`` holds, when ``with_gt``, the
@@ -123,36 +127,54 @@ def _frame(nusc, sample: dict, to_label: dict[str, int] | None) -> Frame:
     """One keyframe; its ground truth when ``to_label`` (category -> label) is given."""
     sd = nusc.get("sample_data", sample["data"]["LIDAR_TOP"])
     pose = nusc.get("ego_pose", sd["ego_pose_token"])
-    return Frame(token=sample["token"], timestamp=int(sample["timestamp"]),
-                 ego_translation=np.asarray(pose["translation"], dtype=np.float64),
-                 ego_rotation=np.asarray(pose["rotation"], dtype=np.float64),
-                 gt=_gt_boxes(nusc, sample, to_label) if to_label is not None else None)
+    return Frame(
+        token=sample["token"],
+        timestamp=int(sample["timestamp"]),
+        ego_translation=np.asarray(pose["translation"], dtype=np.float64),
+        ego_rotation=np.asarray(pose["rotation"], dtype=np.float64),
+        gt=_gt_boxes(nusc, sample, to_label) if to_label is not None else None,
+    )
 
 
 #: nuScenes category -> tracking class: the devkit's ``category_to_tracking_name`` (other categories: None)
 TRACKING_NAME_OF_CATEGORY = {
-    "vehicle.bicycle": "bicycle", "vehicle.bus.bendy": "bus", "vehicle.bus.rigid": "bus", "vehicle.car": "car",
-    "vehicle.motorcycle": "motorcycle", "human.pedestrian.adult": "pedestrian",
-    "human.pedestrian.child": "pedestrian", "human.pedestrian.construction_worker": "pedestrian",
-    "human.pedestrian.police_officer": "pedestrian", "vehicle.trailer": "trailer", "vehicle.truck": "truck",
+    "vehicle.bicycle": "bicycle",
+    "vehicle.bus.bendy": "bus",
+    "vehicle.bus.rigid": "bus",
+    "vehicle.car": "car",
+    "vehicle.motorcycle": "motorcycle",
+    "human.pedestrian.adult": "pedestrian",
+    "human.pedestrian.child": "pedestrian",
+    "human.pedestrian.construction_worker": "pedestrian",
+    "human.pedestrian.police_officer": "pedestrian",
+    "vehicle.trailer": "trailer",
+    "vehicle.truck": "truck",
 }
 
 
 #: nuScenes category -> detection class: the devkit's ``category_to_detection_name`` (other categories: None)
 DETECTION_NAME_OF_CATEGORY = {
-    **TRACKING_NAME_OF_CATEGORY, "movable_object.barrier": "barrier", "vehicle.construction": "construction_vehicle",
+    **TRACKING_NAME_OF_CATEGORY,
+    "movable_object.barrier": "barrier",
+    "vehicle.construction": "construction_vehicle",
     "movable_object.trafficcone": "traffic_cone",
 }
 
 #: the 10 detection classes; the three without a tracking class take the tracker parameters of the nearest one
 #: (static objects: pedestrian, as AV2's bollards and cones; construction vehicles: truck)
-DETECTION_VOCABULARY = Vocabulary(DETECTION_CLASSES, tuple(
-    {"barrier": "pedestrian", "traffic_cone": "pedestrian", "construction_vehicle": "truck"}.get(c, c)
-    for c in DETECTION_CLASSES))
+DETECTION_VOCABULARY = Vocabulary(
+    DETECTION_CLASSES,
+    tuple(
+        {"barrier": "pedestrian", "traffic_cone": "pedestrian", "construction_vehicle": "truck"}.get(c, c)
+        for c in DETECTION_CLASSES
+    ),
+)
 
 #: vocabulary class names -> the category mapping that labels ground truth with them
-_CATEGORY_MAPS = {NUSCENES_VOCABULARY.names: TRACKING_NAME_OF_CATEGORY,
-                  DETECTION_VOCABULARY.names: DETECTION_NAME_OF_CATEGORY}
+_CATEGORY_MAPS = {
+    NUSCENES_VOCABULARY.names: TRACKING_NAME_OF_CATEGORY,
+    DETECTION_VOCABULARY.names: DETECTION_NAME_OF_CATEGORY,
+}
 
 
 def category_to_tracking_name(category_name: str) -> str | None:
@@ -179,5 +201,10 @@ def _gt_boxes(nusc, sample: dict, to_label: dict[str, int]) -> BoxSet:
     if not rows:
         return BoxSet.empty(with_ids=True)
     lidar, radar = np.asarray(lidar, dtype=np.int64), np.asarray(radar, dtype=np.int64)
-    return BoxSet(np.asarray(rows), np.ones(len(rows)), np.asarray(labels), np.asarray(ids, dtype=object),
-                  {"num_pts": lidar + radar, "num_lidar_pts": lidar, "num_radar_pts": radar})
+    return BoxSet(
+        np.asarray(rows),
+        np.ones(len(rows)),
+        np.asarray(labels),
+        np.asarray(ids, dtype=object),
+        {"num_pts": lidar + radar, "num_lidar_pts": lidar, "num_radar_pts": radar},
+    )

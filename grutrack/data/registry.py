@@ -13,8 +13,7 @@ from pathlib import Path
 from grutrack.errors import ConfigError
 
 REGISTRY_PATH = Path(__file__).resolve().parents[1] / "configs" / "detections.yaml"
-KEYS = ("dataset", "detector", "split", "description", "page", "url", "host", "filename", "sha256", "format",
-        "member")
+KEYS = ("dataset", "detector", "split", "description", "page", "url", "host", "filename", "sha256", "format", "member")
 FORMATS = ("nuscenes_json", "nuscenes_json_zip", "lt3d")
 
 
@@ -60,6 +59,8 @@ def get_source(name: str, path: str | Path = REGISTRY_PATH) -> DetectionSource:
 def _entry(path: str, name: str, entry: dict) -> DetectionSource:
     """One schema-checked entry; a zip source must name its member, a plain file must not."""
     if (entry["format"] == "nuscenes_json_zip") != (entry["member"] is not None):
-        raise ConfigError(f"{path}: sources.{name}.member names the file inside the archive: required with format "
-                          f"nuscenes_json_zip, null otherwise")
+        raise ConfigError(
+            f"{path}: sources.{name}.member names the file inside the archive: required with format "
+            f"nuscenes_json_zip, null otherwise"
+        )
     return DetectionSource(name=name, **{k: entry[k] for k in KEYS})

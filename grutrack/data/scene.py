@@ -66,23 +66,30 @@ class BoxSet:
         self.labels = _as_array(self.labels, np.int64, (-1,))
         n = len(self.boxes)
         if len(self.scores) != n or len(self.labels) != n or (self.ids is not None and len(self.ids) != n):
-            raise ValueError(f"BoxSet arrays disagree in length: boxes {n}, scores {len(self.scores)}, "
-                             f"labels {len(self.labels)}, ids {None if self.ids is None else len(self.ids)}")
+            raise ValueError(
+                f"BoxSet arrays disagree in length: boxes {n}, scores {len(self.scores)}, "
+                f"labels {len(self.labels)}, ids {None if self.ids is None else len(self.ids)}"
+            )
 
     def __len__(self) -> int:
         return len(self.boxes)
 
     @classmethod
-    def empty(cls, with_ids: bool = False) -> "BoxSet":
+    def empty(cls, with_ids: bool = False) -> BoxSet:
         """A set of zero boxes."""
-        return cls(empty_boxes(), np.zeros(0), np.zeros(0, dtype=np.int64),
-                   np.zeros(0, dtype=object) if with_ids else None)
+        return cls(
+            empty_boxes(), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=object) if with_ids else None
+        )
 
-    def subset(self, index: np.ndarray) -> "BoxSet":
+    def subset(self, index: np.ndarray) -> BoxSet:
         """The boxes selected by a boolean mask or an index array."""
-        return BoxSet(self.boxes[index], self.scores[index], self.labels[index],
-                      None if self.ids is None else self.ids[index],
-                      {k: v[index] for k, v in self.extra.items()})
+        return BoxSet(
+            self.boxes[index],
+            self.scores[index],
+            self.labels[index],
+            None if self.ids is None else self.ids[index],
+            {k: v[index] for k, v in self.extra.items()},
+        )
 
 
 @dataclass

@@ -22,16 +22,25 @@ class AV2Dataset:
     evaluators = ("official",)
     parallel_evaluation = True
     dataroot_folder = "{split}"
-    dataroot_hint = ("the Argoverse 2 sensor-dataset root, i.e. the folder that holds {split}/<log_id>/ with "
-                     "annotations.feather, city_SE3_egovehicle.feather and map/")
+    dataroot_hint = (
+        "the Argoverse 2 sensor-dataset root, i.e. the folder that holds {split}/<log_id>/ with "
+        "annotations.feather, city_SE3_egovehicle.feather and map/"
+    )
     leaderboard_zip = False
     validates_training = True
     validation_metric = "HOTA"
     #: workflow config kinds this class reads -> the JSON schema of such a ``datasets:`` entry
     config_kinds = {
-        "av2": config_entry("av2", dataroot={"type": ["string", "null"], "minLength": 1}, version={"type": "null"},
-                            rate_hz={"type": "number", "exclusiveMinimum": 0,
-                                     "description": "the rate the logs are tracked at, Hz (the lidar sweeps at 10)"}),
+        "av2": config_entry(
+            "av2",
+            dataroot={"type": ["string", "null"], "minLength": 1},
+            version={"type": "null"},
+            rate_hz={
+                "type": "number",
+                "exclusiveMinimum": 0,
+                "description": "the rate the logs are tracked at, Hz (the lidar sweeps at 10)",
+            },
+        )
     }
 
     @staticmethod
@@ -46,7 +55,7 @@ class AV2Dataset:
 
     def __init__(self, options: DatasetOptions):
         self.options = options
-        self._labels: dict[str, dict] = {}     # split -> the evaluation's labels (score_tracks)
+        self._labels: dict[str, dict] = {}  # split -> the evaluation's labels (score_tracks)
 
     def describe(self) -> str:
         """``av2 at <rate> Hz``, for messages."""
@@ -65,11 +74,17 @@ class AV2Dataset:
     def scenes(self, split: str, with_gt: bool = False) -> list[Scene]:
         from grutrack.data.av2 import load_scenes
 
-        return load_scenes(self.options.dataroot, split, rate_hz=self.options.rate_hz, with_gt=with_gt,
-                           all_categories=self.options.all_categories)
+        return load_scenes(
+            self.options.dataroot,
+            split,
+            rate_hz=self.options.rate_hz,
+            with_gt=with_gt,
+            all_categories=self.options.all_categories,
+        )
 
-    def load_detections(self, path: str | Path, split: str, scenes: list[Scene],
-                        measured_yaw: str = "euler_z") -> Detections:
+    def load_detections(
+        self, path: str | Path, split: str, scenes: list[Scene], measured_yaw: str = "euler_z"
+    ) -> Detections:
         """LT3D rows at the tracked frames, moved to the city frame; rows of other categories or of sweeps
         that are not tracked frames are counted and dropped (``measured_yaw`` does not apply: LT3D rows carry
         a yaw-only quaternion)."""
@@ -78,11 +93,15 @@ class AV2Dataset:
         boxes, stats = load_detections(path, self.options.dataroot, split, scenes, self.vocabulary)
         warnings = []
         if stats.empty_logs:
-            warnings.append(f"{path}: {len(stats.empty_logs)} of {len(scenes)} logs have no detection of a "
-                            f"tracked category (first: {stats.empty_logs[0]}); their tracks are empty (is this "
-                            f"the detection file of split '{split}'?)")
-        summary = (f"detections: {stats.rows} rows, {stats.kept} tracked, {stats.other_category} of untracked "
-                   f"categories, {stats.off_frame} at sweeps that are not tracked frames (dropped)")
+            warnings.append(
+                f"{path}: {len(stats.empty_logs)} of {len(scenes)} logs have no detection of a "
+                f"tracked category (first: {stats.empty_logs[0]}); their tracks are empty (is this "
+                f"the detection file of split '{split}'?)"
+            )
+        summary = (
+            f"detections: {stats.rows} rows, {stats.kept} tracked, {stats.other_category} of untracked "
+            f"categories, {stats.off_frame} at sweeps that are not tracked frames (dropped)"
+        )
         return Detections(boxes, summary, warnings)
 
     def simulate_detections(self, split: str, profile, seed: int, out: str | Path) -> dict[str, int]:
@@ -94,8 +113,10 @@ class AV2Dataset:
         from grutrack.data.lt3d_detections import detection_table, write_detection_table
 
         if self.options.all_categories:
-            raise ConfigError("--all-categories: simulated AV2 detections cover the 7 classes of Table I (the "
-                              "detector profiles describe 10 nuScenes classes); drop --all-categories")
+            raise ConfigError(
+                "--all-categories: simulated AV2 detections cover the 7 classes of Table I (the "
+                "detector profiles describe 10 nuScenes classes); drop --all-categories"
+            )
         scenes = self.scenes(split, with_gt=True)
         sim_class = tuple(SIMULATOR_CLASS[n] for n in self.vocabulary.names)
         boxes = simulate_scenes(scenes, sim_class, profile, seed)
@@ -109,15 +130,24 @@ class AV2Dataset:
 
         return scene_statistics([s for split in splits for s in self.scenes(split, with_gt=True)])
 
-    def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
-                     max_boxes: int, meta: dict[str, bool] | None = None) -> dict[str, int]:
+    def write_tracks(
+        self,
+        path: str | Path,
+        scenes: list[Scene],
+        results: dict[str, BoxSet],
+        max_boxes: int,
+        meta: dict[str, bool] | None = None,
+    ) -> dict[str, int]:
         """The challenge pickle at ``path`` and a feather table of the same tracks beside it (``.feather``);
         the pickle has no meta (``meta`` is None for LT3D detections and ignored)."""
         from grutrack.export.av2_tracks import write_tracks
 
         seqs = write_tracks(path, Path(path).with_suffix(".feather"), scenes, results, self.vocabulary)
-        return {"logs": len(scenes), "frames": sum(len(s) for s in scenes),
-                "boxes": sum(len(f["track_id"]) for fs in seqs.values() for f in fs)}
+        return {
+            "logs": len(scenes),
+            "frames": sum(len(s) for s in scenes),
+            "boxes": sum(len(f["track_id"]) for fs in seqs.values() for f in fs),
+        }
 
     def write_submission(self, tracks: str | Path, split: str, out: str | Path) -> dict[str, int]:
         """The pickle checked against the official layout for exactly the split's frames at ``rate_hz`` (as the
@@ -125,9 +155,12 @@ class AV2Dataset:
         from grutrack.export.av2_tracks import expected_frames, read_tracks_pickle, write_tracks_pickle
 
         seqs = read_tracks_pickle(tracks)
-        write_tracks_pickle(out, seqs, expected_frames(self.scenes(split)))   # validates first
-        return {"logs": len(seqs), "frames": sum(len(v) for v in seqs.values()),
-                "boxes": sum(len(f["track_id"]) for v in seqs.values() for f in v)}
+        write_tracks_pickle(out, seqs, expected_frames(self.scenes(split)))  # validates first
+        return {
+            "logs": len(seqs),
+            "frames": sum(len(v) for v in seqs.values()),
+            "boxes": sum(len(f["track_id"]) for v in seqs.values() for f in v),
+        }
 
     def check_submission(self, path: str | Path, split: str) -> dict[str, int]:
         """The official layout, for exactly the split's frames at ``rate_hz``."""
@@ -135,12 +168,22 @@ class AV2Dataset:
 
         seqs = read_tracks_pickle(path)
         validate_sequences(seqs, expected_frames(self.scenes(split)), where=str(path))
-        return {"logs": len(seqs), "frames": sum(len(v) for v in seqs.values()),
-                "boxes": sum(len(f["track_id"]) for v in seqs.values() for f in v)}
+        return {
+            "logs": len(seqs),
+            "frames": sum(len(v) for v in seqs.values()),
+            "boxes": sum(len(f["track_id"]) for v in seqs.values() for f in v),
+        }
 
-    def evaluate(self, submission: str | Path, split: str, evaluator: str | None = None,
-                 max_range_m: int | None = None, workers: int | None = None,
-                 trackeval_dir: str | Path | None = None, **_ignored) -> MetricsDocument:
+    def evaluate(
+        self,
+        submission: str | Path,
+        split: str,
+        evaluator: str | None = None,
+        max_range_m: int | None = None,
+        workers: int | None = None,
+        trackeval_dir: str | Path | None = None,
+        **_ignored,
+    ) -> MetricsDocument:
         """The official AV2 tracking evaluation (HOTA, drivable-area ROI when the maps are there)."""
         from grutrack.evaluation import av2_eval
 
@@ -148,9 +191,15 @@ class AV2Dataset:
             raise ConfigError(f"--evaluator {evaluator} is for nuScenes; AV2 has the official evaluator only")
         if workers is not None and workers < 1:
             raise ConfigError("--workers must be at least 1")
-        return av2_eval.evaluate_submission(self.options.dataroot, split, submission, rate_hz=self.options.rate_hz,
-                                            max_range_m=max_range_m or av2_eval.DEFAULT_RANGE_M, workers=workers,
-                                            trackeval_dir=trackeval_dir)
+        return av2_eval.evaluate_submission(
+            self.options.dataroot,
+            split,
+            submission,
+            rate_hz=self.options.rate_hz,
+            max_range_m=max_range_m or av2_eval.DEFAULT_RANGE_M,
+            workers=workers,
+            trackeval_dir=trackeval_dir,
+        )
 
     def score_tracks(self, split: str, scenes: list[Scene], results: dict[str, BoxSet], max_boxes: int) -> float:
         """HOTA, the Table I average over the classes with ground truth (NaN when none has), of the tracks on the
@@ -161,14 +210,19 @@ class AV2Dataset:
         from grutrack.export.av2_tracks import build_sequences, gt_sequences
 
         if split not in self._labels:
-            every = load_scenes(self.options.dataroot, split, rate_hz=self.options.rate_hz, with_gt=True,
-                                all_categories=True)
+            every = load_scenes(
+                self.options.dataroot, split, rate_hz=self.options.rate_hz, with_gt=True, all_categories=True
+            )
             self._labels[split] = gt_sequences(every, vocabulary(all_categories=True))
         names = {s.name for s in scenes}
         labels = {log: frames for log, frames in self._labels[split].items() if log in names}
         ddir = split_dir(self.options.dataroot, split)
-        out = av2_eval.evaluate_sequences(build_sequences(scenes, results, self.vocabulary), labels,
-                                          ddir if av2_eval.has_maps(ddir, list(labels)) else None, workers=1)
+        out = av2_eval.evaluate_sequences(
+            build_sequences(scenes, results, self.vocabulary),
+            labels,
+            ddir if av2_eval.has_maps(ddir, list(labels)) else None,
+            workers=1,
+        )
         hota = av2_eval.metrics_from_result(out)[0]["hota"]
         return float("nan") if hota is None else float(hota)
 

@@ -49,8 +49,12 @@ class Detections:
 def config_entry(kind: str, **properties: dict) -> dict:
     """The JSON schema of a workflow-config ``datasets:`` entry of ``kind`` with these properties (each a JSON
     schema), all required, no other key."""
-    return {"type": "object", "additionalProperties": False, "required": ["kind", *properties],
-            "properties": {"kind": {"const": kind}, **properties}}
+    return {
+        "type": "object",
+        "additionalProperties": False,
+        "required": ["kind", *properties],
+        "properties": {"kind": {"const": kind}, **properties},
+    }
 
 
 @runtime_checkable
@@ -81,12 +85,10 @@ class Dataset(Protocol):
     options: DatasetOptions
 
     @staticmethod
-    def config_version(entry: dict, split: str) -> str | None:
-        ...
+    def config_version(entry: dict, split: str) -> str | None: ...
 
     @staticmethod
-    def config_options(entry: dict) -> list[str]:
-        ...
+    def config_options(entry: dict) -> list[str]: ...
 
     def describe(self) -> str:
         """What is read, for messages (``nuscenes v1.0-mini``, ``av2 at 2 Hz``)."""
@@ -102,8 +104,9 @@ class Dataset(Protocol):
     def scenes(self, split: str, with_gt: bool = False) -> list[Scene]:
         """The split's scenes in order; ground-truth boxes on each frame when ``with_gt``."""
 
-    def load_detections(self, path: str | Path, split: str, scenes: list[Scene],
-                        measured_yaw: str = "euler_z") -> Detections:
+    def load_detections(
+        self, path: str | Path, split: str, scenes: list[Scene], measured_yaw: str = "euler_z"
+    ) -> Detections:
         """A detection file of the split, per frame of ``scenes`` (tracked classes only)."""
 
     def simulate_detections(self, split: str, profile, seed: int, out: str | Path) -> dict[str, int]:
@@ -115,8 +118,14 @@ class Dataset(Protocol):
         """Per-class statistics of the ground truth of the union of ``splits``
         (:mod:`grutrack.data.gt_stats`: share, size, speed, moving share, |yaw rate|, 0-point share)."""
 
-    def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
-                     max_boxes: int, meta: dict[str, bool] | None = None) -> dict[str, int]:
+    def write_tracks(
+        self,
+        path: str | Path,
+        scenes: list[Scene],
+        results: dict[str, BoxSet],
+        max_boxes: int,
+        meta: dict[str, bool] | None = None,
+    ) -> dict[str, int]:
         """The tracker's output written as the official submission (validated, atomically) declaring ``meta``
         (:attr:`Detections.meta` of the detections tracked; a format without one ignores it); returns counts
         (samples/logs, frames, boxes)."""
@@ -129,8 +138,7 @@ class Dataset(Protocol):
         """A submission checked against the official format for exactly the split's frames (one-line
         :class:`~grutrack.errors.InputFormatError` otherwise); returns counts as :meth:`write_submission`."""
 
-    def evaluate(self, submission: str | Path, split: str, evaluator: str | None = None,
-                 **options) -> MetricsDocument:
+    def evaluate(self, submission: str | Path, split: str, evaluator: str | None = None, **options) -> MetricsDocument:
         """Official metrics of a submission (``evaluator`` one of :attr:`evaluators`, None: the default)."""
 
     def score_tracks(self, split: str, scenes: list[Scene], results: dict[str, BoxSet], max_boxes: int) -> float:

@@ -24,20 +24,30 @@ class NuScenesDataset:
     evaluators = ("devkit", "fast")
     parallel_evaluation = False
     dataroot_folder = "{version}"
-    dataroot_hint = ("the nuScenes dataroot, i.e. the folder that holds {version}/ (the JSON tables; v1.0-test/ "
-                     "too for the test split)")
+    dataroot_hint = (
+        "the nuScenes dataroot, i.e. the folder that holds {version}/ (the JSON tables; v1.0-test/ "
+        "too for the test split)"
+    )
     leaderboard_zip = True
     validates_training = True
     validation_metric = "AMOTA"
     #: workflow config kinds (``datasets: {<name>: {kind: ...}}``) this class reads -> the JSON schema of such an
     #: entry; the demo is nuScenes-format data that the workflow generates (rule demo_data)
     config_kinds = {
-        "nuscenes": config_entry("nuscenes", dataroot={"type": ["string", "null"], "minLength": 1},
-                                 version={"type": "string", "minLength": 1},
-                                 test_version={"type": ["string", "null"], "minLength": 1}),
-        "demo": config_entry("demo", dataroot={"type": "string", "minLength": 1},
-                             version={"type": "string", "minLength": 1}, scenes={"type": "integer", "minimum": 2},
-                             frames_per_scene={"type": "integer", "minimum": 2}, seed={"type": "integer"}),
+        "nuscenes": config_entry(
+            "nuscenes",
+            dataroot={"type": ["string", "null"], "minLength": 1},
+            version={"type": "string", "minLength": 1},
+            test_version={"type": ["string", "null"], "minLength": 1},
+        ),
+        "demo": config_entry(
+            "demo",
+            dataroot={"type": "string", "minLength": 1},
+            version={"type": "string", "minLength": 1},
+            scenes={"type": "integer", "minimum": 2},
+            frames_per_scene={"type": "integer", "minimum": 2},
+            seed={"type": "integer"},
+        ),
     }
 
     @staticmethod
@@ -57,7 +67,7 @@ class NuScenesDataset:
             raise ConfigError("--version is required with --dataset nuscenes (e.g. v1.0-trainval, v1.0-mini)")
         self.options = options
         self._nusc = None
-        self._split_samples: dict[str, set[str]] = {}    # split -> its sample tokens (score_tracks of a subset)
+        self._split_samples: dict[str, set[str]] = {}  # split -> its sample tokens (score_tracks of a subset)
 
     def describe(self) -> str:
         """``<name> <version>``, for messages."""
@@ -91,8 +101,9 @@ class NuScenesDataset:
         """The split's sample tokens, scene by scene in time order."""
         return [f.token for s in self.scenes(split) for f in s.frames]
 
-    def load_detections(self, path: str | Path, split: str, scenes: list[Scene],
-                        measured_yaw: str = "euler_z") -> Detections:
+    def load_detections(
+        self, path: str | Path, split: str, scenes: list[Scene], measured_yaw: str = "euler_z"
+    ) -> Detections:
         """The official detection-submission JSON: boxes of every sample of ``scenes`` and the file's meta
         (checked; the tracking submission declares it)."""
         from grutrack.data.nusc_detections import load_detection_file
@@ -106,8 +117,9 @@ class NuScenesDataset:
         with a detector profile, as an official detection-submission JSON."""
         from grutrack.data.detection_sim import simulate_nuscenes
 
-        sub = simulate_nuscenes(self.options.dataroot, self.options.version, split, profile, seed, out,
-                                nusc=self.tables)
+        sub = simulate_nuscenes(
+            self.options.dataroot, self.options.version, split, profile, seed, out, nusc=self.tables
+        )
         return {"detections": sum(len(v) for v in sub["results"].values()), "samples": len(sub["results"])}
 
     def gt_statistics(self, splits: list[str]) -> dict[str, dict]:
@@ -116,16 +128,21 @@ class NuScenesDataset:
 
         return nuscenes_statistics(self.options.dataroot, self.options.version, splits, nusc=self.tables)
 
-    def write_tracks(self, path: str | Path, scenes: list[Scene], results: dict[str, BoxSet],
-                     max_boxes: int, meta: dict[str, bool] | None = None) -> dict[str, int]:
+    def write_tracks(
+        self,
+        path: str | Path,
+        scenes: list[Scene],
+        results: dict[str, BoxSet],
+        max_boxes: int,
+        meta: dict[str, bool] | None = None,
+    ) -> dict[str, int]:
         """The tracking JSON declaring the detections' ``meta`` (None: lidar-only)."""
         from grutrack.export.nuscenes_json import build_submission, write_submission
 
         tokens = [f.token for s in scenes for f in s.frames]
         sub = build_submission(results, tokens, max_boxes, meta)
         write_submission(path, sub, tokens)
-        return {"samples": len(tokens), "boxes": sum(len(v) for v in sub["results"].values()),
-                "scenes": len(scenes)}
+        return {"samples": len(tokens), "boxes": sum(len(v) for v in sub["results"].values()), "scenes": len(scenes)}
 
     def write_submission(self, tracks: str | Path, split: str, out: str | Path) -> dict[str, int]:
         from grutrack.export.leaderboard import write_validated
@@ -140,8 +157,9 @@ class NuScenesDataset:
         devkit_check(path)
         return counts(sub)
 
-    def evaluate(self, submission: str | Path, split: str, evaluator: str | None = None,
-                 progress: bool | None = None, **_ignored) -> MetricsDocument:
+    def evaluate(
+        self, submission: str | Path, split: str, evaluator: str | None = None, progress: bool | None = None, **_ignored
+    ) -> MetricsDocument:
         """``devkit``: nuscenes-devkit TrackingEval (the reference, default); ``fast``: the exact vectorised
         re-implementation (equal to 1e-9). The submission is checked first as ``leaderboard-zip`` checks it."""
         from grutrack.data.nuscenes import split_scene_names
@@ -151,18 +169,29 @@ class NuScenesDataset:
         evaluator = evaluator or self.evaluators[0]
         if evaluator not in self.evaluators:
             raise ConfigError(f"--evaluator {evaluator}: nuScenes has {' and '.join(self.evaluators)}")
-        split_scene_names(self.tables, split)   # clear error for an unknown split before the devkit asserts
+        split_scene_names(self.tables, split)  # clear error for an unknown split before the devkit asserts
         t0 = time.perf_counter()
         sub = load_valid_submission(submission, self.sample_tokens(split))
         if evaluator == "devkit":
-            summary = devkit_tracking_eval(self.options.dataroot, self.options.version, split, submission,
-                                           progress=sys.stderr.isatty() if progress is None else progress)
+            summary = devkit_tracking_eval(
+                self.options.dataroot,
+                self.options.version,
+                split,
+                submission,
+                progress=sys.stderr.isatty() if progress is None else progress,
+            )
         else:
             from grutrack.evaluation.nuscenes_fast import fast_tracking_eval
 
             summary = fast_tracking_eval(self.tables, sub, split)
-        doc = metrics_document(summary, dataset=self.name, version=self.options.version, split=split,
-                               evaluator=evaluator, submission=str(submission))
+        doc = metrics_document(
+            summary,
+            dataset=self.name,
+            version=self.options.version,
+            split=split,
+            evaluator=evaluator,
+            submission=str(submission),
+        )
         doc.seconds = round(time.perf_counter() - t0, 3)
         return doc
 
@@ -189,8 +218,9 @@ class NuScenesDataset:
             sub["results"].update({t: [] for t in self._split_samples[split] - set(tokens)})  # every sample of it
             gt, pred, _ = load_tracks(self.tables, sub, split)
             keep = {sc.token for sc in scenes}
-            metrics, _ = evaluate_tracks({k: v for k, v in gt.items() if k in keep},
-                                         {k: v for k, v in pred.items() if k in keep})
+            metrics, _ = evaluate_tracks(
+                {k: v for k, v in gt.items() if k in keep}, {k: v for k, v in pred.items() if k in keep}
+            )
         return float(metrics.serialize()["amota"])
 
     def format_summary(self, doc: MetricsDocument) -> str:

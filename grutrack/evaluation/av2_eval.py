@@ -73,17 +73,17 @@ from pathlib import Path
 import numpy as np
 
 from grutrack.data.av2 import COMPETITION_CATEGORIES, TABLE_I_CLASSES, load_scenes, split_dir, vocabulary
+from grutrack.documents import ABSENT_TEXT, MetricsDocument
 from grutrack.errors import DatasetError, InputFormatError
 from grutrack.export.av2_tracks import expected_frames, gt_sequences, read_tracks_pickle, validate_sequences
-from grutrack.documents import ABSENT_TEXT, MetricsDocument
 
 EVALUATOR = "av2.evaluation.tracking.eval.evaluate (HOTA objective)"
 DEFAULT_RANGE_M = 50
-OBJECTIVE = "HOTA"                 # the official evaluate's objective_metric as the challenge runs it
-NUM_THRESHOLDS = 10                # evaluate -> _tune_score_thresholds(num_thresholds=10, match_distance_m=2)
+OBJECTIVE = "HOTA"  # the official evaluate's objective_metric as the challenge runs it
+NUM_THRESHOLDS = 10  # evaluate -> _tune_score_thresholds(num_thresholds=10, match_distance_m=2)
 MATCH_DISTANCE_M = 2
-SIMILARITY_THRESHOLD = 0.5         # iou_threshold default of _tune_score_thresholds and evaluate_tracking
-TRACKER_NAME = "TRACKER"           # evaluate -> evaluate_tracking(tracker_name="TRACKER")
+SIMILARITY_THRESHOLD = 0.5  # iou_threshold default of _tune_score_thresholds and evaluate_tracking
+TRACKER_NAME = "TRACKER"  # evaluate -> evaluate_tracking(tracker_name="TRACKER")
 
 
 def default_workers() -> int:
@@ -96,10 +96,15 @@ def default_workers() -> int:
 
 def has_maps(dataset_dir: Path, log_ids: list[str]) -> bool:
     """Whether every log has the vector map and raster files the drivable-area ROI needs."""
+
     def ok(log: str) -> bool:
         m = dataset_dir / log / "map"
-        return (any(m.glob("log_map_archive_*.json")) and any(m.glob("*img_Sim2_city.json"))
-                and any(m.glob("*ground_height_surface*.npy")))
+        return (
+            any(m.glob("log_map_archive_*.json"))
+            and any(m.glob("*img_Sim2_city.json"))
+            and any(m.glob("*ground_height_surface*.npy"))
+        )
+
     return all(ok(lg) for lg in log_ids)
 
 
@@ -122,8 +127,9 @@ def eval_config(quiet: bool) -> dict:
 
     cfg = {**trackeval.Evaluator.get_default_eval_config(), "TIME_PROGRESS": False, "LOG_ON_ERROR": None}
     if quiet:
-        cfg.update(PRINT_RESULTS=False, PRINT_CONFIG=False, OUTPUT_SUMMARY=False, OUTPUT_DETAILED=False,
-                   PLOT_CURVES=False)
+        cfg.update(
+            PRINT_RESULTS=False, PRINT_CONFIG=False, OUTPUT_SUMMARY=False, OUTPUT_DETAILED=False, PLOT_CURVES=False
+        )
     return cfg
 
 
@@ -139,8 +145,9 @@ def range_filter(predictions: dict, labels: dict, max_range_m: int) -> tuple[dic
 
     official = official_module()
     labels = official.filter_max_dist(labels, max_range_m)
-    utils.annotate_frame_metadata(utils.ungroup_frames(predictions), utils.ungroup_frames(labels),
-                                  ["ego_translation_m"])
+    utils.annotate_frame_metadata(
+        utils.ungroup_frames(predictions), utils.ungroup_frames(labels), ["ego_translation_m"]
+    )
     return official.filter_max_dist(predictions, max_range_m), labels
 
 
@@ -156,20 +163,33 @@ def drivable_area_filter(predictions: dict, labels: dict, dataset_dir: Path) -> 
         official_module().filter_drivable_area(held, str(dataset_dir))
 
 
-def tune_score_thresholds(labels: dict, predictions: dict, classes: list[str], workers: int,
-                          output_dir: str) -> tuple[dict, dict, dict]:
+def tune_score_thresholds(
+    labels: dict, predictions: dict, classes: list[str], workers: int, output_dir: str
+) -> tuple[dict, dict, dict]:
     """Step 3, the body of the official ``_tune_score_thresholds`` (HOTA objective, 10 thresholds, 2 m) with
     this module's pool: (threshold, tuned HOTA, recall-averaged HOTA), each ``{class: float}``."""
     official = official_module()
     metric_class = official.SUBMETRIC_TO_METRIC_CLASS_NAME[OBJECTIVE]
     metrics_config = {"METRICS": [metric_class], "THRESHOLD": SIMILARITY_THRESHOLD, "PRINT_CONFIG": False}
-    dataset_config = {**official.TrackEvalDataset.get_default_dataset_config(), "GT_TRACKS": {"tracker": labels},
-                      "PREDICTED_TRACKS": {"tracker": predictions}, "SEQ_IDS_TO_EVAL": list(labels.keys()),
-                      "CLASSES_TO_EVAL": classes, "TRACKERS_TO_EVAL": ["tracker"], "OUTPUT_FOLDER": output_dir}
+    dataset_config = {
+        **official.TrackEvalDataset.get_default_dataset_config(),
+        "GT_TRACKS": {"tracker": labels},
+        "PREDICTED_TRACKS": {"tracker": predictions},
+        "SEQ_IDS_TO_EVAL": list(labels.keys()),
+        "CLASSES_TO_EVAL": classes,
+        "TRACKERS_TO_EVAL": ["tracker"],
+        "OUTPUT_FOLDER": output_dir,
+    }
     sim_func = functools.partial(official._xy_center_similarity, zero_distance=MATCH_DISTANCE_M)
-    candidates = {c: official._calculate_score_thresholds(official._filter_by_class(labels, c),
-                                                          official._filter_by_class(predictions, c), sim_func,
-                                                          num_thresholds=NUM_THRESHOLDS) for c in classes}
+    candidates = {
+        c: official._calculate_score_thresholds(
+            official._filter_by_class(labels, c),
+            official._filter_by_class(predictions, c),
+            sim_func,
+            num_thresholds=NUM_THRESHOLDS,
+        )
+        for c in classes
+    }
     jobs = [(i, candidates, classes, predictions, dataset_config, metrics_config) for i in range(NUM_THRESHOLDS)]
     if workers == 1:
         results = [official._evaluate_single_threshold(job) for job in jobs]
@@ -196,9 +216,15 @@ _IN_TREE = (*OFFICIAL_METRICS, "Count")
 #: another TrackEval metric class (``trackeval.metrics``) is one more line here: that class then runs in the same
 #: final evaluation, on the same labels and score-filtered tracks.
 TRACKEVAL_COLUMNS: dict[str, tuple[str, str, str]] = {
-    "hota": ("HOTA", "HOTA", "mean"), "detA": ("HOTA", "DetA", "mean"), "assA": ("HOTA", "AssA", "mean"),
-    "mota": ("CLEAR", "MOTA", "float"), "idsw": ("CLEAR", "IDSW", "int"), "tp": ("CLEAR", "CLR_TP", "int"),
-    "fp": ("CLEAR", "CLR_FP", "int"), "fn": ("CLEAR", "CLR_FN", "int"), "ids": ("CLEAR", "IDSW", "int"),
+    "hota": ("HOTA", "HOTA", "mean"),
+    "detA": ("HOTA", "DetA", "mean"),
+    "assA": ("HOTA", "AssA", "mean"),
+    "mota": ("CLEAR", "MOTA", "float"),
+    "idsw": ("CLEAR", "IDSW", "int"),
+    "tp": ("CLEAR", "CLR_TP", "int"),
+    "fp": ("CLEAR", "CLR_FP", "int"),
+    "fn": ("CLEAR", "CLR_FN", "int"),
+    "ids": ("CLEAR", "IDSW", "int"),
     "idf1": ("Identity", "IDF1", "float"),
 }
 
@@ -210,13 +236,13 @@ def _reduced(value, how: str):
     return int(value) if how == "int" else float(value)
 
 
-def final_evaluation(labels: dict, predictions: dict, classes: list[str], config: dict,
-                     output_dir: str) -> tuple[dict, dict]:
+def final_evaluation(
+    labels: dict, predictions: dict, classes: list[str], config: dict, output_dir: str
+) -> tuple[dict, dict]:
     """Step 5: TrackEval HOTA + CLEAR configured as the official ``evaluate_tracking`` does, with the other metric
     classes of :data:`TRACKEVAL_COLUMNS` (Identity) in the same run. Returns (the result tree with the official
     metrics only, ``{class: {metric class: {field: value}}}`` of the other classes, combined over sequences)."""
     import trackeval
-
     from av2.evaluation.tracking import utils
 
     official = official_module()
@@ -227,13 +253,21 @@ def final_evaluation(labels: dict, predictions: dict, classes: list[str], config
     if frames(labels) != frames(predictions):  # evaluate_tracking's check; the input check makes it a bug
         raise RuntimeError("sequences ids and timestamp_ns in labels and predictions don't match")
     extra = sorted({m for m, _, _ in TRACKEVAL_COLUMNS.values()} - set(_IN_TREE))
-    metrics_config = {"METRICS": [*OFFICIAL_METRICS, *extra], "THRESHOLD": SIMILARITY_THRESHOLD,
-                      "PRINT_CONFIG": bool(config["PRINT_CONFIG"])}
+    metrics_config = {
+        "METRICS": [*OFFICIAL_METRICS, *extra],
+        "THRESHOLD": SIMILARITY_THRESHOLD,
+        "PRINT_CONFIG": bool(config["PRINT_CONFIG"]),
+    }
     metrics = [getattr(trackeval.metrics, m)(metrics_config) for m in metrics_config["METRICS"]]
-    dataset_config = {**official.TrackEvalDataset.get_default_dataset_config(),
-                      "GT_TRACKS": {TRACKER_NAME: labels}, "PREDICTED_TRACKS": {TRACKER_NAME: predictions},
-                      "SEQ_IDS_TO_EVAL": list(labels.keys()), "CLASSES_TO_EVAL": classes,
-                      "TRACKERS_TO_EVAL": [TRACKER_NAME], "OUTPUT_FOLDER": output_dir}
+    dataset_config = {
+        **official.TrackEvalDataset.get_default_dataset_config(),
+        "GT_TRACKS": {TRACKER_NAME: labels},
+        "PREDICTED_TRACKS": {TRACKER_NAME: predictions},
+        "SEQ_IDS_TO_EVAL": list(labels.keys()),
+        "CLASSES_TO_EVAL": classes,
+        "TRACKERS_TO_EVAL": [TRACKER_NAME],
+        "OUTPUT_FOLDER": output_dir,
+    }
     result, _ = trackeval.Evaluator(config).evaluate([official.TrackEvalDataset(dataset_config)], metrics)
     tree = result["TrackEvalDataset"][TRACKER_NAME]
     others = {c: {m: tree["COMBINED_SEQ"][c][m] for m in extra} for c in classes}
@@ -244,10 +278,17 @@ def final_evaluation(labels: dict, predictions: dict, classes: list[str], config
     return result, others
 
 
-def evaluate_sequences(predictions: dict, labels: dict, dataset_dir: str | Path | None, *,
-                       max_range_m: int = DEFAULT_RANGE_M, workers: int | None = None,
-                       trackeval_dir: str | Path | None = None, verbose: bool = False,
-                       keep_inputs: bool = False) -> dict:
+def evaluate_sequences(
+    predictions: dict,
+    labels: dict,
+    dataset_dir: str | Path | None,
+    *,
+    max_range_m: int = DEFAULT_RANGE_M,
+    workers: int | None = None,
+    trackeval_dir: str | Path | None = None,
+    verbose: bool = False,
+    keep_inputs: bool = False,
+) -> dict:
     """Run the official evaluation on in-memory sequences (steps 1-5 of the module docstring).
 
     predictions / labels: ``{log_id: [frame, ...]}`` (the pickle layout), same frames (else InputFormatError);
@@ -282,9 +323,13 @@ def evaluate_sequences(predictions: dict, labels: dict, dataset_dir: str | Path 
         res, others = final_evaluation(labels, scored, classes, eval_config(quiet=trackeval_dir is None), out_dir)
     out = {"result": res, "tuned": tuned, "mean": mean, "others": others}
     if keep_inputs:
-        out["final"] = {"labels": labels, "predictions": scored, "classes": classes,
-                        "similarity_threshold": float(SIMILARITY_THRESHOLD),
-                        "thresholds": {c: float(t) for c, t in thresholds.items()}}
+        out["final"] = {
+            "labels": labels,
+            "predictions": scored,
+            "classes": classes,
+            "similarity_threshold": float(SIMILARITY_THRESHOLD),
+            "thresholds": {c: float(t) for c, t in thresholds.items()},
+        }
     return out
 
 
@@ -328,8 +373,13 @@ def class_average(per_class: dict, classes=TABLE_I_CLASSES, columns=AVERAGED_COL
     """
     present = [c for c in classes if not per_class[c]["absent"]]
     out = {k: (float(np.mean([per_class[c][k] for c in present])) if present else None) for k in columns}
-    out.update({"classes": list(classes), "present_classes": present,
-                "absent_classes": [c for c in classes if c not in present]})
+    out.update(
+        {
+            "classes": list(classes),
+            "present_classes": present,
+            "absent_classes": [c for c in classes if c not in present],
+        }
+    )
     return out
 
 
@@ -342,25 +392,45 @@ def metrics_from_result(out: dict) -> tuple[dict, dict]:
         m = {**combined[c], **out["others"].get(c, {})}
         gt = int(m["CLEAR"]["CLR_TP"] + m["CLEAR"]["CLR_FN"])
         per_class[c] = {col: _reduced(m[metric][field], how) for col, (metric, field, how) in TRACKEVAL_COLUMNS.items()}
-        per_class[c].update({"hota_tuned": float(out["tuned"][c]), "hota_mean": float(out["mean"][c]),
-                             "gt_boxes": gt, "present": gt > 0, "absent": gt == 0})
+        per_class[c].update(
+            {
+                "hota_tuned": float(out["tuned"][c]),
+                "hota_mean": float(out["mean"][c]),
+                "gt_boxes": gt,
+                "present": gt > 0,
+                "absent": gt == 0,
+            }
+        )
     return class_average(per_class), per_class
 
 
-def metrics_document(out: dict, *, split: str, submission: str, rate_hz: float | None, max_range_m: int,
-                     roi: bool, workers: int) -> MetricsDocument:
+def metrics_document(
+    out: dict, *, split: str, submission: str, rate_hz: float | None, max_range_m: int, roi: bool, workers: int
+) -> MetricsDocument:
     """The AV2 metrics document."""
     overall, per_class = metrics_from_result(out)
     return MetricsDocument(
-        dataset="av2", version="sensor", split=split, evaluator=EVALUATOR, submission=str(submission),
-        overall=overall, per_class=per_class,
-        settings={"rate_hz": rate_hz, "max_range_m": int(max_range_m), "drivable_area_roi": bool(roi),
-                  "objective": "HOTA", "workers": int(workers),
-                  "average": AVERAGE_RULE})
+        dataset="av2",
+        version="sensor",
+        split=split,
+        evaluator=EVALUATOR,
+        submission=str(submission),
+        overall=overall,
+        per_class=per_class,
+        settings={
+            "rate_hz": rate_hz,
+            "max_range_m": int(max_range_m),
+            "drivable_area_roi": bool(roi),
+            "objective": "HOTA",
+            "workers": int(workers),
+            "average": AVERAGE_RULE,
+        },
+    )
 
 
-def load_submission(root: str | Path, split: str, submission: str | Path, *, rate_hz: float | None = 2.0,
-                    roi: bool | None = None) -> tuple[list, dict, dict, Path, bool]:
+def load_submission(
+    root: str | Path, split: str, submission: str | Path, *, rate_hz: float | None = 2.0, roi: bool | None = None
+) -> tuple[list, dict, dict, Path, bool]:
     """What the evaluation of a tracking pickle reads: (scenes with ground truth of all 26 categories, labels,
     the checked submission, split folder, whether the drivable-area ROI applies).
 
@@ -378,9 +448,18 @@ def load_submission(root: str | Path, split: str, submission: str | Path, *, rat
     return scenes, labels, preds, ddir, use_roi
 
 
-def evaluate_submission(root: str | Path, split: str, submission: str | Path, *, rate_hz: float | None = 2.0,
-                        max_range_m: int = DEFAULT_RANGE_M, workers: int | None = None, roi: bool | None = None,
-                        trackeval_dir: str | Path | None = None, verbose: bool = False) -> MetricsDocument:
+def evaluate_submission(
+    root: str | Path,
+    split: str,
+    submission: str | Path,
+    *,
+    rate_hz: float | None = 2.0,
+    max_range_m: int = DEFAULT_RANGE_M,
+    workers: int | None = None,
+    roi: bool | None = None,
+    trackeval_dir: str | Path | None = None,
+    verbose: bool = False,
+) -> MetricsDocument:
     """Evaluate a tracking pickle against the split's labels; returns the metrics document.
 
     ``roi`` None: on when every log has its map. Raises :class:`InputFormatError` when the pickle does not hold
@@ -389,10 +468,24 @@ def evaluate_submission(root: str | Path, split: str, submission: str | Path, *,
     t0 = time.perf_counter()
     _, labels, preds, ddir, use_roi = load_submission(root, split, submission, rate_hz=rate_hz, roi=roi)
     workers = max(1, int(workers or default_workers()))
-    out = evaluate_sequences(preds, labels, ddir if use_roi else None, max_range_m=max_range_m, workers=workers,
-                             trackeval_dir=trackeval_dir, verbose=verbose)
-    doc = metrics_document(out, split=split, submission=str(submission), rate_hz=rate_hz, max_range_m=max_range_m,
-                           roi=use_roi, workers=workers)
+    out = evaluate_sequences(
+        preds,
+        labels,
+        ddir if use_roi else None,
+        max_range_m=max_range_m,
+        workers=workers,
+        trackeval_dir=trackeval_dir,
+        verbose=verbose,
+    )
+    doc = metrics_document(
+        out,
+        split=split,
+        submission=str(submission),
+        rate_hz=rate_hz,
+        max_range_m=max_range_m,
+        roi=use_roi,
+        workers=workers,
+    )
     doc.logs, doc.frames = len(labels), sum(len(v) for v in labels.values())
     doc.seconds = round(time.perf_counter() - t0, 3)
     return doc

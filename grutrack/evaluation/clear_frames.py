@@ -39,6 +39,7 @@ class StepDecisions:
     gt_previous: (G,) int64, for a switch the (mapped) id of the track the GT was last matched to, else -1.
     track_matched: (T,) bool; an unmatched track is a false positive (FP).
     """
+
     gt_track: np.ndarray
     gt_switch: np.ndarray
     gt_previous: np.ndarray
@@ -47,31 +48,40 @@ class StepDecisions:
     def counts(self) -> dict:
         """``{tp, fp, fn, ids}`` of the timestep (CLEAR: tp includes the id-switch matches)."""
         tp = int((self.gt_track >= 0).sum())
-        return {"tp": tp, "fp": int(len(self.track_matched) - tp), "fn": int(len(self.gt_track) - tp),
-                "ids": int(self.gt_switch.sum())}
+        return {
+            "tp": tp,
+            "fp": int(len(self.track_matched) - tp),
+            "fn": int(len(self.gt_track) - tp),
+            "ids": int(self.gt_switch.sum()),
+        }
 
 
-def clear_decisions(gt_ids: list, tracker_ids: list, similarity: list, num_gt_ids: int,
-                    threshold: float = 0.5) -> list[StepDecisions]:
+def clear_decisions(
+    gt_ids: list, tracker_ids: list, similarity: list, num_gt_ids: int, threshold: float = 0.5
+) -> list[StepDecisions]:
     """Replay CLEAR over one sequence of one class: one :class:`StepDecisions` per timestep.
 
     Per timestep: gt_ids (G_t,) int ids in ``0..num_gt_ids-1`` (TrackEval's mapped ids), tracker_ids (T_t,) int
     ids (mapped), similarity (G_t, T_t) float (1 = same place). threshold: CLEAR's similarity threshold (AV2:
     0.5, i.e. centre distance <= 1 m).
     """
-    prev_tracker_id = np.full(num_gt_ids, np.nan)            # last match, any timestep before: id switches
-    prev_timestep_tracker_id = np.full(num_gt_ids, np.nan)   # match of the previous timestep: matching bonus
+    prev_tracker_id = np.full(num_gt_ids, np.nan)  # last match, any timestep before: id switches
+    prev_timestep_tracker_id = np.full(num_gt_ids, np.nan)  # match of the previous timestep: matching bonus
     out = []
     for gt_t, tr_t, sim in zip(gt_ids, tracker_ids, similarity):
         gt_t = np.asarray(gt_t, dtype=np.int64)
         tr_t = np.asarray(tr_t, dtype=np.int64)
         g, n = len(gt_t), len(tr_t)
-        step = StepDecisions(np.full(g, -1, dtype=np.int64), np.zeros(g, dtype=bool), np.full(g, -1, dtype=np.int64),
-                             np.zeros(n, dtype=bool))
+        step = StepDecisions(
+            np.full(g, -1, dtype=np.int64),
+            np.zeros(g, dtype=bool),
+            np.full(g, -1, dtype=np.int64),
+            np.zeros(n, dtype=bool),
+        )
         out.append(step)
-        if g == 0 or n == 0:        # CLEAR leaves the previous-timestep record as it is on such a timestep
+        if g == 0 or n == 0:  # CLEAR leaves the previous-timestep record as it is on such a timestep
             continue
-        score = (tr_t[np.newaxis, :] == prev_timestep_tracker_id[gt_t[:, np.newaxis]])
+        score = tr_t[np.newaxis, :] == prev_timestep_tracker_id[gt_t[:, np.newaxis]]
         score = 1000 * score + sim
         score[sim < threshold - _EPS] = 0
         rows, cols = linear_sum_assignment(-score)
@@ -98,6 +108,7 @@ class ClassSequence:
     came from; gt_ids / tracker_ids: the mapped ids; gt_names / tracker_names: mapped id -> original track id;
     similarity: per timestep, (G_t, T_t).
     """
+
     gt_rows: list
     tracker_rows: list
     gt_ids: list
@@ -119,10 +130,16 @@ def official_sequence_data(labels: dict, predictions: dict, classes: list[str]) 
     from grutrack.evaluation.av2_eval import official_module
 
     TrackEvalDataset = official_module().TrackEvalDataset
-    cfg = {**TrackEvalDataset.get_default_dataset_config(), "GT_TRACKS": {"t": labels},
-           "PREDICTED_TRACKS": {"t": predictions}, "SEQ_IDS_TO_EVAL": list(labels), "CLASSES_TO_EVAL": classes,
-           "TRACKERS_TO_EVAL": ["t"], "OUTPUT_FOLDER": None}
-    with contextlib.redirect_stdout(io.StringIO()):      # the dataset class prints its zero distance
+    cfg = {
+        **TrackEvalDataset.get_default_dataset_config(),
+        "GT_TRACKS": {"t": labels},
+        "PREDICTED_TRACKS": {"t": predictions},
+        "SEQ_IDS_TO_EVAL": list(labels),
+        "CLASSES_TO_EVAL": classes,
+        "TRACKERS_TO_EVAL": ["t"],
+        "OUTPUT_FOLDER": None,
+    }
+    with contextlib.redirect_stdout(io.StringIO()):  # the dataset class prints its zero distance
         ds = TrackEvalDataset(cfg)
     out: dict = {}
     for log in labels:
@@ -135,8 +152,9 @@ def official_sequence_data(labels: dict, predictions: dict, classes: list[str]) 
             t_rows = [np.flatnonzero(c == k) for c in raw["tracker_classes"]]
             g_names = _names(data["gt_ids"], raw["gt_ids"], g_rows)
             t_names = _names(data["tracker_ids"], raw["tracker_ids"], t_rows)
-            out[log][cls] = ClassSequence(g_rows, t_rows, data["gt_ids"], data["tracker_ids"],
-                                          data["similarity_scores"], g_names, t_names)
+            out[log][cls] = ClassSequence(
+                g_rows, t_rows, data["gt_ids"], data["tracker_ids"], data["similarity_scores"], g_names, t_names
+            )
     return out
 
 

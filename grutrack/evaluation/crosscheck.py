@@ -60,7 +60,7 @@ def entry_differences(ref: dict, ours: dict) -> dict[str, float]:
     """
     fr, fo = flatten(ref), flatten(ours)
     if set(fr) != set(fo):
-        raise ValueError("different entries: %s" % sorted(set(fr) ^ set(fo)))
+        raise ValueError(f"different entries: {sorted(set(fr) ^ set(fo))}")
     return {k: value_difference(fr[k], fo[k]) for k in sorted(fr) if k not in IGNORED}
 
 
@@ -92,8 +92,9 @@ def subset_dataroot(dataroot: str | Path, version: str, scenes: list[str], into:
     return into
 
 
-def cross_check(dataroot: str | Path, version: str, split: str, submission: str | Path,
-                scenes: int | None = None) -> CrossCheckDocument:
+def cross_check(
+    dataroot: str | Path, version: str, split: str, submission: str | Path, scenes: int | None = None
+) -> CrossCheckDocument:
     """Score ``submission`` (a tracking JSON of ``split``) with both nuScenes evaluators on ``scenes`` evenly
     spaced scenes of the split (None: all) and compare every summary entry."""
     from grutrack.data.nuscenes import split_scene_names
@@ -115,8 +116,18 @@ def cross_check(dataroot: str | Path, version: str, split: str, submission: str 
     diffs = entry_differences(docs["devkit"].devkit_summary, docs["fast"].devkit_summary)
     worst = max(diffs, key=diffs.get)
     return CrossCheckDocument(
-        dataset="nuscenes", version=version, split=split, submission=str(submission), scenes=chosen,
-        split_scenes=len(names), samples=len(tokens), entries=len(diffs), max_abs_difference=diffs[worst],
-        worst_entry=worst, tolerance=TOLERANCE, equal=diffs[worst] <= TOLERANCE,
+        dataset="nuscenes",
+        version=version,
+        split=split,
+        submission=str(submission),
+        scenes=chosen,
+        split_scenes=len(names),
+        samples=len(tokens),
+        entries=len(diffs),
+        max_abs_difference=diffs[worst],
+        worst_entry=worst,
+        tolerance=TOLERANCE,
+        equal=diffs[worst] <= TOLERANCE,
         amota={ev: d.overall.get("amota") for ev, d in docs.items()},
-        seconds={ev: d.seconds for ev, d in docs.items()})
+        seconds={ev: d.seconds for ev, d in docs.items()},
+    )

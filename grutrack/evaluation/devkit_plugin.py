@@ -45,12 +45,28 @@ class FastTrackingEvaluation:
     path does not model (another distance function than the centre distance, plots of the class asked for,
     ground truth with a repeated id in one frame) are handed to the devkit's own class."""
 
-    def __init__(self, tracks_gt: dict, tracks_pred: dict, class_name: str, dist_fcn: Callable,
-                 dist_th_tp: float, min_recall: float, num_thresholds: int, metric_worst: dict[str, float],
-                 verbose: bool = True, output_dir: str | None = None, render_classes: list[str] | None = None):
+    def __init__(
+        self,
+        tracks_gt: dict,
+        tracks_pred: dict,
+        class_name: str,
+        dist_fcn: Callable,
+        dist_th_tp: float,
+        min_recall: float,
+        num_thresholds: int,
+        metric_worst: dict[str, float],
+        verbose: bool = True,
+        output_dir: str | None = None,
+        render_classes: list[str] | None = None,
+    ):
         self.args = (tracks_gt, tracks_pred, class_name, dist_fcn, dist_th_tp, min_recall)
-        self.kwargs = dict(num_thresholds=num_thresholds, metric_worst=metric_worst, verbose=verbose,
-                           output_dir=output_dir, render_classes=render_classes)
+        self.kwargs = dict(
+            num_thresholds=num_thresholds,
+            metric_worst=metric_worst,
+            verbose=verbose,
+            output_dir=output_dir,
+            render_classes=render_classes,
+        )
 
     def accumulate(self) -> TrackingMetricData:
         """Metrics of every recall threshold of the class (the devkit's ``TrackingMetricData``)."""
@@ -80,6 +96,8 @@ class FastTrackingEval(_devkit_evaluate.TrackingEval):
     evaluate = types.FunctionType(
         _devkit_evaluate.TrackingEval.evaluate.__code__,
         {**vars(_devkit_evaluate), "TrackingEvaluation": FastTrackingEvaluation},
-        "evaluate", _devkit_evaluate.TrackingEval.evaluate.__defaults__,
-        _devkit_evaluate.TrackingEval.evaluate.__closure__)
+        "evaluate",
+        _devkit_evaluate.TrackingEval.evaluate.__defaults__,
+        _devkit_evaluate.TrackingEval.evaluate.__closure__,
+    )
     evaluate.__doc__ = _devkit_evaluate.TrackingEval.evaluate.__doc__

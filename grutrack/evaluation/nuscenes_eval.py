@@ -19,12 +19,35 @@ from grutrack.documents import MetricsDocument
 from grutrack.errors import InputFormatError
 
 #: metrics reported overall and per class, in the devkit's names
-METRIC_KEYS = ("amota", "amotp", "recall", "motar", "gt", "mota", "motp", "mt", "ml", "faf", "tp", "fp", "fn",
-               "ids", "frag", "tid", "lgd")
+METRIC_KEYS = (
+    "amota",
+    "amotp",
+    "recall",
+    "motar",
+    "gt",
+    "mota",
+    "motp",
+    "mt",
+    "ml",
+    "faf",
+    "tp",
+    "fp",
+    "fn",
+    "ids",
+    "frag",
+    "tid",
+    "lgd",
+)
 
 
-def devkit_tracking_eval(dataroot: str | Path, version: str, split: str, submission: str | Path,
-                         verbose: bool = False, progress: bool = False) -> dict:
+def devkit_tracking_eval(
+    dataroot: str | Path,
+    version: str,
+    split: str,
+    submission: str | Path,
+    verbose: bool = False,
+    progress: bool = False,
+) -> dict:
     """Run the official ``TrackingEval`` and return the devkit's summary dict (metrics_summary.json).
 
     ``progress``: a bar on stderr through the devkit's stages (loading, filtering, one step per class), read
@@ -37,15 +60,24 @@ def devkit_tracking_eval(dataroot: str | Path, version: str, split: str, submiss
     if not submission.is_file():
         raise InputFormatError(f"{submission}: submission file does not exist")
     cfg = config_factory("tracking_nips_2019")
-    with tempfile.TemporaryDirectory(prefix="grutrack-eval-") as out_dir, \
-            _DevkitProgress(len(cfg.class_names), enabled=progress and not verbose) as bar:
+    with (
+        tempfile.TemporaryDirectory(prefix="grutrack-eval-") as out_dir,
+        _DevkitProgress(len(cfg.class_names), enabled=progress and not verbose) as bar,
+    ):
         quiet = contextlib.ExitStack()
         if not verbose:  # the devkit prints and draws progress bars (stderr) even with verbose=False
             quiet.enter_context(contextlib.redirect_stdout(bar.sink if progress else io.StringIO()))
             quiet.enter_context(contextlib.redirect_stderr(io.StringIO()))
         with quiet:
-            ev = TrackingEval(config=cfg, result_path=str(submission), eval_set=split, output_dir=out_dir,
-                              nusc_version=version, nusc_dataroot=str(dataroot), verbose=verbose or progress)
+            ev = TrackingEval(
+                config=cfg,
+                result_path=str(submission),
+                eval_set=split,
+                output_dir=out_dir,
+                nusc_version=version,
+                nusc_dataroot=str(dataroot),
+                verbose=verbose or progress,
+            )
             ev.main(render_curves=False)
         return json.loads((Path(out_dir) / "metrics_summary.json").read_text())
 
@@ -54,9 +86,13 @@ class _DevkitProgress:
     """A tqdm bar on the real stderr moved by the devkit's stdout messages (which are swallowed)."""
 
     #: devkit message prefix -> stage shown on the bar (in the order TrackingEval prints them)
-    STAGES = (("Loading NuScenes tables", "loading tables"), ("Loading annotations", "loading ground truth"),
-              ("Filtering tracks", "filtering predictions"), ("Filtering ground truth", "filtering ground truth"),
-              ("Accumulating metric data", "accumulating"))
+    STAGES = (
+        ("Loading NuScenes tables", "loading tables"),
+        ("Loading annotations", "loading ground truth"),
+        ("Filtering tracks", "filtering predictions"),
+        ("Filtering ground truth", "filtering ground truth"),
+        ("Accumulating metric data", "accumulating"),
+    )
 
     def __init__(self, n_classes: int, enabled: bool):
         self.enabled, self.n_classes, self.bar = enabled, n_classes, None
@@ -68,8 +104,9 @@ class _DevkitProgress:
 
             from tqdm import tqdm
 
-            self.bar = tqdm(total=len(self.STAGES) + self.n_classes, desc="devkit evaluation", unit="step",
-                            file=sys.stderr)
+            self.bar = tqdm(
+                total=len(self.STAGES) + self.n_classes, desc="devkit evaluation", unit="step", file=sys.stderr
+            )
         return self
 
     def __exit__(self, *exc):
@@ -110,8 +147,10 @@ class _LineSink(io.TextIOBase):
 def metrics_from_summary(summary: dict) -> tuple[dict, dict]:
     """(overall, per_class) metric dicts from a devkit summary; NaN becomes None (valid JSON)."""
     overall = {k: _clean(summary.get(k)) for k in METRIC_KEYS}
-    per_class = {c: {k: _clean(summary["label_metrics"].get(k, {}).get(c)) for k in METRIC_KEYS
-                     if k in summary["label_metrics"]} for c in TRACKING_CLASSES}
+    per_class = {
+        c: {k: _clean(summary["label_metrics"].get(k, {}).get(c)) for k in METRIC_KEYS if k in summary["label_metrics"]}
+        for c in TRACKING_CLASSES
+    }
     return overall, per_class
 
 
@@ -130,13 +169,21 @@ def _clean_tree(obj):
     return _clean(obj)
 
 
-def metrics_document(summary: dict, *, dataset: str, version: str, split: str, evaluator: str,
-                     submission: str) -> MetricsDocument:
+def metrics_document(
+    summary: dict, *, dataset: str, version: str, split: str, evaluator: str, submission: str
+) -> MetricsDocument:
     """The metrics document for a devkit-format summary."""
     overall, per_class = metrics_from_summary(summary)
-    return MetricsDocument(dataset=dataset, version=version, split=split, evaluator=evaluator,
-                           submission=str(submission), overall=overall, per_class=per_class,
-                           devkit_summary=_clean_tree(summary))
+    return MetricsDocument(
+        dataset=dataset,
+        version=version,
+        split=split,
+        evaluator=evaluator,
+        submission=str(submission),
+        overall=overall,
+        per_class=per_class,
+        devkit_summary=_clean_tree(summary),
+    )
 
 
 def format_summary(doc: MetricsDocument) -> str:

@@ -24,12 +24,12 @@ class TrackParity:
     samples: int = 0
     ref_boxes: int = 0
     our_boxes: int = 0
-    paired: int = 0                     # reference boxes with a box of ours of the same class within tolerance
-    count_mismatch: list[str] = field(default_factory=list)   # samples whose box counts differ
-    score_mismatch: int = 0             # paired boxes whose scores differ by more than score_tolerance
-    yaw_mismatch: int = 0               # paired boxes whose yaws differ by more than the tolerance (radians)
-    partition_breaks: int = 0           # reference tracks split across, or merged with, tracks of ours
-    max_distance: float = 0.0           # largest centre / size difference of a paired box (m)
+    paired: int = 0  # reference boxes with a box of ours of the same class within tolerance
+    count_mismatch: list[str] = field(default_factory=list)  # samples whose box counts differ
+    score_mismatch: int = 0  # paired boxes whose scores differ by more than score_tolerance
+    yaw_mismatch: int = 0  # paired boxes whose yaws differ by more than the tolerance (radians)
+    partition_breaks: int = 0  # reference tracks split across, or merged with, tracks of ours
+    max_distance: float = 0.0  # largest centre / size difference of a paired box (m)
     first_divergence: str | None = None  # first sample (in the order given) where anything differs
 
     @property
@@ -40,16 +40,23 @@ class TrackParity:
     @property
     def identical(self) -> bool:
         """Every box paired, same counts, scores and yaws, same track partition."""
-        return (self.paired == self.ref_boxes == self.our_boxes and not self.count_mismatch
-                and self.score_mismatch == 0 and self.yaw_mismatch == 0 and self.partition_breaks == 0)
+        return (
+            self.paired == self.ref_boxes == self.our_boxes
+            and not self.count_mismatch
+            and self.score_mismatch == 0
+            and self.yaw_mismatch == 0
+            and self.partition_breaks == 0
+        )
 
     def summary(self) -> str:
         """One line of figures."""
-        return (f"{self.paired}/{self.ref_boxes} reference boxes paired ({100 * self.paired_fraction:.3f} %), "
-                f"{self.our_boxes} boxes of ours, {len(self.count_mismatch)} of {self.samples} samples with other "
-                f"box counts, {self.score_mismatch} score and {self.yaw_mismatch} yaw mismatches, "
-                f"{self.partition_breaks} track partition breaks, largest paired difference "
-                f"{self.max_distance:.2e} m, first divergence: {self.first_divergence or 'none'}")
+        return (
+            f"{self.paired}/{self.ref_boxes} reference boxes paired ({100 * self.paired_fraction:.3f} %), "
+            f"{self.our_boxes} boxes of ours, {len(self.count_mismatch)} of {self.samples} samples with other "
+            f"box counts, {self.score_mismatch} score and {self.yaw_mismatch} yaw mismatches, "
+            f"{self.partition_breaks} track partition breaks, largest paired difference "
+            f"{self.max_distance:.2e} m, first divergence: {self.first_divergence or 'none'}"
+        )
 
 
 def _sample_arrays(boxes: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
@@ -73,8 +80,9 @@ def _pair(ref: np.ndarray, ours: np.ndarray, tolerance: float) -> tuple[np.ndarr
     return r[ok], c[ok], diff[r[ok], c[ok]]
 
 
-def compare_tracks(reference: dict, ours: dict, sample_scene: dict[str, str], tolerance: float = 1e-6,
-                   score_tolerance: float = 1e-9) -> TrackParity:
+def compare_tracks(
+    reference: dict, ours: dict, sample_scene: dict[str, str], tolerance: float = 1e-6, score_tolerance: float = 1e-9
+) -> TrackParity:
     """Compare the ``results`` of two tracking submissions sample by sample.
 
     ``sample_scene``: sample token -> scene token, in the order to report the first divergence; only these samples
@@ -114,6 +122,5 @@ def compare_tracks(reference: dict, ours: dict, sample_scene: dict[str, str], to
                 ours_to_ref.setdefault(b, set()).add(a)
         if differs and out.first_divergence is None:
             out.first_divergence = token
-    out.partition_breaks = (sum(len(v) - 1 for v in ref_to_ours.values())
-                            + sum(len(v) - 1 for v in ours_to_ref.values()))
+    out.partition_breaks = sum(len(v) - 1 for v in ref_to_ours.values()) + sum(len(v) - 1 for v in ours_to_ref.values())
     return out

@@ -24,11 +24,26 @@ INTERNAL_METRICS = ["recall", "motar", "gt"]
 LEGACY_METRICS = ["mota", "motp", "mt", "ml", "faf", "tp", "fp", "fn", "ids", "frag", "tid", "lgd"]
 TRACKING_METRICS = [*AMOT_METRICS, *INTERNAL_METRICS, *LEGACY_METRICS]
 AVG_METRIC_MAP = {"amota": "motar", "amotp": "motp"}
-MOT_METRIC_MAP = {"num_frames": "", "num_objects": "gt", "pred_frequencies": "", "num_predictions": "",
-                  "num_matches": "tp", "motar": "motar", "mota_custom": "mota", "motp_custom": "motp", "faf": "faf",
-                  "mostly_tracked": "mt", "mostly_lost": "ml", "num_false_positives": "fp", "num_misses": "fn",
-                  "num_switches": "ids", "num_fragmentations_custom": "frag", "recall": "recall", "tid": "tid",
-                  "lgd": "lgd"}
+MOT_METRIC_MAP = {
+    "num_frames": "",
+    "num_objects": "gt",
+    "pred_frequencies": "",
+    "num_predictions": "",
+    "num_matches": "tp",
+    "motar": "motar",
+    "mota_custom": "mota",
+    "motp_custom": "motp",
+    "faf": "faf",
+    "mostly_tracked": "mt",
+    "mostly_lost": "ml",
+    "num_false_positives": "fp",
+    "num_misses": "fn",
+    "num_switches": "ids",
+    "num_fragmentations_custom": "frag",
+    "recall": "recall",
+    "tid": "tid",
+    "lgd": "lgd",
+}
 #: per-threshold metrics of TrackingMetricData, in the devkit's order (a list built from a set there: the order
 #: of that set in this interpreter, so serialised keys come out in the same order as the devkit's)
 MD_METRICS = [m for m in list(set(TRACKING_METRICS) - set(AMOT_METRICS))]
@@ -45,8 +60,18 @@ def devkit_package_dir() -> Path:
 class TrackingConfig:
     """The devkit's ``TrackingConfig`` fields, read from its JSON (``tracking_nips_2019`` by default)."""
 
-    FIELDS = ("tracking_names", "pretty_tracking_names", "tracking_colors", "class_range", "dist_fcn",
-              "dist_th_tp", "min_recall", "max_boxes_per_sample", "metric_worst", "num_thresholds")
+    FIELDS = (
+        "tracking_names",
+        "pretty_tracking_names",
+        "tracking_colors",
+        "class_range",
+        "dist_fcn",
+        "dist_th_tp",
+        "min_recall",
+        "max_boxes_per_sample",
+        "metric_worst",
+        "num_thresholds",
+    )
 
     def __init__(self, content: dict[str, Any]):
         for key in self.FIELDS:
@@ -63,7 +88,7 @@ class TrackingConfig:
         return devkit_config(self).dist_fcn_callable
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _config_content(name: str) -> str:
     task = name.split("_")[0]
     return (devkit_package_dir() / "eval" / task / "configs" / f"{name}.json").read_text()
@@ -132,8 +157,9 @@ class TrackingMetrics:
         self.eval_time = None
         self.class_names = cfg.class_names
         self.metric_names = list(TRACKING_METRICS)
-        self.label_metrics: dict[str, dict[str, float]] = {m: {c: np.nan for c in self.class_names}
-                                                           for m in self.metric_names}
+        self.label_metrics: dict[str, dict[str, float]] = {
+            m: {c: np.nan for c in self.class_names} for m in self.metric_names
+        }
 
     def add_label_metric(self, metric_name: str, tracking_name: str, value: float) -> None:
         assert metric_name in self.label_metrics
@@ -153,8 +179,11 @@ class TrackingMetrics:
         return float(np.nanmean(data))
 
     def serialize(self) -> dict[str, Any]:
-        metrics: dict[str, Any] = {"label_metrics": self.label_metrics, "eval_time": self.eval_time,
-                                   "cfg": self.cfg.serialize()}
+        metrics: dict[str, Any] = {
+            "label_metrics": self.label_metrics,
+            "eval_time": self.eval_time,
+            "cfg": self.cfg.serialize(),
+        }
         for metric_name in self.label_metrics:
             metrics[metric_name] = self.compute_metric(metric_name)
         return metrics

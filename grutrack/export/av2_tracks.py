@@ -43,13 +43,36 @@ from grutrack.errors import InputFormatError
 from grutrack.io import atomic_path
 
 ARRAY_KEYS = ("track_id", "translation_m", "size", "yaw", "velocity_m_per_s", "label", "name")
-TABLE_COLUMNS = ("log_id", "timestamp_ns", "track_uuid", "category", "tx_m", "ty_m", "tz_m", "length_m",
-                 "width_m", "height_m", "qw", "qx", "qy", "qz", "vx_m_per_s", "vy_m_per_s", "score")
+TABLE_COLUMNS = (
+    "log_id",
+    "timestamp_ns",
+    "track_uuid",
+    "category",
+    "tx_m",
+    "ty_m",
+    "tz_m",
+    "length_m",
+    "width_m",
+    "height_m",
+    "qw",
+    "qx",
+    "qy",
+    "qz",
+    "vx_m_per_s",
+    "vy_m_per_s",
+    "score",
+)
 _CATEGORY_INDEX = {c: i for i, c in enumerate(COMPETITION_CATEGORIES)}
 
 
-def frame_dict(log_id: str, timestamp_ns: int, ego_translation: np.ndarray, boxes: BoxSet | None,
-               vocab: Vocabulary, with_score: bool = True) -> dict:
+def frame_dict(
+    log_id: str,
+    timestamp_ns: int,
+    ego_translation: np.ndarray,
+    boxes: BoxSet | None,
+    vocab: Vocabulary,
+    with_score: bool = True,
+) -> dict:
     """One frame of the official format from canonical boxes (city frame; labels index ``vocab``).
 
     ``boxes.ids`` become ``track_id`` (int64 when integer, else object); None or empty gives (0, ...) arrays.
@@ -64,7 +87,8 @@ def frame_dict(log_id: str, timestamp_ns: int, ego_translation: np.ndarray, boxe
     else:
         ids = np.asarray(b.ids, dtype=object)
     out = {
-        "seq_id": log_id, "timestamp_ns": int(timestamp_ns),
+        "seq_id": log_id,
+        "timestamp_ns": int(timestamp_ns),
         "track_id": ids,
         "translation_m": b.boxes[:, 0:3].copy(),
         "size": b.boxes[:, [4, 3, 5]].copy(),
@@ -86,14 +110,24 @@ def _log_order(scenes: list[Scene]) -> list[Scene]:
 
 def build_sequences(scenes: list[Scene], results: dict[str, BoxSet], vocab: Vocabulary) -> dict[str, list[dict]]:
     """The tracking pickle object: every frame of every scene, tracks from ``results`` (token -> BoxSet)."""
-    return {s.name: [frame_dict(s.name, token_timestamp_ns(f.token), f.ego_translation, results.get(f.token),
-                                vocab) for f in s.frames] for s in _log_order(scenes)}
+    return {
+        s.name: [
+            frame_dict(s.name, token_timestamp_ns(f.token), f.ego_translation, results.get(f.token), vocab)
+            for f in s.frames
+        ]
+        for s in _log_order(scenes)
+    }
 
 
 def gt_sequences(scenes: list[Scene], vocab: Vocabulary) -> dict[str, list[dict]]:
     """The labels object (same layout, no score) from scenes loaded with ground truth."""
-    return {s.name: [frame_dict(s.name, token_timestamp_ns(f.token), f.ego_translation, f.gt, vocab,
-                                with_score=False) for f in s.frames] for s in _log_order(scenes)}
+    return {
+        s.name: [
+            frame_dict(s.name, token_timestamp_ns(f.token), f.ego_translation, f.gt, vocab, with_score=False)
+            for f in s.frames
+        ]
+        for s in _log_order(scenes)
+    }
 
 
 def expected_frames(scenes: list[Scene]) -> dict[str, list[int]]:
@@ -105,23 +139,27 @@ def expected_frames(scenes: list[Scene]) -> dict[str, list[int]]:
 # validation
 # ------------------------------------------------------------------------------------------------------------
 
-def validate_sequences(seqs, expected: dict[str, list[int]], where: str = "tracks",
-                       require_score: bool = True) -> None:
+
+def validate_sequences(seqs, expected: dict[str, list[int]], where: str = "tracks", require_score: bool = True) -> None:
     """Check a tracking object against the official format and the expected frames; InputFormatError else."""
     if not isinstance(seqs, dict):
         raise InputFormatError(f"{where}: expected a dict {{log_id: [frame, ...]}}, got {type(seqs).__name__}")
     missing, extra = sorted(set(expected) - set(seqs)), sorted(set(seqs) - set(expected))
     if missing or extra:
-        raise InputFormatError(f"{where}: logs must be exactly the {len(expected)} logs of the split "
-                               f"(missing {missing[:3]}, not in the split {extra[:3]})")
+        raise InputFormatError(
+            f"{where}: logs must be exactly the {len(expected)} logs of the split "
+            f"(missing {missing[:3]}, not in the split {extra[:3]})"
+        )
     for log_id, frames in seqs.items():
         if not isinstance(frames, list):
             raise InputFormatError(f"{where}: log {log_id}: expected a list of frame dicts")
         ts = [f.get("timestamp_ns") if isinstance(f, dict) else None for f in frames]
         if ts != list(expected[log_id]):
-            raise InputFormatError(f"{where}: log {log_id}: frames must be exactly the {len(expected[log_id])} "
-                                   f"label frames in time order (timestamp_ns), got {len(frames)} frames"
-                                   f"{'' if len(frames) != len(expected[log_id]) else ' with other timestamps'}")
+            raise InputFormatError(
+                f"{where}: log {log_id}: frames must be exactly the {len(expected[log_id])} "
+                f"label frames in time order (timestamp_ns), got {len(frames)} frames"
+                f"{'' if len(frames) != len(expected[log_id]) else ' with other timestamps'}"
+            )
         for f in frames:
             _validate_frame(where, log_id, f, require_score)
 
@@ -136,13 +174,21 @@ def _validate_frame(where: str, log_id: str, f: dict, require_score: bool) -> No
     if f["seq_id"] != log_id:
         raise InputFormatError(f"{at}: seq_id is {f['seq_id']!r}, expected the log id")
     n = len(f["track_id"])
-    shapes = {"translation_m": (n, 3), "size": (n, 3), "yaw": (n,), "velocity_m_per_s": (n, 3), "label": (n,),
-              "name": (n,), **({"score": (n,)} if require_score else {})}
+    shapes = {
+        "translation_m": (n, 3),
+        "size": (n, 3),
+        "yaw": (n,),
+        "velocity_m_per_s": (n, 3),
+        "label": (n,),
+        "name": (n,),
+        **({"score": (n,)} if require_score else {}),
+    }
     for key, shape in shapes.items():
         v = f[key]
         if not isinstance(v, np.ndarray) or v.shape != shape:
-            raise InputFormatError(f"{at}: '{key}' must be a numpy array of shape {shape}, got "
-                                   f"{getattr(v, 'shape', type(v).__name__)}")
+            raise InputFormatError(
+                f"{at}: '{key}' must be a numpy array of shape {shape}, got {getattr(v, 'shape', type(v).__name__)}"
+            )
     for key in ("translation_m", "size", "yaw", "velocity_m_per_s") + (("score",) if require_score else ()):
         if not np.all(np.isfinite(f[key])):
             raise InputFormatError(f"{at}: '{key}' has non-finite values")
@@ -158,6 +204,7 @@ def _validate_frame(where: str, log_id: str, f: dict, require_score: bool) -> No
 # ------------------------------------------------------------------------------------------------------------
 # files
 # ------------------------------------------------------------------------------------------------------------
+
 
 def write_tracks_pickle(path: str | Path, seqs: dict, expected: dict[str, list[int]]) -> None:
     """Validate and write the tracking pickle atomically."""
@@ -197,10 +244,18 @@ def sequences_to_table(seqs: dict[str, list[dict]]) -> pd.DataFrame:
         "timestamp_ns": np.repeat([f["timestamp_ns"] for f in frames], n).astype(np.int64),
         "track_uuid": cat("track_id").astype(str).astype(object),
         "category": cat("name").astype(object),
-        "tx_m": trans[:, 0], "ty_m": trans[:, 1], "tz_m": trans[:, 2],
-        "length_m": size[:, 0], "width_m": size[:, 1], "height_m": size[:, 2],
-        "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3],
-        "vx_m_per_s": vel[:, 0], "vy_m_per_s": vel[:, 1],
+        "tx_m": trans[:, 0],
+        "ty_m": trans[:, 1],
+        "tz_m": trans[:, 2],
+        "length_m": size[:, 0],
+        "width_m": size[:, 1],
+        "height_m": size[:, 2],
+        "qw": q[:, 0],
+        "qx": q[:, 1],
+        "qy": q[:, 2],
+        "qz": q[:, 3],
+        "vx_m_per_s": vel[:, 0],
+        "vy_m_per_s": vel[:, 1],
         "score": cat("score").astype(np.float64),
     }
     return pd.DataFrame(table, columns=list(TABLE_COLUMNS))
@@ -233,13 +288,20 @@ def table_to_sequences(table: pd.DataFrame, expected: dict[str, list[int]]) -> d
 def _table_frame(rows: pd.DataFrame, ids, yaw, names, log_id: str, ts: int) -> dict:
     """One frame dict from its table rows."""
     n = len(rows)
-    return {"seq_id": log_id, "timestamp_ns": int(ts), "track_id": ids,
-            "translation_m": rows[["tx_m", "ty_m", "tz_m"]].to_numpy(np.float64).reshape(n, 3),
-            "size": rows[["length_m", "width_m", "height_m"]].to_numpy(np.float64).reshape(n, 3),
-            "yaw": yaw, "velocity_m_per_s": np.column_stack([rows[["vx_m_per_s", "vy_m_per_s"]].to_numpy(np.float64)
-                                                             .reshape(n, 2), np.zeros(n)]),
-            "label": pd.Series(names, dtype=object).map(_CATEGORY_INDEX).to_numpy(np.int64), "name": names,
-            "score": rows["score"].to_numpy(np.float64)}
+    return {
+        "seq_id": log_id,
+        "timestamp_ns": int(ts),
+        "track_id": ids,
+        "translation_m": rows[["tx_m", "ty_m", "tz_m"]].to_numpy(np.float64).reshape(n, 3),
+        "size": rows[["length_m", "width_m", "height_m"]].to_numpy(np.float64).reshape(n, 3),
+        "yaw": yaw,
+        "velocity_m_per_s": np.column_stack(
+            [rows[["vx_m_per_s", "vy_m_per_s"]].to_numpy(np.float64).reshape(n, 2), np.zeros(n)]
+        ),
+        "label": pd.Series(names, dtype=object).map(_CATEGORY_INDEX).to_numpy(np.int64),
+        "name": names,
+        "score": rows["score"].to_numpy(np.float64),
+    }
 
 
 def write_tracks_feather(path: str | Path, table: pd.DataFrame) -> None:
@@ -248,8 +310,13 @@ def write_tracks_feather(path: str | Path, table: pd.DataFrame) -> None:
         table.reset_index(drop=True).to_feather(tmp)
 
 
-def write_tracks(pkl_path: str | Path, feather_path: str | Path | None, scenes: list[Scene],
-                 results: dict[str, BoxSet], vocab: Vocabulary) -> dict:
+def write_tracks(
+    pkl_path: str | Path,
+    feather_path: str | Path | None,
+    scenes: list[Scene],
+    results: dict[str, BoxSet],
+    vocab: Vocabulary,
+) -> dict:
     """Build, validate and write the pickle (and the feather table when a path is given); returns the object."""
     seqs = build_sequences(scenes, results, vocab)
     write_tracks_pickle(pkl_path, seqs, expected_frames(scenes))

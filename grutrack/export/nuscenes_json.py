@@ -24,8 +24,16 @@ from grutrack.io import write_json_atomic
 MAX_BOXES_PER_SAMPLE = 500
 #: the meta of a submission built with no detection meta (the tracker's own evaluations: validation, scripts)
 META = dict(LIDAR_META)
-BOX_KEYS = ("sample_token", "translation", "size", "rotation", "velocity", "tracking_id", "tracking_name",
-            "tracking_score")
+BOX_KEYS = (
+    "sample_token",
+    "translation",
+    "size",
+    "rotation",
+    "velocity",
+    "tracking_id",
+    "tracking_name",
+    "tracking_score",
+)
 
 
 def sample_boxes(token: str, tracks: BoxSet, max_boxes: int = MAX_BOXES_PER_SAMPLE) -> list[dict]:
@@ -39,14 +47,27 @@ def sample_boxes(token: str, tracks: BoxSet, max_boxes: int = MAX_BOXES_PER_SAMP
     q = quaternion_from_yaw(b[:, 6])
     names = [TRACKING_CLASSES[i] for i in tracks.labels[order]]
     ids = tracks.ids[order]
-    return [{"sample_token": token, "translation": b[i, 0:3].tolist(), "size": b[i, 3:6].tolist(),
-             "rotation": q[i].tolist(), "velocity": b[i, 7:9].tolist(), "tracking_id": str(ids[i]),
-             "tracking_name": names[i], "tracking_score": float(tracks.scores[order[i]])}
-            for i in range(len(order))]
+    return [
+        {
+            "sample_token": token,
+            "translation": b[i, 0:3].tolist(),
+            "size": b[i, 3:6].tolist(),
+            "rotation": q[i].tolist(),
+            "velocity": b[i, 7:9].tolist(),
+            "tracking_id": str(ids[i]),
+            "tracking_name": names[i],
+            "tracking_score": float(tracks.scores[order[i]]),
+        }
+        for i in range(len(order))
+    ]
 
 
-def build_submission(results: dict[str, BoxSet], sample_tokens: list[str],
-                     max_boxes: int = MAX_BOXES_PER_SAMPLE, meta: dict[str, bool] | None = None) -> dict:
+def build_submission(
+    results: dict[str, BoxSet],
+    sample_tokens: list[str],
+    max_boxes: int = MAX_BOXES_PER_SAMPLE,
+    meta: dict[str, bool] | None = None,
+) -> dict:
     """The submission dict for the given samples (a sample with no tracks gets an empty list); ``meta``: the
     detection file's (:func:`grutrack.data.nusc_detections.detection_meta`), None: :data:`META`."""
     out = {}
@@ -69,8 +90,10 @@ def validate_submission(sub: dict, sample_tokens: list[str], where: str = "submi
     missing = [t for t in sample_tokens if t not in res]
     extra = set(res) - set(sample_tokens)
     if missing or extra:
-        raise InputFormatError(f"{where}: 'results' must hold exactly the {len(sample_tokens)} samples of the "
-                               f"split ({len(missing)} missing, {len(extra)} not in the split)")
+        raise InputFormatError(
+            f"{where}: 'results' must hold exactly the {len(sample_tokens)} samples of the "
+            f"split ({len(missing)} missing, {len(extra)} not in the split)"
+        )
     for token, boxes in res.items():
         if len(boxes) > MAX_BOXES_PER_SAMPLE:
             raise InputFormatError(f"{where}: sample {token} has {len(boxes)} boxes (max {MAX_BOXES_PER_SAMPLE})")
@@ -89,8 +112,10 @@ def _validate_box(where: str, token: str, i: int, box: dict) -> None:
     if box["sample_token"] != token:
         raise InputFormatError(f"{where}: sample {token} box {i}: sample_token is {box['sample_token']}")
     if box["tracking_name"] not in _CLASS_SET:
-        raise InputFormatError(f"{where}: sample {token} box {i}: tracking_name '{box['tracking_name']}' is not "
-                               f"one of {', '.join(TRACKING_CLASSES)}")
+        raise InputFormatError(
+            f"{where}: sample {token} box {i}: tracking_name '{box['tracking_name']}' is not "
+            f"one of {', '.join(TRACKING_CLASSES)}"
+        )
     if not isinstance(box["tracking_id"], str):
         raise InputFormatError(f"{where}: sample {token} box {i}: tracking_id must be a string")
     for key, n in _VECTORS:
@@ -103,8 +128,7 @@ def _validate_box(where: str, token: str, i: int, box: dict) -> None:
         raise InputFormatError(f"{where}: sample {token} box {i}: 'rotation' must be a unit quaternion")
     s = box["tracking_score"]
     if not _finite(s) or not 0 <= s <= 1:
-        raise InputFormatError(f"{where}: sample {token} box {i}: tracking_score must be a number in [0, 1], "
-                               f"got {s!r}")
+        raise InputFormatError(f"{where}: sample {token} box {i}: tracking_score must be a number in [0, 1], got {s!r}")
 
 
 def _numbers(v, n: int) -> bool:

@@ -34,8 +34,7 @@ def read_checkpoint(path: str | Path, map_location="cpu") -> dict:
     return Checkpoint.read(path, map_location).to_dict()
 
 
-def load_network(source: str | Path | Checkpoint, map_location="cpu", where: str | Path | None = None
-                 ) -> GRUKalmanNet:
+def load_network(source: str | Path | Checkpoint, map_location="cpu", where: str | Path | None = None) -> GRUKalmanNet:
     """The trained network of a checkpoint (a path, or a document already read: ``where`` names its file in
     errors), weights loaded once and never re-initialised afterwards, in eval mode."""
     ck = source if isinstance(source, Checkpoint) else Checkpoint.read(source, map_location)
@@ -55,11 +54,15 @@ def load_weights(net: GRUKalmanNet, ck: Checkpoint, path: str | Path) -> None:
     state, own = ck.weights, net.state_dict()
     missing, extra = sorted(set(own) - set(state)), sorted(set(state) - set(own))
     if missing or extra:
-        raise InputFormatError(f"{path}: field 'model' does not fit the architecture in 'arch' (missing tensors "
-                               f"{missing[:3]}, unexpected {extra[:3]})")
+        raise InputFormatError(
+            f"{path}: field 'model' does not fit the architecture in 'arch' (missing tensors "
+            f"{missing[:3]}, unexpected {extra[:3]})"
+        )
     for k, v in state.items():
         if not isinstance(v, torch.Tensor) or tuple(v.shape) != tuple(own[k].shape):
             got = tuple(v.shape) if isinstance(v, torch.Tensor) else type(v).__name__
-            raise InputFormatError(f"{path}: tensor 'model.{k}' has shape {got}, expected {tuple(own[k].shape)} "
-                                   f"(the architecture in 'arch')")
+            raise InputFormatError(
+                f"{path}: tensor 'model.{k}' has shape {got}, expected {tuple(own[k].shape)} "
+                f"(the architecture in 'arch')"
+            )
     net.load_state_dict(state)

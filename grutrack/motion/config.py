@@ -100,6 +100,7 @@ def _overrides(path: Path, model_override) -> dict[str, str]:
     """``model_override`` (None, a model name for all classes, or ``{class: model}``) -> ``{class: model}``."""
     if model_override is None:
         return {}
+
     def model(key: str, name) -> str:
         return _canonical_model(path, key, name)
 
@@ -131,7 +132,7 @@ def load_motion_config(path: str | Path | None = None, model_override=None) -> d
             non-symmetric or non-positive matrix; the message names the file and the key.
     """
     path = resolve_config_path(path)
-    raw, _ = load_config("motion", path)       # layout and value types (grutrack/configs/schemas/motion.schema.yaml)
+    raw, _ = load_config("motion", path)  # layout and value types (grutrack/configs/schemas/motion.schema.yaml)
     defaults = _model_defaults(path, raw["models"])
     override = _overrides(path, model_override)
     out = {}
@@ -143,8 +144,11 @@ def load_motion_config(path: str | Path | None = None, model_override=None) -> d
         model = override.get(cls, own)
         if model not in defaults:
             key = f"models.{model}" if model == own else f"model_override.{cls}"
-            raise _fail(path, key, f"no defaults for motion model {model} under 'models' (P0, Q, R, params: "
-                                   f"its constructor parameters)")
+            raise _fail(
+                path,
+                key,
+                f"no defaults for motion model {model} under 'models' (P0, Q, R, params: its constructor parameters)",
+            )
         if model != own:
             noise = {k: defaults[model][k].copy() for k in ("Q", "R", "P0")}
         out[cls] = {"model": model, **noise, "params": dict(defaults[model]["params"])}

@@ -33,11 +33,10 @@ the detached state: gradients flow through the state and the innovation, not thr
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
-
 import contextlib
 import functools
 import math
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import torch
@@ -119,13 +118,13 @@ class GRUKFConfig:
     n_classes: int = 7
     yaw_flip: bool = False
     aux_inputs: bool = False
-    ss_params: dict = field(default_factory=dict)   # the SS model's constructor parameters (motion config)
-    gain_prior: str = "constant"   # "constant": K = network output; "ekf": K = K_ekf + network output
-    network_classes: str = "all"   # "all", "ss_model" or "own_model" (see above)
-    model_params: dict = field(default_factory=dict)   # own_model: {model name: constructor parameters}
-    coast_yaw_rate: str = "keep"   # "keep" or "zero" (see above)
-    coast_acceleration: str = "keep"   # "keep" or "zero" (see above)
-    min_size: float = MIN_SIZE     # metres: lower bound of the posterior w, l, h
+    ss_params: dict = field(default_factory=dict)  # the SS model's constructor parameters (motion config)
+    gain_prior: str = "constant"  # "constant": K = network output; "ekf": K = K_ekf + network output
+    network_classes: str = "all"  # "all", "ss_model" or "own_model" (see above)
+    model_params: dict = field(default_factory=dict)  # own_model: {model name: constructor parameters}
+    coast_yaw_rate: str = "keep"  # "keep" or "zero" (see above)
+    coast_acceleration: str = "keep"  # "keep" or "zero" (see above)
+    min_size: float = MIN_SIZE  # metres: lower bound of the posterior w, l, h
 
     def torch_model(self, name: str | None = None):
         """The torch SS model ``name`` (default ``ss_model``) with its parameters (:mod:`torch_models`)."""
@@ -148,7 +147,7 @@ def _fc(i: int, o: int) -> nn.Sequential:
     return nn.Sequential(nn.Linear(i, o), nn.ReLU())
 
 
-_EPS = 1e-6   # added to the L2 norm of each input before dividing by it (zero rows stay zero)
+_EPS = 1e-6  # added to the L2 norm of each input before dividing by it (zero rows stay zero)
 
 
 class DeferredWeightGrads:
@@ -194,12 +193,12 @@ class DeferredWeightGrads:
         leaves = [p for p in params if p.requires_grad]
         grads = torch.autograd.grad(loss, [y for _, _, y in uses] + leaves, allow_unused=True)
         acc: dict[tuple[nn.Parameter, nn.Parameter], tuple[list, list]] = {}
-        for (key, x, _), g in zip(uses, grads[:len(uses)]):
+        for (key, x, _), g in zip(uses, grads[: len(uses)]):
             if g is not None:
                 xs, gs = acc.setdefault(key, ([], []))
                 xs.append(x)
                 gs.append(g)
-        extra = [(p, g) for p, g in zip(leaves, grads[len(uses):]) if g is not None]
+        extra = [(p, g) for p, g in zip(leaves, grads[len(uses) :]) if g is not None]
         for (weight, bias), (xs, gs) in acc.items():
             G = torch.cat(gs)
             extra += [(weight, G.t().mm(torch.cat(xs))), (bias, G.sum(0))]
@@ -219,26 +218,28 @@ def _fc_apply(fc: nn.Sequential, x: torch.Tensor, deferred: DeferredWeightGrads 
     return torch.relu(_linear(x, fc._modules["0"], deferred))
 
 
-def _gru(cell: nn.GRUCell, x: torch.Tensor, h: torch.Tensor,
-         deferred: DeferredWeightGrads | None = None) -> torch.Tensor:
+def _gru(
+    cell: nn.GRUCell, x: torch.Tensor, h: torch.Tensor, deferred: DeferredWeightGrads | None = None
+) -> torch.Tensor:
     """``cell(x, h)`` for batched (N, ·) inputs: the operator GRUCell.forward calls; with ``deferred``, the same
     equations written out (torch's CPU composite of ``gru_cell``) with the two input products' weight gradients
     deferred: ``r = sigma(W_ir x + b_ir + W_hr h + b_hr)``, ``z = sigma(W_iz x + b_iz + W_hz h + b_hz)``,
     ``n = tanh(W_in x + b_in + r * (W_hn h + b_hn))``, ``h' = (h - n) * z + n``."""
     if deferred is None:
         return torch.gru_cell(x, h, cell.weight_ih, cell.weight_hh, cell.bias_ih, cell.bias_hh)
-    gi = deferred.linear_params(cell.weight_ih, cell.bias_ih, x)       # [i_r, i_z, i_n]  (N, 3H)
-    gh = deferred.linear_params(cell.weight_hh, cell.bias_hh, h)       # [h_r, h_z, h_n]
+    gi = deferred.linear_params(cell.weight_ih, cell.bias_ih, x)  # [i_r, i_z, i_n]  (N, 3H)
+    gh = deferred.linear_params(cell.weight_hh, cell.bias_hh, h)  # [h_r, h_z, h_n]
     H = h.shape[1]
     (i_rz, i_n), (h_rz, h_n) = gi.split_with_sizes([2 * H, H], 1), gh.split_with_sizes([2 * H, H], 1)
     r, z = torch.sigmoid(i_rz + h_rz).chunk(2, 1)
     n = torch.tanh(torch.addcmul(i_n, r, h_n))
-    return torch.lerp(n, h, z)                                         # n + z (h - n)
+    return torch.lerp(n, h, z)  # n + z (h - n)
 
 
-@functools.lru_cache(maxsize=None)
-def _rotation_masks(pairs: tuple[tuple[int, int], ...], d: int, dtype: torch.dtype, device: torch.device
-                    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+@functools.cache
+def _rotation_masks(
+    pairs: tuple[tuple[int, int], ...], d: int, dtype: torch.dtype, device: torch.device
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Constants of :func:`rotate_pairs` for (N, d) rows (made once; normal tensors even when first asked for
     under ``torch.inference_mode``, so that training can save them): ``in_pair`` (1, d) bool, ``sign`` (1, d)
     +1 at each pair's first column, -1 at its second, 0 elsewhere, ``swap`` (d,) int64 the column order with each
@@ -252,8 +253,7 @@ def _rotation_masks(pairs: tuple[tuple[int, int], ...], d: int, dtype: torch.dty
         return in_pair.to(device), sign.to(device), swap.to(device)
 
 
-def rotate_pairs(v: torch.Tensor, c: torch.Tensor, s: torch.Tensor, pairs: tuple[tuple[int, int], ...]
-                 ) -> torch.Tensor:
+def rotate_pairs(v: torch.Tensor, c: torch.Tensor, s: torch.Tensor, pairs: tuple[tuple[int, int], ...]) -> torch.Tensor:
     """Rotate the planar column pairs (i, j) of v (N, d) by -angle, given ``c, s`` (N, 1) = cos, sin of the angle:
     ``[v_i, v_j] <- [c v_i + s v_j, -s v_i + c v_j]``, other columns unchanged. As ``v * C + v[:, swap] * S`` with
     C = c on the pairs' columns and 1 elsewhere, S = +-s on them and 0 elsewhere: five operators for all pairs."""
@@ -284,8 +284,8 @@ def wrap_offset(a: torch.Tensor, flip: bool = False) -> torch.Tensor:
         return a - w
 
 
-MEAS_PLANAR = ((0, 1), (7, 8))   # (x, y), (vx, vy) in the measurement
-STATE_PLANAR = ((0, 1),)         # (x, y) in the CTRA / Bicycle state
+MEAS_PLANAR = ((0, 1), (7, 8))  # (x, y), (vx, vy) in the measurement
+STATE_PLANAR = ((0, 1),)  # (x, y) in the CTRA / Bicycle state
 
 
 class GRUKalmanNet(nn.Module):
@@ -296,23 +296,25 @@ class GRUKalmanNet(nn.Module):
         global generator), see :meth:`reset_parameters`."""
         super().__init__()
         self.cfg = cfg
-        self.deferred: DeferredWeightGrads | None = None   # set while training a scene (see deferring_weight_grads)
+        self.deferred: DeferredWeightGrads | None = None  # set while training a scene (see deferring_weight_grads)
         self.ss = cfg.torch_model()
         if cfg.gain_prior not in GAIN_PRIORS:
             raise ValueError(f"gain_prior must be one of {', '.join(GAIN_PRIORS)}, got {cfg.gain_prior!r}")
         if cfg.network_classes not in NETWORK_CLASSES:
-            raise ValueError(f"network_classes must be one of {', '.join(NETWORK_CLASSES)}, "
-                             f"got {cfg.network_classes!r}")
+            raise ValueError(
+                f"network_classes must be one of {', '.join(NETWORK_CLASSES)}, got {cfg.network_classes!r}"
+            )
         if cfg.coast_yaw_rate not in COAST_YAW_RATES:
             raise ValueError(f"coast_yaw_rate must be one of {', '.join(COAST_YAW_RATES)}, got {cfg.coast_yaw_rate!r}")
         if cfg.coast_acceleration not in COAST_ACCELERATIONS:
-            raise ValueError(f"coast_acceleration must be one of {', '.join(COAST_ACCELERATIONS)}, "
-                             f"got {cfg.coast_acceleration!r}")
-        with torch.device("meta"):      # allocated without drawing from any generator, initialised below
+            raise ValueError(
+                f"coast_acceleration must be one of {', '.join(COAST_ACCELERATIONS)}, got {cfg.coast_acceleration!r}"
+            )
+        with torch.device("meta"):  # allocated without drawing from any generator, initialised below
             self._build(cfg)
         self.to_empty(device="cpu")
         self.reset_parameters(generator)
-        if cfg.gain_prior == "ekf":   # the EKF's per-class noise (tracking classes), float64 like the state
+        if cfg.gain_prior == "ekf":  # the EKF's per-class noise (tracking classes), float64 like the state
             m, n = self.m, self.n
             self.register_buffer("ekf_Q", torch.zeros(cfg.n_classes, m, m, dtype=torch.float64))
             self.register_buffer("ekf_R", torch.zeros(cfg.n_classes, n, n, dtype=torch.float64))
@@ -323,13 +325,13 @@ class GRUKalmanNet(nn.Module):
         m, n = self.ss.dim_x, MEAS_DIM
         self.m, self.n = m, n
         self.h_q, self.h_sigma, self.h_s = m * m, m * m, n * n
-        self.fc_fwd_update = _fc(m, m * cfg.in_mult)                     # input layer of the Q-GRU
+        self.fc_fwd_update = _fc(m, m * cfg.in_mult)  # input layer of the Q-GRU
         self.gru_q = nn.GRUCell(m * cfg.in_mult, self.h_q)
-        self.fc_fwd_evol = _fc(m, m * cfg.in_mult)                       # input layer of the Σ-GRU
+        self.fc_fwd_evol = _fc(m, m * cfg.in_mult)  # input layer of the Σ-GRU
         self.gru_sigma = nn.GRUCell(self.h_q + m * cfg.in_mult, self.h_sigma)
         self.fc_sigma_to_s = _fc(self.h_sigma, n * n)
         a = AUX_DIM if cfg.aux_inputs else 0
-        self.fc_obs = _fc(2 * n + a, 2 * n * cfg.in_mult)                    # input layer of the S-GRU
+        self.fc_obs = _fc(2 * n + a, 2 * n * cfg.in_mult)  # input layer of the S-GRU
         r_dim = 0
         if cfg.four_gru:
             self.gru_r = nn.GRUCell(n * cfg.in_mult, n * n)
@@ -337,8 +339,9 @@ class GRUKalmanNet(nn.Module):
             r_dim = n * n
         self.gru_s = nn.GRUCell(n * n + 2 * n * cfg.in_mult + r_dim, self.h_s)
         hidden = (self.h_sigma + self.h_s) * cfg.out_mult // 10
-        self.fc_gain = nn.Sequential(nn.Linear(self.h_sigma + self.h_s + a, hidden), nn.ReLU(),
-                                     nn.Linear(hidden, m * n))            # output layer: K
+        self.fc_gain = nn.Sequential(
+            nn.Linear(self.h_sigma + self.h_s + a, hidden), nn.ReLU(), nn.Linear(hidden, m * n)
+        )  # output layer: K
         self.fc_back1 = _fc(self.h_s + m * n, m * m)
         self.fc_back2 = _fc(self.h_sigma + m * m, self.h_sigma)
         if cfg.has_table:
@@ -376,8 +379,9 @@ class GRUKalmanNet(nn.Module):
         finally:
             self.deferred = None
 
-    def set_gain_prior(self, K0: torch.Tensor, K_table: torch.Tensor | None = None,
-                       generator: torch.Generator | None = None) -> None:
+    def set_gain_prior(
+        self, K0: torch.Tensor, K_table: torch.Tensor | None = None, generator: torch.Generator | None = None
+    ) -> None:
         """Start from the constant gain K0 (m, n) in the heading frame: output bias = K0, small weights
         (N(0, 1e-3^2), drawn from ``generator``, a torch.Generator on the network's device; None = torch's
         global generator).
@@ -416,9 +420,11 @@ class GRUKalmanNet(nn.Module):
     def init_hidden(self, n_tracks: int, device=None) -> dict[str, torch.Tensor]:
         """Zero hidden states for new tracks (N, hidden) each."""
         dt = self.fc_gain[2].weight.dtype
-        h = {"q": torch.zeros(n_tracks, self.h_q, device=device, dtype=dt),
-             "sigma": torch.zeros(n_tracks, self.h_sigma, device=device, dtype=dt),
-             "s": torch.zeros(n_tracks, self.h_s, device=device, dtype=dt)}
+        h = {
+            "q": torch.zeros(n_tracks, self.h_q, device=device, dtype=dt),
+            "sigma": torch.zeros(n_tracks, self.h_sigma, device=device, dtype=dt),
+            "s": torch.zeros(n_tracks, self.h_s, device=device, dtype=dt),
+        }
         if self.cfg.four_gru:
             h["r"] = torch.zeros(n_tracks, self.n * self.n, device=device, dtype=dt)
         return h
@@ -435,34 +441,47 @@ class GRUKalmanNet(nn.Module):
         if device not in cache:
             n, m, yi = self.n, self.m, self.ss.yaw_index
             starts = (0, n, 2 * n, 2 * n + m)
-            pairs = tuple((o + i, o + j) for o, planar in zip(starts, (MEAS_PLANAR, MEAS_PLANAR, STATE_PLANAR,
-                                                                       STATE_PLANAR)) for i, j in planar)
-            with torch.inference_mode(False):   # normal tensors: training saves them for the backward pass
+            pairs = tuple(
+                (o + i, o + j)
+                for o, planar in zip(starts, (MEAS_PLANAR, MEAS_PLANAR, STATE_PLANAR, STATE_PLANAR))
+                for i, j in planar
+            )
+            with torch.inference_mode(False):  # normal tensors: training saves them for the backward pass
                 sizes = (n, n, m, m)
                 diff = torch.zeros(3 * n + 3 * m, 2 * n + 2 * m, dtype=torch.float64)
                 eye_n, eye_m = torch.eye(n, dtype=torch.float64), torch.eye(m, dtype=torch.float64)
                 # rows: y [0, n), y_prev [n, 2n), h(x^-) [2n, 3n), post1 [3n, 3n+m), post2 [.., 3n+2m), prior1
-                diff[0:n, 0:n], diff[n:2 * n, 0:n] = eye_n, -eye_n                                # y - y_prev
-                diff[0:n, n:2 * n], diff[2 * n:3 * n, n:2 * n] = eye_n, -eye_n                    # y - h(x^-)
+                diff[0:n, 0:n], diff[n : 2 * n, 0:n] = eye_n, -eye_n  # y - y_prev
+                diff[0:n, n : 2 * n], diff[2 * n : 3 * n, n : 2 * n] = eye_n, -eye_n  # y - h(x^-)
                 p1, p2, q1 = 3 * n, 3 * n + m, 3 * n + 2 * m
-                diff[p1:p1 + m, 2 * n:2 * n + m], diff[p2:p2 + m, 2 * n:2 * n + m] = eye_m, -eye_m  # post1 - post2
-                diff[p1:p1 + m, 2 * n + m:], diff[q1:q1 + m, 2 * n + m:] = eye_m, -eye_m         # post1 - prior1
+                diff[p1 : p1 + m, 2 * n : 2 * n + m], diff[p2 : p2 + m, 2 * n : 2 * n + m] = (
+                    eye_m,
+                    -eye_m,
+                )  # post1 - post2
+                diff[p1 : p1 + m, 2 * n + m :], diff[q1 : q1 + m, 2 * n + m :] = eye_m, -eye_m  # post1 - prior1
                 part = torch.zeros(2 * n + 2 * m, 4, dtype=torch.float64)
                 for k, (o, size) in enumerate(zip(starts, sizes)):
-                    part[o:o + size, k] = 1.0
+                    part[o : o + size, k] = 1.0
                 lower = torch.full((1, m), -math.inf, dtype=torch.float64)
                 lower[0, 3:6] = self.cfg.min_size
-                cache[device] = {"diff": diff.to(device), "pairs": pairs, "part": part.to(device),
-                                 "angles": torch.tensor([_YAW_Z, n + _YAW_Z, 2 * n + yi, 2 * n + m + yi],
-                                                        device=device),
-                                 "flip": torch.tensor([[True, True, False, False]], device=device),
-                                 "yaw": torch.tensor([yi], device=device),
-                                 "lower": lower.to(device)}
+                cache[device] = {
+                    "diff": diff.to(device),
+                    "pairs": pairs,
+                    "part": part.to(device),
+                    "angles": torch.tensor([_YAW_Z, n + _YAW_Z, 2 * n + yi, 2 * n + m + yi], device=device),
+                    "flip": torch.tensor([[True, True, False, False]], device=device),
+                    "yaw": torch.tensor([yi], device=device),
+                    "lower": lower.to(device),
+                }
         return cache[device]
 
-    def gain(self, feats: torch.Tensor, hidden: dict[str, torch.Tensor],
-             cells: torch.Tensor | None = None,
-             aux: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    def gain(
+        self,
+        feats: torch.Tensor,
+        hidden: dict[str, torch.Tensor],
+        cells: torch.Tensor | None = None,
+        aux: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Gain K (N, m, n) from the four normalised inputs side by side, ``feats`` (N, 2n + 2m) =
         ``[obs_diff, innovation, fwd_evol, fwd_update]`` (see :meth:`_layout`), and the hidden states (and, with
         a gain table, the tracks' cells of it, see :meth:`table_index`; with ``aux_inputs``, ``aux`` (N,
@@ -478,8 +497,9 @@ class GRUKalmanNet(nn.Module):
             f_obs = torch.cat([f_obs, *aux], dim=1)
         d = self.deferred
         h_q = _gru(self.gru_q, _fc_apply(self.fc_fwd_update, f_upd, d), hidden["q"], d)
-        h_sigma = _gru(self.gru_sigma, torch.cat([h_q, _fc_apply(self.fc_fwd_evol, f_evol, d)], dim=1),
-                       hidden["sigma"], d)
+        h_sigma = _gru(
+            self.gru_sigma, torch.cat([h_q, _fc_apply(self.fc_fwd_evol, f_evol, d)], dim=1), hidden["sigma"], d
+        )
         s_in = [_fc_apply(self.fc_sigma_to_s, h_sigma, d), _fc_apply(self.fc_obs, f_obs, d)]
         new = {"q": h_q}
         if self.cfg.four_gru:
@@ -498,11 +518,20 @@ class GRUKalmanNet(nn.Module):
         new["s"] = h_s
         return K.reshape(-1, self.m, self.n), new
 
-    def correct(self, x_prior: torch.Tensor, y: torch.Tensor, y_prev: torch.Tensor, x_post_prev: torch.Tensor,
-                x_prior_prev: torch.Tensor, x_post_prev2: torch.Tensor, hidden: dict[str, torch.Tensor],
-                cells: torch.Tensor | None = None,
-                counts: torch.Tensor | None = None, K_prior: torch.Tensor | None = None, ss=None
-                ) -> tuple[torch.Tensor, dict[str, torch.Tensor], torch.Tensor]:
+    def correct(
+        self,
+        x_prior: torch.Tensor,
+        y: torch.Tensor,
+        y_prev: torch.Tensor,
+        x_post_prev: torch.Tensor,
+        x_prior_prev: torch.Tensor,
+        x_post_prev2: torch.Tensor,
+        hidden: dict[str, torch.Tensor],
+        cells: torch.Tensor | None = None,
+        counts: torch.Tensor | None = None,
+        K_prior: torch.Tensor | None = None,
+        ss=None,
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor], torch.Tensor]:
         """One update of K tracks (all (K, ·) float64): prior x^-_n, measurement y_n, previous measurement,
         previous posterior x_{n-1|n-1}, previous prior x_{n-1|n-2}, posterior before that x_{n-2|n-2};
         ``cells`` (K,) int64: the tracks' cells of the gain table (:meth:`table_index`; only with a table); ``counts``
@@ -524,13 +553,14 @@ class GRUKalmanNet(nn.Module):
         ss = self.ss if ss is None else ss
         n, m, yi = self.n, self.m, ss.yaw_index
         lay = self._layout(x_prior.device)
-        yaw = x_prior[:, yi:yi + 1]
+        yaw = x_prior[:, yi : yi + 1]
         c, s = torch.cos(yaw), torch.sin(yaw)
         raw = torch.cat([y, y_prev, ss.h_at(x_prior, c, s), x_post_prev, x_post_prev2, x_prior_prev], dim=1).mm(
-            lay["diff"])                                            # the four differences (exact: +-1 entries)
+            lay["diff"]
+        )  # the four differences (exact: +-1 entries)
         ang = raw.detach().index_select(1, lay["angles"])
         off = wrap_offset(ang)
-        if self.cfg.yaw_flip:   # the measurement-space yaw residuals (observation difference, innovation)
+        if self.cfg.yaw_flip:  # the measurement-space yaw residuals (observation difference, innovation)
             off = torch.where(lay["flip"], wrap_offset(ang, flip=True), off)
         wrapped = raw - torch.zeros_like(raw).index_copy_(1, lay["angles"], off)
         raw = rotate_pairs(wrapped, c, s, lay["pairs"])
@@ -541,20 +571,27 @@ class GRUKalmanNet(nn.Module):
         if self.cfg.aux_inputs:
             if counts is None:
                 raise ValueError("this GRU-KF's aux inputs need the update count and gap of every track")
-            aux = aux_features({"innovation": raw[:, n:2 * n], "obs_diff": raw[:, :n],
-                                "fwd_evol": raw[:, 2 * n:2 * n + m], "fwd_update": raw[:, 2 * n + m:]}, counts)
-        innov_h = raw[:, n:2 * n]
+            aux = aux_features(
+                {
+                    "innovation": raw[:, n : 2 * n],
+                    "obs_diff": raw[:, :n],
+                    "fwd_evol": raw[:, 2 * n : 2 * n + m],
+                    "fwd_update": raw[:, 2 * n + m :],
+                },
+                counts,
+            )
+        innov_h = raw[:, n : 2 * n]
         K, new_hidden = self.gain(feats, hidden, cells, aux)
         delta = torch.bmm(K.to(innov_h.dtype), innov_h[:, :, None])[:, :, 0]
-        delta = rotate_pairs(delta, c, -s, STATE_PLANAR)             # back to the global frame
+        delta = rotate_pairs(delta, c, -s, STATE_PLANAR)  # back to the global frame
         if self.cfg.gain_prior == "ekf":
             if K_prior is None:
                 raise ValueError("this GRU-KF's EKF gain prior needs every track's EKF gain")
-            innov = wrapped[:, n:2 * n]                                                    # global frame
-            delta = delta + torch.bmm(K_prior.to(innov.dtype), innov[:, :, None])[:, :, 0]   # K_ekf r
+            innov = wrapped[:, n : 2 * n]  # global frame
+            delta = delta + torch.bmm(K_prior.to(innov.dtype), innov[:, :, None])[:, :, 0]  # K_ekf r
         # sizes stay physical (a learned gain can overshoot); the yaw is wrapped
         x = torch.clamp(x_prior + delta, min=lay["lower"])
-        x = x - torch.zeros_like(x).index_copy_(1, lay["yaw"], wrap_offset(x.detach()[:, yi:yi + 1]))
+        x = x - torch.zeros_like(x).index_copy_(1, lay["yaw"], wrap_offset(x.detach()[:, yi : yi + 1]))
         return x, new_hidden, K
 
     def _yaw_res(self, r: torch.Tensor) -> torch.Tensor:

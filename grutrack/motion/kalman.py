@@ -125,25 +125,25 @@ def _correct_kernel(x, P, rows, z, h, H, R, R_index, yaw_flip, yaw_index, y_out,
         r[0, YAW_Z] = _wrap(r[0, YAW_Z])
         if yaw_flip and abs(r[0, YAW_Z]) > 0.5 * np.pi:
             r[0, YAW_Z] = _wrap(r[0, YAW_Z] + np.pi)
-        _mm(Hk, Pn, HP)                           # H P
-        _mm(HP, Hk, S, b_t=True, sparse_b=True)   # H P H^T
+        _mm(Hk, Pn, HP)  # H P
+        _mm(HP, Hk, S, b_t=True, sparse_b=True)  # H P H^T
         S += Rk
         _sym_into(S, S_sym)
         S_out[k] = S_sym
-        _lu_solve(S_sym, HP, KT, perm)            # K^T = S^-1 H P (S_sym overwritten by its LU factors)
+        _lu_solve(S_sym, HP, KT, perm)  # K^T = S^-1 H P (S_sym overwritten by its LU factors)
         for i in range(m):
             y_out[k, i] = r[0, i]
             for j in range(d):
                 K_out[k, j, i] = KT[i, j]
-        _mm(KT, r, Kr, a_t=True, b_t=True)        # K r
+        _mm(KT, r, Kr, a_t=True, b_t=True)  # K r
         _mm(KT, Hk, IKH, a_t=True, sparse_b=True)  # K H
         IKH *= -1.0
         for i in range(d):
-            IKH[i, i] += 1.0                      # I - K H
+            IKH[i, i] += 1.0  # I - K H
         _mm(IKH, Pn, T1)
-        _mm(T1, IKH, A, b_t=True, sparse_b=True)   # (I - K H) P (I - K H)^T
+        _mm(T1, IKH, A, b_t=True, sparse_b=True)  # (I - K H) P (I - K H)^T
         _mm(KT, Rk, KR, a_t=True, sparse_b=True)  # K R
-        _mm(KR, KT, B)                            # K R K^T
+        _mm(KR, KT, B)  # K R K^T
         A += B
         for i in range(d):
             x[n, i] += Kr[i, 0]
@@ -248,8 +248,9 @@ class BatchKalmanFilter:
             self.correct(x, P, rows, z, _batch(R, n, BOX_DIM, "R"), rows)
         return x, P
 
-    def correct(self, x: np.ndarray, P: np.ndarray, rows: np.ndarray, z: np.ndarray, R: np.ndarray,
-                R_index: np.ndarray) -> Correction:
+    def correct(
+        self, x: np.ndarray, P: np.ndarray, rows: np.ndarray, z: np.ndarray, R: np.ndarray, R_index: np.ndarray
+    ) -> Correction:
         """Correct the tracks ``rows (K,)`` of ``x (N, dim_x)``, ``P (N, dim_x, dim_x)`` (C-contiguous float64,
         changed in place) with ``z (K, 9)``; ``R (C, 9, 9)`` a table indexed by ``R_index (K,)`` (e.g. the
         per-class noise and the tracks' labels). Row k of the result equals :meth:`update` of that track.
@@ -260,7 +261,19 @@ class BatchKalmanFilter:
         h, H = self.model.measurement(x[rows])
         z = np.ascontiguousarray(z, dtype=np.float64).reshape(-1, BOX_DIM)
         out = Correction(np.empty((k, BOX_DIM)), np.empty((k, BOX_DIM, BOX_DIM)), np.empty((k, d, BOX_DIM)))
-        _correct_kernel(x, P, np.asarray(rows, dtype=np.int64), z, h, H, np.asarray(R, dtype=np.float64),
-                        np.asarray(R_index, dtype=np.int64), self.yaw_flip, self.model.yaw_index, out.y, out.S,
-                        out.K)
+        _correct_kernel(
+            x,
+            P,
+            np.asarray(rows, dtype=np.int64),
+            z,
+            h,
+            H,
+            np.asarray(R, dtype=np.float64),
+            np.asarray(R_index, dtype=np.int64),
+            self.yaw_flip,
+            self.model.yaw_index,
+            out.y,
+            out.S,
+            out.K,
+        )
         return out

@@ -103,15 +103,16 @@ def arc_moments(phi: np.ndarray, order: int = 2) -> list[tuple[np.ndarray, np.nd
     phi = np.ascontiguousarray(phi, dtype=np.float64)
     p = np.where(np.abs(phi) < _SERIES_LIMIT, 1.0, phi)  # a safe divisor for the closed form
     out = np.empty((order + 1, 2) + phi.shape)
-    _arc_moments_kernel(phi.reshape(-1), np.cos(p).reshape(-1), np.sin(p).reshape(-1), _COEFF_TABLE,
-                        out.reshape(order + 1, 2, -1))
+    _arc_moments_kernel(
+        phi.reshape(-1), np.cos(p).reshape(-1), np.sin(p).reshape(-1), _COEFF_TABLE, out.reshape(order + 1, 2, -1)
+    )
     return [(out[n, 0], out[n, 1]) for n in range(order + 1)]
 
 
 def _arc_step(x: np.ndarray, ds: np.ndarray, psi: np.ndarray, phi: np.ndarray) -> np.ndarray:
     """A copy of ``x (N, 10)`` moved along a circular arc: ``(x + i y) += ds exp(i psi) E_0(phi)`` and
     ``yaw += phi`` (arc length ``ds`` m, initial direction ``psi`` rad, turned angle ``phi`` rad, all ``(N,)``)."""
-    (e0r, e0i), = arc_moments(phi, order=0)
+    ((e0r, e0i),) = arc_moments(phi, order=0)
     cp, sp = np.cos(psi), np.sin(psi)
     out = x.copy()
     out[:, 0] += ds * (cp * e0r - sp * e0i)
@@ -494,8 +495,9 @@ class Bicycle(MotionModel):
         x = np.ascontiguousarray(x, dtype=np.float64)
         beta, dbeta = self._slip(x[:, 9])
         h = np.empty((x.shape[0], BOX_DIM))
-        _bicycle_measurement_kernel(x, beta, dbeta, self._offset_ratio, self._delta_terms, h,
-                                    np.zeros((0, BOX_DIM, self.dim_x)), True)
+        _bicycle_measurement_kernel(
+            x, beta, dbeta, self._offset_ratio, self._delta_terms, h, np.zeros((0, BOX_DIM, self.dim_x)), True
+        )
         return h
 
     def h(self, x: np.ndarray) -> np.ndarray:

@@ -25,23 +25,24 @@ def wrap_angle_t(a: torch.Tensor) -> torch.Tensor:
     return torch.remainder(a + math.pi, 2 * math.pi) - math.pi
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _ctra_bases(dtype: torch.dtype, device: torch.device) -> tuple[torch.Tensor, ...]:
     """dt-free parts of :func:`_ctra_tables` (made once per dtype and device): I, D (10, 10); M0, M1 (4, 8); W1
     (8, 10), so that A^T = I + dt D, M = M0 + dt M1, W = dt W1."""
     D = np.zeros((10, 10))
-    D[7, 6] = D[9, 8] = 1.0               # (A^T)[7, 6]: v' gets a dt; (A^T)[9, 8]: yaw' gets omega dt
+    D[7, 6] = D[9, 8] = 1.0  # (A^T)[7, 6]: v' gets a dt; (A^T)[9, 8]: yaw' gets omega dt
     M0, M1 = np.zeros((4, 8)), np.zeros((4, 8))
     M0[0, :4], M0[2, 4:] = 1.0, 1.0
     M1[1, :4], M1[3, 4:] = _GL_NODES, _GL_NODES
     W1 = np.zeros((8, 10))
     W1[:4, 0], W1[4:, 1] = _GL_WEIGHTS, _GL_WEIGHTS
-    with torch.inference_mode(False):   # normal tensors: training saves what is made from them
+    with torch.inference_mode(False):  # normal tensors: training saves what is made from them
         return tuple(torch.tensor(a, dtype=dtype, device=device) for a in (np.eye(10), D, M0, M1, W1))
 
 
-def _ctra_tables(dt: float, dtype: torch.dtype, device: torch.device
-                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def _ctra_tables(
+    dt: float, dtype: torch.dtype, device: torch.device
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Constant matrices of :meth:`TorchCTRA.f` over ``dt`` seconds: A^T (10, 10) the linear part; M (4, 8) taking
     ``[v, a, yaw, omega]`` to the speeds ``v + a t_i`` and headings ``yaw + omega t_i`` at the 4 quadrature nodes
     ``t_i`` in [0, dt]; W (8, 10) taking ``[speed_i cos_i | speed_i sin_i]`` to ``sum_i w_i (.)`` in state columns
@@ -56,7 +57,7 @@ class TorchCTRA:
     name = "CTRA"
     dim_x = 10
     yaw_index = 8
-    turn_index = 9   # the turn-rate slot: omega
+    turn_index = 9  # the turn-rate slot: omega
     accel_index = 7  # the acceleration slot: a (m/s^2)
 
     def init_state(self, z: torch.Tensor) -> torch.Tensor:
@@ -74,9 +75,9 @@ class TorchCTRA:
         at the nodes t_i: ``[speed_i | heading_i] = [v, a, yaw, omega] M`` and ``(dx, dy) = sum_i w_i speed_i
         (cos, sin)(heading_i)``, each step one small matrix product (a handful of autograd nodes per frame)."""
         A_T, M, W = _ctra_tables(float(dt), x.dtype, x.device)
-        speed, heading = x[:, 6:10].mm(M).chunk(2, 1)                 # (N, 4) each: at the nodes
-        arc = torch.cat([speed * torch.cos(heading), speed * torch.sin(heading)], dim=1)   # (N, 8)
-        return torch.addmm(x.mm(A_T), arc, W)                         # A x + (dx, dy) in columns 0, 1
+        speed, heading = x[:, 6:10].mm(M).chunk(2, 1)  # (N, 4) each: at the nodes
+        arc = torch.cat([speed * torch.cos(heading), speed * torch.sin(heading)], dim=1)  # (N, 8)
+        return torch.addmm(x.mm(A_T), arc, W)  # A x + (dx, dy) in columns 0, 1
 
     def h(self, x: torch.Tensor) -> torch.Tensor:
         """Measurement (N, 10) -> (N, 9) ``[x, y, z, w, l, h, yaw, v cos yaw, v sin yaw]``."""
@@ -100,7 +101,7 @@ class TorchBicycle:
     name = "Bicycle"
     dim_x = 10
     yaw_index = 8
-    turn_index = 9   # the turn-rate slot: the steering angle delta
+    turn_index = 9  # the turn-rate slot: the steering angle delta
     accel_index = 7  # the acceleration slot: a (m/s^2)
 
     def __init__(self, wheelbase_ratio: float = 0.8, front_ratio: float = 0.5):
@@ -132,8 +133,10 @@ class TorchBicycle:
         heading = yaw + beta + k * ds * u
         dx = ds[:, 0] * (wts * torch.cos(heading)).sum(1)
         dy = ds[:, 0] * (wts * torch.sin(heading)).sum(1)
-        return torch.cat([(x[:, 0] + dx)[:, None], (x[:, 1] + dy)[:, None], x[:, 2:6], v + a * dt, a,
-                          yaw + k * ds, x[:, 9:10]], dim=1)
+        return torch.cat(
+            [(x[:, 0] + dx)[:, None], (x[:, 1] + dy)[:, None], x[:, 2:6], v + a * dt, a, yaw + k * ds, x[:, 9:10]],
+            dim=1,
+        )
 
     def h_at(self, x: torch.Tensor, c: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
         """:meth:`h` (the velocity is along yaw + beta, so cos, sin of the yaw ``c, s`` are not used)."""
@@ -143,8 +146,17 @@ class TorchBicycle:
         """Measurement (N, 10) -> (N, 9): the box centre, size, yaw, velocity along yaw + beta."""
         beta, _ = self._beta(x)
         yaw, v, d = x[:, 8:9], x[:, 6:7], self._offset(x)
-        return torch.cat([x[:, 0:1] - d * torch.cos(yaw), x[:, 1:2] - d * torch.sin(yaw), x[:, 2:6], yaw,
-                          v * torch.cos(yaw + beta), v * torch.sin(yaw + beta)], dim=1)
+        return torch.cat(
+            [
+                x[:, 0:1] - d * torch.cos(yaw),
+                x[:, 1:2] - d * torch.sin(yaw),
+                x[:, 2:6],
+                yaw,
+                v * torch.cos(yaw + beta),
+                v * torch.sin(yaw + beta),
+            ],
+            dim=1,
+        )
 
 
 class TorchBicyclePiecewise(TorchBicycle):
@@ -161,7 +173,7 @@ class TorchBicyclePiecewise(TorchBicycle):
         v, a, yaw = x[:, 6:7], x[:, 7:8], x[:, 8:9]
         beta, lr = self._beta(x)
         turning = beta.detach().abs() > PIECEWISE_SWITCH
-        ds = torch.where(turning, v * dt, v * dt + 0.5 * a * dt * dt)               # arc length over dt
+        ds = torch.where(turning, v * dt, v * dt + 0.5 * a * dt * dt)  # arc length over dt
         psi = torch.where(turning, yaw + beta, yaw)
         phi = torch.where(turning, torch.sin(beta) / lr * ds, torch.zeros_like(ds))  # heading change
         u = torch.as_tensor(_GL_NODES, dtype=x.dtype, device=x.device)[None, :]
@@ -169,9 +181,18 @@ class TorchBicyclePiecewise(TorchBicycle):
         heading = psi + phi * u
         dx = ds[:, 0] * (wts * torch.cos(heading)).sum(1)
         dy = ds[:, 0] * (wts * torch.sin(heading)).sum(1)
-        return torch.cat([(x[:, 0] + dx)[:, None], (x[:, 1] + dy)[:, None], x[:, 2:6],
-                          torch.where(turning, v, v + a * dt), torch.where(turning, torch.zeros_like(a), a),
-                          yaw + phi, x[:, 9:10]], dim=1)
+        return torch.cat(
+            [
+                (x[:, 0] + dx)[:, None],
+                (x[:, 1] + dy)[:, None],
+                x[:, 2:6],
+                torch.where(turning, v, v + a * dt),
+                torch.where(turning, torch.zeros_like(a), a),
+                yaw + phi,
+                x[:, 9:10],
+            ],
+            dim=1,
+        )
 
 
 TORCH_MODELS = {"CTRA": TorchCTRA, "BICYCLE": TorchBicycle}
@@ -186,6 +207,8 @@ def make_torch_model(name: str, form: str = "arc", **params):
     if key not in TORCH_MODELS:
         raise ValueError(f"GRU-Kalman filter SS model must be one of CTRA, Bicycle; got {name!r}")
     if form not in ("arc", "piecewise") or (form == "piecewise" and key not in TORCH_PIECEWISE):
-        raise ValueError(f"GRU-Kalman filter SS model {name}: form must be 'arc'"
-                         f"{' or ' + repr('piecewise') if key in TORCH_PIECEWISE else ''}, got {form!r}")
+        raise ValueError(
+            f"GRU-Kalman filter SS model {name}: form must be 'arc'"
+            f"{' or ' + repr('piecewise') if key in TORCH_PIECEWISE else ''}, got {form!r}"
+        )
     return (TORCH_PIECEWISE[key] if form == "piecewise" else TORCH_MODELS[key])(**params)

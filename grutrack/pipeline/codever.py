@@ -17,8 +17,19 @@ from grutrack import __version__
 PACKAGE = Path(__file__).resolve().parents[1]
 #: files every stage runs (the package version itself is part of every code version)
 _COMMON = ("errors.py", "io.py", "provenance.py", "boxes.py", "classes.py", "geometry.py", "data/scene.py")
-_TRACKING = ("tracking", "motion", "geometry.py", "boxes.py", "classes.py", "data/scene.py", "configs/trackers",
-             "configs/motion", "motion/checkpoint.py", "pipeline/presets.py", "cli/common.py")
+_TRACKING = (
+    "tracking",
+    "motion",
+    "geometry.py",
+    "boxes.py",
+    "classes.py",
+    "data/scene.py",
+    "configs/trackers",
+    "configs/motion",
+    "motion/checkpoint.py",
+    "pipeline/presets.py",
+    "cli/common.py",
+)
 #: what every stage that goes through a dataset runs: the dataset interface, the stage documents, and the
 #: datasets' readers and writers (the data and export layers whole, so a new dataset's modules count without
 #: being listed here)
@@ -30,12 +41,25 @@ STAGE_SOURCES: dict[str, tuple[str, ...]] = {
     "simulate": ("configs/detector_profiles", "cli/demo.py", *_DATASETS),
     "fetch": ("data/registry.py", "data/download.py", "configs/detections.yaml", "cli/detections.py"),
     "convert": ("data", "configs/detections.yaml", "cli/detections.py"),
-    "train": ("training", "evaluation/nuscenes_fast", "evaluation/tracking_classes.py", "configs/training",
-              "cli/train.py", *_TRACKING, *_DATASETS),
-    "resolve": ("pipeline/presets.py", "tracking/config.py", "motion/config.py", "configs/trackers",
-                "configs/motion", "cli/resolve.py"),
+    "train": (
+        "training",
+        "evaluation/nuscenes_fast",
+        "evaluation/tracking_classes.py",
+        "configs/training",
+        "cli/train.py",
+        *_TRACKING,
+        *_DATASETS,
+    ),
+    "resolve": (
+        "pipeline/presets.py",
+        "tracking/config.py",
+        "motion/config.py",
+        "configs/trackers",
+        "configs/motion",
+        "cli/resolve.py",
+    ),
     "track": ("cli/track.py", *_TRACKING, *_DATASETS),
-    "submit": ("cli/submit.py", "pipeline/presets.py", *_DATASETS),   # presets: where track wrote its config
+    "submit": ("cli/submit.py", "pipeline/presets.py", *_DATASETS),  # presets: where track wrote its config
     "evaluate": ("evaluation", "cli/evaluate.py", *_DATASETS),
     "render": ("render", "evaluation", "threads.py", "cli/render.py", *_DATASETS),
     "report": ("report", "render", "documents.py", "cli/report.py"),

@@ -25,6 +25,7 @@ def report_kind(kind: str):
 # command-line values and the schema check
 # ------------------------------------------------------------------------------------------------------------
 
+
 def typed_cli_config(cli: dict) -> dict:
     """Snakemake's ``--config key=value`` with the scalars of its values typed as YAML types them.
 
@@ -33,6 +34,7 @@ def typed_cli_config(cli: dict) -> dict:
     string that spells a YAML null, boolean (true/false) or number (``12``, ``1.2``, ``1e-5``) becomes that
     value; every other string stays a string. Only the ``--config`` values are typed, never a config file's.
     """
+
     def typed(v):
         if isinstance(v, dict):
             return {k: typed(x) for k, x in v.items()}
@@ -100,8 +102,9 @@ def with_registered_kinds(schema: dict) -> dict:
     kinds = config_kinds()
     entry = schema["properties"]["datasets"]["additionalProperties"]
     entry["properties"] = {**entry.get("properties", {}), "kind": {"enum": sorted(kinds)}}
-    entry["allOf"] = [{"if": {"properties": {"kind": {"const": k}}}, "then": {"$ref": f"#/$defs/{k}_dataset"}}
-                      for k in sorted(kinds)]
+    entry["allOf"] = [
+        {"if": {"properties": {"kind": {"const": k}}}, "then": {"$ref": f"#/$defs/{k}_dataset"}} for k in sorted(kinds)
+    ]
     schema["$defs"].update({f"{k}_dataset": sub for k, (_, sub) in kinds.items()})
     return schema
 
@@ -119,6 +122,7 @@ def _has_path(d, path: list) -> bool:
 # cross-references
 # ------------------------------------------------------------------------------------------------------------
 
+
 def check_config(cfg: dict, paper: dict, registry: dict) -> None:
     """Check every name the config refers to; resolve tracker presets and training configs with overrides."""
     from grutrack.pipeline.presets import resolve_tracker, resolve_training
@@ -131,8 +135,10 @@ def check_config(cfg: dict, paper: dict, registry: dict) -> None:
         _need(cfg["detectors"], tr["detector"], f"{key}.detector", "detectors")
         ds = dataset_class(cfg, tr["dataset"])
         if tr["validation"] and not ds.validates_training:
-            raise ConfigError(f"config key {key}.validation: validation AMOTA during training is scored on "
-                              f"nuScenes-format data, not on '{tr['dataset']}' ({ds.name}); set it to null")
+            raise ConfigError(
+                f"config key {key}.validation: validation AMOTA during training is scored on "
+                f"nuScenes-format data, not on '{tr['dataset']}' ({ds.name}); set it to null"
+            )
         splits = [tr["split"]] + ([tr["validation"]["split"]] if tr["validation"] else [])
         for split in splits:
             _detector_covers(cfg, registry, tr["detector"], split, f"{key}.detector")
@@ -153,24 +159,30 @@ def _resolved(key: str, fn) -> None:
 
 def _need(section: dict, name, key: str, section_name: str) -> None:
     if name not in section:
-        raise ConfigError(f"config key {key}: '{name}' is not defined under {section_name} "
-                          f"(defined: {', '.join(section) or 'none'})")
+        raise ConfigError(
+            f"config key {key}: '{name}' is not defined under {section_name} (defined: {', '.join(section) or 'none'})"
+        )
 
 
 def _detector_covers(cfg: dict, registry: dict, det: str, split: str, key: str) -> None:
     """A simulated detector needs a seed for the split, a registry detector a source."""
     d = cfg["detectors"][det]
     if d["kind"] == "simulated" and split not in d["seeds"]:
-        raise ConfigError(f"config key detectors.{det}.seeds has no seed for split '{split}' (used by {key}); "
-                          f"add e.g. {split}: 1")
+        raise ConfigError(
+            f"config key detectors.{det}.seeds has no seed for split '{split}' (used by {key}); add e.g. {split}: 1"
+        )
     if d["kind"] == "registry":
         if split not in d["sources"]:
-            raise ConfigError(f"config key detectors.{det}.sources has no source for split '{split}' (used by "
-                              f"{key}); add {split}: <name in grutrack/configs/detections.yaml>")
+            raise ConfigError(
+                f"config key detectors.{det}.sources has no source for split '{split}' (used by "
+                f"{key}); add {split}: <name in grutrack/configs/detections.yaml>"
+            )
         _need(registry, d["sources"][split], f"detectors.{det}.sources.{split}", "grutrack/configs/detections.yaml")
     if d["kind"] == "local" and split not in d["files"]:
-        raise ConfigError(f"config key detectors.{det}.files has no file for split '{split}' (used by {key}); add "
-                          f"{split}: <path to the detection file>")
+        raise ConfigError(
+            f"config key detectors.{det}.files has no file for split '{split}' (used by {key}); add "
+            f"{split}: <path to the detection file>"
+        )
 
 
 def _check_experiment(cfg: dict, registry: dict, name: str, exp: dict) -> None:
@@ -190,21 +202,27 @@ def _check_experiment(cfg: dict, registry: dict, name: str, exp: dict) -> None:
     ds = dataset_class(cfg, exp["dataset"])
     evaluators = (*ds.evaluators, "none")
     if exp["evaluator"] not in evaluators:
-        raise ConfigError(f"config key {key}.evaluator: '{exp['evaluator']}' is not available for a {kind} "
-                          f"dataset (choose {', '.join(evaluators)})")
+        raise ConfigError(
+            f"config key {key}.evaluator: '{exp['evaluator']}' is not available for a {kind} "
+            f"dataset (choose {', '.join(evaluators)})"
+        )
     cc = exp.get("cross_check")
     if cc is not None:
         _need(exp["runs"], cc["run"], f"{key}.cross_check.run", f"{key}.runs")
         if exp["evaluator"] != "fast" or "devkit" not in ds.evaluators:
-            raise ConfigError(f"config key {key}.cross_check: the cross-check compares the fast evaluator with the "
-                              f"devkit on nuScenes-format data; experiment '{name}' is evaluated with "
-                              f"'{exp['evaluator']}' on {kind} (set evaluator: fast, or cross_check: null)")
+            raise ConfigError(
+                f"config key {key}.cross_check: the cross-check compares the fast evaluator with the "
+                f"devkit on nuScenes-format data; experiment '{name}' is evaluated with "
+                f"'{exp['evaluator']}' on {kind} (set evaluator: fast, or cross_check: null)"
+            )
     lb = exp["leaderboard_run"]
     if lb is not None:
         _need(exp["runs"], lb, f"{key}.leaderboard_run", f"{key}.runs")
         if not ds.leaderboard_zip:
-            raise ConfigError(f"config key {key}.leaderboard_run: leaderboard zips are built for nuScenes-format "
-                              f"datasets, not {kind}; set it to null")
+            raise ConfigError(
+                f"config key {key}.leaderboard_run: leaderboard zips are built for nuScenes-format "
+                f"datasets, not {kind}; set it to null"
+            )
 
 
 def _check_report(cfg: dict, paper: dict, name: str, rep: dict) -> None:
@@ -216,8 +234,9 @@ def _check_report(cfg: dict, paper: dict, name: str, rep: dict) -> None:
         tr = rep["trainings"][role]
         _need(cfg["trainings"], tr, f"{key}.trainings.{role}", "trainings")
         if cfg["trainings"][tr]["validation"] is None:
-            raise ConfigError(f"config key trainings.{tr}.validation must be set (the figure plots validation "
-                              f"AMOTA against step)")
+            raise ConfigError(
+                f"config key trainings.{tr}.validation must be set (the figure plots validation AMOTA against step)"
+            )
     if not kind.datasets or (rep["experiment"] is None and kind.optional_experiment):
         return
     if rep["experiment"] is None:
@@ -226,14 +245,20 @@ def _check_report(cfg: dict, paper: dict, name: str, rep: dict) -> None:
     exp = cfg["experiments"][rep["experiment"]]
     ds_kind = cfg["datasets"][exp["dataset"]]["kind"]
     if ds_kind not in kind.datasets:
-        raise ConfigError(f"config key {key}.experiment: a {rep['kind']} report needs a "
-                          f"{' or '.join(kind.datasets)} experiment, '{rep['experiment']}' is {ds_kind}")
+        raise ConfigError(
+            f"config key {key}.experiment: a {rep['kind']} report needs a "
+            f"{' or '.join(kind.datasets)} experiment, '{rep['experiment']}' is {ds_kind}"
+        )
     if "zips" in kind.reads and exp["leaderboard_run"] is None:
-        raise ConfigError(f"config key experiments.{rep['experiment']}.leaderboard_run must name the run whose zips "
-                          f"the {name} report shows")
+        raise ConfigError(
+            f"config key experiments.{rep['experiment']}.leaderboard_run must name the run whose zips "
+            f"the {name} report shows"
+        )
     if "runs" in kind.reads and exp["evaluator"] == "none":
-        raise ConfigError(f"config key {key}.experiment: a {rep['kind']} report needs metrics, but experiment "
-                          f"'{rep['experiment']}' has evaluator none")
+        raise ConfigError(
+            f"config key {key}.experiment: a {rep['kind']} report needs metrics, but experiment "
+            f"'{rep['experiment']}' has evaluator none"
+        )
     for table, rows in rep["tables"].items():
         _need(paper["tables"], table, f"{key}.tables", "the paper tables (paper.yaml)")
         for row, run in rows.items():
@@ -243,14 +268,17 @@ def _check_report(cfg: dict, paper: dict, name: str, rep: dict) -> None:
         _need(paper["tables"], table, f"{key}.extra_rows", "the paper tables (paper.yaml)")
         for row, run in rows.items():
             if row in paper["tables"][table]["rows"]:
-                raise ConfigError(f"config key {key}.extra_rows.{table}.{row}: '{row}' is a row of the paper's table "
-                                  f"{table}; list it under {key}.tables.{table}")
+                raise ConfigError(
+                    f"config key {key}.extra_rows.{table}.{row}: '{row}' is a row of the paper's table "
+                    f"{table}; list it under {key}.tables.{table}"
+                )
             _need(exp["runs"], run, f"{key}.extra_rows.{table}.{row}", f"experiments.{rep['experiment']}.runs")
 
 
 # ------------------------------------------------------------------------------------------------------------
 # datasets and dataroots
 # ------------------------------------------------------------------------------------------------------------
+
 
 def version_for(cfg: dict, dataset: str, split: str) -> str | None:
     """The dataset version a split lives in, as the dataset class reads its config entry (nuScenes test lives
@@ -269,8 +297,10 @@ def require_dataroot(cfg: dict, dataset: str, split: str | None = None) -> str:
     hint = cls.dataroot_hint.format(version=version, split=split or "<split>")
     root = ds["dataroot"]
     if not root:
-        raise ConfigError(f"config key {key} is not set: put there {hint} (edit workflow/config/config.yaml or "
-                          f"pass --config 'datasets={{{dataset}: {{dataroot: /path/to/it}}}}')")
+        raise ConfigError(
+            f"config key {key} is not set: put there {hint} (edit workflow/config/config.yaml or "
+            f"pass --config 'datasets={{{dataset}: {{dataroot: /path/to/it}}}}')"
+        )
     need = Path(root) / cls.dataroot_folder.format(version=version, split=split or "")
     if not need.is_dir():
         raise ConfigError(f"config key {key} = {root}: {need} does not exist; it must be {hint}")
@@ -280,6 +310,7 @@ def require_dataroot(cfg: dict, dataset: str, split: str | None = None) -> str:
 # ------------------------------------------------------------------------------------------------------------
 # file layout
 # ------------------------------------------------------------------------------------------------------------
+
 
 def dataset_kind(cfg: dict, dataset: str) -> str:
     """The config kind of a dataset entry (one a dataset class declares in its ``config_kinds``)."""

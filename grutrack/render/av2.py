@@ -26,20 +26,41 @@ import numpy as np
 from grutrack.errors import DatasetError
 from grutrack.io import write_json_atomic
 from grutrack.render.records import scene_record
-from grutrack.render.views import (COUNT_KEYS, GT_IGNORED, GT_MATCH, GT_MISS, GT_SWITCH, TR_BELOW, TR_FP,
-                                   TR_IGNORED, TR_MATCH, TR_SWITCH, FrameView, choose_scenes, update_trails)
+from grutrack.render.views import (
+    COUNT_KEYS,
+    GT_IGNORED,
+    GT_MATCH,
+    GT_MISS,
+    GT_SWITCH,
+    TR_BELOW,
+    TR_FP,
+    TR_IGNORED,
+    TR_MATCH,
+    TR_SWITCH,
+    FrameView,
+    choose_scenes,
+    update_trails,
+)
 
-MATCHING = ("official AV2 tracking evaluation (av2.evaluation.tracking.eval.evaluate, HOTA objective): per class "
-            "at its tuned score threshold, TrackEval CLEAR on centre distance (similarity 1 - d/2 m >= 0.5, i.e. "
-            "within 1 m), replayed per frame; an id-switch match is also a TP")
+MATCHING = (
+    "official AV2 tracking evaluation (av2.evaluation.tracking.eval.evaluate, HOTA objective): per class "
+    "at its tuned score threshold, TrackEval CLEAR on centre distance (similarity 1 - d/2 m >= 0.5, i.e. "
+    "within 1 m), replayed per frame; an id-switch match is also a TP"
+)
 
 
 def notes(max_range_m: int, roi: bool) -> tuple[str, ...]:
     """The text panel's lines on the matching (lines of at most 36 characters)."""
     where = f"beyond {max_range_m} m" + (", off the drivable" if roi else "")
-    return ("TP includes id-switch matches", "     (CLEAR)", "thr: tuned track-score threshold",
-            "     (official, HOTA objective)", "match: centres within 1 m", f"grey: {where}",
-            ("      area, or below thr" if roi else "      or below thr"))
+    return (
+        "TP includes id-switch matches",
+        "     (CLEAR)",
+        "thr: tuned track-score threshold",
+        "     (official, HOTA objective)",
+        "match: centres within 1 m",
+        f"grey: {where}",
+        ("      area, or below thr" if roi else "      or below thr"),
+    )
 
 
 @dataclass
@@ -52,6 +73,7 @@ class Av2Evaluation:
     [StepDecisions per frame]}}; sequences: {log: {class: ClassSequence}}; official: {class: {tp, fp, fn, ids}}
     of the official result.
     """
+
     scenes: list
     labels: dict
     predictions: dict
@@ -72,8 +94,15 @@ class Av2Evaluation:
         return self.final["classes"]
 
 
-def load_evaluation(root: str | Path, split: str, submission: str | Path, *, rate_hz: float | None = 2.0,
-                    max_range_m: int = 50, workers: int = 1) -> Av2Evaluation:
+def load_evaluation(
+    root: str | Path,
+    split: str,
+    submission: str | Path,
+    *,
+    rate_hz: float | None = 2.0,
+    max_range_m: int = 50,
+    workers: int = 1,
+) -> Av2Evaluation:
     """Evaluate ``submission`` with the official evaluator and replay its final CLEAR matching per frame.
 
     Raises InputFormatError / DatasetError (exit 2) for a missing or malformed pickle, one of other frames or
@@ -83,20 +112,21 @@ def load_evaluation(root: str | Path, split: str, submission: str | Path, *, rat
     from grutrack.evaluation.clear_frames import official_sequence_data
 
     scenes, labels, preds, ddir, roi = load_submission(root, split, submission, rate_hz=rate_hz)
-    out = evaluate_sequences(preds, labels, ddir if roi else None, max_range_m=max_range_m, workers=workers,
-                             keep_inputs=True)
+    out = evaluate_sequences(
+        preds, labels, ddir if roi else None, max_range_m=max_range_m, workers=workers, keep_inputs=True
+    )
     final = out["final"]
     seqs = official_sequence_data(final["labels"], final["predictions"], final["classes"])
-    decisions = {log: {c: s.decisions(final["similarity_threshold"]) for c, s in by_cls.items()}
-                 for log, by_cls in seqs.items()}
+    decisions = {
+        log: {c: s.decisions(final["similarity_threshold"]) for c, s in by_cls.items()} for log, by_cls in seqs.items()
+    }
     _, per_class = metrics_from_result(out)
     official = {c: {k: per_class[c][k] for k in COUNT_KEYS} for c in final["classes"]}
     ev = Av2Evaluation(scenes, labels, preds, final, seqs, decisions, official, roi, rate_hz, max_range_m)
     replay = class_sums(ev, list(decisions))
-    if replay != official:      # a bug, not bad input: the replay must be the evaluator's own matching
+    if replay != official:  # a bug, not bad input: the replay must be the evaluator's own matching
         bad = next(c for c in official if replay[c] != official[c])
-        raise RuntimeError(f"CLEAR replay differs from the official counts for {bad}: {replay[bad]} vs "
-                           f"{official[bad]}")
+        raise RuntimeError(f"CLEAR replay differs from the official counts for {bad}: {replay[bad]} vs {official[bad]}")
     return ev
 
 
@@ -212,8 +242,15 @@ def build_views(ev: Av2Evaluation, scene, detections: dict | None = None, trail_
             if gt_state[k] == GT_MISS:
                 missed.append({"instance": gid, "class": gt_cls[k], "xy": xy})
             elif gt_state[k] == GT_SWITCH:
-                switches.append({"instance": gid, "class": gt_cls[k], "track_id": prd_ids_fin[gt_track_f[g]],
-                                 "previous_track_id": gt_prev_f[g], "xy": xy})
+                switches.append(
+                    {
+                        "instance": gid,
+                        "class": gt_cls[k],
+                        "track_id": prd_ids_fin[gt_track_f[g]],
+                        "previous_track_id": gt_prev_f[g],
+                        "xy": xy,
+                    }
+                )
 
         # tracks: every submitted box; the scored ones carry a decision, the others are below their class's
         # threshold or outside the range / drivable area
@@ -228,8 +265,9 @@ def build_views(ev: Av2Evaluation, scene, detections: dict | None = None, trail_
             if p is not None:
                 tr_state[k] = tr_state_f[p]
                 if tr_state[k] == TR_FP:
-                    false_positives.append({"track_id": tid, "class": tr_cls[k],
-                                            "xy": [round(float(v), 3) for v in tr_boxes[k, :2]]})
+                    false_positives.append(
+                        {"track_id": tid, "class": tr_cls[k], "xy": [round(float(v), 3) for v in tr_boxes[k, :2]]}
+                    )
             elif scores[k] < ev.thresholds.get(tr_cls[k], 0.0):
                 tr_state[k] = TR_BELOW
         trails = update_trails(history, i, tr_ids, tr_boxes, trail_frames)
@@ -237,28 +275,57 @@ def build_views(ev: Av2Evaluation, scene, detections: dict | None = None, trail_
         det = detections.get(frame.token) if detections is not None else None
         det_boxes = det.boxes[:, [0, 1, 3, 4, 6]] if det is not None and len(det) else np.zeros((0, 5))
         ts_ns = token_timestamp_ns(frame.token)
-        views.append(FrameView(
-            scene=log, index=i, sample_token=frame.token, timestamp=int(frame.timestamp),
-            ego_xy=np.asarray(frame.ego_translation[:2], dtype=np.float64),
-            ego_yaw=float(yaw_from_quaternion(frame.ego_rotation)[0]),
-            gt_boxes=gt_boxes, gt_state=gt_state, gt_cls=gt_cls, gt_ids=gt_ids,
-            tr_boxes=tr_boxes, tr_state=tr_state, tr_cls=tr_cls, tr_ids=tr_ids, det_boxes=det_boxes,
-            trails=trails, counts=counts, false_positives=false_positives, missed=missed, id_switches=switches,
-            caption=f"ts {ts_ns}\n{log}", gt_zh=_zh(lab_all), tr_zh=_zh(prd_all),
-            det_zh=det.boxes[:, [2, 5]] if det is not None and len(det) else np.zeros((0, 2)),
-            ego_z=float(frame.ego_translation[2])))
+        views.append(
+            FrameView(
+                scene=log,
+                index=i,
+                sample_token=frame.token,
+                timestamp=int(frame.timestamp),
+                ego_xy=np.asarray(frame.ego_translation[:2], dtype=np.float64),
+                ego_yaw=float(yaw_from_quaternion(frame.ego_rotation)[0]),
+                gt_boxes=gt_boxes,
+                gt_state=gt_state,
+                gt_cls=gt_cls,
+                gt_ids=gt_ids,
+                tr_boxes=tr_boxes,
+                tr_state=tr_state,
+                tr_cls=tr_cls,
+                tr_ids=tr_ids,
+                det_boxes=det_boxes,
+                trails=trails,
+                counts=counts,
+                false_positives=false_positives,
+                missed=missed,
+                id_switches=switches,
+                caption=f"ts {ts_ns}\n{log}",
+                gt_zh=_zh(lab_all),
+                tr_zh=_zh(prd_all),
+                det_zh=det.boxes[:, [2, 5]] if det is not None and len(det) else np.zeros((0, 2)),
+                ego_z=float(frame.ego_translation[2]),
+            )
+        )
     return views
 
 
-def render_av2(root: str | Path, split: str, submission: str | Path, out: str | Path,
-               scene_names: list[str] | None = None, worst: int | None = None, detections: str | None = None,
-               animation: bool = True, rerun: bool = False, rate_hz: float | None = 2.0, max_range_m: int = 50,
-               workers: int = 1) -> dict:
+def render_av2(
+    root: str | Path,
+    split: str,
+    submission: str | Path,
+    out: str | Path,
+    scene_names: list[str] | None = None,
+    worst: int | None = None,
+    detections: str | None = None,
+    animation: bool = True,
+    rerun: bool = False,
+    rate_hz: float | None = 2.0,
+    max_range_m: int = 50,
+    workers: int = 1,
+) -> dict:
     """Render the chosen logs into ``out`` and write ``out/counts.json``; returns that document."""
-    from grutrack.render.draw import BevCanvas, TRAIL_FRAMES, render_scene
+    from grutrack.render.draw import TRAIL_FRAMES, BevCanvas, render_scene
 
     t_start = time.perf_counter()
-    if scene_names:         # before the evaluation: a wrong name fails at once
+    if scene_names:  # before the evaluation: a wrong name fails at once
         from grutrack.data.av2 import list_logs
 
         logs = list_logs(root, split)
@@ -282,11 +349,21 @@ def render_av2(root: str | Path, split: str, submission: str | Path, out: str | 
         views = build_views(ev, scene, det, trail_frames=TRAIL_FRAMES)
         pngs, gif = render_scene(views, out, ev.thresholds, canvas, animation=animation)
         scene_docs.append(scene_record(scene, errors.get(scene.name, 0), views, pngs, gif, out, rerun))
-    doc = {"dataset": "av2", "version": "sensor", "split": split, "submission": str(submission),
-           "detections": str(detections) if detections else None, "thresholds": ev.thresholds,
-           "rate_hz": rate_hz, "max_range_m": int(max_range_m), "drivable_area_roi": ev.roi, "matching": MATCHING,
-           "scenes": scene_docs, "per_class": class_sums(ev, [s.name for s in chosen]),
-           "seconds": round(time.perf_counter() - t_start, 3)}
+    doc = {
+        "dataset": "av2",
+        "version": "sensor",
+        "split": split,
+        "submission": str(submission),
+        "detections": str(detections) if detections else None,
+        "thresholds": ev.thresholds,
+        "rate_hz": rate_hz,
+        "max_range_m": int(max_range_m),
+        "drivable_area_roi": ev.roi,
+        "matching": MATCHING,
+        "scenes": scene_docs,
+        "per_class": class_sums(ev, [s.name for s in chosen]),
+        "seconds": round(time.perf_counter() - t_start, 3),
+    }
     write_json_atomic(out / "counts.json", doc, indent=1)
     return doc
 

@@ -24,34 +24,54 @@ from pathlib import Path
 
 import numpy as np
 
-from grutrack.render.views import (GT_IGNORED, GT_MISS, TR_FP, TR_MATCH, TR_SWITCH,
-                                   FrameView)
+from grutrack.render.views import GT_IGNORED, GT_MISS, TR_FP, TR_MATCH, TR_SWITCH, FrameView
 
-HALF_RANGE = 55.0                       # metres from the ego to each edge of the view
+HALF_RANGE = 55.0  # metres from the ego to each edge of the view
 RINGS = (10.0, 20.0, 30.0, 40.0, 50.0)  # range rings, metres
 TRAIL_FRAMES = 6
-CLASS_CHARS = 15                        # class names longer than this are cut in the text panel
+CLASS_CHARS = 15  # class names longer than this are cut in the text panel
 
 #: what the text panel says about the matching (nuScenes: the devkit's; AV2: TrackEval's CLEAR, see render.av2)
-NUSC_NOTES = ("- : class without an achieved", "    threshold (only misses count)",
-              "thr: track-score threshold of the", "     class (best MOTA); match within",
-              "     2 m centre distance")
+NUSC_NOTES = (
+    "- : class without an achieved",
+    "    threshold (only misses count)",
+    "thr: track-score threshold of the",
+    "     class (best MOTA); match within",
+    "     2 m centre distance",
+)
 
-FP_COLOR = "#e6194b"        # false-positive track (fill and edge)
-MISS_COLOR = "#ff8c00"      # missed ground truth (FN)
-IDS_COLOR = "#c000c0"       # id switch ring
-GT_COLOR = "#1a1a1a"        # evaluated ground truth
-IGNORED_COLOR = "#a8a8a8"   # not evaluated / not scored
-DET_COLOR = "#404040"       # raw detections (dotted, over the tracks)
+FP_COLOR = "#e6194b"  # false-positive track (fill and edge)
+MISS_COLOR = "#ff8c00"  # missed ground truth (FN)
+IDS_COLOR = "#c000c0"  # id switch ring
+GT_COLOR = "#1a1a1a"  # evaluated ground truth
+IGNORED_COLOR = "#a8a8a8"  # not evaluated / not scored
+DET_COLOR = "#404040"  # raw detections (dotted, over the tracks)
 #: track colours by id: blues, greens, purples, browns, teals (no red, orange or magenta)
-TRACK_PALETTE = ("#1f77b4", "#2ca02c", "#9467bd", "#8c564b", "#17becf", "#7f7f00", "#393b79", "#637939",
-                 "#5254a3", "#3182bd", "#31a354", "#756bb1", "#0b6e4f", "#4a6fa5", "#6a3d9a", "#005f73")
+TRACK_PALETTE = (
+    "#1f77b4",
+    "#2ca02c",
+    "#9467bd",
+    "#8c564b",
+    "#17becf",
+    "#7f7f00",
+    "#393b79",
+    "#637939",
+    "#5254a3",
+    "#3182bd",
+    "#31a354",
+    "#756bb1",
+    "#0b6e4f",
+    "#4a6fa5",
+    "#6a3d9a",
+    "#005f73",
+)
 
 
 @dataclass(frozen=True)
 class Layout:
     """Figure geometry in pixels: a square BEV panel at (``margin``, ``margin``) from the top-left corner and a
     text / legend panel on its right."""
+
     width: int = 1060
     height: int = 760
     panel: int = 740
@@ -85,8 +105,8 @@ def box_corners(boxes: np.ndarray) -> np.ndarray:
     """``(N, 5) [x, y, w, l, yaw]`` -> ``(N, 4, 2)`` corners, global metres (length along the heading)."""
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 5)
     half_l, half_w = boxes[:, 3:4] / 2, boxes[:, 2:3] / 2
-    lx = np.array([1, 1, -1, -1]) * half_l            # (N, 4) along the heading
-    ly = np.array([1, -1, -1, 1]) * half_w            # (N, 4) to the left
+    lx = np.array([1, 1, -1, -1]) * half_l  # (N, 4) along the heading
+    ly = np.array([1, -1, -1, 1]) * half_w  # (N, 4) to the left
     c, s = np.cos(boxes[:, 4:5]), np.sin(boxes[:, 4:5])
     return np.stack([boxes[:, 0:1] + c * lx - s * ly, boxes[:, 1:2] + s * lx + c * ly], axis=-1)
 
@@ -110,16 +130,17 @@ class BevCanvas:
         import matplotlib
 
         matplotlib.use("Agg", force=False)
-        from matplotlib.figure import Figure
         from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
         from matplotlib.lines import Line2D
         from matplotlib.patches import Circle, Patch, Rectangle
 
         self.layout = L = layout
         self.fig = Figure(figsize=(L.width / L.dpi, L.height / L.dpi), dpi=L.dpi, facecolor="white")
         self.canvas = FigureCanvasAgg(self.fig)
-        ax = self.ax = self.fig.add_axes([L.margin / L.width, 1 - (L.margin + L.panel) / L.height,
-                                          L.panel / L.width, L.panel / L.height])
+        ax = self.ax = self.fig.add_axes(
+            [L.margin / L.width, 1 - (L.margin + L.panel) / L.height, L.panel / L.width, L.panel / L.height]
+        )
         ax.set_xlim(-HALF_RANGE, HALF_RANGE)
         ax.set_ylim(-HALF_RANGE, HALF_RANGE)
         ax.set_aspect("equal", adjustable="box")
@@ -137,13 +158,28 @@ class BevCanvas:
             Patch(facecolor=FP_COLOR, edgecolor=FP_COLOR, label="false-positive track (FP)"),
             Patch(facecolor="none", edgecolor=GT_COLOR, label="ground truth"),
             Patch(facecolor="none", edgecolor=MISS_COLOR, linestyle="--", lw=2, label="missed ground truth (FN)"),
-            Line2D([], [], marker="o", ls="", markersize=12, markerfacecolor="none", markeredgecolor=IDS_COLOR,
-                   markeredgewidth=2.5, label="id switch (IDS)"),
+            Line2D(
+                [],
+                [],
+                marker="o",
+                ls="",
+                markersize=12,
+                markerfacecolor="none",
+                markeredgecolor=IDS_COLOR,
+                markeredgewidth=2.5,
+                label="id switch (IDS)",
+            ),
             Patch(facecolor="none", edgecolor=IGNORED_COLOR, label="track not scored / GT not evaluated (grey)"),
             Patch(facecolor="none", edgecolor=DET_COLOR, linestyle=":", label="raw detection (dotted)"),
         ]
-        self.fig.legend(handles=handles, loc="lower left", bbox_to_anchor=(x0 - 0.005, 10 / L.height),
-                        fontsize=8, frameon=False, handlelength=1.6)
+        self.fig.legend(
+            handles=handles,
+            loc="lower left",
+            bbox_to_anchor=(x0 - 0.005, 10 / L.height),
+            fontsize=8,
+            frameon=False,
+            handlelength=1.6,
+        )
         self.thresholds = thresholds or {}
         self.notes = tuple(notes)
         self._dynamic: list = []
@@ -168,12 +204,22 @@ class BevCanvas:
         self._dynamic = []
         self.canvas.restore_region(self._background)
         ax = self.ax
-        P = lambda xy: to_plot(xy, v.ego_xy, v.ego_yaw)   # noqa: E731
+        P = lambda xy: to_plot(xy, v.ego_xy, v.ego_yaw)  # noqa: E731
 
         if len(v.det_boxes):
-            self._add(ax.add_collection(PolyCollection(P(box_corners(v.det_boxes)), facecolors="none",
-                                                       edgecolors=DET_COLOR, linewidths=0.8, alpha=0.8,
-                                                       linestyles=(0, (1, 1.5)), zorder=4.5)))
+            self._add(
+                ax.add_collection(
+                    PolyCollection(
+                        P(box_corners(v.det_boxes)),
+                        facecolors="none",
+                        edgecolors=DET_COLOR,
+                        linewidths=0.8,
+                        alpha=0.8,
+                        linestyles=(0, (1, 1.5)),
+                        zorder=4.5,
+                    )
+                )
+            )
         # Trails below the boxes.
         segs = [P(t) for t in v.trails if len(t) > 1]
         cols = [track_color(tid) for tid, t in zip(v.tr_ids, v.trails) if len(t) > 1]
@@ -184,8 +230,11 @@ class BevCanvas:
             edge = [MISS_COLOR if s == GT_MISS else IGNORED_COLOR if s == GT_IGNORED else GT_COLOR for s in v.gt_state]
             lw = [2.2 if s == GT_MISS else 0.6 if s == GT_IGNORED else 1.0 for s in v.gt_state]
             ls = [(0, (3, 2)) if s == GT_MISS else "solid" for s in v.gt_state]
-            self._add(ax.add_collection(PolyCollection(corners, facecolors="none", edgecolors=edge, linewidths=lw,
-                                                       linestyles=ls, zorder=3)))
+            self._add(
+                ax.add_collection(
+                    PolyCollection(corners, facecolors="none", edgecolors=edge, linewidths=lw, linestyles=ls, zorder=3)
+                )
+            )
         if len(v.tr_boxes):
             corners = P(box_corners(v.tr_boxes))
             scored = np.isin(v.tr_state, (TR_MATCH, TR_SWITCH, TR_FP))
@@ -196,29 +245,57 @@ class BevCanvas:
             from matplotlib.colors import to_rgba
 
             fc = [(0, 0, 0, 0) if f == "none" else to_rgba(f, a) for f, a in zip(face, alpha_face)]
-            order = np.argsort(v.tr_state == TR_FP, kind="stable")     # false positives on top
-            self._add(ax.add_collection(PolyCollection(corners[order], facecolors=[fc[i] for i in order],
-                                                       edgecolors=[edge[i] for i in order],
-                                                       linewidths=[1.8 if scored[i] else 0.8 for i in order],
-                                                       zorder=4)))
+            order = np.argsort(v.tr_state == TR_FP, kind="stable")  # false positives on top
+            self._add(
+                ax.add_collection(
+                    PolyCollection(
+                        corners[order],
+                        facecolors=[fc[i] for i in order],
+                        edgecolors=[edge[i] for i in order],
+                        linewidths=[1.8 if scored[i] else 0.8 for i in order],
+                        zorder=4,
+                    )
+                )
+            )
             heads = P(heading_segments(v.tr_boxes))
             self._add(ax.add_collection(LineCollection(heads, colors=edge, linewidths=1.6, zorder=5)))
             for fp in v.false_positives:
                 uv = P(np.asarray(fp["xy"]))
                 if np.all(np.abs(uv) < HALF_RANGE - 4):
-                    self._add(ax.text(uv[0] + 1.8, uv[1] + 1.2, f"FP {fp['class']} {_short(fp['track_id'])}",
-                                      color=FP_COLOR, fontsize=7, weight="bold", zorder=7, bbox=_HALO))
+                    self._add(
+                        ax.text(
+                            uv[0] + 1.8,
+                            uv[1] + 1.2,
+                            f"FP {fp['class']} {_short(fp['track_id'])}",
+                            color=FP_COLOR,
+                            fontsize=7,
+                            weight="bold",
+                            zorder=7,
+                            bbox=_HALO,
+                        )
+                    )
         for sw in v.id_switches:
             uv = P(np.asarray(sw["xy"]))
-            if sw["previous_track_id"] in v.tr_ids:    # where the track that lost the object is now
+            if sw["previous_track_id"] in v.tr_ids:  # where the track that lost the object is now
                 old = P(v.tr_boxes[v.tr_ids.index(sw["previous_track_id"]), :2])
-                self._add(ax.plot([uv[0], old[0]], [uv[1], old[1]], color=IDS_COLOR, lw=1.4, ls=(0, (2, 2)),
-                                  zorder=7)[0])
-            self._add(ax.scatter([uv[0]], [uv[1]], s=420, facecolors="none", edgecolors=IDS_COLOR,
-                                 linewidths=2.8, zorder=7))
-            self._add(ax.text(uv[0] + 3.2, uv[1] - 1.0,
-                              f"IDS {_short(sw['previous_track_id'])} \u2192 {_short(sw['track_id'])}",
-                              color=IDS_COLOR, fontsize=8, weight="bold", zorder=7, bbox=_HALO))
+                self._add(
+                    ax.plot([uv[0], old[0]], [uv[1], old[1]], color=IDS_COLOR, lw=1.4, ls=(0, (2, 2)), zorder=7)[0]
+                )
+            self._add(
+                ax.scatter([uv[0]], [uv[1]], s=420, facecolors="none", edgecolors=IDS_COLOR, linewidths=2.8, zorder=7)
+            )
+            self._add(
+                ax.text(
+                    uv[0] + 3.2,
+                    uv[1] - 1.0,
+                    f"IDS {_short(sw['previous_track_id'])} \u2192 {_short(sw['track_id'])}",
+                    color=IDS_COLOR,
+                    fontsize=8,
+                    weight="bold",
+                    zorder=7,
+                    bbox=_HALO,
+                )
+            )
 
         for a in self._dynamic:
             ax.draw_artist(a)
@@ -227,7 +304,7 @@ class BevCanvas:
         im = Image.fromarray(np.asarray(self.canvas.buffer_rgba())[:, :, :3])
         d = ImageDraw.Draw(im)
         x = 2 * self.layout.margin + self.layout.panel
-        name = v.scene if len(v.scene) <= 16 else v.scene[:8] + "\u2026"     # an AV2 log id: in full below
+        name = v.scene if len(v.scene) <= 16 else v.scene[:8] + "\u2026"  # an AV2 log id: in full below
         d.text((x, 12), f"{name}   frame {v.index + 1}/{n_frames}", fill="black", font=self._font_title)
         d.multiline_text((x, 40), self._info(v, t0), fill="black", font=self._font, spacing=3)
         return np.asarray(im)
@@ -240,18 +317,31 @@ class BevCanvas:
         tot = v.totals()
         shown = [(c, k) for c, k in v.counts.items() if any(k[x] for x in k)]
         w = max([11] + [min(len(c), CLASS_CHARS) + 1 for c, _ in shown])
-        lines = [f"t = {(v.timestamp - t0) / 1e6:5.1f} s   {v.caption or 'sample ' + v.sample_token[:8]}", "",
-                 "this frame (evaluator's decisions)", f"  TP {tot['tp']:3d}   FP {tot['fp']:3d}",
-                 f"  FN {tot['fn']:3d}   IDS {tot['ids']:2d}", "",
-                 f"{'class':<{w}}{'TP':>4}{'FP':>4}{'FN':>4}{'IDS':>4}  thr"]
+        lines = [
+            f"t = {(v.timestamp - t0) / 1e6:5.1f} s   {v.caption or 'sample ' + v.sample_token[:8]}",
+            "",
+            "this frame (evaluator's decisions)",
+            f"  TP {tot['tp']:3d}   FP {tot['fp']:3d}",
+            f"  FN {tot['fn']:3d}   IDS {tot['ids']:2d}",
+            "",
+            f"{'class':<{w}}{'TP':>4}{'FP':>4}{'FN':>4}{'IDS':>4}  thr",
+        ]
         for c, k in shown:
             thr = self.thresholds.get(c)
-            name = c if len(c) <= CLASS_CHARS else c[:CLASS_CHARS - 1] + "\u2026"
-            lines.append(f"{name:<{w}}{k['tp']:>4}{_n(k['fp']):>4}{k['fn']:>4}{_n(k['ids']):>4}  "
-                         + (f"{thr:.2f}" if thr is not None else "none"))
-        lines += ["", *self.notes, "", "ego heading up, rings every 10 m",
-                  f"trail: last {TRAIL_FRAMES} frames", "IDS old \u2192 new track (dashed: old",
-                  "     track's position)"]
+            name = c if len(c) <= CLASS_CHARS else c[: CLASS_CHARS - 1] + "\u2026"
+            lines.append(
+                f"{name:<{w}}{k['tp']:>4}{_n(k['fp']):>4}{k['fn']:>4}{_n(k['ids']):>4}  "
+                + (f"{thr:.2f}" if thr is not None else "none")
+            )
+        lines += [
+            "",
+            *self.notes,
+            "",
+            "ego heading up, rings every 10 m",
+            f"trail: last {TRAIL_FRAMES} frames",
+            "IDS old \u2192 new track (dashed: old",
+            "     track's position)",
+        ]
         return "\n".join(lines)
 
 
@@ -270,6 +360,7 @@ def _short(track_id) -> str:
 # ----------------------------------------------------------------------------------------------------------------
 # Files
 # ----------------------------------------------------------------------------------------------------------------
+
 
 def write_png(path: Path, rgb: np.ndarray) -> None:
     """Write ``(H, W, 3)`` uint8 as PNG atomically."""
@@ -297,12 +388,14 @@ def write_gif(path: Path, frames: list, seconds_per_frame: float = 0.5) -> None:
     from grutrack.io import atomic_path
 
     with atomic_path(path) as tmp:
-        frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], loop=0,
-                       duration=int(seconds_per_frame * 1000))
+        frames[0].save(
+            tmp, format="GIF", save_all=True, append_images=frames[1:], loop=0, duration=int(seconds_per_frame * 1000)
+        )
 
 
-def render_scene(views: list[FrameView], out_dir: Path, thresholds: dict, canvas: BevCanvas | None = None,
-                 animation: bool = True) -> tuple[list[Path], Path | None]:
+def render_scene(
+    views: list[FrameView], out_dir: Path, thresholds: dict, canvas: BevCanvas | None = None, animation: bool = True
+) -> tuple[list[Path], Path | None]:
     """PNG per frame (``out_dir/<scene>/frame_NNN.png``, NNN from 001 as in the title) and
     ``out_dir/<scene>.gif``; returns their paths."""
     canvas = canvas or BevCanvas(thresholds=thresholds)
@@ -313,7 +406,7 @@ def render_scene(views: list[FrameView], out_dir: Path, thresholds: dict, canvas
     t0 = views[0].timestamp
     for v in views:
         rgb = canvas.draw(v, len(views), t0)
-        path = folder / f"frame_{v.index + 1:03d}.png"      # the frame number of the title, from 1
+        path = folder / f"frame_{v.index + 1:03d}.png"  # the frame number of the title, from 1
         write_png(path, rgb)
         pngs.append(path)
         if animation:
@@ -329,13 +422,16 @@ def key_frames(frames: list[dict], k: int = 4) -> list[dict]:
     """Up to ``k`` frame records of counts.json to show: the id-switch moments first, then the frames with the
     most FP + FN; returned in time order."""
     switch = [f for f in frames if f["id_switches"]]
-    rest = sorted((f for f in frames if not f["id_switches"]),
-                  key=lambda f: (-(f["totals"]["fp"] + f["totals"]["fn"]), f["index"]))
+    rest = sorted(
+        (f for f in frames if not f["id_switches"]),
+        key=lambda f: (-(f["totals"]["fp"] + f["totals"]["fn"]), f["index"]),
+    )
     return sorted((switch + rest)[:k], key=lambda f: f["index"])
 
 
-def strip_from_counts(counts_json: str | Path, out_png: str | Path, k: int = 4, scale: float = 0.45,
-                      layout: Layout = LAYOUT) -> dict:
+def strip_from_counts(
+    counts_json: str | Path, out_png: str | Path, k: int = 4, scale: float = 0.45, layout: Layout = LAYOUT
+) -> dict:
     """A strip of ``k`` key frames (BEV panels of the rendered PNGs, resized by ``scale``, side by side) of the
     rendered scene with the most IDS + FP + FN, from a ``grutrack render`` folder; written as one PNG.
 
@@ -361,8 +457,9 @@ def strip_from_counts(counts_json: str | Path, out_png: str | Path, k: int = 4, 
         if not png.is_file():
             raise InputFormatError(f"{counts_json}: frame image {png} is missing")
         with Image.open(png) as im:
-            crop = im.convert("RGB").crop((layout.margin, layout.margin, layout.margin + layout.panel,
-                                           layout.margin + layout.panel))
+            crop = im.convert("RGB").crop(
+                (layout.margin, layout.margin, layout.margin + layout.panel, layout.margin + layout.panel)
+            )
         panels.append(np.asarray(crop.resize((side, side), Image.LANCZOS)))
     from matplotlib import font_manager
     from PIL import ImageDraw, ImageFont
@@ -375,10 +472,18 @@ def strip_from_counts(counts_json: str | Path, out_png: str | Path, k: int = 4, 
         im.paste(Image.fromarray(p), (0, 24))
         t = f["totals"]
         sw = ", ".join(f"{_short(s['previous_track_id'])}\u2192{_short(s['track_id'])}" for s in f["id_switches"])
-        ImageDraw.Draw(im).text((4, 4), f"frame {f['index'] + 1}: " + (f"IDS {sw}  " if sw else "")
-                                + f"FP {t['fp']}  FN {t['fn']}", fill="black", font=font)
+        ImageDraw.Draw(im).text(
+            (4, 4),
+            f"frame {f['index'] + 1}: " + (f"IDS {sw}  " if sw else "") + f"FP {t['fp']}  FN {t['fn']}",
+            fill="black",
+            font=font,
+        )
         labelled.append(np.asarray(im))
     write_png(Path(out_png), np.concatenate([x for p in labelled for x in (p, gap)][:-1], axis=1))
     totals = {key: sum(f["totals"][key] for f in picks) for key in ("tp", "fp", "fn", "ids")}
-    return {"scene": scene["name"], "frames": [f["index"] + 1 for f in picks], "totals": totals,
-            "id_switches": [(s["previous_track_id"], s["track_id"]) for f in picks for s in f["id_switches"]]}
+    return {
+        "scene": scene["name"],
+        "frames": [f["index"] + 1 for f in picks],
+        "totals": totals,
+        "id_switches": [(s["previous_track_id"], s["track_id"]) for f in picks for s in f["id_switches"]],
+    }

@@ -3,10 +3,11 @@ draw them and write ``counts.json``.
 
 ``counts.json``: ``{"dataset", "version", "split", "submission", "detections", "thresholds": {class: float|None},
 "scenes": [{"name", "token", "animation", "errors", "frames": [{"index" (from 0), "frame" (from 1, as drawn),
-"sample_token", "timestamp", "png", "ego": {"xy", "yaw"}, "totals": {tp, fp, fn, ids}, "per_class": {class: {tp, fp, fn, ids}}, "false_positives": [...],
-"missed": [...], "id_switches": [...]}]}], "per_class": {class: {tp, fp, fn, ids}}}``. ``per_class`` sums the
-rendered frames; as in the metrics JSON, FP and IDS are null for a class without an achieved threshold and
-every count is null for a class without ground truth in the split.
+"sample_token", "timestamp", "png", "ego": {"xy", "yaw"}, "totals": {tp, fp, fn, ids},
+"per_class": {class: {tp, fp, fn, ids}}, "false_positives": [...], "missed": [...], "id_switches": [...]}]}],
+"per_class": {class: {tp, fp, fn, ids}}}``. ``per_class`` sums the rendered frames; as in the metrics JSON, FP
+and IDS are null for a class without an achieved threshold and every count is null for a class without ground
+truth in the split.
 """
 
 from __future__ import annotations
@@ -38,8 +39,10 @@ def load_evaluation(dataroot: str, version: str, split: str, submission: str | P
     tokens = {f.token for s in scenes for f in s.frames}
     missing, extra = tokens - set(results), set(results) - tokens
     if missing or extra:
-        raise InputFormatError(f"{submission}: 'results' must hold exactly the {len(tokens)} samples of split "
-                               f"'{split}' ({len(missing)} missing, {len(extra)} from other splits)")
+        raise InputFormatError(
+            f"{submission}: 'results' must hold exactly the {len(tokens)} samples of split "
+            f"'{split}' ({len(missing)} missing, {len(extra)} from other splits)"
+        )
     try:
         tracks_gt, tracks_pred, _ = load_tracks(nusc, doc, split)
         decisions, _ = match_decisions(tracks_gt, tracks_pred)
@@ -65,18 +68,27 @@ def sum_counts(views: list[FrameView], thresholds: dict, gt_classes: set) -> dic
         tot = {k: 0 for k in COUNT_KEYS}
         for v in views:
             for k in COUNT_KEYS:
-                tot[k] += (v.counts.get(c, {}).get(k) or 0)
+                tot[k] += v.counts.get(c, {}).get(k) or 0
         if thr is None:
             tot["fp"] = tot["ids"] = None
         out[c] = tot
     return out
 
 
-def render_nuscenes(dataroot: str, version: str, split: str, submission: str, out: str | Path,
-                    scene_names: list[str] | None = None, worst: int | None = None,
-                    detections: str | None = None, animation: bool = True, rerun: bool = False) -> dict:
+def render_nuscenes(
+    dataroot: str,
+    version: str,
+    split: str,
+    submission: str,
+    out: str | Path,
+    scene_names: list[str] | None = None,
+    worst: int | None = None,
+    detections: str | None = None,
+    animation: bool = True,
+    rerun: bool = False,
+) -> dict:
     """Render the chosen scenes into ``out`` and write ``out/counts.json``; returns that document."""
-    from grutrack.render.draw import BevCanvas, TRAIL_FRAMES, render_scene
+    from grutrack.render.draw import TRAIL_FRAMES, BevCanvas, render_scene
 
     t_start = time.perf_counter()
     nusc, scenes, results, decisions = load_evaluation(dataroot, version, split, submission)
@@ -97,12 +109,19 @@ def render_nuscenes(dataroot: str, version: str, split: str, submission: str, ou
         all_views += views
         scene_docs.append(scene_record(scene, errors.get(scene.token, 0), views, pngs, gif, out, rerun))
     gt_classes = {decisions.class_names[c] for c in set(decisions.g_cls.tolist())}
-    doc = {"dataset": "nuscenes", "version": version, "split": split, "submission": str(submission),
-           "detections": str(detections) if detections else None, "thresholds": decisions.thresholds,
-           "matching": "fast exact nuScenes evaluator (tracking_nips_2019): per class at its best-MOTA "
-                       "threshold, 2 m centre distance",
-           "scenes": scene_docs, "per_class": sum_counts(all_views, decisions.thresholds, gt_classes),
-           "seconds": round(time.perf_counter() - t_start, 3)}
+    doc = {
+        "dataset": "nuscenes",
+        "version": version,
+        "split": split,
+        "submission": str(submission),
+        "detections": str(detections) if detections else None,
+        "thresholds": decisions.thresholds,
+        "matching": "fast exact nuScenes evaluator (tracking_nips_2019): per class at its best-MOTA "
+        "threshold, 2 m centre distance",
+        "scenes": scene_docs,
+        "per_class": sum_counts(all_views, decisions.thresholds, gt_classes),
+        "seconds": round(time.perf_counter() - t_start, 3),
+    }
     write_json_atomic(out / "counts.json", doc, indent=1)
     return doc
 
@@ -111,5 +130,11 @@ def render_dataset(dataset, split: str, submission: str | Path, out: str | Path,
     """:func:`render_nuscenes` for a :class:`grutrack.datasets.nuscenes.NuScenesDataset` (evaluator settings
     of other datasets, e.g. ``workers``, do not apply and are ignored)."""
     keep = ("scene_names", "worst", "detections", "animation", "rerun")
-    return render_nuscenes(dataset.options.dataroot, dataset.options.version, split, submission, out,
-                           **{k: v for k, v in options.items() if k in keep})
+    return render_nuscenes(
+        dataset.options.dataroot,
+        dataset.options.version,
+        split,
+        submission,
+        out,
+        **{k: v for k, v in options.items() if k in keep},
+    )

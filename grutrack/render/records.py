@@ -11,21 +11,34 @@ from grutrack.render.views import FrameView
 
 def frame_record(v: FrameView, png: Path, out: Path) -> dict:
     """The counts.json entry of one frame."""
-    return {"index": v.index, "frame": v.index + 1, "sample_token": v.sample_token, "timestamp": v.timestamp,
-            "png": str(png.relative_to(out)),
-            "ego": {"xy": [round(float(x), 4) for x in v.ego_xy], "yaw": round(v.ego_yaw, 6)},
-            "totals": v.totals(), "per_class": v.counts,
-            "false_positives": v.false_positives, "missed": v.missed, "id_switches": v.id_switches}
+    return {
+        "index": v.index,
+        "frame": v.index + 1,
+        "sample_token": v.sample_token,
+        "timestamp": v.timestamp,
+        "png": str(png.relative_to(out)),
+        "ego": {"xy": [round(float(x), 4) for x in v.ego_xy], "yaw": round(v.ego_yaw, 6)},
+        "totals": v.totals(),
+        "per_class": v.counts,
+        "false_positives": v.false_positives,
+        "missed": v.missed,
+        "id_switches": v.id_switches,
+    }
 
 
-def scene_record(scene, errors: int, views: list[FrameView], pngs: list[Path], gif: Path | None, out: Path,
-                 rerun: bool) -> dict:
+def scene_record(
+    scene, errors: int, views: list[FrameView], pngs: list[Path], gif: Path | None, out: Path, rerun: bool
+) -> dict:
     """The counts.json entry of one rendered scene (``scene``: a canonical scene; ``errors``: its IDS + FP + FN);
     writes ``out/<scene>.rrd`` too when ``rerun``."""
-    return {"name": scene.name, "token": scene.token, "errors": errors,
-            "animation": str(gif.relative_to(out)) if gif else None,
-            "rerun": _recording(out, views) if rerun else None,
-            "frames": [frame_record(v, p, out) for v, p in zip(views, pngs)]}
+    return {
+        "name": scene.name,
+        "token": scene.token,
+        "errors": errors,
+        "animation": str(gif.relative_to(out)) if gif else None,
+        "rerun": _recording(out, views) if rerun else None,
+        "frames": [frame_record(v, p, out) for v, p in zip(views, pngs)],
+    }
 
 
 def _recording(out: Path, views: list[FrameView]) -> str:

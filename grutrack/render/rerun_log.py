@@ -21,14 +21,14 @@ import numpy as np
 
 from grutrack.render.views import GT_IGNORED, GT_MISS, GT_SWITCH, TR_FP, TR_MATCH, TR_SWITCH, FrameView
 
-EGO_SIZE = (4.6, 1.9, 1.7)        # length, width, height of the ego box, metres (the PNGs' ego rectangle)
-DEFAULT_HEIGHT = 1.5              # height of a box whose height is not known, metres
+EGO_SIZE = (4.6, 1.9, 1.7)  # length, width, height of the ego box, metres (the PNGs' ego rectangle)
+DEFAULT_HEIGHT = 1.5  # height of a box whose height is not known, metres
 INSTALL_HINT = "pip install grutrack[rerun]"
 
 
 def _rgba(hex_colour: str, alpha: float = 1.0) -> np.ndarray:
     h = hex_colour.lstrip("#")
-    return np.array([int(h[i:i + 2], 16) for i in (0, 2, 4)] + [int(round(alpha * 255))], dtype=np.uint8)
+    return np.array([int(h[i : i + 2], 16) for i in (0, 2, 4)] + [int(round(alpha * 255))], dtype=np.uint8)
 
 
 def _zh(zh: np.ndarray | None, n: int, ego_z: float) -> np.ndarray:
@@ -55,34 +55,46 @@ def frame_layers(v: FrameView, origin: np.ndarray) -> dict[str, dict]:
     (list of (K, 3) float32) and ``colors``; ``world/id_switches``: ``positions (M, 3)``, ``colors``, ``labels``;
     ``counts``: ``text`` (markdown).
     """
-    from grutrack.render.draw import (DET_COLOR, FP_COLOR, GT_COLOR, IDS_COLOR, IGNORED_COLOR, MISS_COLOR,
-                                      track_color)
+    from grutrack.render.draw import DET_COLOR, FP_COLOR, GT_COLOR, IDS_COLOR, IGNORED_COLOR, MISS_COLOR, track_color
 
     origin = np.asarray(origin, dtype=np.float64).reshape(3)
     out: dict[str, dict] = {}
     ego = np.array([[v.ego_xy[0], v.ego_xy[1], EGO_SIZE[1], EGO_SIZE[0], v.ego_yaw]])
-    out["world/ego"] = {**_boxes(ego, np.array([[v.ego_z + EGO_SIZE[2] / 2, EGO_SIZE[2]]]), origin),
-                        "colors": np.array([_rgba("#404040")]), "labels": ["ego"]}
+    out["world/ego"] = {
+        **_boxes(ego, np.array([[v.ego_z + EGO_SIZE[2] / 2, EGO_SIZE[2]]]), origin),
+        "colors": np.array([_rgba("#404040")]),
+        "labels": ["ego"],
+    }
 
     gt_col = {GT_MISS: _rgba(MISS_COLOR), GT_IGNORED: _rgba(IGNORED_COLOR), GT_SWITCH: _rgba(IDS_COLOR)}
     out["world/ground_truth"] = {
         **_boxes(v.gt_boxes, _zh(v.gt_zh, len(v.gt_boxes), v.ego_z), origin),
         "colors": np.array([gt_col.get(int(s), _rgba(GT_COLOR)) for s in v.gt_state], dtype=np.uint8).reshape(-1, 4),
-        "labels": [f"{c} {'FN' if s == GT_MISS else 'IDS' if s == GT_SWITCH else ''}".strip()
-                   for c, s in zip(v.gt_cls, v.gt_state)]}
+        "labels": [
+            f"{c} {'FN' if s == GT_MISS else 'IDS' if s == GT_SWITCH else ''}".strip()
+            for c, s in zip(v.gt_cls, v.gt_state)
+        ],
+    }
 
     scored = np.isin(v.tr_state, (TR_MATCH, TR_SWITCH, TR_FP))
-    tr_colors = [_rgba(FP_COLOR) if s == TR_FP else _rgba(track_color(t)) if ok else _rgba(IGNORED_COLOR)
-                 for t, s, ok in zip(v.tr_ids, v.tr_state, scored)]
+    tr_colors = [
+        _rgba(FP_COLOR) if s == TR_FP else _rgba(track_color(t)) if ok else _rgba(IGNORED_COLOR)
+        for t, s, ok in zip(v.tr_ids, v.tr_state, scored)
+    ]
     out["world/tracks"] = {
         **_boxes(v.tr_boxes, _zh(v.tr_zh, len(v.tr_boxes), v.ego_z), origin),
         "colors": np.array(tr_colors, dtype=np.uint8).reshape(-1, 4),
-        "labels": [f"{t} {c}" + (" FP" if s == TR_FP else "" if ok else " (not scored)")
-                   for t, c, s, ok in zip(v.tr_ids, v.tr_cls, v.tr_state, scored)]}
+        "labels": [
+            f"{t} {c}" + (" FP" if s == TR_FP else "" if ok else " (not scored)")
+            for t, c, s, ok in zip(v.tr_ids, v.tr_cls, v.tr_state, scored)
+        ],
+    }
 
-    out["world/detections"] = {**_boxes(v.det_boxes, _zh(v.det_zh, len(v.det_boxes), v.ego_z), origin),
-                               "colors": np.tile(_rgba(DET_COLOR, 0.5), (len(v.det_boxes), 1)),
-                               "labels": [""] * len(v.det_boxes)}
+    out["world/detections"] = {
+        **_boxes(v.det_boxes, _zh(v.det_zh, len(v.det_boxes), v.ego_z), origin),
+        "colors": np.tile(_rgba(DET_COLOR, 0.5), (len(v.det_boxes), 1)),
+        "labels": [""] * len(v.det_boxes),
+    }
 
     tz = dict(zip(v.tr_ids, _zh(v.tr_zh, len(v.tr_boxes), v.ego_z)[:, 0]))
     strips, colors = [], []
@@ -97,14 +109,27 @@ def frame_layers(v: FrameView, origin: np.ndarray) -> dict[str, dict]:
     out["world/id_switches"] = {
         "positions": (np.asarray(pos, dtype=np.float64).reshape(-1, 3) - origin).astype(np.float32),
         "colors": np.tile(_rgba(IDS_COLOR), (len(pos), 1)),
-        "labels": [f"IDS {sw['previous_track_id']} \u2192 {sw['track_id']}" for sw in v.id_switches]}
+        "labels": [f"IDS {sw['previous_track_id']} \u2192 {sw['track_id']}" for sw in v.id_switches],
+    }
 
-    rows = [f"| {c} | {k['tp']} | {'-' if k['fp'] is None else k['fp']} | {k['fn']} | "
-            f"{'-' if k['ids'] is None else k['ids']} |" for c, k in v.counts.items() if any(k.values())]
+    rows = [
+        f"| {c} | {k['tp']} | {'-' if k['fp'] is None else k['fp']} | {k['fn']} | "
+        f"{'-' if k['ids'] is None else k['ids']} |"
+        for c, k in v.counts.items()
+        if any(k.values())
+    ]
     tot = v.totals()
-    out["counts"] = {"text": "\n".join([f"**{v.scene}**, frame {v.index + 1}: TP {tot['tp']}, FP {tot['fp']}, "
-                                        f"FN {tot['fn']}, IDS {tot['ids']}", "", "| class | TP | FP | FN | IDS |",
-                                        "|---|---|---|---|---|", *rows])}
+    out["counts"] = {
+        "text": "\n".join(
+            [
+                f"**{v.scene}**, frame {v.index + 1}: TP {tot['tp']}, FP {tot['fp']}, FN {tot['fn']}, IDS {tot['ids']}",
+                "",
+                "| class | TP | FP | FN | IDS |",
+                "|---|---|---|---|---|",
+                *rows,
+            ]
+        )
+    }
     return out
 
 
@@ -135,11 +160,17 @@ def write_recording(path: str | Path, views: list[FrameView]) -> dict:
         rec = rr.new_recording(application_id="grutrack", recording_id=f"{views[0].scene}", spawn=False)
         rec.save(str(tmp))
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        rec.log("about", rr.TextDocument(
-            f"grutrack render of {views[0].scene}: world = global frame minus ({origin[0]:.3f}, {origin[1]:.3f}, "
-            f"{origin[2]:.3f}) m (the first ego position); "
-            "colours as in the PNGs (tracks by id, false positives red, missed ground truth orange, id switches "
-            "magenta, not scored / not evaluated grey)", media_type="text/markdown"), static=True)
+        rec.log(
+            "about",
+            rr.TextDocument(
+                f"grutrack render of {views[0].scene}: world = global frame minus ({origin[0]:.3f}, {origin[1]:.3f}, "
+                f"{origin[2]:.3f}) m (the first ego position); "
+                "colours as in the PNGs (tracks by id, false positives red, missed ground truth orange, id switches "
+                "magenta, not scored / not evaluated grey)",
+                media_type="text/markdown",
+            ),
+            static=True,
+        )
         for v in views:
             _set_time(rec, v.index + 1, (v.timestamp - t0) / 1e6)
             for entity, d in frame_layers(v, origin).items():
@@ -168,5 +199,10 @@ def _archetype(rr, entity: str, d: dict):
     if entity == "world/id_switches":
         return rr.Points3D(d["positions"], colors=d["colors"], labels=d["labels"], radii=1.2)
     rot = [rr.RotationAxisAngle(axis=[0.0, 0.0, 1.0], radians=float(y)) for y in d["yaw"]]
-    return rr.Boxes3D(centers=d["centers"], half_sizes=d["half_sizes"], rotation_axis_angles=rot,
-                      colors=d["colors"], labels=d["labels"] if any(d["labels"]) else None)
+    return rr.Boxes3D(
+        centers=d["centers"],
+        half_sizes=d["half_sizes"],
+        rotation_axis_angles=rot,
+        colors=d["colors"],
+        labels=d["labels"] if any(d["labels"]) else None,
+    )

@@ -26,8 +26,7 @@ GT_MATCH, GT_SWITCH, GT_MISS, GT_IGNORED = 0, 1, 2, 3
 TR_MATCH, TR_SWITCH, TR_FP, TR_BELOW, TR_UNSCORED, TR_IGNORED = 0, 1, 2, 3, 4, 5
 
 _GT_STATE = {MATCH: GT_MATCH, SWITCH: GT_SWITCH, MISS_OR_FP: GT_MISS}
-_TR_STATE = {MATCH: TR_MATCH, SWITCH: TR_SWITCH, MISS_OR_FP: TR_FP, BELOW_THRESHOLD: TR_BELOW,
-             UNSCORED: TR_UNSCORED}
+_TR_STATE = {MATCH: TR_MATCH, SWITCH: TR_SWITCH, MISS_OR_FP: TR_FP, BELOW_THRESHOLD: TR_BELOW, UNSCORED: TR_UNSCORED}
 COUNT_KEYS = ("tp", "fp", "fn", "ids")
 
 
@@ -39,6 +38,7 @@ class FrameView:
     tokens / track ids. trails: one ``(K, 2)`` float64 array per track (its last centres, oldest first, global
     metres). counts: ``{class: {tp, fp, fn, ids}}`` of the frame (evaluated classes only).
     """
+
     scene: str
     index: int
     sample_token: str
@@ -59,7 +59,7 @@ class FrameView:
     false_positives: list = field(default_factory=list)
     missed: list = field(default_factory=list)
     id_switches: list = field(default_factory=list)
-    caption: str = ""           # what names the frame under the title (default: its sample token)
+    caption: str = ""  # what names the frame under the title (default: its sample token)
     #: heights for the 3D view (:mod:`grutrack.render.rerun_log`): ``(N, 2) [z of the centre, height]`` metres
     #: of gt / tracks / detections, and the ego's z; None: not known (drawn on the ground, 1.5 m high)
     gt_zh: np.ndarray | None = None
@@ -84,8 +84,12 @@ def _sub_boxes(records: list) -> tuple[np.ndarray, list, list, np.ndarray]:
     xy = np.array([b["translation"][:2] for b in records], dtype=np.float64)
     wl = np.array([b["size"][:2] for b in records], dtype=np.float64)
     yaw = yaw_from_quaternion(np.array([b["rotation"] for b in records], dtype=np.float64))
-    return (np.column_stack([xy, wl, yaw]), [b["tracking_name"] for b in records],
-            [b["tracking_id"] for b in records], np.array([b["tracking_score"] for b in records], dtype=np.float64))
+    return (
+        np.column_stack([xy, wl, yaw]),
+        [b["tracking_name"] for b in records],
+        [b["tracking_id"] for b in records],
+        np.array([b["tracking_score"] for b in records], dtype=np.float64),
+    )
 
 
 def update_trails(history: dict, index: int, ids: list, boxes: np.ndarray, trail_frames: int) -> list[np.ndarray]:
@@ -105,8 +109,9 @@ def _sub_zh(records: list) -> np.ndarray:
     return np.array([[b["translation"][2], b["size"][2]] for b in records], dtype=np.float64).reshape(-1, 2)
 
 
-def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detections: dict | None = None,
-                trail_frames: int = 6) -> list[FrameView]:
+def build_views(
+    scene: Scene, results: dict, decisions: MatchDecisions, detections: dict | None = None, trail_frames: int = 6
+) -> list[FrameView]:
     """The frames of one scene, joined with the evaluator's decisions.
 
     :param scene: canonical scene with ground truth (``load_scenes(..., with_gt=True)``).
@@ -120,19 +125,27 @@ def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detectio
     g_ptr = _frame_ranges(decisions.g_frame, n_frames)
     p_ptr = _frame_ranges(decisions.p_frame, n_frames)
     classes = decisions.class_names
-    evaluated = [c for c in classes if decisions.thresholds[c] is not None or np.any(
-        decisions.g_cls == classes.index(c))]
-    last_box: dict[Any, np.ndarray] = {}       # track id -> its last submitted box (for interpolated boxes)
-    history: dict[Any, list] = {}              # track id -> [(frame index, x, y), ...]
-    last_partner: dict[Any, Any] = {}          # GT instance -> track id of its last match
+    evaluated = [
+        c for c in classes if decisions.thresholds[c] is not None or np.any(decisions.g_cls == classes.index(c))
+    ]
+    last_box: dict[Any, np.ndarray] = {}  # track id -> its last submitted box (for interpolated boxes)
+    history: dict[Any, list] = {}  # track id -> [(frame index, x, y), ...]
+    last_partner: dict[Any, Any] = {}  # GT instance -> track id of its last match
     views = []
     for i, frame in enumerate(scene.frames):
         f = frame_of.get((scene.token, frame.timestamp))
         g0, g1 = (int(g_ptr[f]), int(g_ptr[f + 1])) if f is not None else (0, 0)
         p0, p1 = (int(p_ptr[f]), int(p_ptr[f + 1])) if f is not None else (0, 0)
         # A class without an achieved threshold has no FP / IDS in the devkit's summary (None), only misses.
-        counts = {c: {"tp": 0, "fp": 0 if decisions.thresholds[c] is not None else None, "fn": 0,
-                      "ids": 0 if decisions.thresholds[c] is not None else None} for c in evaluated}
+        counts = {
+            c: {
+                "tp": 0,
+                "fp": 0 if decisions.thresholds[c] is not None else None,
+                "fn": 0,
+                "ids": 0 if decisions.thresholds[c] is not None else None,
+            }
+            for c in evaluated
+        }
 
         # Ground truth: the dataset's boxes, with the evaluator's decision where it evaluated them.
         gt = frame.gt
@@ -160,9 +173,15 @@ def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detectio
             if partner >= 0:
                 track = decisions.p_id[partner]
                 if status == SWITCH:
-                    switches.append({"instance": gid, "class": cls, "track_id": track,
-                                     "previous_track_id": last_partner.get(gid),
-                                     "xy": [round(float(v), 3) for v in gt_boxes[k, :2]]})
+                    switches.append(
+                        {
+                            "instance": gid,
+                            "class": cls,
+                            "track_id": track,
+                            "previous_track_id": last_partner.get(gid),
+                            "xy": [round(float(v), 3) for v in gt_boxes[k, :2]],
+                        }
+                    )
                 last_partner[gid] = track
 
         # Tracks: the submitted boxes plus the evaluator's interpolated ones (track gaps).
@@ -176,7 +195,7 @@ def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detectio
             if p is not None:
                 tr_state[k] = _TR_STATE[int(decisions.p_status[p])]
             last_box[tid] = np.r_[tr_boxes[k], tr_zh[k]]
-        extra = [(tid, p) for tid, p in p_eval.items() if tid in last_box]   # interpolated by the evaluator
+        extra = [(tid, p) for tid, p in p_eval.items() if tid in last_box]  # interpolated by the evaluator
         if extra:
             add = np.array([np.r_[decisions.p_xy[p], last_box[tid][2:]] for tid, p in extra])
             tr_boxes = np.vstack([tr_boxes, add[:, :5]])
@@ -189,24 +208,42 @@ def build_views(scene: Scene, results: dict, decisions: MatchDecisions, detectio
             if decisions.p_status[p] == MISS_OR_FP:
                 cls = classes[int(decisions.p_cls[p])]
                 counts[cls]["fp"] += 1
-                false_positives.append({"track_id": decisions.p_id[p], "class": cls,
-                                        "xy": [round(float(v), 3) for v in decisions.p_xy[p]]})
+                false_positives.append(
+                    {"track_id": decisions.p_id[p], "class": cls, "xy": [round(float(v), 3) for v in decisions.p_xy[p]]}
+                )
 
         trails = update_trails(history, i, tr_ids, tr_boxes, trail_frames)
 
         det = detections.get(token) if detections is not None else None
         det_boxes = det.boxes[:, [0, 1, 3, 4, 6]] if det is not None and len(det) else np.zeros((0, 5))
-        views.append(FrameView(
-            scene=scene.name, index=i, sample_token=token, timestamp=int(frame.timestamp),
-            ego_xy=np.asarray(frame.ego_translation[:2], dtype=np.float64),
-            ego_yaw=float(yaw_from_quaternion(frame.ego_rotation)[0]),
-            gt_boxes=np.asarray(gt_boxes, dtype=np.float64).reshape(-1, 5), gt_state=gt_state, gt_cls=gt_cls,
-            gt_ids=gt_ids, tr_boxes=np.asarray(tr_boxes, dtype=np.float64).reshape(-1, 5), tr_state=tr_state,
-            tr_cls=tr_cls, tr_ids=tr_ids, det_boxes=det_boxes, trails=trails, counts=counts,
-            false_positives=false_positives, missed=missed, id_switches=switches,
-            gt_zh=gt.boxes[:, [2, 5]] if gt is not None else np.zeros((0, 2)), tr_zh=tr_zh,
-            det_zh=det.boxes[:, [2, 5]] if det is not None and len(det) else np.zeros((0, 2)),
-            ego_z=float(frame.ego_translation[2])))
+        views.append(
+            FrameView(
+                scene=scene.name,
+                index=i,
+                sample_token=token,
+                timestamp=int(frame.timestamp),
+                ego_xy=np.asarray(frame.ego_translation[:2], dtype=np.float64),
+                ego_yaw=float(yaw_from_quaternion(frame.ego_rotation)[0]),
+                gt_boxes=np.asarray(gt_boxes, dtype=np.float64).reshape(-1, 5),
+                gt_state=gt_state,
+                gt_cls=gt_cls,
+                gt_ids=gt_ids,
+                tr_boxes=np.asarray(tr_boxes, dtype=np.float64).reshape(-1, 5),
+                tr_state=tr_state,
+                tr_cls=tr_cls,
+                tr_ids=tr_ids,
+                det_boxes=det_boxes,
+                trails=trails,
+                counts=counts,
+                false_positives=false_positives,
+                missed=missed,
+                id_switches=switches,
+                gt_zh=gt.boxes[:, [2, 5]] if gt is not None else np.zeros((0, 2)),
+                tr_zh=tr_zh,
+                det_zh=det.boxes[:, [2, 5]] if det is not None and len(det) else np.zeros((0, 2)),
+                ego_z=float(frame.ego_translation[2]),
+            )
+        )
     return views
 
 
@@ -233,8 +270,9 @@ def scene_errors(decisions: MatchDecisions) -> dict:
     tokens = [s for s, _ in decisions.frame_keys]
     bad_g = np.isin(decisions.g_status, (SWITCH, MISS_OR_FP))
     bad_p = decisions.p_status == MISS_OR_FP
-    per_frame = (np.bincount(decisions.g_frame[bad_g], minlength=len(tokens))
-                 + np.bincount(decisions.p_frame[bad_p], minlength=len(tokens)))
+    per_frame = np.bincount(decisions.g_frame[bad_g], minlength=len(tokens)) + np.bincount(
+        decisions.p_frame[bad_p], minlength=len(tokens)
+    )
     out: dict = {}
     for f in range(len(tokens)):
         out[tokens[f]] = out.get(tokens[f], 0) + int(per_frame[f])

@@ -16,8 +16,9 @@ class ReportKind:
     kinds its experiment may use (empty: the report has no experiment); ``reads``: what the report rule gives it,
     of ``runs`` (each run's metrics JSON and manifest: the experiment must be evaluated), ``trainings`` (the
     training logs of the experiment's GRU-KF runs, or of the report's own ``trainings`` map when it has no
-    experiment, or its own ``trainings`` map when it has ``training_roles``), ``renders`` (each run's worst-scene frames) and ``zips`` (the leaderboard zips: the experiment
-    must name its ``leaderboard_run``); ``training_roles``: the keys its ``trainings`` map must hold;
+    experiment, or its own ``trainings`` map when it has ``training_roles``), ``renders`` (each run's
+    worst-scene frames) and ``zips`` (the leaderboard zips: the experiment must name its ``leaderboard_run``);
+    ``training_roles``: the keys its ``trainings`` map must hold;
     ``no_renders``: why a report that does not read renders has none (for the error when one is given);
     ``optional_experiment``: the experiment may be left out (null)."""
 
@@ -33,10 +34,19 @@ class ReportKind:
 KINDS: dict[str, ReportKind] = {
     "demo": ReportKind("grutrack.report.demo", ("demo",), ("runs", "trainings", "renders")),
     "nusc_val": ReportKind("grutrack.report.nusc_val", ("nuscenes", "demo"), ("runs", "trainings", "renders")),
-    "nusc_test": ReportKind("grutrack.report.nusc_test", ("nuscenes", "demo"), ("zips",),
-                            no_renders="nuScenes test has no public ground truth"),
+    "nusc_test": ReportKind(
+        "grutrack.report.nusc_test",
+        ("nuscenes", "demo"),
+        ("zips",),
+        no_renders="nuScenes test has no public ground truth",
+    ),
     "av2_val": ReportKind("grutrack.report.av2_val", ("av2",), ("runs", "trainings", "renders")),
     # its experiment, when given, runs trackers without training on the validation split: reference lines
-    "semi_supervised": ReportKind("grutrack.report.semi_supervised", ("demo", "nuscenes"), ("trainings", "runs"),
-                                  training_roles=("semi_supervised", "supervised"), optional_experiment=True),
+    "semi_supervised": ReportKind(
+        "grutrack.report.semi_supervised",
+        ("demo", "nuscenes"),
+        ("trainings", "runs"),
+        training_roles=("semi_supervised", "supervised"),
+        optional_experiment=True,
+    ),
 }

@@ -44,9 +44,11 @@ def compare(table: dict, doc: MetricsDocument, row: str | None = None) -> tuple[
     name, numbers = get_row(table, row)
     values = reproduced(table, doc)
     absent = absent_columns(table, doc)
-    return name, [Comparison(col, float(numbers[col]), values[col], float(table["columns"][col]["tolerance"]),
-                             col in absent)
-                  for col in table["columns"] if col in numbers]
+    return name, [
+        Comparison(col, float(numbers[col]), values[col], float(table["columns"][col]["tolerance"]), col in absent)
+        for col in table["columns"]
+        if col in numbers
+    ]
 
 
 def _num(v: float | None, integer: bool, signed: bool = False) -> str:
@@ -64,6 +66,8 @@ def format_comparisons(table: dict, comps: list[Comparison]) -> str:
     for c in comps:
         integer = table["columns"][c.metric]["scale"] == 1
         repro = "absent" if c.absent else _num(c.reproduced, integer)
-        lines.append(f"{c.metric:<16}{_num(c.paper, integer):>10}{repro:>12}"
-                     f"{_num(c.diff, integer, True):>10}{'±' + _num(c.tolerance, integer):>11}  {c.status}")
+        lines.append(
+            f"{c.metric:<16}{_num(c.paper, integer):>10}{repro:>12}"
+            f"{_num(c.diff, integer, True):>10}{'±' + _num(c.tolerance, integer):>11}  {c.status}"
+        )
     return "\n".join(lines)

@@ -5,17 +5,29 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from grutrack.report import figures
 from grutrack.documents import SELECTION_RULES, TrainingLog, ValidationRecord
+from grutrack.report import figures
 from grutrack.report.inputs import ReportInputs
-from grutrack.report.markdown import (evaluator_line, header, image, per_class_table, provenance, runs_table, table,
-                                      num, training_provenance, worst_scene_strips)
+from grutrack.report.markdown import (
+    evaluator_line,
+    header,
+    image,
+    num,
+    per_class_table,
+    provenance,
+    runs_table,
+    table,
+    training_provenance,
+    worst_scene_strips,
+)
 from grutrack.report.paper import get_table
 
-BANNER = ("> **SYNTHETIC DATA.** Every reproduced number in this report is measured on grutrack's synthetic demo "
-          "dataset ({version}, split {split}) with simulated, detector-like detections ({detector}). The paper's "
-          "numbers further down are for the real nuScenes val split with real CenterPoint detections; they are "
-          "shown for reference only. **No comparison between the two is implied**, and no difference is computed.")
+BANNER = (
+    "> **SYNTHETIC DATA.** Every reproduced number in this report is measured on grutrack's synthetic demo "
+    "dataset ({version}, split {split}) with simulated, detector-like detections ({detector}). The paper's "
+    "numbers further down are for the real nuScenes val split with real CenterPoint detections; they are "
+    "shown for reference only. **No comparison between the two is implied**, and no difference is computed."
+)
 
 
 def build(inp: ReportInputs) -> str:
@@ -23,12 +35,26 @@ def build(inp: ReportInputs) -> str:
     docs = inp.docs()
     exp = inp.experiment or {}
     version = (next(iter(docs.values())).version or "v1.0-demo") if docs else "v1.0-demo"
-    parts = [header(f"Demo report: GRU-KF and EKF on the SYNTHETIC demo ({exp.get('split', '')})",
-                    [BANNER.format(version=version, split=exp.get("split", "?"), detector=exp.get("detector", "?"))])]
-    parts += ["", "## Reproduced on the synthetic demo", "",
-              evaluator_line(docs, *reversed(inp.cross_check_doc())), "",
-              "Overall (rates ×100, AMOTP in cm):", "",
-              runs_table(docs), "", "AMOTA per class (×100):", "", per_class_table(docs, "amota")]
+    parts = [
+        header(
+            f"Demo report: GRU-KF and EKF on the SYNTHETIC demo ({exp.get('split', '')})",
+            [BANNER.format(version=version, split=exp.get("split", "?"), detector=exp.get("detector", "?"))],
+        )
+    ]
+    parts += [
+        "",
+        "## Reproduced on the synthetic demo",
+        "",
+        evaluator_line(docs, *reversed(inp.cross_check_doc())),
+        "",
+        "Overall (rates ×100, AMOTP in cm):",
+        "",
+        runs_table(docs),
+        "",
+        "AMOTA per class (×100):",
+        "",
+        per_class_table(docs, "amota"),
+    ]
     parts += ["", _amota_figure(inp, docs)]
     strips = worst_scene_strips(inp)
     parts += ["", strips] if strips else []
@@ -42,10 +68,13 @@ def build(inp: ReportInputs) -> str:
 
 def _amota_figure(inp: ReportInputs, docs: dict) -> str:
     classes = next(iter(docs.values())).classes if docs else []
-    series = {run: [None if d.per_class[c].get("amota") is None else 100 * d.per_class[c]["amota"]
-                    for c in classes] for run, d in docs.items()}
-    path = figures.grouped_bars(inp.figures / "amota_per_class.png", classes, series,
-                                "AMOTA per class on the SYNTHETIC demo", "AMOTA ×100")
+    series = {
+        run: [None if d.per_class[c].get("amota") is None else 100 * d.per_class[c]["amota"] for c in classes]
+        for run, d in docs.items()
+    }
+    path = figures.grouped_bars(
+        inp.figures / "amota_per_class.png", classes, series, "AMOTA per class on the SYNTHETIC demo", "AMOTA ×100"
+    )
     return image(path, inp.out.parent, "AMOTA per class on the synthetic demo")
 
 
@@ -57,14 +86,24 @@ def _training_sections(inp: ReportInputs) -> list[str]:
         if not tl.steps:
             out += ["", f"## Training '{label}'", "", _no_step(Path(log).parent / "training.yaml")]
             continue
-        path = figures.lines(inp.figures / f"training_{label}.png",
-                             {"loss": ([s.step for s in tl.steps], [s.loss for s in tl.steps])},
-                             f"GRU-KF training '{label}' (SYNTHETIC demo)", "step", "loss per scene")
+        path = figures.lines(
+            inp.figures / f"training_{label}.png",
+            {"loss": ([s.step for s in tl.steps], [s.loss for s in tl.steps])},
+            f"GRU-KF training '{label}' (SYNTHETIC demo)",
+            "step",
+            "loss per scene",
+        )
         last, val = tl.steps[-1], tl.validated()
-        out += ["", f"## Training '{label}'", "",
-                f"{last.step} steps over {last.epoch + 1} epoch(s); last scene loss {last.loss:.4g}"
-                + (f"; last validation AMOTA {val[-1].val_amota:.3f}" if val else "") + ".", "",
-                image(path, inp.out.parent, f"training loss of {label}")]
+        out += [
+            "",
+            f"## Training '{label}'",
+            "",
+            f"{last.step} steps over {last.epoch + 1} epoch(s); last scene loss {last.loss:.4g}"
+            + (f"; last validation AMOTA {val[-1].val_amota:.3f}" if val else "")
+            + ".",
+            "",
+            image(path, inp.out.parent, f"training loss of {label}"),
+        ]
         out += _learning_curve(inp, label, tl, Path(log).parent / "validation.json")
     return out
 
@@ -76,21 +115,34 @@ def _learning_curve(inp: ReportInputs, label: str, tl: TrainingLog, record_path:
     if not val or not record_path.is_file():
         return []
     rec = ValidationRecord.read(record_path)
-    ref = {f"{rec.reference}: {rec.reference_amota:.3f}": rec.reference_amota} \
-        if rec.reference_amota is not None else None
-    path = figures.lines(inp.figures / f"learning_curve_{label}.png",
-                         {"GRU-KF": ([r.step for r in val], [r.val_amota for r in val])},
-                         f"Validation AMOTA of '{label}' (SYNTHETIC demo)", "step", "AMOTA", hlines=ref,
-                         min_span=0.02)
+    ref = (
+        {f"{rec.reference}: {rec.reference_amota:.3f}": rec.reference_amota}
+        if rec.reference_amota is not None
+        else None
+    )
+    path = figures.lines(
+        inp.figures / f"learning_curve_{label}.png",
+        {"GRU-KF": ([r.step for r in val], [r.val_amota for r in val])},
+        f"Validation AMOTA of '{label}' (SYNTHETIC demo)",
+        "step",
+        "AMOTA",
+        hlines=ref,
+        min_span=0.02,
+    )
     n = len(rec.scenes)
     where = f"{n} scene{'s' if n != 1 else ''} held out of {rec.split}" if rec.held_out else f"the {rec.split} split"
     chosen = SELECTION_RULES[rec.rule]
     amota = "n/a" if rec.selected_amota is None else f"{rec.selected_amota:.3f}"
-    sets = (f" with {len(rec.detection_sets)} detection sets ({', '.join(rec.detection_sets)}; AMOTA their mean)"
-            if len(rec.detection_sets) > 1 else "")
-    text = (f"Validated on {where} ({', '.join(rec.scenes)}){sets}, not trained on; step 0 is the network before "
-            f"training. model.pt holds step {rec.selected_step} ({chosen}, AMOTA {amota})"
-            + (f"; {rec.reference} on the same scenes: {rec.reference_amota:.3f}." if ref else "."))
+    sets = (
+        f" with {len(rec.detection_sets)} detection sets ({', '.join(rec.detection_sets)}; AMOTA their mean)"
+        if len(rec.detection_sets) > 1
+        else ""
+    )
+    text = (
+        f"Validated on {where} ({', '.join(rec.scenes)}){sets}, not trained on; step 0 is the network before "
+        f"training. model.pt holds step {rec.selected_step} ({chosen}, AMOTA {amota})"
+        + (f"; {rec.reference} on the same scenes: {rec.reference_amota:.3f}." if ref else ".")
+    )
     return ["", text, "", image(path, inp.out.parent, f"validation AMOTA of {label}")]
 
 
@@ -99,10 +151,12 @@ def _no_step(cfg_path: Path) -> str:
     import yaml
 
     cfg = yaml.safe_load(cfg_path.read_text()) if cfg_path.is_file() else {}
-    net = {**cfg, **(cfg.get("network") or {})}     # the network's options: nested, or flat in older configs
+    net = {**cfg, **(cfg.get("network") or {})}  # the network's options: nested, or flat in older configs
     if net.get("gap_bins") == 0 and net.get("gain_prior", "constant") == "constant":
-        return ("No training step: the network as initialised, whose gain is one constant, the EKF's mean gain "
-                "on the training data (the constant-gain ablation).")
+        return (
+            "No training step: the network as initialised, whose gain is one constant, the EKF's mean gain "
+            "on the training data (the constant-gain ablation)."
+        )
     return "No training step: the network as initialised (its gain prior)."
 
 
@@ -110,6 +164,7 @@ def _paper_table(inp: ReportInputs) -> str:
     """Table III as printed in the paper (PAPER numbers)."""
     tbl = get_table(inp.paper, "III")
     cols = list(tbl["columns"])
-    rows = [[row] + [num(v.get(c), integer=tbl["columns"][c]["scale"] == 1) for c in cols]
-            for row, v in tbl["rows"].items()]
+    rows = [
+        [row] + [num(v.get(c), integer=tbl["columns"][c]["scale"] == 1) for c in cols] for row, v in tbl["rows"].items()
+    ]
     return f"**Paper numbers**, {tbl['title']}:\n\n" + table(["method"] + cols, rows)

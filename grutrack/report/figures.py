@@ -19,8 +19,9 @@ def _save(fig, path: Path) -> Path:
     return Path(path)
 
 
-def grouped_bars(path: str | Path, categories: list[str], series: dict[str, list[float | None]], title: str,
-                 ylabel: str) -> Path:
+def grouped_bars(
+    path: str | Path, categories: list[str], series: dict[str, list[float | None]], title: str, ylabel: str
+) -> Path:
     """Bars per category, one colour per series (None bars are left out)."""
     fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * len(categories) + 2), 3.6))
     width = 0.8 / max(1, len(series))
@@ -36,8 +37,7 @@ def grouped_bars(path: str | Path, categories: list[str], series: dict[str, list
     return _save(fig, Path(path))
 
 
-def _finish(ax, title: str, xlabel: str, ylabel: str, hlines: dict[str, float] | None,
-            min_span: float | None) -> None:
+def _finish(ax, title: str, xlabel: str, ylabel: str, hlines: dict[str, float] | None, min_span: float | None) -> None:
     """Labelled horizontal reference lines, a y span of at least ``min_span`` (centred on the data), axis labels,
     title, grid and legend."""
     for label, y in (hlines or {}).items():
@@ -55,8 +55,15 @@ def _finish(ax, title: str, xlabel: str, ylabel: str, hlines: dict[str, float] |
     ax.legend(fontsize=8)
 
 
-def lines(path: str | Path, series: dict[str, tuple[list[float], list[float]]], title: str, xlabel: str,
-          ylabel: str, hlines: dict[str, float] | None = None, min_span: float | None = None) -> Path:
+def lines(
+    path: str | Path,
+    series: dict[str, tuple[list[float], list[float]]],
+    title: str,
+    xlabel: str,
+    ylabel: str,
+    hlines: dict[str, float] | None = None,
+    min_span: float | None = None,
+) -> Path:
     """Line plot of (x, y) series, with optional labelled horizontal reference lines; the y axis spans at
     least ``min_span`` (centred on the data), so that differences below it do not fill the plot."""
     fig, ax = plt.subplots(figsize=(6.0, 3.6))
@@ -66,14 +73,20 @@ def lines(path: str | Path, series: dict[str, tuple[list[float], list[float]]], 
     return _save(fig, Path(path))
 
 
-def bands(path: str | Path, groups: dict[str, tuple[list[float], list[float], list[float], list[float]]],
-          title: str, xlabel: str, ylabel: str, min_span: float | None = None,
-          hlines: dict[str, float] | None = None) -> Path:
+def bands(
+    path: str | Path,
+    groups: dict[str, tuple[list[float], list[float], list[float], list[float]]],
+    title: str,
+    xlabel: str,
+    ylabel: str,
+    min_span: float | None = None,
+    hlines: dict[str, float] | None = None,
+) -> Path:
     """Per group, the mean line over its runs and the band from their minimum to their maximum:
     ``groups[label] = (x, mean, low, high)``; optional labelled horizontal reference lines."""
     fig, ax = plt.subplots(figsize=(6.0, 3.6))
     for label, (x, mean, lo, hi) in groups.items():
-        line, = ax.plot(x, mean, marker="o", markersize=3, label=label)
+        (line,) = ax.plot(x, mean, marker="o", markersize=3, label=label)
         ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2, linewidth=0)
     _finish(ax, title, xlabel, ylabel, hlines, min_span)
     return _save(fig, Path(path))

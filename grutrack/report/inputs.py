@@ -6,8 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from grutrack.errors import InputFormatError
 from grutrack.documents import CrossCheckDocument, MetricsDocument
+from grutrack.errors import InputFormatError
 
 
 @dataclass
@@ -19,14 +19,14 @@ class ReportInputs:
     figures: Path
     paper: dict
     paper_path: str
-    experiment: dict | None = None                             # name, dataset, split, detector
-    runs: dict[str, Path] = field(default_factory=dict)        # run -> metrics JSON
+    experiment: dict | None = None  # name, dataset, split, detector
+    runs: dict[str, Path] = field(default_factory=dict)  # run -> metrics JSON
     rows: dict[str, dict[str, str]] = field(default_factory=dict)  # paper table -> paper row -> run
     extra_rows: dict[str, dict[str, str]] = field(default_factory=dict)  # paper table -> row not in it -> run
     train_logs: dict[str, Path] = field(default_factory=dict)  # label -> train_log.csv
-    zips: dict[str, Path] = field(default_factory=dict)        # detector -> leaderboard zip
-    renders: dict[str, Path] = field(default_factory=dict)     # run -> counts.json of its `grutrack render`
-    cross_check: tuple[str, Path] | None = None                # (run, its `grutrack cross-check` JSON)
+    zips: dict[str, Path] = field(default_factory=dict)  # detector -> leaderboard zip
+    renders: dict[str, Path] = field(default_factory=dict)  # run -> counts.json of its `grutrack render`
+    cross_check: tuple[str, Path] | None = None  # (run, its `grutrack cross-check` JSON)
     _docs: dict | None = None
 
     def cross_check_doc(self) -> tuple[str | None, CrossCheckDocument | None]:
@@ -51,4 +51,3 @@ class ReportInputs:
                 raise InputFormatError(f"table {tid} row '{row}' is mapped to run '{run}', which has no --run")
             out[row] = docs[run]
         return out
-

@@ -52,8 +52,13 @@ def mirror_tables(tbl: dict, docs: dict[str, dict | None], extra: dict[str, dict
             elif diff_to is None:
                 out.append(num(values[c], column_is_count(tbl, c)))
             else:
-                out.append(num(None if values[c] is None or c not in diff_to else values[c] - diff_to[c],
-                               column_is_count(tbl, c), signed=True))
+                out.append(
+                    num(
+                        None if values[c] is None or c not in diff_to else values[c] - diff_to[c],
+                        column_is_count(tbl, c),
+                        signed=True,
+                    )
+                )
         return out
 
     for row, numbers in tbl["rows"].items():
@@ -66,9 +71,16 @@ def mirror_tables(tbl: dict, docs: dict[str, dict | None], extra: dict[str, dict
         repro_rows.append([f"{row} (not in the paper)"] + cells(reproduced(tbl, doc), absent_columns(tbl, doc)))
     out = [f"**Paper numbers** ({tbl['title']}; as printed in the paper):", "", table(["method"] + cols, paper_rows)]
     if repro_rows:
-        out += ["", "**Reproduced** (same layout; read from the metrics JSONs listed under Provenance):", "",
-                table(["method"] + cols, repro_rows), "", "**Difference** (reproduced − paper, in the paper's unit):",
-                "", table(["method"] + cols, diff_rows)]
+        out += [
+            "",
+            "**Reproduced** (same layout; read from the metrics JSONs listed under Provenance):",
+            "",
+            table(["method"] + cols, repro_rows),
+            "",
+            "**Difference** (reproduced − paper, in the paper's unit):",
+            "",
+            table(["method"] + cols, diff_rows),
+        ]
     return "\n".join(out)
 
 
@@ -81,9 +93,11 @@ def setting_note(tbl: dict, experiment: dict | None, detections: str | None = No
     same_det = detections is None or detections.lower().replace("_", "") in tbl.get("detections", "").lower()
     if paper == ours and same_det:
         return ""
-    return (f"> **Different setting.** The paper's numbers are on {paper[0]} {paper[1]} with {tbl.get('detections')} "
-            f"detections; the reproduced ones on {ours[0]} {ours[1]} with {detections or '?'} detections, so the "
-            f"differences below mostly measure that, not the method.")
+    return (
+        f"> **Different setting.** The paper's numbers are on {paper[0]} {paper[1]} with {tbl.get('detections')} "
+        f"detections; the reproduced ones on {ours[0]} {ours[1]} with {detections or '?'} detections, so the "
+        f"differences below mostly measure that, not the method."
+    )
 
 
 def detections_line(experiment: dict | None) -> str:
@@ -92,13 +106,17 @@ def detections_line(experiment: dict | None) -> str:
     exp = experiment or {}
     line = f"Detections: {exp.get('detector', '?')}."
     if exp.get("dataset") == "demo":
-        line = (f"> **SYNTHETIC DATA.** The scenes and ground truth are grutrack's SYNTHETIC demo dataset (split "
-                f"{exp.get('split', '?')}), and so are detections made from it: the reproduced numbers measure the "
-                f"trackers on synthetic data, not on nuScenes.\n\n{line}")
+        line = (
+            f"> **SYNTHETIC DATA.** The scenes and ground truth are grutrack's SYNTHETIC demo dataset (split "
+            f"{exp.get('split', '?')}), and so are detections made from it: the reproduced numbers measure the "
+            f"trackers on synthetic data, not on nuScenes.\n\n{line}"
+        )
     if exp.get("simulated"):
-        line = (f"> **SYNTHETIC DETECTIONS.** The detections ({exp.get('detector')}) were simulated from the ground "
-                f"truth by `grutrack simulate-detections` (a detector model, not a real detector): the reproduced "
-                f"numbers measure the trackers on them, not on a real detector's output.\n\n{line}")
+        line = (
+            f"> **SYNTHETIC DETECTIONS.** The detections ({exp.get('detector')}) were simulated from the ground "
+            f"truth by `grutrack simulate-detections` (a detector model, not a real detector): the reproduced "
+            f"numbers measure the trackers on them, not on a real detector's output.\n\n{line}"
+        )
     return line
 
 
@@ -123,16 +141,33 @@ def provenance(runs: dict[str, str], docs: dict[str, MetricsDocument]) -> str:
             continue
         cfg = m.tracker_config
         config = f"`{cfg.path}` (config hash {cfg.config_hash or DASH})"
-        rows.append([run, f"`{path}`", m.tracker or DASH, file_cell(m.detections), file_cell(m.checkpoint), config,
-                     f"{m.grutrack_version or DASH} (code {m.code_version or DASH})"])
-    return table(["run", "metrics JSON", "tracker", "detections", "checkpoint", "tracker config", "grutrack"],
-                 rows, "l" * 7)
+        rows.append(
+            [
+                run,
+                f"`{path}`",
+                m.tracker or DASH,
+                file_cell(m.detections),
+                file_cell(m.checkpoint),
+                config,
+                f"{m.grutrack_version or DASH} (code {m.code_version or DASH})",
+            ]
+        )
+    return table(
+        ["run", "metrics JSON", "tracker", "detections", "checkpoint", "tracker config", "grutrack"], rows, "l" * 7
+    )
 
 
 def header(title: str, lines: list[str], source: str = "metrics JSONs written by `grutrack evaluate`") -> str:
     """Title, generator line (naming what the report reads) and notes."""
-    return "\n".join([f"# {title}", "", f"Generated by grutrack {__version__} (`grutrack report`) from {source}; no "
-                      f"metric is recomputed here.", "", *lines])
+    return "\n".join(
+        [
+            f"# {title}",
+            "",
+            f"Generated by grutrack {__version__} (`grutrack report`) from {source}; no metric is recomputed here.",
+            "",
+            *lines,
+        ]
+    )
 
 
 def image(path: Path, md_dir: Path, alt: str) -> str:
@@ -150,8 +185,17 @@ def _inside(path: Path, folder: Path) -> bool:
 
 
 #: overall columns of a nuScenes metrics JSON shown in run tables: (key, header, scale)
-NUSC_OVERALL = (("amota", "AMOTA", 100), ("amotp", "AMOTP", 100), ("mota", "MOTA", 100), ("recall", "recall", 100),
-                ("ids", "IDS", 1), ("frag", "FRAG", 1), ("tp", "TP", 1), ("fp", "FP", 1), ("fn", "FN", 1))
+NUSC_OVERALL = (
+    ("amota", "AMOTA", 100),
+    ("amotp", "AMOTP", 100),
+    ("mota", "MOTA", 100),
+    ("recall", "recall", 100),
+    ("ids", "IDS", 1),
+    ("frag", "FRAG", 1),
+    ("tp", "TP", 1),
+    ("fp", "FP", 1),
+    ("fn", "FN", 1),
+)
 #: overall columns of an AV2 metrics JSON (Table I average over its classes with ground truth)
 AV2_OVERALL = (("hota", "HOTA", 100), ("mota", "MOTA", 100), ("idf1", "IDF1", 100))
 
@@ -168,9 +212,16 @@ def runs_table(docs: dict[str, MetricsDocument], columns=NUSC_OVERALL) -> str:
 def per_class_table(docs: dict[str, MetricsDocument], key: str = "amota", scale: float = 100) -> str:
     """One row per class, one column per run, of one per-class metric (a class without ground truth: absent)."""
     classes = next(iter(docs.values())).classes if docs else []
-    rows = [[c] + [ABSENT_TEXT if d.is_absent(c) else
-                   num(None if d.per_class.get(c, {}).get(key) is None else d.per_class[c][key] * scale)
-                   for d in docs.values()] for c in classes]
+    rows = [
+        [c]
+        + [
+            ABSENT_TEXT
+            if d.is_absent(c)
+            else num(None if d.per_class.get(c, {}).get(key) is None else d.per_class[c][key] * scale)
+            for d in docs.values()
+        ]
+        for c in classes
+    ]
     return table(["class"] + list(docs), rows)
 
 
@@ -184,14 +235,20 @@ def check_section(tid: str, tbl: dict, row_docs: dict[str, MetricsDocument]) -> 
         _, comps = compare(tbl, doc, row)
         for c in comps:
             integer = column_is_count(tbl, c.metric)
-            rows.append([f"{tid}: {row}", c.metric, num(c.paper, integer),
-                         ABSENT_TEXT if c.absent else num(c.reproduced, integer),
-                         num(c.diff, integer, signed=True), "±" + num(c.tolerance, integer),
-                         "absent, not checked" if c.absent else "within" if c.ok else "**OUT**"])
+            rows.append(
+                [
+                    f"{tid}: {row}",
+                    c.metric,
+                    num(c.paper, integer),
+                    ABSENT_TEXT if c.absent else num(c.reproduced, integer),
+                    num(c.diff, integer, signed=True),
+                    "±" + num(c.tolerance, integer),
+                    "absent, not checked" if c.absent else "within" if c.ok else "**OUT**",
+                ]
+            )
     if not rows:
         return "_No reproduced row._"
-    return table(["paper row", "metric", "paper", "reproduced", "difference", "tolerance", "status"], rows,
-                 "llrrrrl")
+    return table(["paper row", "metric", "paper", "reproduced", "difference", "tolerance", "status"], rows, "llrrrrl")
 
 
 def training_provenance(train_logs: dict[str, Path]) -> str:
@@ -209,13 +266,28 @@ def training_provenance(train_logs: dict[str, Path]) -> str:
         cfg_hash = config_hash(yaml.safe_load(cfg_path.read_text())) if cfg_path.is_file() else DASH
         model_txt = f"`{model}` (sha256 {short(sha256_file(model))})" if model.is_file() else DASH
         steps = TrainingLog.read(log).steps if Path(log).is_file() else None
-        done = (f"{steps[-1].step} steps, {steps[-1].epoch + 1} epochs" if steps else
-                "no step (the initialised network)" if steps is not None else DASH)
+        done = (
+            f"{steps[-1].step} steps, {steps[-1].epoch + 1} epochs"
+            if steps
+            else "no step (the initialised network)"
+            if steps is not None
+            else DASH
+        )
         synthetic = training_synthetic(cfg_path)
-        rows.append([label, training_data(cfg_path), "SYNTHETIC: " + ", ".join(synthetic) if synthetic else "none",
-                     done, f"`{log}`", f"`{cfg_path}` (config hash {cfg_hash})", model_txt])
-    return table(["training", "trained on", "synthetic data", "length", "log", "training config", "checkpoint"],
-                 rows, "lllllll")
+        rows.append(
+            [
+                label,
+                training_data(cfg_path),
+                "SYNTHETIC: " + ", ".join(synthetic) if synthetic else "none",
+                done,
+                f"`{log}`",
+                f"`{cfg_path}` (config hash {cfg_hash})",
+                model_txt,
+            ]
+        )
+    return table(
+        ["training", "trained on", "synthetic data", "length", "log", "training config", "checkpoint"], rows, "lllllll"
+    )
 
 
 def training_synthetic(cfg_path: Path) -> list[str]:
@@ -228,7 +300,7 @@ def training_synthetic(cfg_path: Path) -> list[str]:
     for line in Path(cfg_path).read_text().splitlines():
         if line.startswith("# data "):
             try:
-                found = json.loads(line[len("# data "):]).get("synthetic", [])
+                found = json.loads(line[len("# data ") :]).get("synthetic", [])
             except (ValueError, AttributeError):
                 return []
             return [str(x) for x in found] if isinstance(found, list) else []
@@ -241,33 +313,44 @@ def synthetic_training_banner(train_logs: dict[str, Path]) -> str | None:
     items = [(label, what) for label, what in items if what]
     if not items:
         return None
-    return ("> **SYNTHETIC TRAINING DATA.** The GRU-KF rows depend on trainings that used synthetic data: "
-            + "; ".join(f"`{label}`: {', '.join(what)}" for label, what in items)
-            + ". Their numbers measure the method trained so, not trained on a real detector's output alone.")
+    return (
+        "> **SYNTHETIC TRAINING DATA.** The GRU-KF rows depend on trainings that used synthetic data: "
+        + "; ".join(f"`{label}`: {', '.join(what)}" for label, what in items)
+        + ". Their numbers measure the method trained so, not trained on a real detector's output alone."
+    )
 
 
-def evaluator_line(docs: dict[str, MetricsDocument], cross_check: CrossCheckDocument | None = None,
-                   run: str | None = None) -> str:
+def evaluator_line(
+    docs: dict[str, MetricsDocument], cross_check: CrossCheckDocument | None = None, run: str | None = None
+) -> str:
     """Which evaluator made the numbers and, with a cross-check, how the devkit and the fast evaluator compared
     on ``run``."""
     used = sorted({d.evaluator for d in docs.values()})
-    names = {"devkit": "nuscenes-devkit `TrackingEval` (`tracking_nips_2019`)",
-             "fast": "grutrack's fast exact evaluator (nuscenes-devkit `TrackingEval`'s metrics, re-implemented; "
-                     "`grutrack evaluate --evaluator fast`)",
-             "official": "the official AV2 tracking evaluation (`av2.evaluation.tracking.eval`, HOTA via TrackEval)"}
+    names = {
+        "devkit": "nuscenes-devkit `TrackingEval` (`tracking_nips_2019`)",
+        "fast": "grutrack's fast exact evaluator (nuscenes-devkit `TrackingEval`'s metrics, re-implemented; "
+        "`grutrack evaluate --evaluator fast`)",
+        "official": "the official AV2 tracking evaluation (`av2.evaluation.tracking.eval`, HOTA via TrackEval)",
+    }
     line = "Evaluated with " + " and ".join(names.get(e, e) for e in used) + "."
     if cross_check is None:
         return line
     cc = cross_check
-    where = (f"{len(cc.scenes)} of the split's {cc.split_scenes} scenes, evenly spaced ({cc.samples} samples)"
-             if cc.subset else f"all {cc.split_scenes} scenes of the split")
+    where = (
+        f"{len(cc.scenes)} of the split's {cc.split_scenes} scenes, evenly spaced ({cc.samples} samples)"
+        if cc.subset
+        else f"all {cc.split_scenes} scenes of the split"
+    )
     diff = "an entry differing in kind" if cc.max_abs_difference is None else f"{cc.max_abs_difference:.2g}"
-    verdict = (f"**equal** to {cc.tolerance:g}" if cc.equal else
-               f"**NOT EQUAL** (largest difference in `{cc.worst_entry}`)")
-    return (f"{line} Cross-check: run `{run or '?'}` scored by both nuscenes-devkit `TrackingEval` and the fast "
-            f"evaluator on {where}: all {cc.entries} entries of the metrics summary compared, largest absolute "
-            f"difference {diff}: {verdict} (devkit {cc.seconds.get('devkit') or 0:.0f} s, fast "
-            f"{cc.seconds.get('fast') or 0:.1f} s; `grutrack cross-check`).")
+    verdict = (
+        f"**equal** to {cc.tolerance:g}" if cc.equal else f"**NOT EQUAL** (largest difference in `{cc.worst_entry}`)"
+    )
+    return (
+        f"{line} Cross-check: run `{run or '?'}` scored by both nuscenes-devkit `TrackingEval` and the fast "
+        f"evaluator on {where}: all {cc.entries} entries of the metrics summary compared, largest absolute "
+        f"difference {diff}: {verdict} (devkit {cc.seconds.get('devkit') or 0:.0f} s, fast "
+        f"{cc.seconds.get('fast') or 0:.1f} s; `grutrack cross-check`)."
+    )
 
 
 def training_data(cfg_path: Path) -> str:
@@ -279,11 +362,13 @@ def training_data(cfg_path: Path) -> str:
     for line in Path(cfg_path).read_text().splitlines():
         if line.startswith("# data "):
             try:
-                d = json.loads(line[len("# data "):])
+                d = json.loads(line[len("# data ") :])
             except ValueError:
                 return DASH
-            return (f"split {d.get('split', '?')} of {d.get('version', '?')} at `{d.get('dataroot', '?')}`; "
-                    f"detections `{d.get('detections', '?')}`")
+            return (
+                f"split {d.get('split', '?')} of {d.get('version', '?')} at `{d.get('dataroot', '?')}`; "
+                f"detections `{d.get('detections', '?')}`"
+            )
     return DASH
 
 
@@ -297,18 +382,27 @@ def worst_scene_strips(inp, scene_word: str = "scene") -> str:
         return ""
     from grutrack.render.draw import strip_from_counts
 
-    matching = ("the official AV2 evaluator's own CLEAR matching (an id-switch match is also a TP)"
-                if scene_word == "log" else "the evaluator's own matching")
-    parts = [WORST_SCENE_TITLE.replace("scene", scene_word), "",
-             f"Bird's-eye frames of each run's {scene_word} with the most id switches + false positives + misses "
-             "(`grutrack render --worst 1`): tracks coloured by id, false-positive tracks red, missed ground truth "
-             f"orange dashed, id switches ringed in magenta (old \u2192 new track); {matching}."]
+    matching = (
+        "the official AV2 evaluator's own CLEAR matching (an id-switch match is also a TP)"
+        if scene_word == "log"
+        else "the evaluator's own matching"
+    )
+    parts = [
+        WORST_SCENE_TITLE.replace("scene", scene_word),
+        "",
+        f"Bird's-eye frames of each run's {scene_word} with the most id switches + false positives + misses "
+        "(`grutrack render --worst 1`): tracks coloured by id, false-positive tracks red, missed ground truth "
+        f"orange dashed, id switches ringed in magenta (old \u2192 new track); {matching}.",
+    ]
     for run, counts in inp.renders.items():
         info = strip_from_counts(counts, inp.figures / f"worst_scene_{run}.png")
         t = info["totals"]
         sw = ", ".join(f"{a}\u2192{b}" for a, b in info["id_switches"]) or "none"
-        parts += ["", f"**{run}**: {info['scene']}, frames {', '.join(map(str, info['frames']))} "
-                      f"(id switches shown: {sw}; FP {t['fp']}, FN {t['fn']} in these frames)", "",
-                  image(inp.figures / f"worst_scene_{run}.png", inp.out.parent,
-                        f"{run}: key frames of {info['scene']}")]
+        parts += [
+            "",
+            f"**{run}**: {info['scene']}, frames {', '.join(map(str, info['frames']))} "
+            f"(id switches shown: {sw}; FP {t['fp']}, FN {t['fn']} in these frames)",
+            "",
+            image(inp.figures / f"worst_scene_{run}.png", inp.out.parent, f"{run}: key frames of {info['scene']}"),
+        ]
     return "\n".join(parts)

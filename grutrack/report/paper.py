@@ -40,8 +40,9 @@ def _check_table(path: str, tid: str, table: dict) -> None:
     for row, values in table["rows"].items():
         for col in values:
             if col not in table["columns"] and col not in ROW_INFO_KEYS:
-                raise ConfigError(f"{path}: tables.{tid}.rows.{row} has column '{col}', not one of "
-                                  f"{', '.join(table['columns'])}")
+                raise ConfigError(
+                    f"{path}: tables.{tid}.rows.{row} has column '{col}', not one of {', '.join(table['columns'])}"
+                )
 
 
 def get_table(paper: dict, tid: str) -> dict:

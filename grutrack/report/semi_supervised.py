@@ -11,12 +11,11 @@ from __future__ import annotations
 import re
 import statistics
 
+from grutrack.documents import TrainingLog, TrainingStep, ValidationRecord
 from grutrack.io import write_text_atomic
 from grutrack.report import figures
-from grutrack.documents import TrainingLog, TrainingStep, ValidationRecord
 from grutrack.report.inputs import ReportInputs
 from grutrack.report.markdown import DASH, header, image, table, training_provenance
-
 
 #: the y axis of the AMOTA figure spans at least this much, so that a flat curve looks flat
 MIN_AMOTA_SPAN = 0.1
@@ -26,25 +25,45 @@ def build(inp: ReportInputs) -> str:
     """The markdown text (figures are written into ``inp.figures``)."""
     logs = {label: TrainingLog.read(p).steps for label, p in inp.train_logs.items()}
     paper = inp.paper.get("figures", {}).get("semi_supervised", {})
-    parts = [header("Semi-supervised vs supervised training of the GRU-KF",
-                    ["Validation AMOTA is the one logged by `grutrack train` (`val_amota` of train_log.csv, "
-                     "official semantics). The paper's figure is on real nuScenes; the runs here were trained on "
-                     "the data in the \"trained on\" column under Provenance (the SYNTHETIC demo by default), so "
-                     "the curves show the method's behaviour, not the paper's values."],
-                    source="the training logs (train_log.csv) written by `grutrack train`")]
+    parts = [
+        header(
+            "Semi-supervised vs supervised training of the GRU-KF",
+            [
+                "Validation AMOTA is the one logged by `grutrack train` (`val_amota` of train_log.csv, "
+                "official semantics). The paper's figure is on real nuScenes; the runs here were trained on "
+                "the data in the \"trained on\" column under Provenance (the SYNTHETIC demo by default), so "
+                "the curves show the method's behaviour, not the paper's values."
+            ],
+            source="the training logs (train_log.csv) written by `grutrack train`",
+        )
+    ]
     groups = _groups(logs)
     refs = _references(inp)
     parts += ["", "## Validation AMOTA against step", "", _figure(inp, logs, refs), ""]
     if refs:
-        parts += ["Reference lines: AMOTA of trackers without training on the same validation scenes and "
-                  "detections (" + ", ".join(f"{k} {v:.4f}" for k, v in refs.items()) + ").", ""]
+        parts += [
+            "Reference lines: AMOTA of trackers without training on the same validation scenes and "
+            "detections (" + ", ".join(f"{k} {v:.4f}" for k, v in refs.items()) + ").",
+            "",
+        ]
     if any(len(g) > 1 for g in groups.values()):
         parts += [_band_figure(inp, logs, groups, refs), "", "## Across seeds", "", _across(logs, groups), ""]
     csv_path = _csv(inp, logs, groups)
-    parts += [f"Every validation point: [{csv_path.name}]({_relative(csv_path, inp.out.parent)}).", "",
-              "## Summary", "", _summary(logs), "",
-              "## What the paper reports (**paper numbers**, nuScenes)", "", _paper(paper),
-              "", "## Provenance", "", training_provenance(inp.train_logs)]
+    parts += [
+        f"Every validation point: [{csv_path.name}]({_relative(csv_path, inp.out.parent)}).",
+        "",
+        "## Summary",
+        "",
+        _summary(logs),
+        "",
+        "## What the paper reports (**paper numbers**, nuScenes)",
+        "",
+        _paper(paper),
+        "",
+        "## Provenance",
+        "",
+        training_provenance(inp.train_logs),
+    ]
     return "\n".join(parts) + "\n"
 
 
@@ -57,8 +76,7 @@ def _references(inp: ReportInputs) -> dict[str, float]:
     of each training's own reference (``reference_amota`` of the validation.json beside its train_log.csv: the
     tracker preset's EKF on the same validation scenes and detection sets; trainings sharing a value share a
     line)."""
-    refs = {run: float(doc.overall["amota"]) for run, doc in inp.docs().items()
-            if doc.overall.get("amota") is not None}
+    refs = {run: float(doc.overall["amota"]) for run, doc in inp.docs().items() if doc.overall.get("amota") is not None}
     by_value: dict[float, list[str]] = {}
     for label, log in inp.train_logs.items():
         path = log.parent / "validation.json"
@@ -71,11 +89,19 @@ def _references(inp: ReportInputs) -> dict[str, float]:
 
 
 def _figure(inp: ReportInputs, logs: dict[str, list[TrainingStep]], refs: dict[str, float]) -> str:
-    series = {label: ([r.step for r in _validated(rows)], [r.val_amota for r in _validated(rows)])
-              for label, rows in logs.items()}
-    path = figures.lines(inp.figures / "val_amota_vs_step.png", series, "Validation AMOTA against training step",
-                         "step (one optimizer step per scene)", "validation AMOTA", hlines=refs,
-                         min_span=MIN_AMOTA_SPAN)
+    series = {
+        label: ([r.step for r in _validated(rows)], [r.val_amota for r in _validated(rows)])
+        for label, rows in logs.items()
+    }
+    path = figures.lines(
+        inp.figures / "val_amota_vs_step.png",
+        series,
+        "Validation AMOTA against training step",
+        "step (one optimizer step per scene)",
+        "validation AMOTA",
+        hlines=refs,
+        min_span=MIN_AMOTA_SPAN,
+    )
     return image(path, inp.out.parent, "validation AMOTA against step")
 
 
@@ -92,8 +118,11 @@ def _csv(inp: ReportInputs, logs: dict[str, list[TrainingStep]], groups: dict[st
     path = inp.figures / "val_amota_vs_step.csv"
     mode_of = {label: mode for mode, labels in groups.items() for label in labels}
     lines = ["training,mode,step,epoch,val_amota"]
-    lines += [f"{label},{mode_of[label]},{r.step},{r.epoch},{r.val_amota}"
-              for label, rows in logs.items() for r in _validated(rows)]
+    lines += [
+        f"{label},{mode_of[label]},{r.step},{r.epoch},{r.val_amota}"
+        for label, rows in logs.items()
+        for r in _validated(rows)
+    ]
     write_text_atomic(path, "\n".join(lines) + "\n")
     return path
 
@@ -108,8 +137,9 @@ def _relative(path, base) -> str:
         return Path(path).as_posix()
 
 
-def _band_figure(inp: ReportInputs, logs: dict[str, list[TrainingStep]], groups: dict[str, list[str]],
-                 refs: dict[str, float]) -> str:
+def _band_figure(
+    inp: ReportInputs, logs: dict[str, list[TrainingStep]], groups: dict[str, list[str]], refs: dict[str, float]
+) -> str:
     """Mean validation AMOTA of each mode's runs with their min-max band, at the steps every run logged."""
     data = {}
     for mode, labels in groups.items():
@@ -118,11 +148,21 @@ def _band_figure(inp: ReportInputs, logs: dict[str, list[TrainingStep]], groups:
         if not steps:
             continue
         vals = [[p[s] for p in per] for s in steps]
-        data[f"{mode} ({len(labels)} runs)"] = (steps, [statistics.fmean(v) for v in vals], [min(v) for v in vals],
-                                                [max(v) for v in vals])
-    path = figures.bands(inp.figures / "val_amota_vs_step_seeds.png", data,
-                         "Validation AMOTA against step: mean and min-max over seeds", "step",
-                         "validation AMOTA", min_span=MIN_AMOTA_SPAN, hlines=refs)
+        data[f"{mode} ({len(labels)} runs)"] = (
+            steps,
+            [statistics.fmean(v) for v in vals],
+            [min(v) for v in vals],
+            [max(v) for v in vals],
+        )
+    path = figures.bands(
+        inp.figures / "val_amota_vs_step_seeds.png",
+        data,
+        "Validation AMOTA against step: mean and min-max over seeds",
+        "step",
+        "validation AMOTA",
+        min_span=MIN_AMOTA_SPAN,
+        hlines=refs,
+    )
     return image(path, inp.out.parent, "validation AMOTA against step, mean and spread over seeds")
 
 
@@ -140,8 +180,10 @@ def _mean_spread(values: list[float], fmt: str) -> str:
         return DASH
     if len(values) == 1:
         return fmt.format(values[0])
-    return (f"{fmt.format(statistics.fmean(values))} ± {fmt.format(statistics.stdev(values))} "
-            f"({fmt.format(min(values))}–{fmt.format(max(values))})")
+    return (
+        f"{fmt.format(statistics.fmean(values))} ± {fmt.format(statistics.stdev(values))} "
+        f"({fmt.format(min(values))}–{fmt.format(max(values))})"
+    )
 
 
 def _across(logs: dict[str, list[TrainingStep]], groups: dict[str, list[str]]) -> str:
@@ -169,12 +211,17 @@ def _summary(logs: dict[str, list[TrainingStep]]) -> str:
     for label, log in logs.items():
         val = _validated(log)
         best = max(val, key=lambda r: r.val_amota) if val else None
-        rows.append([label, str(log[-1].step) if log else DASH, str(log[-1].epoch + 1) if log else DASH,
-                     f"{val[-1].val_amota:.3f}" if val else DASH,
-                     f"{best.val_amota:.3f} (step {best.step})" if best else DASH,
-                     _step_text(first_step_within(log))])
-    return table(["training", "steps", "epochs", "last val AMOTA", "best val AMOTA", "first step ≥ 99 % of best"],
-                 rows)
+        rows.append(
+            [
+                label,
+                str(log[-1].step) if log else DASH,
+                str(log[-1].epoch + 1) if log else DASH,
+                f"{val[-1].val_amota:.3f}" if val else DASH,
+                f"{best.val_amota:.3f} (step {best.step})" if best else DASH,
+                _step_text(first_step_within(log)),
+            ]
+        )
+    return table(["training", "steps", "epochs", "last val AMOTA", "best val AMOTA", "first step ≥ 99 % of best"], rows)
 
 
 def _step_text(step: int | None) -> str:
@@ -186,6 +233,13 @@ def _paper(paper: dict) -> str:
     rows = []
     for label in ("semi_supervised", "supervised"):
         p = paper.get(label) or {}
-        rows.append([label, str(p.get("converged_step") or DASH), str(p.get("converged_epochs") or DASH),
-                     str(p.get("amota") or DASH), p.get("text", DASH)])
+        rows.append(
+            [
+                label,
+                str(p.get("converged_step") or DASH),
+                str(p.get("converged_epochs") or DASH),
+                str(p.get("amota") or DASH),
+                p.get("text", DASH),
+            ]
+        )
     return table(["training", "converged at step", "epochs", "AMOTA", "paper says"], rows, "lrrrl")

@@ -39,8 +39,8 @@ _INVALID = 1e6  # cost of a forbidden pair; far above any threshold (costs live 
 class Matches:
     """Result of association: matched (det, track) index pairs and the unmatched indices of each side."""
 
-    dets: np.ndarray        # (K,) int64 detection indices
-    tracks: np.ndarray      # (K,) int64 track indices, aligned with ``dets``
+    dets: np.ndarray  # (K,) int64 detection indices
+    tracks: np.ndarray  # (K,) int64 track indices, aligned with ``dets``
     unmatched_dets: np.ndarray
     unmatched_tracks: np.ndarray
 
@@ -169,8 +169,13 @@ def _similarity_codes(metrics: tuple[tuple[str, ...], ...]) -> np.ndarray:
     return codes
 
 
-def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray,
-                     trk_labels: np.ndarray, stages: list[tuple[tuple[str, ...], np.ndarray]]) -> list[np.ndarray]:
+def _candidate_costs(
+    det_boxes: np.ndarray,
+    det_labels: np.ndarray,
+    trk_boxes: np.ndarray,
+    trk_labels: np.ndarray,
+    stages: list[tuple[tuple[str, ...], np.ndarray]],
+) -> list[np.ndarray]:
     """(D, T) cost matrices, one per stage, from ONE compiled geometry pass over the candidate pairs.
 
     stages: per stage, (metric name per class, cost threshold per class (C,)). A pair is a candidate of a
@@ -184,14 +189,30 @@ def _candidate_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: n
         thresholds = np.array([thr for _, thr in stages], dtype=np.float64)
         det = geometry._check_boxes(det_boxes, "detection boxes")
         trk = geometry._check_boxes(trk_boxes, "track boxes")
-        _cost_kernel(det_labels.astype(np.int64, copy=False), trk_labels.astype(np.int64, copy=False),
-                     geometry._box_terms(det), geometry._box_terms(trk), codes, thresholds, costs)
+        _cost_kernel(
+            det_labels.astype(np.int64, copy=False),
+            trk_labels.astype(np.int64, copy=False),
+            geometry._box_terms(det),
+            geometry._box_terms(trk),
+            codes,
+            thresholds,
+            costs,
+        )
     return list(costs)
 
 
-def associate(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray, trk_labels: np.ndarray,
-              first_metric: tuple[str, ...], first_threshold: np.ndarray, two_stage: bool,
-              second_metric: str, second_threshold: np.ndarray, assignment: str = "most_pairs") -> Matches:
+def associate(
+    det_boxes: np.ndarray,
+    det_labels: np.ndarray,
+    trk_boxes: np.ndarray,
+    trk_labels: np.ndarray,
+    first_metric: tuple[str, ...],
+    first_threshold: np.ndarray,
+    two_stage: bool,
+    second_metric: str,
+    second_threshold: np.ndarray,
+    assignment: str = "most_pairs",
+) -> Matches:
     """Two-stage association of D detections with T (predicted) tracks.
 
     det_boxes (D, 9), trk_boxes (T, 9): canonical boxes; labels (D,), (T,) class indices;
@@ -206,8 +227,9 @@ def associate(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarr
     return _solve_stages(solve, costs, det_labels, first_threshold, second_threshold)
 
 
-def _solve_stages(solve, costs: list[np.ndarray], det_labels: np.ndarray, first_threshold: np.ndarray,
-                  second_threshold: np.ndarray) -> Matches:
+def _solve_stages(
+    solve, costs: list[np.ndarray], det_labels: np.ndarray, first_threshold: np.ndarray, second_threshold: np.ndarray
+) -> Matches:
     """Assign on ``costs[0] (D, T)`` with the per-class ``first_threshold``, then (when a second cost
     matrix is given) on ``costs[1]`` restricted to what stage 1 left, with ``second_threshold``."""
     n_det, n_trk = costs[0].shape
@@ -224,8 +246,9 @@ def _solve_stages(solve, costs: list[np.ndarray], det_labels: np.ndarray, first_
 # public code at 694dec3): alignment GIoU (A-GIoU) similarities and a 3D centre-distance gate, on dense costs.
 
 
-def aligned_extents(boxes: np.ndarray, scale: np.ndarray | float = 1.0,
-                    quaternion: np.ndarray | None = None) -> np.ndarray:
+def aligned_extents(
+    boxes: np.ndarray, scale: np.ndarray | float = 1.0, quaternion: np.ndarray | None = None
+) -> np.ndarray:
     """Axis-aligned BEV extents of boxes whose size is scaled by ``scale`` about its centre.
 
     boxes (N, >=7); scale scalar or (N,) -> (N, 4) float64 ``[x_min, y_min, x_max, y_max]`` metres.
@@ -237,12 +260,17 @@ def aligned_extents(boxes: np.ndarray, scale: np.ndarray | float = 1.0,
     k = np.broadcast_to(np.asarray(scale, dtype=np.float64), (len(b),))
     if quaternion is None:
         b[:, 3:5] *= k[:, None]
-        c = geometry.bev_corners(b)                                # (N, 4, 2)
+        c = geometry.bev_corners(b)  # (N, 4, 2)
     else:
-        R = rotation_matrices(quaternion)                          # (N, 3, 3)
-        local = np.stack([np.array([1, 1, -1, -1]) * (0.5 * k * b[:, 4])[:, None],
-                          np.array([-1, 1, 1, -1]) * (0.5 * k * b[:, 3])[:, None],
-                          np.broadcast_to((-0.5 * k * b[:, 5])[:, None], (len(b), 4))], axis=1)   # (N, 3, 4)
+        R = rotation_matrices(quaternion)  # (N, 3, 3)
+        local = np.stack(
+            [
+                np.array([1, 1, -1, -1]) * (0.5 * k * b[:, 4])[:, None],
+                np.array([-1, 1, 1, -1]) * (0.5 * k * b[:, 3])[:, None],
+                np.broadcast_to((-0.5 * k * b[:, 5])[:, None], (len(b), 4)),
+            ],
+            axis=1,
+        )  # (N, 3, 4)
         c = (np.einsum("nij,njk->nik", R[:, :2], local) + b[:, :2, None]).transpose(0, 2, 1)
     return np.concatenate([c.min(axis=1), c.max(axis=1)], axis=1)
 
@@ -251,9 +279,14 @@ def rotation_matrices(q: np.ndarray) -> np.ndarray:
     """Rotation matrices (N, 3, 3) of quaternions ``q (N, 4) [w, x, y, z]`` (normalised first)."""
     q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
     w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
-    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-                     np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-                     np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], axis=1)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=1,
+    )
 
 
 def _rect_area(e: np.ndarray) -> np.ndarray:
@@ -261,8 +294,9 @@ def _rect_area(e: np.ndarray) -> np.ndarray:
     return (e[..., 2] - e[..., 0]) * (e[..., 3] - e[..., 1])
 
 
-def pairwise_a_giou(ext_a: np.ndarray, ext_b: np.ndarray, z_h_a: np.ndarray | None = None,
-                    z_h_b: np.ndarray | None = None) -> np.ndarray:
+def pairwise_a_giou(
+    ext_a: np.ndarray, ext_b: np.ndarray, z_h_a: np.ndarray | None = None, z_h_b: np.ndarray | None = None
+) -> np.ndarray:
     """A-GIoU between every pair of axis-aligned extents: (Na, 4), (Nb, 4) -> (Na, Nb) in (-1, 1].
 
     BEV (``z_h_*`` None): ``A-GIoU = I / U - (C - U) / C`` with I, U the intersection and union areas of the
@@ -276,8 +310,9 @@ def pairwise_a_giou(ext_a: np.ndarray, ext_b: np.ndarray, z_h_a: np.ndarray | No
     ih = np.maximum(0.0, np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]))
     inter = iw * ih
     area_a, area_b = _rect_area(a), _rect_area(b)
-    hull = ((np.maximum(a[..., 2], b[..., 2]) - np.minimum(a[..., 0], b[..., 0]))
-            * (np.maximum(a[..., 3], b[..., 3]) - np.minimum(a[..., 1], b[..., 1])))
+    hull = (np.maximum(a[..., 2], b[..., 2]) - np.minimum(a[..., 0], b[..., 0])) * (
+        np.maximum(a[..., 3], b[..., 3]) - np.minimum(a[..., 1], b[..., 1])
+    )
     if z_h_a is None:
         union = area_a + area_b - inter
         return inter / union - (hull - union) / hull
@@ -322,14 +357,26 @@ def _dense_similarity(name: str, a: np.ndarray, b: np.ndarray, qa: np.ndarray | 
         return a_giou_3d(a, b, qa)
     if name == "a_giou_bev":
         return a_giou_bev(a, b, qa)
-    fn = {"giou_3d": geometry.pairwise_giou_3d, "giou_bev": geometry.pairwise_bev_giou,
-          "iou_3d": geometry.pairwise_iou_3d, "iou_bev": geometry.pairwise_bev_iou}[name]
+    fn = {
+        "giou_3d": geometry.pairwise_giou_3d,
+        "giou_bev": geometry.pairwise_bev_giou,
+        "iou_3d": geometry.pairwise_iou_3d,
+        "iou_bev": geometry.pairwise_bev_iou,
+    }[name]
     return fn(a, b)
 
 
-def gated_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray, trk_labels: np.ndarray,
-                first_metric: tuple[str, ...], second_metric: str, gate: np.ndarray,
-                invalid: float = np.inf, det_quaternion: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def gated_costs(
+    det_boxes: np.ndarray,
+    det_labels: np.ndarray,
+    trk_boxes: np.ndarray,
+    trk_labels: np.ndarray,
+    first_metric: tuple[str, ...],
+    second_metric: str,
+    gate: np.ndarray,
+    invalid: float = np.inf,
+    det_quaternion: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Stage-1 and stage-2 cost matrices (D, T) with Fast-Poly's distance gate; cost = 1 - similarity.
 
     Stage 1: a pair is scored when its classes agree and its 3D centre distance is below ``gate[class]``
@@ -345,8 +392,8 @@ def gated_costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.nda
     same = det_labels[:, None] == trk_labels[None, :]
     radii = np.where(gate > 0, gate, np.inf)
     dist = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2)
-    valid = same & (dist < radii[det_labels][:, None])                 # stage-1 pairs
-    near = same & (dist < radii.max())                                 # Fast-Poly's union of the class masks
+    valid = same & (dist < radii[det_labels][:, None])  # stage-1 pairs
+    near = same & (dist < radii.max())  # Fast-Poly's union of the class masks
     rows, cols = np.flatnonzero(near.any(axis=1)), np.flatnonzero(near.any(axis=0))
     if len(rows) == 0:
         return c1, c2
@@ -376,8 +423,19 @@ def gated_association(cfg):
     solve = ASSIGNMENT[cfg.assignment]
 
     def run(dets, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
-        c1, c2 = gated_costs(dets.boxes, dets.labels, trk_boxes, trk_labels, cfg.first_metric, cfg.second_metric,
-                             cfg.distance_gate, invalid=_INVALID, det_quaternion=dets.extra.get("quaternion"))
-        return _solve_stages(solve, [c1, c2] if cfg.two_stage else [c1], dets.labels, cfg.first_threshold,
-                             cfg.second_threshold)
+        c1, c2 = gated_costs(
+            dets.boxes,
+            dets.labels,
+            trk_boxes,
+            trk_labels,
+            cfg.first_metric,
+            cfg.second_metric,
+            cfg.distance_gate,
+            invalid=_INVALID,
+            det_quaternion=dets.extra.get("quaternion"),
+        )
+        return _solve_stages(
+            solve, [c1, c2] if cfg.two_stage else [c1], dets.labels, cfg.first_threshold, cfg.second_threshold
+        )
+
     return run

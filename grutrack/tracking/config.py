@@ -26,12 +26,14 @@ PRESET_DIR = Path(__file__).resolve().parents[1] / "configs" / "trackers"
 SECTIONS = ("preprocessing", "association", "lifecycle", "motion", "output")
 #: keys required with the setting that reads them: key -> (setting, value); without it their schema default
 #: is a placeholder nothing reads
-NEEDED_WITH = {"association.first_metric": ("association.algorithm", "hungarian"),
-               "association.first_threshold": ("association.algorithm", "hungarian"),
-               "association.max_distance": ("association.algorithm", "greedy"),
-               "association.second_metric": ("association.two_stage", True),
-               "association.second_threshold": ("association.two_stage", True),
-               "lifecycle.delete_threshold": ("lifecycle.termination", "average_score")}
+NEEDED_WITH = {
+    "association.first_metric": ("association.algorithm", "hungarian"),
+    "association.first_threshold": ("association.algorithm", "hungarian"),
+    "association.max_distance": ("association.algorithm", "greedy"),
+    "association.second_metric": ("association.two_stage", True),
+    "association.second_threshold": ("association.two_stage", True),
+    "lifecycle.delete_threshold": ("lifecycle.termination", "average_score"),
+}
 #: per-class settings that are names (kept as tuples; the numeric ones become (7,) arrays)
 _NAMED_PER_CLASS = ("per_class_metric", "per_class_nms_metric", "per_class_geometry_filter")
 
@@ -58,11 +60,11 @@ class TrackerConfig:
     max_age: np.ndarray
     min_hits: np.ndarray
     decay_rate: np.ndarray
-    punish_num: np.ndarray      # int64 per label: predicted boxes written for at most this many missed frames
+    punish_num: np.ndarray  # int64 per label: predicted boxes written for at most this many missed frames
     motion_config: str
     model_override: dict[str, str]
     yaw_flip: bool
-    time_step: float | None     # fixed prediction step (s), None: the timestamp difference
+    time_step: float | None  # fixed prediction step (s), None: the timestamp difference
     ctra_form: str
     bicycle_form: str
     matched_box: str
@@ -98,34 +100,58 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         raise ConfigError(f"{source}: expected a mapping of sections {', '.join(SECTIONS)}")
     validate("tracker", raw, source)
     given = {f"{sec}.{key}": val for sec in SECTIONS for key, val in (raw.get(sec) or {}).items()}
-    v = {f"{sec}.{key}": _convert(given.get(f"{sec}.{key}", default), ref)
-         for sec, keys in _section_refs().items() for key, (ref, default) in keys.items()}
+    v = {
+        f"{sec}.{key}": _convert(given.get(f"{sec}.{key}", default), ref)
+        for sec, keys in _section_refs().items()
+        for key, (ref, default) in keys.items()
+    }
     for key, (setting, value) in NEEDED_WITH.items():
         if v[setting] == value and key not in given:
             raise ConfigError(f"{source}: '{key}' is required with '{setting}: {_yaml_scalar(value)}'")
     _check_model_names(v["motion.model_override"], source)
     if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
-        raise ConfigError(f"{source}: 'association.two_stage' must be false with 'association.algorithm' greedy "
-                          f"(greedy matching is one stage)")
+        raise ConfigError(
+            f"{source}: 'association.two_stage' must be false with 'association.algorithm' greedy "
+            f"(greedy matching is one stage)"
+        )
     return TrackerConfig(
         source=source,
-        score_threshold=v["preprocessing.score_threshold"], nms_threshold=v["preprocessing.nms_threshold"],
-        nms_class_aware=v["preprocessing.nms_class_aware"], measured_yaw=v["preprocessing.measured_yaw"],
-        algorithm=v["association.algorithm"], assignment=v["association.assignment"],
-        first_metric=v["association.first_metric"], first_threshold=v["association.first_threshold"],
-        two_stage=v["association.two_stage"], second_metric=v["association.second_metric"],
-        second_threshold=v["association.second_threshold"], max_distance=v["association.max_distance"],
-        max_age=v["lifecycle.max_age"], min_hits=v["lifecycle.min_hits"], decay_rate=v["lifecycle.decay_rate"],
+        score_threshold=v["preprocessing.score_threshold"],
+        nms_threshold=v["preprocessing.nms_threshold"],
+        nms_class_aware=v["preprocessing.nms_class_aware"],
+        measured_yaw=v["preprocessing.measured_yaw"],
+        algorithm=v["association.algorithm"],
+        assignment=v["association.assignment"],
+        first_metric=v["association.first_metric"],
+        first_threshold=v["association.first_threshold"],
+        two_stage=v["association.two_stage"],
+        second_metric=v["association.second_metric"],
+        second_threshold=v["association.second_threshold"],
+        max_distance=v["association.max_distance"],
+        max_age=v["lifecycle.max_age"],
+        min_hits=v["lifecycle.min_hits"],
+        decay_rate=v["lifecycle.decay_rate"],
         punish_num=v["lifecycle.punish_num"],
-        motion_config=v["motion.config"], model_override=v["motion.model_override"],
-        yaw_flip=v["motion.yaw_flip"], time_step=v["motion.time_step"], ctra_form=v["motion.ctra_form"],
-        bicycle_form=v["motion.bicycle_form"], matched_box=v["output.matched_box"],
+        motion_config=v["motion.config"],
+        model_override=v["motion.model_override"],
+        yaw_flip=v["motion.yaw_flip"],
+        time_step=v["motion.time_step"],
+        ctra_form=v["motion.ctra_form"],
+        bicycle_form=v["motion.bicycle_form"],
+        matched_box=v["output.matched_box"],
         max_boxes_per_sample=v["output.max_boxes_per_sample"],
-        score_filter=v["preprocessing.score_filter"], nms_method=v["preprocessing.nms_method"], nms_metric=v["preprocessing.nms_metric"],
-        nms_scale=v["preprocessing.nms_scale"], nms_distance_gate=v["preprocessing.nms_distance_gate"],
-        distance_gate=v["association.distance_gate"], score_update=v["lifecycle.score_update"],
-        termination=v["lifecycle.termination"], delete_threshold=v["lifecycle.delete_threshold"],
-        geometry_filter=v["motion.geometry_filter"], geometry_window=v["motion.geometry_window"])
+        score_filter=v["preprocessing.score_filter"],
+        nms_method=v["preprocessing.nms_method"],
+        nms_metric=v["preprocessing.nms_metric"],
+        nms_scale=v["preprocessing.nms_scale"],
+        nms_distance_gate=v["preprocessing.nms_distance_gate"],
+        distance_gate=v["association.distance_gate"],
+        score_update=v["lifecycle.score_update"],
+        termination=v["lifecycle.termination"],
+        delete_threshold=v["lifecycle.delete_threshold"],
+        geometry_filter=v["motion.geometry_filter"],
+        geometry_window=v["motion.geometry_window"],
+    )
 
 
 def _check_model_names(override: dict[str, str], source: str) -> None:
@@ -137,8 +163,10 @@ def _check_model_names(override: dict[str, str], source: str) -> None:
     names = sorted(m.upper() for m in MODELS)
     for cls, model in override.items():
         if model not in names:
-            raise ConfigError(f"{source}: 'motion.model_override.{cls}' must be one of {', '.join(names)} "
-                              f"(a motion model of grutrack/motion/models.py), not {model!r}")
+            raise ConfigError(
+                f"{source}: 'motion.model_override.{cls}' must be one of {', '.join(names)} "
+                f"(a motion model of grutrack/motion/models.py), not {model!r}"
+            )
 
 
 def _section_refs() -> dict[str, dict[str, tuple[str, Any]]]:
@@ -175,7 +203,7 @@ def _convert(val: Any, ref: str) -> Any:
         return float(val)
     if ref in ("posint", "nonnegint"):
         return int(val)
-    if ref == "punish":   # one integer for every class, or a map over the classes -> (7,) int64
+    if ref == "punish":  # one integer for every class, or a map over the classes -> (7,) int64
         if isinstance(val, dict):
             return np.array([int(val[c]) for c in TRACKING_CLASSES], dtype=np.int64)
         return np.full(len(TRACKING_CLASSES), int(val), dtype=np.int64)

@@ -59,5 +59,4 @@ class KalmanBackend:
 
     def concat(self, a: KFState, b: KFState) -> KFState:
         """Tracks of a then b."""
-        return KFState(np.concatenate([a.x, b.x]), np.concatenate([a.P, b.P]),
-                       np.concatenate([a.labels, b.labels]))
+        return KFState(np.concatenate([a.x, b.x]), np.concatenate([a.P, b.P]), np.concatenate([a.labels, b.labels]))

@@ -18,9 +18,13 @@ from grutrack.tracking.tracker import Tracker, TrackGroup
 DEFAULT_PRESET = {"ekf": "ekf", "grukf": "ekf", "greedy": "greedy", "ab3dmot": "ab3dmot"}
 
 
-def build_tracker(name: str = "ekf", config: str | Path | None = None,
-                  param_classes: tuple[str, ...] | None = None, checkpoint: str | Path | None = None,
-                  device: str = "auto") -> Tracker:
+def build_tracker(
+    name: str = "ekf",
+    config: str | Path | None = None,
+    param_classes: tuple[str, ...] | None = None,
+    checkpoint: str | Path | None = None,
+    device: str = "auto",
+) -> Tracker:
     """A :class:`Tracker` for ``name`` with the preset ``config`` (default: the preset named ``name``).
 
     ``param_classes``: for a dataset whose labels are not the 7 nuScenes tracking classes (e.g. AV2
@@ -32,8 +36,10 @@ def build_tracker(name: str = "ekf", config: str | Path | None = None,
     if name not in TRACKERS:
         raise ConfigError(f"unknown tracker '{name}' (available: {', '.join(TRACKERS)})")
     if checkpoint is not None and name != "grukf":
-        raise ConfigError(f"--checkpoint is for --tracker grukf; --tracker {name} has no learned model (drop "
-                          f"--checkpoint, or use --tracker grukf)")
+        raise ConfigError(
+            f"--checkpoint is for --tracker grukf; --tracker {name} has no learned model (drop "
+            f"--checkpoint, or use --tracker grukf)"
+        )
     cfg = load_tracker_config(config or DEFAULT_PRESET[name])
     index = param_index(param_classes)
     cfg = remap_config(cfg, index)
@@ -44,12 +50,11 @@ def build_tracker(name: str = "ekf", config: str | Path | None = None,
         from grutrack.motion.checkpoint import load_network
         from grutrack.tracking.grukf_backend import resolve_device
 
-        device = resolve_device(device)   # a device this machine lacks is refused before the model is read
+        device = resolve_device(device)  # a device this machine lacks is refused before the model is read
         ck = Checkpoint.read(checkpoint)  # read once: the network and the training config's matched box
         if config is None:  # the default preset writes what the network was trained to give (see grukf.yaml)
             cfg = replace(cfg, matched_box=ck.matched_box)
-        return Tracker(cfg, network_groups(load_network(ck, where=checkpoint), cfg, index, device),
-                       _association(cfg))
+        return Tracker(cfg, network_groups(load_network(ck, where=checkpoint), cfg, index, device), _association(cfg))
     return Tracker(cfg, _baseline_groups(name, cfg, index), _association(cfg))
 
 
@@ -71,17 +76,25 @@ def _association(cfg: TrackerConfig):
     return None
 
 
-def grukf_group(net, n_labels: int, device: str = "auto", train: bool = False,
-                class_index: np.ndarray | None = None, members: np.ndarray | None = None,
-                correct=None, ss_model: str | None = None) -> TrackGroup:
+def grukf_group(
+    net,
+    n_labels: int,
+    device: str = "auto",
+    train: bool = False,
+    class_index: np.ndarray | None = None,
+    members: np.ndarray | None = None,
+    correct=None,
+    ss_model: str | None = None,
+) -> TrackGroup:
     """One track group run by the GRU-Kalman filter ``net`` for the labels ``members`` (n_labels,) bool (default:
     every label); ``class_index`` (n_labels,) int maps a dataset label to the tracking class the network's
     per-class gain uses (default: identity); ``correct``, ``ss_model``: see :class:`GRUKFBackend`."""
     from grutrack.tracking.grukf_backend import GRUKFBackend
 
     members = np.ones(n_labels, dtype=bool) if members is None else np.asarray(members, dtype=bool)
-    return TrackGroup(GRUKFBackend(net, device, train=train, class_index=class_index, correct=correct,
-                                   ss_model=ss_model), members)
+    return TrackGroup(
+        GRUKFBackend(net, device, train=train, class_index=class_index, correct=correct, ss_model=ss_model), members
+    )
 
 
 def network_models(arch, cfg: TrackerConfig, index: np.ndarray) -> list[tuple[str, np.ndarray]]:
@@ -116,8 +129,10 @@ def network_groups(net, cfg: TrackerConfig, index: np.ndarray, device: str = "au
     models = network_models(net.cfg, cfg, index)
     members = np.logical_or.reduce([m for _, m in models])
     rest = ekf_groups(cfg, index, only=~members) if not members.all() else []
-    return [*(grukf_group(net, len(index), device, class_index=index, members=m, ss_model=name)
-              for name, m in models), *rest]
+    return [
+        *(grukf_group(net, len(index), device, class_index=index, members=m, ss_model=name) for name, m in models),
+        *rest,
+    ]
 
 
 def param_index(param_classes: tuple[str, ...] | None) -> np.ndarray:
@@ -132,20 +147,30 @@ def param_index(param_classes: tuple[str, ...] | None) -> np.ndarray:
 
 def remap_config(cfg: TrackerConfig, index: np.ndarray) -> TrackerConfig:
     """The config with every per-class array re-indexed by dataset label (``index`` (n_labels,))."""
-    return replace(cfg, score_threshold=cfg.score_threshold[index],
-                   first_metric=tuple(cfg.first_metric[i] for i in index),
-                   first_threshold=cfg.first_threshold[index], second_threshold=cfg.second_threshold[index],
-                   max_distance=cfg.max_distance[index], max_age=cfg.max_age[index], min_hits=cfg.min_hits[index],
-                   decay_rate=cfg.decay_rate[index], punish_num=cfg.punish_num[index],
-                   nms_metric=tuple(cfg.nms_metric[i] for i in index),
-                   nms_scale=cfg.nms_scale[index], nms_distance_gate=cfg.nms_distance_gate[index],
-                   distance_gate=cfg.distance_gate[index], delete_threshold=cfg.delete_threshold[index],
-                   geometry_filter=tuple(cfg.geometry_filter[i] for i in index),
-                   geometry_window=cfg.geometry_window[index])
+    return replace(
+        cfg,
+        score_threshold=cfg.score_threshold[index],
+        first_metric=tuple(cfg.first_metric[i] for i in index),
+        first_threshold=cfg.first_threshold[index],
+        second_threshold=cfg.second_threshold[index],
+        max_distance=cfg.max_distance[index],
+        max_age=cfg.max_age[index],
+        min_hits=cfg.min_hits[index],
+        decay_rate=cfg.decay_rate[index],
+        punish_num=cfg.punish_num[index],
+        nms_metric=tuple(cfg.nms_metric[i] for i in index),
+        nms_scale=cfg.nms_scale[index],
+        nms_distance_gate=cfg.nms_distance_gate[index],
+        distance_gate=cfg.distance_gate[index],
+        delete_threshold=cfg.delete_threshold[index],
+        geometry_filter=tuple(cfg.geometry_filter[i] for i in index),
+        geometry_window=cfg.geometry_window[index],
+    )
 
 
-def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None, backend_cls=None,
-               only: np.ndarray | None = None) -> list[TrackGroup]:
+def ekf_groups(
+    cfg: TrackerConfig, index: np.ndarray | None = None, backend_cls=None, only: np.ndarray | None = None
+) -> list[TrackGroup]:
     """One track group per state-space model in use, each with per-label (n_labels, d, d) Q, R, P0 tables.
 
     ``index`` (n_labels,) maps dataset labels to tracking classes (identity for nuScenes). Labels of other
@@ -172,8 +197,9 @@ def ekf_groups(cfg: TrackerConfig, index: np.ndarray | None = None, backend_cls=
         tables = {}
         for key in ("Q", "R", "P0"):
             d = first[key].shape[0]
-            tables[key] = np.stack([motion[TRACKING_CLASSES[c]][key] if members[i] else np.zeros((d, d))
-                                    for i, c in enumerate(index)])
+            tables[key] = np.stack(
+                [motion[TRACKING_CLASSES[c]][key] if members[i] else np.zeros((d, d)) for i, c in enumerate(index)]
+            )
         backend = (backend_cls or KalmanBackend)(model, tables["Q"], tables["R"], tables["P0"], yaw_flip=cfg.yaw_flip)
         backend = with_geometry_filter(backend, cfg)
         groups.append(TrackGroup(backend, members))

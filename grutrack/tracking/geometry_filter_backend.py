@@ -28,7 +28,7 @@ class GeometryWindow:
     mean: np.ndarray
 
     @classmethod
-    def start(cls, zwlh: np.ndarray, window: np.ndarray, mean: np.ndarray) -> "GeometryWindow":
+    def start(cls, zwlh: np.ndarray, window: np.ndarray, mean: np.ndarray) -> GeometryWindow:
         """Windows holding one measurement each. zwlh (N, 4); window (N,) int >= 1; mean (N,) bool.
 
         The array width is the largest window; a track with a smaller window W_i keeps its last W_i entries
@@ -46,7 +46,7 @@ class GeometryWindow:
         h[:, :-1] = h[:, 1:]
         h[:, -1] = zwlh
         width = h.shape[1]
-        stale = np.arange(width)[None, :] < (width - window)[:, None]   # (K, width) beyond the window
+        stale = np.arange(width)[None, :] < (width - window)[:, None]  # (K, width) beyond the window
         h[stale] = np.nan
         self.hist[rows] = h
 
@@ -55,9 +55,9 @@ class GeometryWindow:
         if len(self.hist) == 0:
             return np.zeros((0, 4))
         filled = ~np.isnan(self.hist[:, :, 0])
-        n = filled.sum(axis=1)                                            # (N,) entries per window
+        n = filled.sum(axis=1)  # (N,) entries per window
         rows = np.arange(len(self.hist))
-        s = np.sort(self.hist, axis=1)                                    # NaN sort last
+        s = np.sort(self.hist, axis=1)  # NaN sort last
         # median: the middle entry (odd n) or the mean of the two middle ones (even n), as numpy's median
         out = 0.5 * (s[rows, (n - 1) // 2] + s[rows, n // 2])
         if self.mean.any():
@@ -65,16 +65,15 @@ class GeometryWindow:
             out[self.mean] = (total / n[:, None])[self.mean]
         return out
 
-    def select(self, index: np.ndarray) -> "GeometryWindow":
+    def select(self, index: np.ndarray) -> GeometryWindow:
         """The tracks picked by a boolean mask or index array."""
         return GeometryWindow(self.hist[index], self.mean[index])
 
     @staticmethod
-    def concat(a: "GeometryWindow", b: "GeometryWindow") -> "GeometryWindow":
+    def concat(a: GeometryWindow, b: GeometryWindow) -> GeometryWindow:
         """Tracks of ``a`` followed by those of ``b`` (windows padded to the wider one)."""
         w = max(a.hist.shape[1], b.hist.shape[1])
-        pad = [np.concatenate([np.full((len(g.hist), w - g.hist.shape[1], 4), np.nan), g.hist], axis=1)
-               for g in (a, b)]
+        pad = [np.concatenate([np.full((len(g.hist), w - g.hist.shape[1], 4), np.nan), g.hist], axis=1) for g in (a, b)]
         return GeometryWindow(np.concatenate(pad), np.concatenate([a.mean, b.mean]))
 
 
@@ -104,8 +103,9 @@ class GeometryFilterBackend:
     def initiate(self, z: np.ndarray, labels: np.ndarray) -> GeometryState:
         """New tracks from detections z (N, 9)."""
         win = np.maximum(self.window[labels], 1)
-        return GeometryState(self.inner.initiate(z, labels),
-                             GeometryWindow.start(z[:, 2:6], win, self.mean[labels]), labels.copy())
+        return GeometryState(
+            self.inner.initiate(z, labels), GeometryWindow.start(z[:, 2:6], win, self.mean[labels]), labels.copy()
+        )
 
     def predict(self, s: GeometryState, dt: float) -> GeometryState:
         """Motion predicted ``dt`` seconds ahead; the geometry is constant."""
@@ -128,5 +128,8 @@ class GeometryFilterBackend:
         return GeometryState(self.inner.select(s.motion, index), s.geometry.select(index), s.labels[index])
 
     def concat(self, a: GeometryState, b: GeometryState) -> GeometryState:
-        return GeometryState(self.inner.concat(a.motion, b.motion), GeometryWindow.concat(a.geometry, b.geometry),
-                             np.concatenate([a.labels, b.labels]))
+        return GeometryState(
+            self.inner.concat(a.motion, b.motion),
+            GeometryWindow.concat(a.geometry, b.geometry),
+            np.concatenate([a.labels, b.labels]),
+        )

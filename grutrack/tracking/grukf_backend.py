@@ -23,7 +23,6 @@ import numpy as np
 import torch
 
 from grutrack.errors import ConfigError
-
 from grutrack.motion.grukf import GRUKalmanNet
 
 
@@ -38,8 +37,11 @@ def resolve_device(device: str = "auto", what: str = "--device") -> torch.device
         raise ConfigError(f"{what}: unknown torch device {device!r} (expected auto, cpu, cuda or cuda:N)") from exc
     if dev.type == "cuda":
         if not torch.cuda.is_available():
-            why = (f"this torch build ({torch.__version__}) has no CUDA support (see the README: a CUDA build "
-                   f"of torch)") if torch.version.cuda is None else "no CUDA GPU is visible"
+            why = (
+                (f"this torch build ({torch.__version__}) has no CUDA support (see the README: a CUDA build of torch)")
+                if torch.version.cuda is None
+                else "no CUDA GPU is visible"
+            )
             raise ConfigError(f"{what}: {device!r} asked for a GPU, but {why}; use auto or cpu")
         if dev.index is not None and dev.index >= torch.cuda.device_count():
             raise ConfigError(f"{what}: {device!r} but only {torch.cuda.device_count()} CUDA device(s) are visible")
@@ -84,17 +86,18 @@ class GRUState:
     @property
     def x(self) -> torch.Tensor:
         """Current state (N, m) (a view of ``rows``)."""
-        return self.rows[:, :self.m]
+        return self.rows[:, : self.m]
 
     @property
     def gain_abs_max(self) -> torch.Tensor:
         """(N,) float64: the largest |K| entry of each track's last gain."""
         return self.rows[:, -1].detach()
 
-    def with_x(self, x: torch.Tensor, P: np.ndarray | None) -> "GRUState":
+    def with_x(self, x: torch.Tensor, P: np.ndarray | None) -> GRUState:
         """The tracks with state ``x`` (N, m) and covariance ``P``, one more frame since their last update."""
-        return GRUState(torch.cat([x, self.rows[:, self.m:]], dim=1), self.hid, self.labels, self.n_updates,
-                        self.since + 1, P)
+        return GRUState(
+            torch.cat([x, self.rows[:, self.m :]], dim=1), self.hid, self.labels, self.n_updates, self.since + 1, P
+        )
 
     def take(self, r: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """(x, y_prev, post1, post2, prior1, hid) of tracks ``r`` (K,) int64: two row gathers."""
@@ -114,8 +117,15 @@ class GRUKFBackend:
     shared).
     """
 
-    def __init__(self, net: GRUKalmanNet, device: torch.device | str = "auto", train: bool = False,
-                 class_index: np.ndarray | None = None, correct=None, ss_model: str | None = None):
+    def __init__(
+        self,
+        net: GRUKalmanNet,
+        device: torch.device | str = "auto",
+        train: bool = False,
+        class_index: np.ndarray | None = None,
+        correct=None,
+        ss_model: str | None = None,
+    ):
         self.net = net
         own = ss_model is None or ss_model.upper() == net.cfg.ss_model.upper()
         self.ss = net.ss if own else net.cfg.torch_model(ss_model)
@@ -125,20 +135,21 @@ class GRUKFBackend:
         self.device = resolve_device(device) if isinstance(device, str) else device
         self.net.to(self.device)
         self.train = train
-        h = net.init_hidden(0, self.device)   # names and widths of the hidden states, in their packed order
+        h = net.init_hidden(0, self.device)  # names and widths of the hidden states, in their packed order
         self._hidden_layout = (tuple(h), tuple(v.shape[1] for v in h.values()))
         self._hidden_dtype = next(iter(h.values())).dtype
         self.kf = None
-        if net.cfg.gain_prior == "ekf":   # the prior EKF: same SS model, the network's noise tables (numpy)
+        if net.cfg.gain_prior == "ekf":  # the prior EKF: same SS model, the network's noise tables (numpy)
             from grutrack.motion.kalman import BatchKalmanFilter
             from grutrack.motion.models import make_model
 
             name = net.cfg.ss_model if own else ss_model
             params = dict(net.cfg.ss_params if own else net.cfg.model_params.get(ss_model.upper(), {}))
-            form = params.pop("form", "arc")   # the torch model's form (:meth:`GRUKFConfig.torch_model`)
+            form = params.pop("form", "arc")  # the torch model's form (:meth:`GRUKFConfig.torch_model`)
             self.kf = BatchKalmanFilter(make_model(name, form, **params), yaw_flip=net.cfg.yaw_flip)
-            self.Q, self.R, self.P0 = (getattr(net, k).detach().cpu().numpy().astype(np.float64)
-                                       for k in ("ekf_Q", "ekf_R", "ekf_P0"))
+            self.Q, self.R, self.P0 = (
+                getattr(net, k).detach().cpu().numpy().astype(np.float64) for k in ("ekf_Q", "ekf_R", "ekf_P0")
+            )
 
     def _classes(self, labels: np.ndarray) -> np.ndarray:
         """Tracking class (N,) int64 of dataset labels (N,)."""
@@ -158,7 +169,7 @@ class GRUKFBackend:
             zt = self._t(z)
             x = self.ss.init_state(zt)
             zero = np.zeros(len(z), dtype=np.int64)
-            P = None if self.kf is None else self.P0[self._classes(labels)].copy()   # P = P0 of the class
+            P = None if self.kf is None else self.P0[self._classes(labels)].copy()  # P = P0 of the class
             rows = torch.cat([x, zt, x, x, x, zt.new_zeros(len(z), 1)], dim=1)
             hid = torch.zeros(len(z), sum(self._hidden_layout[1]), dtype=self._hidden_dtype, device=self.device)
             return GRUState(rows, hid, labels.copy(), zero, zero, P)
@@ -189,7 +200,7 @@ class GRUKFBackend:
         (acceleration) slot set to 0 first."""
         x = self._coasted(s)
         P = None
-        if self.kf is not None:   # P^- = F P F^T + Q, F at the posterior
+        if self.kf is not None:  # P^- = F P F^T + Q, F at the posterior
             _, P = self.kf.predict(self._np(x), s.P, self.Q[self._classes(s.labels)], dt)
         with self._ctx():
             return s.with_x(self.ss.f(x, dt), P)
@@ -198,8 +209,9 @@ class GRUKFBackend:
         """State columns a coasting track holds at 0: the turn rate (CTRA omega, Bicycle steering angle) with
         ``coast_yaw_rate: zero``, the acceleration with ``coast_acceleration: zero``."""
         cfg = self.net.cfg
-        return ([self.ss.turn_index] if cfg.coast_yaw_rate == "zero" else []) + \
-            ([self.ss.accel_index] if cfg.coast_acceleration == "zero" else [])
+        return ([self.ss.turn_index] if cfg.coast_yaw_rate == "zero" else []) + (
+            [self.ss.accel_index] if cfg.coast_acceleration == "zero" else []
+        )
 
     def _coasted(self, s: GRUState) -> torch.Tensor:
         """The state (N, m) to predict from: ``s.x``, with the :meth:`_coast_slots` of coasting tracks
@@ -210,8 +222,8 @@ class GRUKFBackend:
             return s.x
         with self._ctx():
             held = torch.zeros(s.x.shape[1], dtype=torch.bool, device=s.x.device)
-            held[slots] = True                                                                   # (m,)
-            rows = torch.as_tensor(coasting, device=s.x.device)[:, None]                         # (N, 1)
+            held[slots] = True  # (m,)
+            rows = torch.as_tensor(coasting, device=s.x.device)[:, None]  # (N, 1)
             return torch.where(rows & held, torch.zeros((), dtype=s.x.dtype, device=s.x.device), s.x)
 
     @staticmethod
@@ -238,14 +250,31 @@ class GRUKFBackend:
             y = self._t(z)
             prior, y_prev, post1, post2, prior1, hid = s.take(r)
             K_ekf, P = self._ekf_gain(s, rows, z)
-            post, new_hidden, K = self.correct(prior, y, y_prev, post1, prior1, post2, self.hidden(hid),
-                                               self._cells(s, rows), self._counts(s, rows), K_prior=K_ekf)
+            post, new_hidden, K = self.correct(
+                prior,
+                y,
+                y_prev,
+                post1,
+                prior1,
+                post2,
+                self.hidden(hid),
+                self._cells(s, rows),
+                self._counts(s, rows),
+                K_prior=K_ekf,
+            )
             gain = K.detach().abs().amax(dim=(1, 2)).to(post.dtype)[:, None]
             new_rows = torch.cat([post, y, post, post1, prior, gain], dim=1)
             new_hid = torch.cat([new_hidden[k] for k in self._hidden_layout[0]], dim=1).to(s.hid.dtype)
-            return GRUState(s.rows.index_copy(0, r, new_rows), s.hid.index_copy(0, r, new_hid), s.labels,
-                            _incremented(s.n_updates, rows), _zeroed(s.since, rows), P, corrected=post,
-                            corrected_gain=gain)
+            return GRUState(
+                s.rows.index_copy(0, r, new_rows),
+                s.hid.index_copy(0, r, new_hid),
+                s.labels,
+                _incremented(s.n_updates, rows),
+                _zeroed(s.since, rows),
+                P,
+                corrected=post,
+                corrected_gain=gain,
+            )
 
     def measure(self, s: GRUState) -> torch.Tensor:
         """h(x) (N, 9) as a tensor (keeps the graph in training)."""
@@ -268,8 +297,14 @@ class GRUKFBackend:
         idx = np.flatnonzero(index) if np.asarray(index).dtype == bool else np.asarray(index)
         with self._ctx():
             it = torch.as_tensor(idx, device=self.device, dtype=torch.long)
-            return GRUState(s.rows.index_select(0, it), s.hid.index_select(0, it), s.labels[idx], s.n_updates[idx],
-                            s.since[idx], None if s.P is None else s.P[idx])
+            return GRUState(
+                s.rows.index_select(0, it),
+                s.hid.index_select(0, it),
+                s.labels[idx],
+                s.n_updates[idx],
+                s.since[idx],
+                None if s.P is None else s.P[idx],
+            )
 
     def concat(self, a: GRUState, b: GRUState) -> GRUState:
         """Tracks of a then b."""
@@ -278,9 +313,12 @@ class GRUKFBackend:
 
     @staticmethod
     def _concat(a: GRUState, b: GRUState) -> GRUState:
-        return GRUState(torch.cat([a.rows, b.rows]), torch.cat([a.hid, b.hid]),
-                        *(np.concatenate([getattr(a, n), getattr(b, n)]) for n in ("labels", "n_updates", "since")),
-                        None if a.P is None else np.concatenate([a.P, b.P]))
+        return GRUState(
+            torch.cat([a.rows, b.rows]),
+            torch.cat([a.hid, b.hid]),
+            *(np.concatenate([getattr(a, n), getattr(b, n)]) for n in ("labels", "n_updates", "since")),
+            None if a.P is None else np.concatenate([a.P, b.P]),
+        )
 
 
 def _zeroed(counts: np.ndarray, rows: np.ndarray) -> np.ndarray:

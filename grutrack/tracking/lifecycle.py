@@ -14,9 +14,27 @@ from numba import njit
 
 
 @njit(cache=True)
-def lifecycle_kernel(rows, det_scores, labels, scores, misses, hits, score_total, score_count, decay_rate, max_age,
-                     min_hits, delete_threshold, multiply, average_score, punish_num, frame_count, matched, alive,
-                     emit) -> None:
+def lifecycle_kernel(
+    rows,
+    det_scores,
+    labels,
+    scores,
+    misses,
+    hits,
+    score_total,
+    score_count,
+    decay_rate,
+    max_age,
+    min_hits,
+    delete_threshold,
+    multiply,
+    average_score,
+    punish_num,
+    frame_count,
+    matched,
+    alive,
+    emit,
+) -> None:
     """One frame's lifecycle of N tracks, in place.
 
     rows (K,) int64: the matched tracks, det_scores (K,): their detections' scores; labels (N,) int64;

@@ -54,8 +54,9 @@ def _nms_kernel(boxes, terms, labels, order, threshold, class_aware, keep) -> No
                 removed[j] = True
 
 
-def nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, threshold: float,
-             class_aware: bool = True) -> np.ndarray:
+def nms_keep(
+    boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, threshold: float, class_aware: bool = True
+) -> np.ndarray:
     """Greedy "blend" NMS: visit boxes of all classes in one descending-score order; each kept box
     removes the not-yet-visited boxes whose BEV IoU with it exceeds ``threshold`` (only boxes of its own
     class when ``class_aware``).
@@ -67,8 +68,15 @@ def nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, threshol
         return np.arange(n, dtype=np.int64)
     boxes = geometry._check_boxes(boxes, "boxes")
     keep = np.zeros(n, dtype=np.bool_)
-    _nms_kernel(boxes, geometry._box_terms(boxes), np.asarray(labels, dtype=np.int64),
-                np.argsort(-scores, kind="stable"), float(threshold), bool(class_aware), keep)
+    _nms_kernel(
+        boxes,
+        geometry._box_terms(boxes),
+        np.asarray(labels, dtype=np.int64),
+        np.argsort(-scores, kind="stable"),
+        float(threshold),
+        bool(class_aware),
+        keep,
+    )
     return np.flatnonzero(keep).astype(np.int64)
 
 
@@ -76,9 +84,16 @@ def nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, threshol
 NMS_METRICS = ("a_giou_bev", "iou_bev")
 
 
-def scale_nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, metric: tuple[str, ...],
-                   threshold: np.ndarray, scale: np.ndarray, radius: np.ndarray,
-                   quaternion: np.ndarray | None = None) -> np.ndarray:
+def scale_nms_keep(
+    boxes: np.ndarray,
+    scores: np.ndarray,
+    labels: np.ndarray,
+    metric: tuple[str, ...],
+    threshold: np.ndarray,
+    scale: np.ndarray,
+    radius: np.ndarray,
+    quaternion: np.ndarray | None = None,
+) -> np.ndarray:
     """Fast-Poly's scale NMS; returns the kept indices (K,) int64, class by class (label 0 first), each class in
     descending score order.
 
@@ -109,12 +124,13 @@ def scale_nms_keep(boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, me
             if removed[i]:
                 continue
             keep.append(order[i])
-            removed[i + 1:] |= over[i, i + 1:]
+            removed[i + 1 :] |= over[i, i + 1 :]
     return np.asarray(keep, dtype=np.int64)
 
 
-def _suppression_matrix(b: np.ndarray, metric: str, threshold: float, scale: float, radius: float,
-                        quaternion: np.ndarray | None = None) -> np.ndarray:
+def _suppression_matrix(
+    b: np.ndarray, metric: str, threshold: float, scale: float, radius: float, quaternion: np.ndarray | None = None
+) -> np.ndarray:
     """(N, N) bool: box i would suppress box j (centres within ``radius``, similarity above ``threshold``)."""
     near = distance_mask(b, b, radius)
     if metric == "a_giou_bev":
@@ -141,5 +157,8 @@ def preprocess_frame(dets: BoxSet, cfg) -> BoxSet:
         return dets.subset(nms_keep(dets.boxes, dets.scores, dets.labels, cfg.nms_threshold, cfg.nms_class_aware))
     thr = np.full(len(cfg.score_threshold), cfg.nms_threshold)
     gate = np.where(cfg.nms_distance_gate > 0, cfg.nms_distance_gate, np.inf)
-    return dets.subset(scale_nms_keep(dets.boxes, dets.scores, dets.labels, cfg.nms_metric, thr, cfg.nms_scale,
-                                      gate, dets.extra.get("quaternion")))
+    return dets.subset(
+        scale_nms_keep(
+            dets.boxes, dets.scores, dets.labels, cfg.nms_metric, thr, cfg.nms_scale, gate, dets.extra.get("quaternion")
+        )
+    )

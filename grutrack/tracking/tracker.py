@@ -1,4 +1,5 @@
-"""The tracking-by-detection loop (ARCHITECTURE.md, "The method"): predict, pre-process, associate, update, lifecycle, output.
+"""The tracking-by-detection loop (ARCHITECTURE.md, "The method"): predict, pre-process, associate, update,
+lifecycle, output.
 
 Tracks are kept in a few :class:`TrackGroup` s, one per motion backend (e.g. one per state-space model for
 the EKF tracker, one for the GRU-Kalman filter). Within a group every per-track quantity is an array and
@@ -8,8 +9,9 @@ each step is a handful of array operations over all its tracks; there is no Pyth
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -49,7 +51,7 @@ class TrackGroup:
     """The tracks handled by one backend; every array has one entry per track."""
 
     backend: MotionBackend
-    classes: np.ndarray                     # (n_labels,) bool: which labels this group takes
+    classes: np.ndarray  # (n_labels,) bool: which labels this group takes
     state: Any = None
     ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     labels: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
@@ -94,15 +96,15 @@ class GroupUpdate:
     tracks at this frame, K = those matched.
     """
 
-    group: int                  # index into ``Tracker.groups``
-    rows: np.ndarray            # (K,) int64 matched track rows (possibly none)
-    det_rows: np.ndarray        # (K,) int64 their detections' rows in the pre-processed frame
-    ids: np.ndarray             # (N,) int64 track ids
-    labels: np.ndarray          # (N,) int64 track labels
-    hits: np.ndarray            # (N,) int64 matched frames since birth, before this frame's update
-    misses: np.ndarray          # (N,) int64 frames since the last update (>= 1 after the predict)
-    prior: Any                  # the backend state of the N tracks after this frame's predict
-    posterior: Any              # the backend state after correcting ``rows`` (``prior`` when K = 0)
+    group: int  # index into ``Tracker.groups``
+    rows: np.ndarray  # (K,) int64 matched track rows (possibly none)
+    det_rows: np.ndarray  # (K,) int64 their detections' rows in the pre-processed frame
+    ids: np.ndarray  # (N,) int64 track ids
+    labels: np.ndarray  # (N,) int64 track labels
+    hits: np.ndarray  # (N,) int64 matched frames since birth, before this frame's update
+    misses: np.ndarray  # (N,) int64 frames since the last update (>= 1 after the predict)
+    prior: Any  # the backend state of the N tracks after this frame's predict
+    posterior: Any  # the backend state after correcting ``rows`` (``prior`` when K = 0)
 
 
 #: association of one frame: (detections after pre-processing, predicted track boxes (T, 9), track labels (T,),
@@ -111,13 +113,25 @@ AssociateFn = Callable[[BoxSet, np.ndarray, np.ndarray, float], Matches]
 
 
 def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
-    """The default association: per-class similarity, Hungarian, optional second stage (ARCHITECTURE.md, "The method")."""
+    """The default association: per-class similarity, Hungarian, optional second stage (ARCHITECTURE.md, "The
+    method")."""
     if gated_association_needed(cfg):
         return gated_association(cfg)
 
     def run(dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
-        return associate(dets.boxes, dets.labels, trk_boxes, trk_labels, cfg.first_metric, cfg.first_threshold,
-                         cfg.two_stage, cfg.second_metric, cfg.second_threshold, cfg.assignment)
+        return associate(
+            dets.boxes,
+            dets.labels,
+            trk_boxes,
+            trk_labels,
+            cfg.first_metric,
+            cfg.first_threshold,
+            cfg.two_stage,
+            cfg.second_metric,
+            cfg.second_threshold,
+            cfg.assignment,
+        )
+
     return run
 
 
@@ -140,8 +154,10 @@ class Tracker:
         self.frame_count = 0  # frames of the current scene, this one included
         self.associate = associate if associate is not None else two_stage_association(cfg)
         #: per-class lifecycle tables of :func:`lifecycle_kernel`: decay_rate, max_age, min_hits, delete_threshold
-        self._life = tuple(np.ascontiguousarray(a, dtype=np.float64)
-                           for a in (cfg.decay_rate, cfg.max_age, cfg.min_hits, cfg.delete_threshold))
+        self._life = tuple(
+            np.ascontiguousarray(a, dtype=np.float64)
+            for a in (cfg.decay_rate, cfg.max_age, cfg.min_hits, cfg.delete_threshold)
+        )
         self._punish = np.ascontiguousarray(cfg.punish_num, dtype=np.float64)  # (n_labels,) frames a track may coast
 
     def reset(self) -> None:
@@ -162,7 +178,7 @@ class Tracker:
         n = len(self.group_of_class)
         boxes = np.zeros((n + 1, 9))
         boxes[:n, 0] = 50.0 * np.arange(n)
-        boxes[n, 0] = 0.2                       # overlaps the first box: non-maximum suppression has work
+        boxes[n, 0] = 0.2  # overlaps the first box: non-maximum suppression has work
         boxes[:, 3:6] = (2.0, 4.0, 1.5)
         boxes[:, 7] = 1.0
         labels = np.append(np.arange(n), 0)
@@ -186,16 +202,18 @@ class Tracker:
         """
         return self._step(dets, timestamp, None)
 
-    def step_with_updates(self, dets: BoxSet, timestamp: int, output: bool = True
-                          ) -> tuple[BoxSet | None, list[GroupUpdate]]:
+    def step_with_updates(
+        self, dets: BoxSet, timestamp: int, output: bool = True
+    ) -> tuple[BoxSet | None, list[GroupUpdate]]:
         """:meth:`step`, also returning a :class:`GroupUpdate` per group that had tracks (training reads the
         filter states of the tracks corrected in this frame from them). ``output=False``: the same tracking
         without forming the frame's output boxes (returned as None; training reads only the updates)."""
         updates: list[GroupUpdate] = []
         return self._step(dets, timestamp, updates, output), updates
 
-    def _step(self, dets: BoxSet, timestamp: int, updates: list[GroupUpdate] | None,
-              output: bool = True) -> BoxSet | None:
+    def _step(
+        self, dets: BoxSet, timestamp: int, updates: list[GroupUpdate] | None, output: bool = True
+    ) -> BoxSet | None:
         """:meth:`step`; appends the groups' :class:`GroupUpdate` s to ``updates`` unless it is None; forms no
         output (returns None) without ``output``."""
         dt = 0.0 if self.last_timestamp is None else (timestamp - self.last_timestamp) * 1e-6
@@ -219,8 +237,14 @@ class Tracker:
                 g.state = g.backend.predict(g.state, dt)
                 g.misses += 1
 
-    def _update_groups(self, dets: BoxSet, mdets: np.ndarray, mtracks: np.ndarray,
-                       updates: list[GroupUpdate] | None, output: bool = True) -> list[BoxSet]:
+    def _update_groups(
+        self,
+        dets: BoxSet,
+        mdets: np.ndarray,
+        mtracks: np.ndarray,
+        updates: list[GroupUpdate] | None,
+        output: bool = True,
+    ) -> list[BoxSet]:
         """Correct matched tracks, decay the others, kill the expired; return each group's output (none without
         ``output``) (and append each group's :class:`GroupUpdate` to ``updates`` unless it is None)."""
         out, offset = [], 0
@@ -234,15 +258,30 @@ class Tracker:
             prior = g.state
             if len(rows):
                 g.state = g.backend.update(g.state, rows, dets.boxes[drows])
-            if updates is not None:   # copies: the lifecycle kernel changes hits and misses in place
-                updates.append(GroupUpdate(gi, rows, drows, g.ids, g.labels, g.hits.copy(), g.misses.copy(),
-                                           prior, g.state))
+            if updates is not None:  # copies: the lifecycle kernel changes hits and misses in place
+                updates.append(
+                    GroupUpdate(gi, rows, drows, g.ids, g.labels, g.hits.copy(), g.misses.copy(), prior, g.state)
+                )
             matched, alive, emit = np.empty(n, dtype=bool), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
             cfg = self.cfg
-            lifecycle_kernel(rows, dets.scores[drows], g.labels, g.scores, g.misses, g.hits, g.score_total,
-                             g.score_count, *self._life, cfg.score_update == "multiply",
-                             cfg.termination == "average_score", self._punish, self.frame_count, matched,
-                             alive, emit)
+            lifecycle_kernel(
+                rows,
+                dets.scores[drows],
+                g.labels,
+                g.scores,
+                g.misses,
+                g.hits,
+                g.score_total,
+                g.score_count,
+                *self._life,
+                cfg.score_update == "multiply",
+                cfg.termination == "average_score",
+                self._punish,
+                self.frame_count,
+                matched,
+                alive,
+                emit,
+            )
             if output:
                 boxes = g.backend.boxes(g.state)
                 if self.cfg.matched_box == "detection" and len(rows):
@@ -271,8 +310,14 @@ class Tracker:
                 if not output:
                     continue
                 show = self._confirmed(np.ones(len(d), dtype=np.int64), dets.labels[d])
-                out.append(BoxSet(g.backend.boxes(g.state)[-len(d):][show], dets.scores[d][show],
-                                  dets.labels[d][show], ids[sel][show]))
+                out.append(
+                    BoxSet(
+                        g.backend.boxes(g.state)[-len(d) :][show],
+                        dets.scores[d][show],
+                        dets.labels[d][show],
+                        ids[sel][show],
+                    )
+                )
         return _concat_boxsets(out)
 
 
@@ -280,8 +325,12 @@ def _concat_boxsets(sets: list[BoxSet]) -> BoxSet:
     sets = [s for s in sets if len(s)]
     if not sets:
         return BoxSet(empty_boxes(), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
-    return BoxSet(np.concatenate([s.boxes for s in sets]), np.concatenate([s.scores for s in sets]),
-                  np.concatenate([s.labels for s in sets]), np.concatenate([s.ids for s in sets]))
+    return BoxSet(
+        np.concatenate([s.boxes for s in sets]),
+        np.concatenate([s.scores for s in sets]),
+        np.concatenate([s.labels for s in sets]),
+        np.concatenate([s.ids for s in sets]),
+    )
 
 
 @dataclass
@@ -300,8 +349,9 @@ class TrackingRun:
         return self.frames / self.seconds if self.seconds > 0 else float("inf")
 
 
-def track_scenes(tracker: Tracker, scenes: Iterable[Scene], detections: dict[str, BoxSet],
-                 progress=None) -> TrackingRun:
+def track_scenes(
+    tracker: Tracker, scenes: Iterable[Scene], detections: dict[str, BoxSet], progress=None
+) -> TrackingRun:
     """Run ``tracker`` over every scene; ``detections`` maps sample token -> canonical detections.
 
     ``progress``: optional callable(n_frames) called after each scene (e.g. a tqdm ``update``).
@@ -312,8 +362,9 @@ def track_scenes(tracker: Tracker, scenes: Iterable[Scene], detections: dict[str
         return _track_scenes(tracker, scenes, detections, progress)
 
 
-def _track_scenes(tracker: Tracker, scenes: Iterable[Scene], detections: dict[str, BoxSet],
-                  progress=None) -> TrackingRun:
+def _track_scenes(
+    tracker: Tracker, scenes: Iterable[Scene], detections: dict[str, BoxSet], progress=None
+) -> TrackingRun:
     # the filter's linear algebra is many tiny batched solves: multi-threaded BLAS only adds thread
     # hand-offs (and stalls badly when other processes share the cores), so the loop runs single-threaded
     t0 = time.perf_counter()

@@ -9,7 +9,7 @@ before the section have them (``{gap_bins: 5}``), is read as that option of the 
 from __future__ import annotations
 
 from dataclasses import MISSING, dataclass, fields
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 from grutrack.config_loader import read_config, schema, validate
@@ -38,20 +38,20 @@ class TrainConfig:
     matched_box: str
     val_every: int
     checkpoint_every: int
-    sources: tuple = ()          # extra training sources (grutrack/training/sources.py), mappings
-    scenes_per_step: int = 1     # scenes per optimizer step (1: the paper's), the network batched over them
-    validation_scenes: int = 0   # training-split scenes held out for validation when no --val-split is given
-    select_checkpoint: str = "last"   # model.pt: "last", "best_val_amota" or "best_val_amota_1se" (selection.py)
+    sources: tuple = ()  # extra training sources (grutrack/training/sources.py), mappings
+    scenes_per_step: int = 1  # scenes per optimizer step (1: the paper's), the network batched over them
+    validation_scenes: int = 0  # training-split scenes held out for validation when no --val-split is given
+    select_checkpoint: str = "last"  # model.pt: "last", "best_val_amota" or "best_val_amota_1se" (selection.py)
     resample_mix: str = "epoch"  # resampled profiles take turns by "epoch" or are mixed over the "scene"s
-    training_classes: str = "tracked"   # the classes whose tracks train the network: "tracked" or "own_model"
-    gt_term_gate: float = 0.0    # metres: a held GT farther than this from the track gives no GT term (0: off)
-    centre_huber_delta: float = 0.0   # metres: x, y residuals beyond it cost linearly, not squared (0: squared)
-    lr_min: float = 0.0          # the cosine schedule's floor: the learning rate of the last step
-    yaw_loss: str = "heading"    # the yaw residual wrapped as a "heading" (2 pi) or an "axis" (pi)
+    training_classes: str = "tracked"  # the classes whose tracks train the network: "tracked" or "own_model"
+    gt_term_gate: float = 0.0  # metres: a held GT farther than this from the track gives no GT term (0: off)
+    centre_huber_delta: float = 0.0  # metres: x, y residuals beyond it cost linearly, not squared (0: squared)
+    lr_min: float = 0.0  # the cosine schedule's floor: the learning rate of the last step
+    yaw_loss: str = "heading"  # the yaw residual wrapped as a "heading" (2 pi) or an "axis" (pi)
     grad_clip_norm: float = 0.0  # the L2 norm a step's gradient is clipped to (0: not clipped, the paper's)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _network_schema() -> dict:
     """The schema of the ``network`` section: ``{option: schema node}``."""
     return schema("training")["properties"]["network"]["properties"]
@@ -61,8 +61,11 @@ def network_options(section: dict) -> dict:
     """The network section with every option of the schema, in its order: the given value, else the option's
     schema default (an option the section lacks and the schema has no default for stays out, for validation to
     name)."""
-    return {k: section[k] if k in section else node["default"] for k, node in _network_schema().items()
-            if k in section or "default" in node}
+    return {
+        k: section[k] if k in section else node["default"]
+        for k, node in _network_schema().items()
+        if k in section or "default" in node
+    }
 
 
 def nested(raw: dict) -> dict:
@@ -100,8 +103,9 @@ def _floats(raw: dict, props: dict) -> dict:
     return {k: _as_float(v) if props.get(k, {}).get("type") == "number" else v for k, v in raw.items()}
 
 
-def load_train_config(name_or_path: str | Path = "grukf", overrides: dict | None = None,
-                      flags: dict | None = None) -> TrainConfig:
+def load_train_config(
+    name_or_path: str | Path = "grukf", overrides: dict | None = None, flags: dict | None = None
+) -> TrainConfig:
     """Load a training config by name or path, apply ``overrides`` (key -> value; the network's options at the
     top level or in a ``network`` mapping), and validate against ``grutrack/configs/schemas/training.schema.yaml``.
 
@@ -135,15 +139,22 @@ def config_from_dict(raw: dict, source: str = "<dict>", flags: dict | None = Non
         if node.get("type") == "number" and k in raw:
             vals[k] = float(raw[k])
     network_classes = vals["network"]["network_classes"]
-    own = "network_classes" if network_classes == "own_model" else (
-        "training_classes" if vals.get("training_classes") == "own_model" else None)
+    own = (
+        "network_classes"
+        if network_classes == "own_model"
+        else ("training_classes" if vals.get("training_classes") == "own_model" else None)
+    )
     if own and vals.get("scenes_per_step", 1) > 1:
         where = (flags or {}).get("scenes_per_step", f"{source}: 'scenes_per_step'")
-        raise ConfigError(f"{where} must be 1 with {own} 'own_model' (its groups of one model each call "
-                          f"the network separately), got {vals['scenes_per_step']!r}")
+        raise ConfigError(
+            f"{where} must be 1 with {own} 'own_model' (its groups of one model each call "
+            f"the network separately), got {vals['scenes_per_step']!r}"
+        )
     if vals.get("training_classes") == "own_model" and network_classes == "all":
         where = (flags or {}).get("training_classes", f"{source}: 'training_classes'")
-        raise ConfigError(f"{where} 'own_model' needs network.network_classes 'ss_model' or 'own_model' (with 'all' "
-                          f"every class is tracked with the network's one SS model, not the one it would be trained "
-                          f"with)")
+        raise ConfigError(
+            f"{where} 'own_model' needs network.network_classes 'ss_model' or 'own_model' (with 'all' "
+            f"every class is tracked with the network's one SS model, not the one it would be trained "
+            f"with)"
+        )
     return TrainConfig(**{k: vals[k] for k in names if k in vals})

@@ -12,7 +12,7 @@ import numpy as np
 import torch
 
 from grutrack.data.scene import BoxSet, Scene
-from grutrack.motion.grukf import GRUKalmanNet, MEAS_PLANAR, STATE_PLANAR
+from grutrack.motion.grukf import MEAS_PLANAR, STATE_PLANAR, GRUKalmanNet
 from grutrack.tracking.config import TrackerConfig
 from grutrack.tracking.ekf_backend import KalmanBackend
 from grutrack.tracking.factory import network_models
@@ -30,17 +30,20 @@ def ekf_gain(backend: KalmanBackend, u: GroupUpdate) -> np.ndarray:
 
 def _rotate_gain(K: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     """Global-frame gains (N, m, 9) -> heading-frame gains: Rs(-yaw) K Rm(-yaw)^T."""
+
     def rot(n, pairs):
         R = np.tile(np.eye(n), (len(yaw), 1, 1))
         c, s = np.cos(yaw), np.sin(yaw)
         for i, j in pairs:
             R[:, i, i], R[:, i, j], R[:, j, i], R[:, j, j] = c, s, -s, c
         return R
+
     return rot(K.shape[1], STATE_PLANAR) @ K @ np.swapaxes(rot(9, MEAS_PLANAR), -1, -2)
 
 
-def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
-                  cfg: TrainConfig, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def mean_ekf_gain(
+    scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: TrackerConfig, cfg: TrainConfig, index: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """The EKF's mean heading-frame gain over all updates on the training scenes, (m, 9), and per cell of the
     gain table (*table_shape, m, 9): by class (``class_gain``), by update count 1..age_bins and by frames
     since the last update 1..gap_bins (the last bin takes the larger values too); NaN in cells without an
@@ -54,7 +57,7 @@ def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: Tra
     total = np.zeros((*shape, ekfs[0].model.dim_x, 9))
     count = np.zeros(shape, dtype=np.int64)
     tracker = Tracker(tracker_cfg, track_groups(ekfs, arch, tracker_cfg, index))
-    with threadpool_limits(limits=1, user_api="blas"):   # tiny batched solves: threads only add stalls
+    with threadpool_limits(limits=1, user_api="blas"):  # tiny batched solves: threads only add stalls
         for scene in scenes:
             tracker.reset()
             for frame in scene.frames:
@@ -63,7 +66,7 @@ def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: Tra
                         continue
                     rows = u.rows
                     c = index[u.labels[rows]] if arch.class_gain else np.zeros(len(rows), dtype=np.int64)
-                    a = np.minimum(u.hits[rows], shape[1]) - 1   # hits = 1 + the updates before this one
+                    a = np.minimum(u.hits[rows], shape[1]) - 1  # hits = 1 + the updates before this one
                     g = np.minimum(u.misses[rows], shape[2]) - 1  # misses = frames since the last update
                     np.add.at(total, (c, a, g), ekf_gain(ekfs[u.group], u))
                     np.add.at(count, (c, a, g), 1)
@@ -73,9 +76,15 @@ def mean_ekf_gain(scenes: list[Scene], dets: dict[str, BoxSet], tracker_cfg: Tra
     return shared, table
 
 
-def init_gain_prior(net: GRUKalmanNet, cfg: TrainConfig, scenes: list[Scene], dets: dict[str, BoxSet],
-                    tracker_cfg: TrackerConfig, index: np.ndarray, generator: torch.Generator | None = None
-                    ) -> None:
+def init_gain_prior(
+    net: GRUKalmanNet,
+    cfg: TrainConfig,
+    scenes: list[Scene],
+    dets: dict[str, BoxSet],
+    tracker_cfg: TrackerConfig,
+    index: np.ndarray,
+    generator: torch.Generator | None = None,
+) -> None:
     """The untrained network's starting point. ``gain_prior: constant``: the output layer's bias (and gain table)
     at the EKF's mean gain on the training data (:func:`mean_ekf_gain`). ``gain_prior: ekf``: the EKF's per-class
     Q, R, P0 of the motion config (``ss_model`` for every class) in the network; the output layer and table

@@ -18,7 +18,7 @@ class StickyGTAssociation:
 
     def __init__(self, max_distance: float = 2.0):
         self.max_distance = max_distance
-        self.held: dict[int, str] = {}   # track id -> GT instance id
+        self.held: dict[int, str] = {}  # track id -> GT instance id
 
     def held_rows(self, track_ids: np.ndarray, gt_ids: np.ndarray) -> np.ndarray:
         """GT row per track (K,) int64 of the instance each track already holds, -1 where it holds none or
@@ -29,11 +29,19 @@ class StickyGTAssociation:
         """Row (via ``row_of``: instance id -> row of this frame's GT) of the instance each track (K,) holds, -1
         where it holds none or its instance is absent (dictionary lookups: a few tens of tracks per frame)."""
         held = self.held
-        return np.fromiter((row_of.get(held.get(t), -1) for t in track_ids.tolist()), dtype=np.int64,
-                           count=len(track_ids))
+        return np.fromiter(
+            (row_of.get(held.get(t), -1) for t in track_ids.tolist()), dtype=np.int64, count=len(track_ids)
+        )
 
-    def match(self, track_ids: np.ndarray, track_xy: np.ndarray, track_labels: np.ndarray,
-              gt_ids: np.ndarray, gt_xy: np.ndarray, gt_labels: np.ndarray) -> np.ndarray:
+    def match(
+        self,
+        track_ids: np.ndarray,
+        track_xy: np.ndarray,
+        track_labels: np.ndarray,
+        gt_ids: np.ndarray,
+        gt_xy: np.ndarray,
+        gt_labels: np.ndarray,
+    ) -> np.ndarray:
         """GT row per track (K,) int64, -1 where the track has no GT this frame.
 
         track_ids (K,), track_xy (K, 2) metres, track_labels (K,); gt_ids (G,) instance ids, gt_xy (G, 2),

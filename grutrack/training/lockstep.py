@@ -15,7 +15,7 @@ at a time; on a CPU the gain is the network's per-operator overhead only.
 from __future__ import annotations
 
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 
@@ -55,17 +55,19 @@ class LockstepCorrect:
         self._correct = correct
         self._cond = threading.Condition()
         self._active = set(range(slots))
-        self._waiting: dict[int, tuple | None] = {}    # slot -> (args, kwargs), or None: a frame without request
+        self._waiting: dict[int, tuple | None] = {}  # slot -> (args, kwargs), or None: a frame without request
         self._results: dict[int, tuple] = {}
-        self._asked: set[int] = set()                  # slots that asked in their current frame
+        self._asked: set[int] = set()  # slots that asked in their current frame
         self._round = 0
         self._error: BaseException | None = None
 
     def bind(self, slot: int) -> Callable:
         """``correct`` for scene ``slot``: blocks until the round's batched call has run; returns its rows."""
+
         def correct(*args, **kwargs):
             self._asked.add(slot)
             return self._arrive(slot, (args, kwargs))
+
         return correct
 
     def frame_done(self, slot: int) -> None:
@@ -122,7 +124,7 @@ class LockstepCorrect:
         n_args = len(asks[0][1][0])
         args = [_cat([a[i] for _, (a, _) in asks]) for i in range(n_args)]
         kwargs = {k: _cat([kw[k] for _, (_, kw) in asks]) for k in asks[0][1][1]}
-        with torch.enable_grad():   # grad mode is per thread: the last to arrive may be outside its backend's context
+        with torch.enable_grad():  # grad mode is per thread: the last to arrive may be outside its backend's context
             outs = self._correct(*args, **kwargs)
         split = [_split(o, sizes) for o in outs]
         return {slot: tuple(s[i] for s in split) for i, (slot, _) in enumerate(asks)}

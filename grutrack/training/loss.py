@@ -74,8 +74,11 @@ def _residual(pred: torch.Tensor, target: torch.Tensor, yaw_period: float = 2 * 
     """pred - target (K, 9) with the yaw component wrapped to [-period/2, period/2) (2 pi: a heading; pi: an
     axis, a reversed heading has no yaw residual)."""
     r = pred - target
-    yaw = wrap_angle_t(r[:, 6:7]) if yaw_period == 2 * math.pi else \
-        wrap_angle_t(r[:, 6:7] * (2 * math.pi / yaw_period)) * (yaw_period / (2 * math.pi))
+    yaw = (
+        wrap_angle_t(r[:, 6:7])
+        if yaw_period == 2 * math.pi
+        else wrap_angle_t(r[:, 6:7] * (2 * math.pi / yaw_period)) * (yaw_period / (2 * math.pi))
+    )
     return torch.cat([r[:, :6], yaw, r[:, 7:]], dim=1)
 
 
@@ -91,10 +94,10 @@ class SceneLoss:
         self.cfg, self.device = cfg, device
         self.w = torch.tensor(cfg.loss_weights, dtype=torch.float64, device=device)
         self.assoc = StickyGTAssociation(cfg.gt_match_distance)
-        self._pred: list[torch.Tensor] = []      # (k, 9) rows with their graph
-        self._target: list[np.ndarray] = []     # (k, 9) float64 targets of those rows
-        self._scale: list[np.ndarray] = []      # (k,) weight of each row's term (1, or the prediction weight)
-        self.max_abs_gain = torch.zeros((), dtype=torch.float64, device=device)   # no sync per frame on a GPU
+        self._pred: list[torch.Tensor] = []  # (k, 9) rows with their graph
+        self._target: list[np.ndarray] = []  # (k, 9) float64 targets of those rows
+        self._scale: list[np.ndarray] = []  # (k,) weight of each row's term (1, or the prediction weight)
+        self.max_abs_gain = torch.zeros((), dtype=torch.float64, device=device)  # no sync per frame on a GPU
         self.gt_terms = self.pseudo_terms = self.prediction_terms = 0
 
     def _add_rows(self, pred: torch.Tensor, rows: np.ndarray | None, target: np.ndarray, scale: float) -> None:
@@ -136,8 +139,11 @@ class SceneLoss:
         pred, ekf = backend.posterior(u)
         ids, labels = u.ids[u.rows], u.labels[u.rows]
         xy = pred.detach().cpu().numpy()[:, :2]
-        match = self._gated(self.assoc.match(ids, xy, labels, gt.ids, gt.boxes[:, :2], gt.labels), xy, gt) \
-            if len(gt) else np.full(len(u.rows), -1)
+        match = (
+            self._gated(self.assoc.match(ids, xy, labels, gt.ids, gt.boxes[:, :2], gt.labels), xy, gt)
+            if len(gt)
+            else np.full(len(u.rows), -1)
+        )
         has = match >= 0
         if self.cfg.mode != "semi_supervised":
             if has.any():
@@ -167,7 +173,7 @@ class SceneLoss:
         """Per-component cost (K, 9) of residuals ``r`` (K, 9): r^2, except with ``centre_huber_delta`` d > 0
         the centre's x, y components cost the Huber form rho(r) = r^2 for |r| <= d, 2 d |r| - d^2 beyond
         (value and slope continuous at d; the gradient of a residual of metres is bounded by 2 d)."""
-        cost = r ** 2
+        cost = r**2
         d = self.cfg.centre_huber_delta
         if d <= 0:
             return cost
@@ -175,8 +181,17 @@ class SceneLoss:
         return torch.cat([torch.where(a <= d, cost[:, :2], 2 * d * a - d * d), cost[:, 2:]], dim=1)
 
 
-def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_cfg: TrackerConfig,
-              cfg: TrainConfig, device: torch.device, index: np.ndarray, lockstep=None, slot: int = 0) -> SceneLoss:
+def run_scene(
+    net: GRUKalmanNet,
+    scene: Scene,
+    dets: dict[str, BoxSet],
+    tracker_cfg: TrackerConfig,
+    cfg: TrainConfig,
+    device: torch.device,
+    index: np.ndarray,
+    lockstep=None,
+    slot: int = 0,
+) -> SceneLoss:
     """Track one scene with gradients on; returns its collected loss. ``index`` (n_labels,): the tracking
     class each label of the scene's vocabulary takes its parameters (and the network its class gain) from.
     With ``network_classes: ss_model`` the other labels run the preset's EKF groups and give no loss terms
@@ -185,9 +200,15 @@ def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_
     network's calls with (several scenes per step); None: the network is called directly."""
     correct = None if lockstep is None else lockstep.bind(slot)
     arch = training_arch(net.cfg, cfg)
-    backends = [PairedBackend(grukf_group(net, len(index), device, train=True, class_index=index, correct=correct,
-                                          ss_model=model).backend, ekf_backend(cfg, index, model))
-                for model, _ in network_models(arch, tracker_cfg, index)]
+    backends = [
+        PairedBackend(
+            grukf_group(
+                net, len(index), device, train=True, class_index=index, correct=correct, ss_model=model
+            ).backend,
+            ekf_backend(cfg, index, model),
+        )
+        for model, _ in network_models(arch, tracker_cfg, index)
+    ]
     tracker = Tracker(tracker_cfg, track_groups(backends, arch, tracker_cfg, index))
     loss = SceneLoss(cfg, device)
     for frame in scene.frames:
@@ -195,13 +216,14 @@ def run_scene(net: GRUKalmanNet, scene: Scene, dets: dict[str, BoxSet], tracker_
         if lockstep is not None:
             lockstep.frame_done(slot)
         for u in updates:
-            if u.group < len(backends):      # the network's groups (the others are the preset's EKF)
+            if u.group < len(backends):  # the network's groups (the others are the preset's EKF)
                 loss.add(u, backends[u.group], frame.gt)
     return loss
 
 
-def run_scenes(net: GRUKalmanNet, jobs: list[tuple], cfg: TrainConfig, dets: dict[str, BoxSet],
-               device: torch.device) -> list[SceneLoss]:
+def run_scenes(
+    net: GRUKalmanNet, jobs: list[tuple], cfg: TrainConfig, dets: dict[str, BoxSet], device: torch.device
+) -> list[SceneLoss]:
     """:func:`run_scene` for several scenes at once, the network called once per frame for all of them
     (:mod:`grutrack.training.lockstep`); ``jobs``: [(scene, label index, tracker config)]. One thread per scene;
     the first scene's failure is raised here (the others stop at their next network call)."""
@@ -215,20 +237,19 @@ def run_scenes(net: GRUKalmanNet, jobs: list[tuple], cfg: TrainConfig, dets: dic
         scene, index, tracker_cfg = jobs[slot]
         try:
             losses[slot] = run_scene(net, scene, dets, tracker_cfg, cfg, device, index, lock, slot)
-        except BaseException as exc:   # noqa: BLE001 - handed to the caller's thread below
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller's thread below
             errors[slot] = exc
             lock.abort(exc)
         finally:
             lock.leave(slot)
 
     # daemon: a second Ctrl-C (raised in this thread's join) does not wait for the scenes to finish
-    threads = [threading.Thread(target=work, args=(i,), name=f"grukf-scene-{i}", daemon=True)
-               for i in range(len(jobs))]
+    threads = [threading.Thread(target=work, args=(i,), name=f"grukf-scene-{i}", daemon=True) for i in range(len(jobs))]
     for t in threads:
         t.start()
     for t in threads:
         t.join()
     failed = [e for e in errors if e is not None]
-    if failed:   # the cause, not the other scenes' LockstepAborted
+    if failed:  # the cause, not the other scenes' LockstepAborted
         raise next((e for e in failed if not isinstance(e, LockstepAborted)), failed[0])
     return losses

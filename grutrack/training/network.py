@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from grutrack.motion.grukf import GRUKFConfig, NETWORK_MODELS
+from grutrack.motion.grukf import NETWORK_MODELS, GRUKFConfig
 from grutrack.tracking.config import TrackerConfig, load_tracker_config
 from grutrack.tracking.ekf_backend import KalmanBackend
 from grutrack.tracking.factory import ekf_groups, network_members, network_models
@@ -54,7 +54,7 @@ def _model_forms(cfg: TrainConfig) -> dict[str, str]:
     if training_network_classes(cfg) != "own_model":
         return {}
     preset = load_tracker_config(cfg.tracker_preset)
-    forms = {"CTRA": "arc", "BICYCLE": preset.bicycle_form}   # CTRA's piecewise form has no torch model
+    forms = {"CTRA": "arc", "BICYCLE": preset.bicycle_form}  # CTRA's piecewise form has no torch model
     return {m: forms[m] for m in NETWORK_MODELS if m != ss_model(cfg).upper()}
 
 
@@ -77,8 +77,7 @@ def _ekf_backend(motion_config: str, ss_model: str, index: tuple[int, ...], form
     motion = load_motion_config(motion_config, ss_model)
     first = motion[TRACKING_CLASSES[0]]
     tables = {k: np.stack([motion[TRACKING_CLASSES[c]][k] for c in index]) for k in ("Q", "R", "P0")}
-    return KalmanBackend(make_model(first["model"], form, **first["params"]), tables["Q"], tables["R"],
-                         tables["P0"])
+    return KalmanBackend(make_model(first["model"], form, **first["params"]), tables["Q"], tables["R"], tables["P0"])
 
 
 def ekf_noise(cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -91,13 +90,11 @@ def ekf_noise(cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
     shared = load_motion_config(cfg.motion_config, ss_model(cfg))
     own = load_motion_config(cfg.motion_config) if training_network_classes(cfg) == "own_model" else {}
-    rows = [own[c] if c in own and own[c]["model"].upper() in NETWORK_MODELS else shared[c]
-            for c in TRACKING_CLASSES]
+    rows = [own[c] if c in own and own[c]["model"].upper() in NETWORK_MODELS else shared[c] for c in TRACKING_CLASSES]
     return tuple(np.stack([r[k] for r in rows]) for k in ("Q", "R", "P0"))
 
 
-def track_groups(backends: list, arch: GRUKFConfig, tracker_cfg: TrackerConfig, index: np.ndarray
-                 ) -> list[TrackGroup]:
+def track_groups(backends: list, arch: GRUKFConfig, tracker_cfg: TrackerConfig, index: np.ndarray) -> list[TrackGroup]:
     """The network's groups first, ``backends[i]`` for the labels of the i-th
     (:func:`~grutrack.tracking.factory.network_models`); then the preset's EKF groups for the other labels (none
     with ``network_classes: all``)."""

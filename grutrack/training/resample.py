@@ -58,8 +58,17 @@ class ResamplingTrainer(Trainer):
     The gain prior is computed on the given detections (epoch 0).
     """
 
-    def __init__(self, cfg: TrainConfig, scenes: list[Scene], dets: dict[str, BoxSet], out_dir, resampler,
-                 validate=None, progress: bool = True, source: dict | None = None):
+    def __init__(
+        self,
+        cfg: TrainConfig,
+        scenes: list[Scene],
+        dets: dict[str, BoxSet],
+        out_dir,
+        resampler,
+        validate=None,
+        progress: bool = True,
+        source: dict | None = None,
+    ):
         super().__init__(cfg, scenes, dets, out_dir, validate=validate, progress=progress, source=source)
         self.resampler = resampler
         self.given = dets
@@ -77,7 +86,7 @@ class ResamplingTrainer(Trainer):
         n = len(profiles)
         for k, profile in enumerate(profiles):
             drawn = self.resampler(profile, seed)
-            for i in range((k - epoch + 1) % n, len(self.scenes), n):      # the scenes with (e - 1 + i) % n == k
+            for i in range((k - epoch + 1) % n, len(self.scenes), n):  # the scenes with (e - 1 + i) % n == k
                 out.update((t, drawn[t]) for t in self.scenes[i].sample_tokens if t in drawn)
         return out
 

@@ -21,13 +21,24 @@ class TrainingResult:
     final: Path
     steps: int
     last_loss: float | None
-    validation: object | None = None     # documents.ValidationRecord
+    validation: object | None = None  # documents.ValidationRecord
     metric: str | None = None
 
 
-def train(cfg, dataset, split: str, detections: str | Path, out: str | Path, *, config_arg: str = "grukf",
-          val_split: str | None = None, val_detections: str | Path | None = None, sources: list[dict] = (),
-          resume: bool = False, progress: bool = True) -> TrainingResult:
+def train(
+    cfg,
+    dataset,
+    split: str,
+    detections: str | Path,
+    out: str | Path,
+    *,
+    config_arg: str = "grukf",
+    val_split: str | None = None,
+    val_detections: str | Path | None = None,
+    sources: list[dict] = (),
+    resume: bool = False,
+    progress: bool = True,
+) -> TrainingResult:
     """Train the GRU-KF with the training config ``cfg`` (:class:`~grutrack.training.config.TrainConfig`) on
     ``split`` of ``dataset`` with ``detections`` (a file the dataset reads), plus the config's ``sources`` and
     ``sources`` (more source entries, checked: ``grutrack.training.sources``); checkpoints and logs into ``out``.
@@ -48,24 +59,31 @@ def train(cfg, dataset, split: str, detections: str | Path, out: str | Path, *, 
     extra = [(e, f"{cfg_name(config_arg)} sources[{i}]") for i, e in enumerate(cfg.sources)]
     extra += [(e, f"--source {i + 1}") for i, e in enumerate(sources)]
     for e, where in extra:
-        check_source(e, where)      # before any data is read
+        check_source(e, where)  # before any data is read
     if val_split and not dataset.validates_training:
-        raise ConfigError(f"--val-split: grutrack train cannot validate on {dataset.name} data; train without it "
-                          f"(or validate a checkpoint with grutrack track + evaluate)")
+        raise ConfigError(
+            f"--val-split: grutrack train cannot validate on {dataset.name} data; train without it "
+            f"(or validate a checkpoint with grutrack track + evaluate)"
+        )
     out = Path(out)
     scenes = dataset.scenes(split, with_gt=True)
     yaw = load_tracker_config(cfg.tracker_preset).measured_yaw  # the preset's measured-yaw definition
     loaded_dets = dataset.load_detections(detections, split, scenes, yaw)
     dets = loaded_dets.boxes
-    source = {"dataset": dataset.name, "dataroot": str(Path(dataset.options.dataroot).resolve()),
-              "version": dataset.options.version, "split": split, "detections": str(Path(detections).resolve())}
+    source = {
+        "dataset": dataset.name,
+        "dataroot": str(Path(dataset.options.dataroot).resolve()),
+        "version": dataset.options.version,
+        "split": split,
+        "detections": str(Path(detections).resolve()),
+    }
     held = [] if val_split else _held_out(cfg, config_arg, dataset, split, scenes)
     if held:
         names = {sc.name for sc in held}
         scenes = [sc for sc in scenes if sc.name not in names]
         source["validation_scenes"] = sorted(names)
         print(f"validating on {len(held)} scenes held out of {split}: {', '.join(sorted(names))}")
-    if dataset.name != "nuscenes":      # the rate the logs are read at (nuScenes keyframes have one)
+    if dataset.name != "nuscenes":  # the rate the logs are read at (nuScenes keyframes have one)
         source["rate_hz"] = dataset.options.rate_hz
     resampler = DetectionResampler(dataset, split, scenes, yaw)
     if extra:
@@ -74,8 +92,7 @@ def train(cfg, dataset, split: str, detections: str | Path, out: str | Path, *, 
         scenes, dets = merge(loaded)
         resampler = merged_resampler(loaded)
         source = {**source, "sources": [src.description for src in loaded[1:]]}
-        print(f"training on {len(scenes)} scenes, {sum(len(sc) for sc in scenes)} frames from {len(loaded)} "
-              f"sources")
+        print(f"training on {len(scenes)} scenes, {sum(len(sc) for sc in scenes)} frames from {len(loaded)} sources")
     if cfg.resample_profiles:
         trainer = ResamplingTrainer(cfg, scenes, dets, out, resampler, progress=progress, source=source)
     else:
@@ -85,9 +102,15 @@ def train(cfg, dataset, split: str, detections: str | Path, out: str | Path, *, 
         val_dets = dataset.load_detections(val_detections, val_split, val_scenes, yaw).boxes
         trainer.validate = DatasetValidator(dataset, val_split, val_scenes, val_dets, cfg)
     elif held:
-        trainer.validate = DatasetValidator(dataset, split, held, _validation_sets(cfg, dataset, split, held, dets,
-                                                                                   yaw), cfg, held_out=True,
-                                            reference_name=f"tracker preset '{cfg.tracker_preset}' (its EKF)")
+        trainer.validate = DatasetValidator(
+            dataset,
+            split,
+            held,
+            _validation_sets(cfg, dataset, split, held, dets, yaw),
+            cfg,
+            held_out=True,
+            reference_name=f"tracker preset '{cfg.tracker_preset}' (its EKF)",
+        )
     if resume:
         trainer.resume(out / "last.pt")
     source["synthetic"] = synthetic_inputs(dataset, loaded_dets, cfg, [e for e, _ in extra])
@@ -113,12 +136,17 @@ def _held_out(cfg, config_arg: str, dataset, split: str, scenes: list) -> list:
     if n == 0:
         return []
     if not dataset.validates_training:
-        print(f"grutrack train: note: grutrack train cannot validate on {dataset.name} data; training on every "
-              f"scene of {split} without validation (model.pt: the last step)", file=sys.stderr)
+        print(
+            f"grutrack train: note: grutrack train cannot validate on {dataset.name} data; training on every "
+            f"scene of {split} without validation (model.pt: the last step)",
+            file=sys.stderr,
+        )
         return []
     if n >= len(scenes):
-        raise ConfigError(f"{cfg_name(config_arg)}: validation_scenes {n} would leave no training scene (split "
-                          f"'{split}' has {len(scenes)}); expected fewer, or 0 with --val-split")
+        raise ConfigError(
+            f"{cfg_name(config_arg)}: validation_scenes {n} would leave no training scene (split "
+            f"'{split}' has {len(scenes)}); expected fewer, or 0 with --val-split"
+        )
     return held_out_scenes(scenes, n)
 
 
@@ -149,14 +177,18 @@ def synthetic_inputs(dataset, dets, cfg, sources: list[dict]) -> list[str]:
     if dataset.is_synthetic():
         out.append("scenes of the SYNTHETIC grutrack demo dataset")
     if dets.synthetic:
-        out.append(f"simulated detections ({dets.synthetic.get('profile', '?')} profile, seed "
-                   f"{dets.synthetic.get('seed', '?')})")
+        out.append(
+            f"simulated detections ({dets.synthetic.get('profile', '?')} profile, seed "
+            f"{dets.synthetic.get('seed', '?')})"
+        )
     if cfg.resample_profiles and cfg.epochs > 1:
         out.append(f"detections simulated afresh every epoch after the first ({', '.join(cfg.resample_profiles)})")
     synthetic_sources = [e for e in sources if e.get("dataset") == "demo" or "profile" in e]
     if synthetic_sources:
-        out.append(f"{len(synthetic_sources)} SYNTHETIC training source(s) "
-                   f"({sum(e.get('scenes', 0) for e in synthetic_sources if e.get('dataset') == 'demo')} demo scenes)")
+        out.append(
+            f"{len(synthetic_sources)} SYNTHETIC training source(s) "
+            f"({sum(e.get('scenes', 0) for e in synthetic_sources if e.get('dataset') == 'demo')} demo scenes)"
+        )
     return out
 
 
@@ -179,6 +211,8 @@ def write_training_yaml(cfg, config_arg: str, path: Path, source: dict) -> None:
         write_text_atomic(path, "\n".join([*lines[:n_head], data, *lines[n_head:]]) + "\n")
         return
     d = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
-    head = (f"# Resolved training config, written by grutrack {__version__} train: --config '{config_arg}' with "
-            f"the command line's overrides.\n# config hash {config_hash(d)}\n{data}\n")
+    head = (
+        f"# Resolved training config, written by grutrack {__version__} train: --config '{config_arg}' with "
+        f"the command line's overrides.\n# config hash {config_hash(d)}\n{data}\n"
+    )
     write_text_atomic(path, head + yaml.safe_dump(d, sort_keys=False, default_flow_style=None, width=120))

@@ -32,8 +32,9 @@ def one_se(row: TrainingStep, best: TrainingStep) -> float:
     return float(d.std(ddof=1) / np.sqrt(d.size))
 
 
-def next_selection(rule: str, best: TrainingStep | None, chosen: TrainingStep | None,
-                   row: TrainingStep) -> tuple[TrainingStep, TrainingStep | None]:
+def next_selection(
+    rule: str, best: TrainingStep | None, chosen: TrainingStep | None, row: TrainingStep
+) -> tuple[TrainingStep, TrainingStep | None]:
     """(best, chosen) after ``row`` has been validated: ``best`` the validated step of highest AMOTA so far (the
     earliest of equals), ``chosen`` the step ``model.pt`` holds under ``rule`` ("best_val_amota" or
     "best_val_amota_1se"). ``row`` is chosen when it is the new best, or under the 1-s.e. rule when its AMOTA is

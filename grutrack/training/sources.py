@@ -20,16 +20,19 @@ resumed run.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 from grutrack.data.scene import BoxSet, Scene
 from grutrack.errors import ConfigError
 
 #: keys of a source entry and what each must be (the schema: grutrack/configs/schemas/training.schema.yaml)
-_REQUIRED = {"nuscenes": ("dataroot", "version", "split"), "av2": ("dataroot", "split"),
-             "demo": ("scenes", "frames_per_scene", "split")}
+_REQUIRED = {
+    "nuscenes": ("dataroot", "version", "split"),
+    "av2": ("dataroot", "split"),
+    "demo": ("scenes", "frames_per_scene", "split"),
+}
 
 
 @dataclass
@@ -50,8 +53,10 @@ def check_source(entry: dict, where: str) -> None:
         if key not in entry:
             raise ConfigError(f"{where}: '{key}' is required for a {entry['dataset']} source")
     if ("detections" in entry) == ("profile" in entry):
-        raise ConfigError(f"{where}: give either 'detections' (a file) or 'profile' (simulate them), not "
-                          f"{'both' if 'detections' in entry else 'neither'}")
+        raise ConfigError(
+            f"{where}: give either 'detections' (a file) or 'profile' (simulate them), not "
+            f"{'both' if 'detections' in entry else 'neither'}"
+        )
     if entry["dataset"] == "demo" and "dataroot" in entry:
         raise ConfigError(f"{where}: a demo source is generated for the run; it takes no 'dataroot'")
 
@@ -85,7 +90,7 @@ def _demo(entry: dict, cache: Path) -> tuple[str, str]:
 
     n, frames, seed = int(entry["scenes"]), int(entry["frames_per_scene"]), int(entry.get("demo_seed", 0))
     root = cache / f"demo_n{n}_f{frames}_s{seed}"
-    generate_demo(root, scenes=n, frames=frames, seed=seed, version=VERSION)   # unchanged when already there
+    generate_demo(root, scenes=n, frames=frames, seed=seed, version=VERSION)  # unchanged when already there
     return str(root), VERSION
 
 
@@ -100,8 +105,10 @@ def parse_source(text: str, index: int) -> dict:
     except Exception as exc:  # noqa: BLE001 - any YAML error is bad input here
         raise ConfigError(f"{where}: not a YAML mapping ({exc.__class__.__name__}): {text!r}") from None
     if not isinstance(entry, dict):
-        raise ConfigError(f"{where}: expected a mapping such as '{{dataset: av2, dataroot: D, split: val, "
-                          f"profile: centerpoint}}', got {text!r}")
+        raise ConfigError(
+            f"{where}: expected a mapping such as '{{dataset: av2, dataroot: D, split: val, "
+            f"profile: centerpoint}}', got {text!r}"
+        )
     _validate_entry(entry, schema("training")["properties"]["sources"]["items"], where)
     check_source(entry, where)
     return entry
@@ -125,8 +132,10 @@ def merge(sources: list[LoadedSource]) -> tuple[list[Scene], dict[str, BoxSet]]:
     for src in sources:
         overlap = dets.keys() & src.dets.keys()
         if overlap:
-            raise ConfigError(f"training source {src.description} repeats frames of an earlier source "
-                              f"({len(overlap)} frames, e.g. {next(iter(overlap))})")
+            raise ConfigError(
+                f"training source {src.description} repeats frames of an earlier source "
+                f"({len(overlap)} frames, e.g. {next(iter(overlap))})"
+            )
         scenes += src.scenes
         dets.update(src.dets)
     return scenes, dets
@@ -134,6 +143,7 @@ def merge(sources: list[LoadedSource]) -> tuple[list[Scene], dict[str, BoxSet]]:
 
 def merged_resampler(sources: list[LoadedSource]) -> Callable[[str, int], dict[str, BoxSet]]:
     """``callable(profile, seed)``: fresh detections of every source, merged."""
+
     def resample(profile: str, seed: int) -> dict[str, BoxSet]:
         out: dict[str, BoxSet] = {}
         for src in sources:

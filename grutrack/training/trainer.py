@@ -21,8 +21,15 @@ import numpy as np
 import torch
 
 from grutrack.data.scene import NUSCENES_VOCABULARY, BoxSet, Scene
-from grutrack.documents import (Checkpoint, CheckpointSelection, TrainingLog, TrainingPosition, TrainingState,
-                                TrainingStep, ValidationRecord)
+from grutrack.documents import (
+    Checkpoint,
+    CheckpointSelection,
+    TrainingLog,
+    TrainingPosition,
+    TrainingState,
+    TrainingStep,
+    ValidationRecord,
+)
 from grutrack.errors import ConfigError, GrutrackError
 from grutrack.motion.checkpoint import load_weights, network_checkpoint
 from grutrack.motion.grukf import GRUKalmanNet
@@ -44,6 +51,7 @@ LOG_EVERY_S = 30.0
 
 #: training-config keys a resumed run may change: they touch neither the weights, the scene order nor the schedule
 RESUME_MAY_CHANGE = ("device", "val_every", "checkpoint_every")
+
 
 class TrainingDiverged(GrutrackError):
     """The loss, a gradient or the learned gain became non-finite or exploded."""
@@ -84,8 +92,10 @@ def _plain(v):
 
 def _flat(cfg: dict) -> dict:
     """A training config's record with its network options as ``network.<option>`` keys (compared one by one)."""
-    return {**{k: v for k, v in cfg.items() if k != "network"},
-            **{f"network.{k}": v for k, v in cfg.get("network", {}).items()}}
+    return {
+        **{k: v for k, v in cfg.items() if k != "network"},
+        **{f"network.{k}": v for k, v in cfg.get("network", {}).items()},
+    }
 
 
 def _rng_state(np_rng: np.random.Generator, torch_rng: torch.Generator) -> dict:
@@ -104,15 +114,23 @@ class Trainer:
     scenes: their losses averaged, the network batched over them, :func:`run_scenes`), with logging, validation
     every ``val_every`` steps and resumable checkpoints in ``out_dir``."""
 
-    def __init__(self, cfg: TrainConfig, scenes: list[Scene], dets: dict[str, BoxSet], out_dir: str | Path,
-                 validate: Validator | None = None, progress: bool = True, source: dict | None = None):
+    def __init__(
+        self,
+        cfg: TrainConfig,
+        scenes: list[Scene],
+        dets: dict[str, BoxSet],
+        out_dir: str | Path,
+        validate: Validator | None = None,
+        progress: bool = True,
+        source: dict | None = None,
+    ):
         self.cfg, self.scenes, self.dets = cfg, scenes, dets
-        self.source = dict(source or {})    # where the data came from (dataroot, split, detections), for messages
+        self.source = dict(source or {})  # where the data came from (dataroot, split, detections), for messages
         self.fingerprint = data_fingerprint(scenes, dets)
         self._interrupted = False
         self._log_written = time.monotonic()
         self.out = Path(out_dir)
-        self.validate = validate            # a validation.Validator, or None (no validation)
+        self.validate = validate  # a validation.Validator, or None (no validation)
         # select_checkpoint: (the validated step of highest AMOTA so far, the step best.pt holds)
         self._best: TrainingStep | None = None
         self._chosen: TrainingStep | None = None
@@ -120,7 +138,7 @@ class Trainer:
         self.device = resolve_device(cfg.device, "training config 'device'")
         vocab = scenes[0].vocabulary if scenes else NUSCENES_VOCABULARY
         self._preset = load_tracker_config(cfg.tracker_preset)
-        self._setups: dict = {}                          # vocabulary -> (label index, remapped preset)
+        self._setups: dict = {}  # vocabulary -> (label index, remapped preset)
         # the first scene's vocabulary (the command's own split): the gain prior uses it
         self.index, self.tracker_cfg = self._setup(vocab)
         # the run's own generators (no process-wide seeding): torch's for the initial weights, numpy's for the
@@ -133,11 +151,12 @@ class Trainer:
         self.net.to(self.device)
         # foreach: the update of all parameters in a few multi-tensor operators (same AdamW, one Python loop less)
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, foreach=True)
-        self.total_steps = cfg.epochs * -(-len(scenes) // cfg.scenes_per_step)   # ceil: a short last step
+        self.total_steps = cfg.epochs * -(-len(scenes) // cfg.scenes_per_step)  # ceil: a short last step
         # eta_t = eta_min + (eta_0 - eta_min) (1 + cos(pi t / T)) / 2 (Loshchilov & Hutter 2017, without restarts)
-        self.sched = torch.optim.lr_scheduler.CosineAnnealingLR(self.opt, T_max=max(self.total_steps, 1),
-                                                                eta_min=min(cfg.lr_min, cfg.lr))
-        self.state = TrainingPosition()     # where the run stands (saved so that a resumed run continues exactly)
+        self.sched = torch.optim.lr_scheduler.CosineAnnealingLR(
+            self.opt, T_max=max(self.total_steps, 1), eta_min=min(cfg.lr_min, cfg.lr)
+        )
+        self.state = TrainingPosition()  # where the run stands (saved so that a resumed run continues exactly)
         self.log = TrainingLog()
 
     def _setup(self, vocab) -> tuple[np.ndarray, TrackerConfig]:
@@ -149,15 +168,27 @@ class Trainer:
         return self._setups[vocab]
 
     # -- checkpoints ------------------------------------------------------------------------------------
-    def save(self, name: str = "last.pt", net: GRUKalmanNet | None = None,
-             selected: CheckpointSelection | None = None) -> Path:
+    def save(
+        self, name: str = "last.pt", net: GRUKalmanNet | None = None, selected: CheckpointSelection | None = None
+    ) -> Path:
         """Write a resumable checkpoint (and the CSV log) into the output folder (``net``: other weights than
         the training network's, e.g. the selected step's for model.pt; ``selected``: which step they are)."""
         path = self.out / name
-        state = TrainingState(self.state, self.opt.state_dict(), self.sched.state_dict(),
-                              _rng_state(self.np_rng, self.torch_rng), self.log.steps)
-        network_checkpoint(self.net if net is None else net, train_config=asdict(self.cfg), training=state,
-                           selected=selected, data_fingerprint=self.fingerprint, data_source=self.source).write(path)
+        state = TrainingState(
+            self.state,
+            self.opt.state_dict(),
+            self.sched.state_dict(),
+            _rng_state(self.np_rng, self.torch_rng),
+            self.log.steps,
+        )
+        network_checkpoint(
+            self.net if net is None else net,
+            train_config=asdict(self.cfg),
+            training=state,
+            selected=selected,
+            data_fingerprint=self.fingerprint,
+            data_source=self.source,
+        ).write(path)
         self._write_log()
         return path
 
@@ -195,15 +226,22 @@ class Trainer:
         changed = [k for k in new if k not in RESUME_MAY_CHANGE and _plain(old.get(k)) != _plain(new[k])]
         if changed:
             diff = ", ".join(f"{k} {old.get(k)!r} -> {new[k]!r}" for k in changed)
-            raise ConfigError(f"{path}: cannot resume with other training settings ({diff}); use the settings "
-                              f"of that run or another --out")
+            raise ConfigError(
+                f"{path}: cannot resume with other training settings ({diff}); use the settings "
+                f"of that run or another --out"
+            )
         if ck.data_fingerprint != self.fingerprint:
             was = ck.data_source or {}
-            diff = ", ".join(f"{k} {was.get(k)!r} -> {self.source.get(k)!r}" for k in sorted(set(was) | set(
-                self.source)) if was.get(k) != self.source.get(k))
-            raise ConfigError(f"{path}: cannot resume on other training data (the scenes, ground truth or "
-                              f"detections differ{': ' + diff if diff else ''}); use the data of that run or "
-                              f"another --out")
+            diff = ", ".join(
+                f"{k} {was.get(k)!r} -> {self.source.get(k)!r}"
+                for k in sorted(set(was) | set(self.source))
+                if was.get(k) != self.source.get(k)
+            )
+            raise ConfigError(
+                f"{path}: cannot resume on other training data (the scenes, ground truth or "
+                f"detections differ{': ' + diff if diff else ''}); use the data of that run or "
+                f"another --out"
+            )
         return state
 
     def _write_log(self) -> None:
@@ -225,13 +263,18 @@ class Trainer:
         if self.validate is not None and self.state.step == 0 and not self.log.steps:
             self._validate_start()
         done = 0
-        bar = tqdm(total=self.total_steps, initial=self.state.step, unit="step", desc="training GRU-KF",
-                   disable=not self.progress)
+        bar = tqdm(
+            total=self.total_steps,
+            initial=self.state.step,
+            unit="step",
+            desc="training GRU-KF",
+            disable=not self.progress,
+        )
         with self._sigint_deferred():
             while self.state.epoch < self.cfg.epochs and (max_steps is None or done < max_steps):
                 if self.state.order is None:
                     self.state.order = [int(i) for i in self.np_rng.permutation(len(self.scenes))]
-                batch = self.state.order[self.state.index:self.state.index + self.cfg.scenes_per_step]
+                batch = self.state.order[self.state.index : self.state.index + self.cfg.scenes_per_step]
                 self._step([self.scenes[i] for i in batch])
                 self._advance(len(batch))
                 done += 1
@@ -242,8 +285,12 @@ class Trainer:
                 if self.cfg.checkpoint_every and self.state.step % self.cfg.checkpoint_every == 0:
                     self.save()
         bar.close()
-        if self.state.epoch >= self.cfg.epochs and self.validate is not None and \
-                self.log.steps and self.log.steps[-1].val_amota is None:
+        if (
+            self.state.epoch >= self.cfg.epochs
+            and self.validate is not None
+            and self.log.steps
+            and self.log.steps[-1].val_amota is None
+        ):
             self._validate_into(self.log.steps[-1])
         self.save()
         return self._write_model() if self.state.epoch >= self.cfg.epochs else self.out / "last.pt"
@@ -272,8 +319,9 @@ class Trainer:
         self._best, chosen = next_selection(self.cfg.select_checkpoint, self._best, self._chosen, row)
         if chosen is row:
             self._chosen = row
-            network_checkpoint(self.net, train_config=asdict(self.cfg),
-                               selected=CheckpointSelection(row.step, row.val_amota)).write(self.out / "best.pt")
+            network_checkpoint(
+                self.net, train_config=asdict(self.cfg), selected=CheckpointSelection(row.step, row.val_amota)
+            ).write(self.out / "best.pt")
 
     def _write_model(self) -> Path:
         """model.pt (the selected step's network with the final run's records) and validation.json."""
@@ -284,8 +332,9 @@ class Trainer:
         if val:
             last = val[-1] if val[-1].step == self.state.step else None
             record.selected_amota = None if last is None else last.val_amota
-            record.selected_amota_sets = None if last is None or last.val_amota_sets is None else \
-                list(last.val_amota_sets)
+            record.selected_amota_sets = (
+                None if last is None or last.val_amota_sets is None else list(last.val_amota_sets)
+            )
             if v is not None:
                 per_set = np.asarray(v.reference_scores(), dtype=np.float64)
                 record.reference_amota_sets = [round(float(x), 6) for x in per_set]
@@ -297,8 +346,9 @@ class Trainer:
             load_weights(net, Checkpoint.read(self.out / "best.pt", map_location=self.device), self.out / "best.pt")
             record.rule, record.selected_step, record.selected_amota = self.cfg.select_checkpoint, c.step, c.val_amota
             record.selected_amota_sets = None if c.val_amota_sets is None else list(c.val_amota_sets)
-        path = self.save("model.pt", net, CheckpointSelection(record.selected_step, record.selected_amota,
-                                                              rule=record.rule))
+        path = self.save(
+            "model.pt", net, CheckpointSelection(record.selected_step, record.selected_amota, rule=record.rule)
+        )
         record.write(self.out / "validation.json")
         return path
 
@@ -326,8 +376,11 @@ class Trainer:
                 if self._interrupted:
                     raise KeyboardInterrupt
                 self._interrupted = True
-                print("\ninterrupt: finishing the current step, then saving last.pt (Ctrl-C again to abort)",
-                      file=sys.stderr, flush=True)
+                print(
+                    "\ninterrupt: finishing the current step, then saving last.pt (Ctrl-C again to abort)",
+                    file=sys.stderr,
+                    flush=True,
+                )
 
             signal.signal(signal.SIGINT, handler)
             try:
@@ -341,9 +394,11 @@ class Trainer:
         """Keep the last good state (the step was not applied) as last.pt and stop with a clear message
         (``scene``: the step's scene name(s))."""
         path = self.save()
-        raise TrainingDiverged(f"training stopped at step {self.state.step + 1} (scene {scene}): {what}; "
-                               f"the last good checkpoint is {path} (lower lr in the training config, then "
-                               f"--resume)")
+        raise TrainingDiverged(
+            f"training stopped at step {self.state.step + 1} (scene {scene}): {what}; "
+            f"the last good checkpoint is {path} (lower lr in the training config, then "
+            f"--resume)"
+        )
 
     def _scene_losses(self, scenes: list[Scene]) -> list[SceneLoss]:
         """The collected loss of each scene of a step (graphs kept): one scene directly, several in lockstep."""
@@ -374,7 +429,7 @@ class Trainer:
         with self.net.deferring_weight_grads() as deferred:
             try:
                 losses = self._scene_losses(scenes)
-            except np.linalg.LinAlgError as exc:   # S = H P^- H^T + R of the parallel EKF, at a diverged state
+            except np.linalg.LinAlgError as exc:  # S = H P^- H^T + R of the parallel EKF, at a diverged state
                 self._diverged(name, f"the filter's state diverged ({exc} in the EKF gain prior's update)")
             value = torch.stack([lo.value() for lo in losses]).mean()
             if not torch.isfinite(value):
@@ -398,14 +453,21 @@ class Trainer:
         lr = self.opt.param_groups[0]["lr"]
         self.sched.step()
         self.state.step += 1
-        row = TrainingStep(step=self.state.step, epoch=self.state.epoch, scene=name,
-                           loss=round(float(value.detach()), 8), gt_terms=sum(lo.gt_terms for lo in losses),
-                           pseudo_terms=sum(lo.pseudo_terms for lo in losses),
-                           prediction_terms=sum(lo.prediction_terms for lo in losses), lr=lr,
-                           seconds=round(time.perf_counter() - t0, 4), grad_norm=round(grad_norm, 6))
+        row = TrainingStep(
+            step=self.state.step,
+            epoch=self.state.epoch,
+            scene=name,
+            loss=round(float(value.detach()), 8),
+            gt_terms=sum(lo.gt_terms for lo in losses),
+            pseudo_terms=sum(lo.pseudo_terms for lo in losses),
+            prediction_terms=sum(lo.prediction_terms for lo in losses),
+            lr=lr,
+            seconds=round(time.perf_counter() - t0, 4),
+            grad_norm=round(grad_norm, 6),
+        )
         if self.validate is not None and self.cfg.val_every and self.state.step % self.cfg.val_every == 0:
             self.net.eval()
             self._validate_into(row)
         self.log.steps.append(row)
         if self.state.step == 1 or time.monotonic() - self._log_written >= LOG_EVERY_S:
-            self._write_log()   # progress shows in train_log.csv from the first step on
+            self._write_log()  # progress shows in train_log.csv from the first step on

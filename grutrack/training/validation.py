@@ -54,8 +54,16 @@ class DatasetValidator:
     kind of detector error is not selected for its score on another. The reference is the preset's own EKF on the
     same scenes and sets, computed once."""
 
-    def __init__(self, dataset, split: str, scenes: list[Scene], dets: dict, cfg: TrainConfig,
-                 held_out: bool = False, reference_name: str = "ekf"):
+    def __init__(
+        self,
+        dataset,
+        split: str,
+        scenes: list[Scene],
+        dets: dict,
+        cfg: TrainConfig,
+        held_out: bool = False,
+        reference_name: str = "ekf",
+    ):
         first = next(iter(dets.values()), None) if dets else None
         self.sets: dict[str, dict[str, BoxSet]] = dets if isinstance(first, dict) else {"given": dets}
         self.dataset, self.split, self.scenes, self.held_out = dataset, split, scenes, held_out
@@ -67,17 +75,24 @@ class DatasetValidator:
         self._reference: np.ndarray | None = None
 
     def describe(self) -> ValidationRecord:
-        return ValidationRecord(rule="last", selected_step=0, split=self.split,
-                                scenes=[sc.name for sc in self.scenes], held_out=self.held_out,
-                                detection_sets=list(self.sets), reference=self.reference_name)
+        return ValidationRecord(
+            rule="last",
+            selected_step=0,
+            split=self.split,
+            scenes=[sc.name for sc in self.scenes],
+            held_out=self.held_out,
+            detection_sets=list(self.sets),
+            reference=self.reference_name,
+        )
 
     def scores(self, net) -> np.ndarray:
         """(n_sets,) float64: the score of the GRU-KF tracker with ``net`` on each detection set."""
         was_training = net.training
         net.eval()
         try:
-            return self._score(Tracker(self.tracker_cfg, network_groups(net, self.tracker_cfg, self.index,
-                                                                        self.device)))
+            return self._score(
+                Tracker(self.tracker_cfg, network_groups(net, self.tracker_cfg, self.index, self.device))
+            )
         finally:
             net.train(was_training)
 
@@ -89,10 +104,18 @@ class DatasetValidator:
 
     def _score(self, tracker: Tracker) -> np.ndarray:
         """(n_sets,) float64: the dataset's score of ``tracker`` on each detection set."""
-        return np.array([self.dataset.score_tracks(self.split, self.scenes,
-                                                   track_scenes(tracker, self.scenes, d).results,
-                                                   self.tracker_cfg.max_boxes_per_sample)
-                         for d in self.sets.values()], dtype=np.float64)
+        return np.array(
+            [
+                self.dataset.score_tracks(
+                    self.split,
+                    self.scenes,
+                    track_scenes(tracker, self.scenes, d).results,
+                    self.tracker_cfg.max_boxes_per_sample,
+                )
+                for d in self.sets.values()
+            ],
+            dtype=np.float64,
+        )
 
 
 def held_out_scenes(scenes: list[Scene], n: int) -> list[Scene]:

@@ -8,21 +8,26 @@ from __future__ import annotations
 
 import copy
 from collections import defaultdict
-from typing import Dict, List, Optional
 
 import numpy as np
 
 __all__ = ["gt_submission", "corrupt_submission", "SUBMISSION_META"]
 
-SUBMISSION_META = {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False,
-                   "use_external": False}
+SUBMISSION_META = {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False, "use_external": False}
 
 # Plausible class confusions for tracks that change class.
-_CONFUSION = {"car": "truck", "truck": "car", "bus": "truck", "trailer": "truck", "pedestrian": "bicycle",
-              "bicycle": "motorcycle", "motorcycle": "bicycle"}
+_CONFUSION = {
+    "car": "truck",
+    "truck": "car",
+    "bus": "truck",
+    "trailer": "truck",
+    "pedestrian": "bicycle",
+    "bicycle": "motorcycle",
+    "motorcycle": "bicycle",
+}
 
 
-def _split_samples(nusc, split: str) -> List[List[str]]:
+def _split_samples(nusc, split: str) -> list[list[str]]:
     """Sample tokens of the split, per scene in time order (scenes in ``nusc.scene`` order)."""
     from nuscenes.utils.splits import get_scenes_of_split
 
@@ -50,7 +55,7 @@ def gt_submission(nusc, split: str, skip_empty: bool = False, score: float = 1.0
     """
     from nuscenes.eval.tracking.utils import category_to_tracking_name
 
-    results: Dict[str, List[dict]] = {}
+    results: dict[str, list[dict]] = {}
     for tokens in _split_samples(nusc, split):
         for token in tokens:
             boxes = []
@@ -62,26 +67,42 @@ def gt_submission(nusc, split: str, skip_empty: bool = False, score: float = 1.0
                 if skip_empty and ann["num_lidar_pts"] + ann["num_radar_pts"] == 0:
                     continue
                 vel = nusc.box_velocity(ann_token)[:2]
-                boxes.append({
-                    "sample_token": token,
-                    "translation": [float(v) for v in ann["translation"]],
-                    "size": [float(v) for v in ann["size"]],
-                    "rotation": [float(v) for v in ann["rotation"]],
-                    "velocity": [float(vel[0]), float(vel[1])],
-                    "tracking_id": ann["instance_token"],
-                    "tracking_name": name,
-                    "tracking_score": float(score),
-                })
+                boxes.append(
+                    {
+                        "sample_token": token,
+                        "translation": [float(v) for v in ann["translation"]],
+                        "size": [float(v) for v in ann["size"]],
+                        "rotation": [float(v) for v in ann["rotation"]],
+                        "velocity": [float(vel[0]), float(vel[1])],
+                        "tracking_id": ann["instance_token"],
+                        "tracking_name": name,
+                        "tracking_score": float(score),
+                    }
+                )
             results[token] = boxes
     return {"meta": dict(SUBMISSION_META), "results": results}
 
 
-def corrupt_submission(nusc, split: str, seed: int = 0, *, base: Optional[dict] = None,
-                       noise: float = 0.25, drop_box: float = 0.1, drop_track: float = 0.08,
-                       fragment: float = 0.15, swap: float = 0.1, class_change: float = 0.05,
-                       duplicate: float = 0.06, exact_duplicate: float = 0.03, fp_tracks_per_scene: int = 25,
-                       fp_single_per_sample: float = 2.0, empty_samples: float = 0.05,
-                       equal_scores: Optional[float] = None, repeated_id: float = 0.0) -> dict:
+def corrupt_submission(
+    nusc,
+    split: str,
+    seed: int = 0,
+    *,
+    base: dict | None = None,
+    noise: float = 0.25,
+    drop_box: float = 0.1,
+    drop_track: float = 0.08,
+    fragment: float = 0.15,
+    swap: float = 0.1,
+    class_change: float = 0.05,
+    duplicate: float = 0.06,
+    exact_duplicate: float = 0.03,
+    fp_tracks_per_scene: int = 25,
+    fp_single_per_sample: float = 2.0,
+    empty_samples: float = 0.05,
+    equal_scores: float | None = None,
+    repeated_id: float = 0.0,
+) -> dict:
     """A realistic imperfect tracker output made from the ground truth of ``split`` (deterministic per seed).
 
     Per ground-truth track: dropped entirely (``drop_track``), boxes dropped (``drop_box``, gaps the devkit
@@ -95,7 +116,7 @@ def corrupt_submission(nusc, split: str, seed: int = 0, *, base: Optional[dict] 
     """
     rng = np.random.default_rng(seed)
     base = base if base is not None else gt_submission(nusc, split)
-    results: Dict[str, List[dict]] = {token: [] for token in base["results"]}
+    results: dict[str, list[dict]] = {token: [] for token in base["results"]}
     counter = [0]
 
     def new_id(prefix: str) -> str:
@@ -114,17 +135,17 @@ def corrupt_submission(nusc, split: str, seed: int = 0, *, base: Optional[dict] 
     for tokens in _split_samples(nusc, split):
         tokens = [t for t in tokens if t in base["results"]]
         # Tracks of this scene: instance -> list of (frame index, box).
-        tracks: Dict[str, List] = defaultdict(list)
+        tracks: dict[str, list] = defaultdict(list)
         for k, token in enumerate(tokens):
             for box in base["results"][token]:
                 tracks[box["tracking_id"]].append((k, box))
         ids = list(tracks)
-        by_class: Dict[str, List[str]] = defaultdict(list)
+        by_class: dict[str, list[str]] = defaultdict(list)
         for tid in ids:
             by_class[tracks[tid][0][1]["tracking_name"]].append(tid)
 
         # Id plan per (instance, frame): fragments and swaps.
-        out_id: Dict[str, List[str]] = {tid: [tid + "-t"] * len(tracks[tid]) for tid in ids}
+        out_id: dict[str, list[str]] = {tid: [tid + "-t"] * len(tracks[tid]) for tid in ids}
         for tid in ids:
             n = len(tracks[tid])
             if n > 2 and rng.random() < fragment:
@@ -171,8 +192,14 @@ def corrupt_submission(nusc, split: str, seed: int = 0, *, base: Optional[dict] 
                 off = rng.normal(0, sigma, 2)
                 emit(tokens[k], box, out_id[tid][i], name, off, score)
                 if dup:
-                    emit(tokens[k], box, dup_id, name, off + dup_offset + rng.normal(0, 0.1, 2),
-                         float(np.clip(dup_level + rng.normal(0, 0.05), 0.01, 1.0)))
+                    emit(
+                        tokens[k],
+                        box,
+                        dup_id,
+                        name,
+                        off + dup_offset + rng.normal(0, 0.1, 2),
+                        float(np.clip(dup_level + rng.normal(0, 0.05), 0.01, 1.0)),
+                    )
                 if exact_dup:
                     emit(tokens[k], box, dup_id + "x", name, off, score)
                 if repeated_id and rng.random() < repeated_id:
@@ -203,8 +230,14 @@ def corrupt_submission(nusc, split: str, seed: int = 0, *, base: Optional[dict] 
             gt_here = base["results"][token]
             for _ in range(int(rng.poisson(fp_single_per_sample)) if gt_here else 0):
                 src = gt_here[int(rng.integers(len(gt_here)))]
-                emit(token, src, new_id("fp1"), src["tracking_name"], rng.uniform(-4, 4, 2),
-                     float(rng.uniform(0.01, 0.6)))
+                emit(
+                    token,
+                    src,
+                    new_id("fp1"),
+                    src["tracking_name"],
+                    rng.uniform(-4, 4, 2),
+                    float(rng.uniform(0.01, 0.6)),
+                )
 
     for token in results:
         if rng.random() < empty_samples:

@@ -14,8 +14,9 @@ def mini_train_scenes_and_dets(nusc, folder, n_scenes: int, n_frames: int, seed:
     from grutrack.data.nuscenes import load_scenes
     from grutrack.data.scene import Scene
 
-    scenes = [Scene(s.name, s.token, s.frames[:n_frames])
-              for s in load_scenes(nusc, "mini_train", with_gt=True)[:n_scenes]]
+    scenes = [
+        Scene(s.name, s.token, s.frames[:n_frames]) for s in load_scenes(nusc, "mini_train", with_gt=True)[:n_scenes]
+    ]
     p = folder / "dets.json"
     p.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_train", "centerpoint", seed=seed, nusc=nusc)))
     return scenes, load_detections(p, [f.token for s in scenes for f in s.frames])

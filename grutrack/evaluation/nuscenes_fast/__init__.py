@@ -28,11 +28,33 @@ from __future__ import annotations
 
 from grutrack.evaluation.nuscenes_fast.accumulate import ClassAccumulator, NeedsDevkit, exact_center_distances
 from grutrack.evaluation.nuscenes_fast.amota import class_metric_data, evaluate_tracks, fast_tracking_eval
-from grutrack.evaluation.nuscenes_fast.decisions import (BELOW_THRESHOLD, MATCH, MISS_OR_FP, SWITCH, UNSCORED,
-                                                         MatchDecisions, match_decisions)
+from grutrack.evaluation.nuscenes_fast.decisions import (
+    BELOW_THRESHOLD,
+    MATCH,
+    MISS_OR_FP,
+    SWITCH,
+    UNSCORED,
+    MatchDecisions,
+    match_decisions,
+)
 from grutrack.evaluation.nuscenes_fast.flatten import FlatBoxes, flatten
 from grutrack.evaluation.nuscenes_fast.loading import load_tracks
 
-__all__ = ["fast_tracking_eval", "load_tracks", "evaluate_tracks", "exact_center_distances", "match_decisions",
-           "MatchDecisions", "MATCH", "SWITCH", "MISS_OR_FP", "BELOW_THRESHOLD", "UNSCORED", "ClassAccumulator",
-           "NeedsDevkit", "FlatBoxes", "class_metric_data", "flatten"]
+__all__ = [
+    "fast_tracking_eval",
+    "load_tracks",
+    "evaluate_tracks",
+    "exact_center_distances",
+    "match_decisions",
+    "MatchDecisions",
+    "MATCH",
+    "SWITCH",
+    "MISS_OR_FP",
+    "BELOW_THRESHOLD",
+    "UNSCORED",
+    "ClassAccumulator",
+    "NeedsDevkit",
+    "FlatBoxes",
+    "class_metric_data",
+    "flatten",
+]

@@ -74,33 +74,52 @@ class _Subset:
     such a pair whatever its state (every optimal assignment contains it), so only the other ("contested")
     rows need the state machine.
     """
-    __slots__ = ("g0", "g", "p", "d", "iso", "simple", "n", "kept", "ph", "unique_ids", "col_hid", "rows",
-                 "row_cols", "pair_d", "iso_rows", "iso_cols", "_dist")
+
+    __slots__ = (
+        "g0",
+        "g",
+        "p",
+        "d",
+        "iso",
+        "simple",
+        "n",
+        "kept",
+        "ph",
+        "unique_ids",
+        "col_hid",
+        "rows",
+        "row_cols",
+        "pair_d",
+        "iso_rows",
+        "iso_cols",
+        "_dist",
+    )
 
     def __init__(self, g0: int, g: np.ndarray, p: np.ndarray, d: np.ndarray, iso: np.ndarray, simple: bool):
-        self.g0 = g0            # class-level index of the frame's first GT
-        self.g = g              # class-level GT index of each candidate pair
-        self.p = p              # class-level prediction index of each candidate pair
-        self.d = d              # exact distance of each pair
-        self.iso = iso          # pair is isolated
-        self.simple = simple    # every pair isolated
+        self.g0 = g0  # class-level index of the frame's first GT
+        self.g = g  # class-level GT index of each candidate pair
+        self.p = p  # class-level prediction index of each candidate pair
+        self.d = d  # exact distance of each pair
+        self.iso = iso  # pair is isolated
+        self.simple = simple  # every pair isolated
 
-    def contest(self, n: int, kept: np.ndarray, ph: np.ndarray, rows: list[int], cols: list[int],
-                unique_ids: bool) -> None:
+    def contest(
+        self, n: int, kept: np.ndarray, ph: np.ndarray, rows: list[int], cols: list[int], unique_ids: bool
+    ) -> None:
         """Python-side structures for the state machine of a frame with contested rows (``rows``, ``cols``: the
         local matrix position of each candidate pair; ``unique_ids``: no hypothesis id repeats in the frame)."""
-        self.n = n                                  # rows of motmetrics' matrix (GT of the frame)
-        self.kept = kept                            # class-level prediction index of each matrix column
+        self.n = n  # rows of motmetrics' matrix (GT of the frame)
+        self.kept = kept  # class-level prediction index of each matrix column
         self.ph = ph
         self.unique_ids = unique_ids
         iso = self.iso.tolist()
         self.pair_d = dict(zip(zip(rows, cols), self.d.tolist()))
-        self.col_hid = dict(zip(cols, ph[self.p].tolist()))   # hypothesis id of the candidate columns
+        self.col_hid = dict(zip(cols, ph[self.p].tolist()))  # hypothesis id of the candidate columns
         self.row_cols: dict[int, list[int]] = {}
         for r, j, i in zip(rows, cols, iso):
             if not i:
                 self.row_cols.setdefault(r, []).append(j)
-        self.rows = sorted(self.row_cols)           # contested rows, ascending
+        self.rows = sorted(self.row_cols)  # contested rows, ascending
         self.iso_rows = [r for r, i in zip(rows, iso) if i]
         self.iso_cols = [j for j, i in zip(cols, iso) if i]
         self._dist = None
@@ -130,6 +149,7 @@ class PassResult:
     distances, metres; switch: (K,) bool, SWITCH (True) or MATCH (False); n_kept: predictions kept; n_frames:
     frames with an event; frame_id: (F,) int64 devkit frame id of every frame (-1 where it has no event).
     """
+
     g: np.ndarray
     p: np.ndarray
     d: np.ndarray
@@ -237,7 +257,7 @@ class ClassAccumulator:
         dots = []
         for f, _ in missing:
             g0, g1 = g_ptr[f], g_ptr[f + 1]
-            idx = kept_idx[ck[p_ptr[f]]:ck[p_ptr[f + 1]]]
+            idx = kept_idx[ck[p_ptr[f]] : ck[p_ptr[f + 1]]]
             dots.append((gxy[g0:g1].copy() @ pxy[idx].T).ravel())
         fs = np.asarray([f for f, _ in missing], dtype=np.int64)
         ks = np.asarray([k for _, k in missing], dtype=np.int64)
@@ -253,20 +273,21 @@ class ClassAccumulator:
         sel = kept[npp]
         sid, ng, npp = sid[sel], ng[sel], npp[sel]
         row = ng - g_ptr[fs[sid]]
-        col = ck[npp] - ck[p_ptr[fs[sid]]]          # rank of the prediction among the frame's kept ones
+        col = ck[npp] - ck[p_ptr[fs[sid]]]  # rank of the prediction among the frame's kept ones
         d = -2 * dot_all[offsets[sid] + row * ks[sid] + col]
         d += self.gxx[ng]
         d += self.pyy[npp]
         np.maximum(d, 0, out=d)
         np.sqrt(d, out=d)
-        cand = d < self.dist_th                     # the devkit sets distances >= dist_th_tp to NaN
+        cand = d < self.dist_th  # the devkit sets distances >= dist_th_tp to NaN
         sid, ng, npp, d, row, col = sid[cand], ng[cand], npp[cand], d[cand], row[cand], col[cand]
         row_off = np.r_[0, np.cumsum(ns)]
         col_off = np.r_[0, np.cumsum(ks)]
         rkey = row_off[sid] + row
         ckey = col_off[sid] + col
-        iso = (np.bincount(rkey, minlength=int(row_off[-1]))[rkey] == 1) & \
-              (np.bincount(ckey, minlength=int(col_off[-1]))[ckey] == 1)
+        iso = (np.bincount(rkey, minlength=int(row_off[-1]))[rkey] == 1) & (
+            np.bincount(ckey, minlength=int(col_off[-1]))[ckey] == 1
+        )
         n_contested = np.bincount(sid[~iso], minlength=len(missing))
         bounds = np.searchsorted(sid, np.arange(1, len(missing))).tolist()
         parts = zip(np.split(ng, bounds), np.split(npp, bounds), np.split(d, bounds), np.split(iso, bounds))
@@ -276,8 +297,14 @@ class ClassAccumulator:
             sub = _Subset(g0, g_, p_, d_, iso_, nc == 0)
             if nc:
                 lo, hi = (bounds[s_ - 1] if s_ else 0), (bounds[s_] if s_ < len(bounds) else len(sid))
-                sub.contest(int(self.n_f[f]), kept_idx[ck[p_ptr[f]]:ck[p_ptr[f + 1]]].copy(), self.ph,
-                            row[lo:hi].tolist(), col[lo:hi].tolist(), not self.frame_dup_hyp[f])
+                sub.contest(
+                    int(self.n_f[f]),
+                    kept_idx[ck[p_ptr[f]] : ck[p_ptr[f + 1]]].copy(),
+                    self.ph,
+                    row[lo:hi].tolist(),
+                    col[lo:hi].tolist(),
+                    not self.frame_dup_hyp[f],
+                )
             cache[(f, k)] = sub
 
     # -- one threshold -----------------------------------------------------------------------------------------
@@ -287,7 +314,7 @@ class ClassAccumulator:
         number kept (the kept sets of the thresholds are nested)."""
         n_kept = int(kept.sum())
         cached = self._pass_cache.get(n_kept)
-        if cached is not None:   # kept sets are nested: same count, same set, same result
+        if cached is not None:  # kept sets are nested: same count, same set, same result
             return cached
         ck = np.r_[0, np.cumsum(kept)]
         k_f = ck[self.p_ptr[1:]] - ck[self.p_ptr[:-1]]
@@ -330,8 +357,7 @@ class ClassAccumulator:
         if len(order) > 1:
             sw[order[1:]] = (o_s[1:] == o_s[:-1]) & (h_s[1:] != h_s[:-1])
 
-        res = PassResult(g=g, p=p, d=d, switch=sw, n_kept=n_kept, n_frames=int(nonempty.sum()),
-                          frame_id=frame_id)
+        res = PassResult(g=g, p=p, d=d, switch=sw, n_kept=n_kept, n_frames=int(nonempty.sum()), frame_id=frame_id)
         self._pass_cache[n_kept] = res
         return res
 
@@ -350,7 +376,7 @@ class ClassAccumulator:
         order = np.argsort(key_iso, kind="stable")
         key_sorted = key_iso[order]
         h_sorted = ph[p_iso][order]
-        last: dict[int, tuple[int, int]] = {}   # object -> (frame, hypothesis) of its last contested match
+        last: dict[int, tuple[int, int]] = {}  # object -> (frame, hypothesis) of its last contested match
 
         def isolated_prev(rows: list[int], g0: int, f: int) -> tuple[list[int], list[int], list[int]]:
             """Objects of the rows, and (frame, hypothesis) of their last isolated match before f (-1: none)."""
@@ -360,8 +386,11 @@ class ClassAccumulator:
             q = np.searchsorted(key_sorted, objs * nf + f) - 1
             qc = np.maximum(q, 0)
             ok = (q >= 0) & (key_sorted[qc] // nf == objs)
-            return (objs.tolist(), np.where(ok, key_sorted[qc] % nf, -1).tolist(),
-                    np.where(ok, h_sorted[qc], -1).tolist())
+            return (
+                objs.tolist(),
+                np.where(ok, key_sorted[qc] % nf, -1).tolist(),
+                np.where(ok, h_sorted[qc], -1).tolist(),
+            )
 
         def state(rows: list[int], g0: int, f: int) -> tuple[list[int], list[int]]:
             """Objects of the rows and their previous partner (-1: none) before frame f."""
@@ -394,8 +423,8 @@ class ClassAccumulator:
         for f, sub in hard:
             rows = sub.rows
             nr = len(rows)
-            objs = objs_all[at:at + nr]
-            prev = hp_all[at:at + nr]
+            objs = objs_all[at : at + nr]
+            prev = hp_all[at : at + nr]
             for t, o in enumerate(objs):
                 lc = last.get(o)
                 if lc is not None and lc[0] > pf_all[at + t]:
@@ -448,8 +477,11 @@ class ClassAccumulator:
                 out_p.append(int(kept[j]))
                 out_d.append(pair_d[(r, j)])
                 last[row_obj[r]] = (f, col_hid[j])
-        return (np.asarray(out_g, dtype=np.int64), np.asarray(out_p, dtype=np.int64),
-                np.asarray(out_d, dtype=np.float64))
+        return (
+            np.asarray(out_g, dtype=np.int64),
+            np.asarray(out_p, dtype=np.int64),
+            np.asarray(out_d, dtype=np.float64),
+        )
 
     @staticmethod
     def _update_generic(sub: _Subset, prev: dict[int, int]) -> list[tuple[int, int]]:
@@ -505,4 +537,5 @@ class ClassAccumulator:
             switches=np.asarray([int(res.switch.sum()) for res in passes], dtype=np.int64),
             kept=np.asarray([res.n_kept for res in passes], dtype=np.int64),
             frames=np.asarray([res.n_frames for res in passes], dtype=np.int64),
-            dist_sum=np.asarray([float(np.sum(res.d)) for res in passes], dtype=np.float64))
+            dist_sum=np.asarray([float(np.sum(res.d)) for res in passes], dtype=np.float64),
+        )

@@ -23,8 +23,9 @@ from grutrack.evaluation.nuscenes_fast.loading import default_config, load_track
 __all__ = ["class_metric_data", "evaluate_tracks", "fast_tracking_eval", "summarise"]
 
 
-def _recall_thresholds(scores: np.ndarray, gt_box_count: int, min_recall: float,
-                       num_thresholds: int) -> tuple[list[float], list[float]]:
+def _recall_thresholds(
+    scores: np.ndarray, gt_box_count: int, min_recall: float, num_thresholds: int
+) -> tuple[list[float], list[float]]:
     """``TrackingEvaluation.compute_thresholds``: (score thresholds, recalls), ``num_thresholds`` each, from the
     highest recall down; NaN thresholds where the recall is not achieved."""
     if len(scores) == 0:
@@ -105,8 +106,17 @@ def _devkit_class_metric_data(tracks_gt, tracks_pred, class_name: str, cfg, nele
     from grutrack.evaluation.tracking_classes import devkit_config
 
     cfg = devkit_config(cfg)  # sets the devkit's TrackingMetricData.nelem
-    ev = TrackingEvaluation(tracks_gt, tracks_pred, class_name, cfg.dist_fcn_callable, cfg.dist_th_tp,
-                            cfg.min_recall, num_thresholds=nelem, metric_worst=cfg.metric_worst, verbose=False)
+    ev = TrackingEvaluation(
+        tracks_gt,
+        tracks_pred,
+        class_name,
+        cfg.dist_fcn_callable,
+        cfg.dist_th_tp,
+        cfg.min_recall,
+        num_thresholds=nelem,
+        metric_worst=cfg.metric_worst,
+        verbose=False,
+    )
     return ev.accumulate()
 
 
@@ -164,8 +174,15 @@ def evaluate_tracks(tracks_gt, tracks_pred, config=None):
     return metrics, md_list
 
 
-def fast_tracking_eval(nusc, submission: dict | str | os.PathLike, eval_split: str, config=None,
-                       verbose: bool = False, *, loader: str = "fast") -> dict:
+def fast_tracking_eval(
+    nusc,
+    submission: dict | str | os.PathLike,
+    eval_split: str,
+    config=None,
+    verbose: bool = False,
+    *,
+    loader: str = "fast",
+) -> dict:
     """Evaluate a nuScenes tracking submission: what ``TrackingEval.main`` writes as ``metrics_summary.json``
     (``TrackingMetrics.serialize()`` plus ``meta``), with the same numbers.
 

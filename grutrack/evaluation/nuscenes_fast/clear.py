@@ -18,8 +18,23 @@ import numpy as np
 __all__ = ["CLEAR_METRICS", "ThresholdEvents", "clear_metrics"]
 
 #: the metrics :func:`clear_metrics` computes, in the order ``TrackingEvaluation`` stores them
-CLEAR_METRICS = ("gt", "tp", "motar", "mota", "motp", "faf", "mt", "ml", "fp", "fn", "ids", "frag", "recall",
-                 "tid", "lgd")
+CLEAR_METRICS = (
+    "gt",
+    "tp",
+    "motar",
+    "mota",
+    "motp",
+    "faf",
+    "mt",
+    "ml",
+    "fp",
+    "fn",
+    "ids",
+    "frag",
+    "recall",
+    "tid",
+    "lgd",
+)
 
 
 @dataclass
@@ -32,6 +47,7 @@ class ThresholdEvents:
     frames: (T,) int64 SWITCH events, predictions kept, frames with an event. dist_sum: (T,) float64 sum of the
     matches' centre distances in metres, summed in the accumulation's order (that order fixes its last bit).
     """
+
     matched: np.ndarray
     frame_id: np.ndarray
     obj_starts: np.ndarray
@@ -77,12 +93,12 @@ def clear_metrics(ev: ThresholdEvents) -> dict[str, np.ndarray]:
     gaps = np.maximum(lead, trail)
     obj_of = np.repeat(np.arange(len(starts)), counts)
     prev = np.maximum.accumulate(np.where(ms, pos, -1), axis=1)
-    prev = np.concatenate([np.full((n_thresholds, 1), -1), prev[:, :-1]], axis=1)   # last match before
+    prev = np.concatenate([np.full((n_thresholds, 1), -1), prev[:, :-1]], axis=1)  # last match before
     prev0 = np.maximum(prev, 0)
     inner_ok = ms & (prev >= 0) & (obj_of[prev0] == obj_of)
     inner = fid - np.take_along_axis(fid, prev0, axis=1) - 1
     gaps = np.maximum(gaps, np.maximum.reduceat(np.where(inner_ok, inner, 0), starts, axis=1))
-    lead_sum = np.sum(np.where(is_tracked, lead, 0) * 0.5, axis=1)     # halves of small integers: exact sums
+    lead_sum = np.sum(np.where(is_tracked, lead, 0) * 0.5, axis=1)  # halves of small integers: exact sums
     gap_sum = np.sum(np.where(is_tracked, gaps, 0) * 0.5, axis=1)
 
     # FRAG: matched -> missed transitions inside [first match, last match] of each object.
@@ -97,10 +113,24 @@ def clear_metrics(ev: ThresholdEvents) -> dict[str, np.ndarray]:
         nominator = (n_miss + n_sw + n_fp) - (1 - recall_m) * n_gt
         denominator = recall_m * n_gt
         motar = np.where(denominator == 0, np.nan, np.maximum(0.0, 1 - 1.0 * nominator / denominator))
-        mota = np.maximum(0.0, 1. - (n_miss + n_sw + n_fp) / n_gt)
+        mota = np.maximum(0.0, 1.0 - (n_miss + n_sw + n_fp) / n_gt)
         motp = np.where(n_det == 0, np.nan, ev.dist_sum / n_det)
     faf = n_fp / ev.frames * 100
     recall = n_det / n_gt
-    return {"gt": np.full(n_thresholds, n_gt, dtype=np.int64), "tp": n_match, "motar": motar, "mota": mota,
-            "motp": motp, "faf": faf, "mt": mt, "ml": ml, "fp": n_fp, "fn": n_miss, "ids": n_sw, "frag": frag,
-            "recall": recall, "tid": tid, "lgd": lgd}
+    return {
+        "gt": np.full(n_thresholds, n_gt, dtype=np.int64),
+        "tp": n_match,
+        "motar": motar,
+        "mota": mota,
+        "motp": motp,
+        "faf": faf,
+        "mt": mt,
+        "ml": ml,
+        "fp": n_fp,
+        "fn": n_miss,
+        "ids": n_sw,
+        "frag": frag,
+        "recall": recall,
+        "tid": tid,
+        "lgd": lgd,
+    }

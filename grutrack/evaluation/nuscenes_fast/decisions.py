@@ -38,6 +38,7 @@ class MatchDecisions:
     g_partner: (G,) int64 index of the matched prediction, -1 if none.
     thresholds: {class: best-MOTA threshold, or None when the class has none}.
     """
+
     frame_keys: list[tuple[Any, Any]]
     g_frame: np.ndarray
     g_cls: np.ndarray
@@ -81,8 +82,10 @@ def match_decisions(tracks_gt, tracks_pred, config=None):
         try:
             md = class_metric_data(acc, cfg, nelem)
         except NeedsDevkit as exc:
-            raise ValueError(f"ground truth with a repeated id in one frame (class {class_name}): per-box "
-                             "decisions are not available") from exc
+            raise ValueError(
+                f"ground truth with a repeated id in one frame (class {class_name}): per-box "
+                "decisions are not available"
+            ) from exc
         md_list.set(class_name, md)
         thresholds[class_name] = None
         if acc.n_gt == 0 or np.all(np.isnan(md.mota)):
@@ -92,7 +95,7 @@ def match_decisions(tracks_gt, tracks_pred, config=None):
             continue
         thresholds[class_name] = float(threshold)
         kept = acc.ps >= threshold
-        res = acc.run_pass(kept)     # the best threshold's pass, already run (cached)
+        res = acc.run_pass(kept)  # the best threshold's pass, already run (cached)
         gi = np.flatnonzero(flat.g_cls == c)
         pi = np.flatnonzero(flat.p_cls == c)
         p_status[pi] = np.where(kept, MISS_OR_FP, BELOW_THRESHOLD)
@@ -102,8 +105,20 @@ def match_decisions(tracks_gt, tracks_pred, config=None):
     metrics = summarise(md_list, cfg)
     metrics.add_runtime(time.time() - start)
     decisions = MatchDecisions(
-        frame_keys=flat.frame_keys, g_frame=flat.g_frame, g_cls=flat.g_cls,
-        g_id=[flat.obj_raw_id[o] for o in flat.g_obj.tolist()], g_xy=flat.g_xy, g_status=g_status,
-        g_partner=g_partner, p_frame=flat.p_frame, p_cls=flat.p_cls, p_id=flat.p_raw_id, p_xy=flat.p_xy,
-        p_score=flat.p_score, p_status=p_status, thresholds=thresholds, class_names=list(cfg.class_names))
+        frame_keys=flat.frame_keys,
+        g_frame=flat.g_frame,
+        g_cls=flat.g_cls,
+        g_id=[flat.obj_raw_id[o] for o in flat.g_obj.tolist()],
+        g_xy=flat.g_xy,
+        g_status=g_status,
+        g_partner=g_partner,
+        p_frame=flat.p_frame,
+        p_cls=flat.p_cls,
+        p_id=flat.p_raw_id,
+        p_xy=flat.p_xy,
+        p_score=flat.p_score,
+        p_status=p_status,
+        thresholds=thresholds,
+        class_names=list(cfg.class_names),
+    )
     return decisions, metrics

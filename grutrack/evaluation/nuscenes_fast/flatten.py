@@ -26,6 +26,7 @@ class FlatBoxes:
     score. obj_raw_id: tracking id (instance token) of each dense object id; p_raw_id: (P,) tracking id of each
     prediction.
     """
+
     n_frames: int
     g_frame: np.ndarray
     g_cls: np.ndarray
@@ -73,7 +74,7 @@ def flatten(tracks_gt, tracks_pred, class_names: list[str]) -> FlatBoxes:
     obj_raw_id: list[Any] = []
     frame_keys: list[tuple[Any, Any]] = []
     p_raw_id: list[Any] = []
-    hyp_raw_id: list[Any] = []      # one entry per dense hypothesis id (ids are per scene)
+    hyp_raw_id: list[Any] = []  # one entry per dense hypothesis id (ids are per scene)
     f = 0
     for scene_token, scene_gt in tracks_gt.items():
         scene_pred = tracks_pred[scene_token]

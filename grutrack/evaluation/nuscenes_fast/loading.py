@@ -50,8 +50,14 @@ def default_config():
     return load_config("tracking_nips_2019")
 
 
-def load_tracks(nusc, submission: dict | str | os.PathLike, eval_split: str, config=None, verbose: bool = False,
-                loader: str = "fast"):
+def load_tracks(
+    nusc,
+    submission: dict | str | os.PathLike,
+    eval_split: str,
+    config=None,
+    verbose: bool = False,
+    loader: str = "fast",
+):
     """``(tracks_gt, tracks_pred, meta)`` as the devkit's ``create_tracks`` gives them in ``TrackingEval.__init__``.
 
     ``loader``: ``"fast"`` (default): :func:`fast_load_tracks`, the same tracks with :class:`LiteBox` records,
@@ -74,6 +80,7 @@ def load_tracks(nusc, submission: dict | str | os.PathLike, eval_split: str, con
 # The devkit's own loaders
 # ----------------------------------------------------------------------------------------------------------------
 
+
 def _quiet(verbose: bool):
     """The devkit's GT loaders draw a tqdm bar on stderr even when not verbose; hide it unless verbose."""
     return contextlib.nullcontext() if verbose else contextlib.redirect_stderr(io.StringIO())
@@ -81,9 +88,15 @@ def _quiet(verbose: bool):
 
 def _devkit_load_tracks(nusc, submission, eval_split: str, cfg, verbose: bool):
     from nuscenes.eval.common.data_classes import EvalBoxes
-    from nuscenes.eval.common.loaders import (add_center_dist, filter_eval_boxes, get_samples_of_custom_split,
-                                              load_gt, load_gt_of_sample_tokens, load_prediction,
-                                              load_prediction_of_sample_tokens)
+    from nuscenes.eval.common.loaders import (
+        add_center_dist,
+        filter_eval_boxes,
+        get_samples_of_custom_split,
+        load_gt,
+        load_gt_of_sample_tokens,
+        load_prediction,
+        load_prediction_of_sample_tokens,
+    )
     from nuscenes.eval.tracking.data_classes import TrackingBox
     from nuscenes.eval.tracking.loaders import create_tracks
     from nuscenes.utils.splits import is_predefined_split
@@ -102,7 +115,8 @@ def _devkit_load_tracks(nusc, submission, eval_split: str, cfg, verbose: bool):
                 pred_boxes, meta = load_prediction(path, cfg.max_boxes_per_sample, TrackingBox, verbose=verbose)
             else:
                 pred_boxes, meta = load_prediction_of_sample_tokens(
-                    path, cfg.max_boxes_per_sample, TrackingBox, sample_tokens=custom_tokens, verbose=verbose)
+                    path, cfg.max_boxes_per_sample, TrackingBox, sample_tokens=custom_tokens, verbose=verbose
+                )
     else:
         # Same steps as load_prediction / load_prediction_of_sample_tokens, on an in-memory submission.
         data = submission
@@ -115,8 +129,9 @@ def _devkit_load_tracks(nusc, submission, eval_split: str, cfg, verbose: bool):
         pred_boxes = EvalBoxes.deserialize(results, TrackingBox)
         meta = data["meta"]
         for sample_token in pred_boxes.sample_tokens:
-            assert len(pred_boxes.boxes[sample_token]) <= cfg.max_boxes_per_sample, \
+            assert len(pred_boxes.boxes[sample_token]) <= cfg.max_boxes_per_sample, (
                 f"Error: Only <= {cfg.max_boxes_per_sample} boxes per sample allowed!"
+            )
 
     with _quiet(verbose):
         if predefined:
@@ -124,8 +139,9 @@ def _devkit_load_tracks(nusc, submission, eval_split: str, cfg, verbose: bool):
         else:
             gt_boxes = load_gt_of_sample_tokens(nusc, custom_tokens, TrackingBox, verbose=verbose)
 
-    assert set(pred_boxes.sample_tokens) == set(gt_boxes.sample_tokens), \
+    assert set(pred_boxes.sample_tokens) == set(gt_boxes.sample_tokens), (
         "Samples in split don't match samples in predicted tracks."
+    )
 
     pred_boxes = add_center_dist(nusc, pred_boxes)
     gt_boxes = add_center_dist(nusc, gt_boxes)
@@ -141,10 +157,12 @@ def _devkit_load_tracks(nusc, submission, eval_split: str, cfg, verbose: bool):
 # The fast loader: records and validation
 # ----------------------------------------------------------------------------------------------------------------
 
+
 class LiteBox(NamedTuple):
     """What the tracking metrics read from a ``TrackingBox`` (``sample_token``: the sample the box is filed
     under; for an interpolated box, that of its right neighbour, as the devkit does); ``translation``: global
     frame, metres."""
+
     sample_token: str
     translation: tuple[float, float, float]
     tracking_id: Any
@@ -182,10 +200,19 @@ class _Boxes:
     xyz: (N, 3) float64 translations, global frame, metres; num_pts: (N,) int64 (-1: not given).
     """
 
-    def __init__(self, tokens: list[str], counts: list[int], xyz: np.ndarray, raw_translation: list[Any],
-                 ids: list[Any], names: list[str], scores: list[float], num_pts: np.ndarray):
-        self.tokens = tokens            # sample tokens, in EvalBoxes order
-        self.counts = counts            # boxes per sample token
+    def __init__(
+        self,
+        tokens: list[str],
+        counts: list[int],
+        xyz: np.ndarray,
+        raw_translation: list[Any],
+        ids: list[Any],
+        names: list[str],
+        scores: list[float],
+        num_pts: np.ndarray,
+    ):
+        self.tokens = tokens  # sample tokens, in EvalBoxes order
+        self.counts = counts  # boxes per sample token
         self.xyz = xyz
         self.raw_translation = raw_translation
         self.ids = ids
@@ -199,6 +226,7 @@ class _Boxes:
 # The fast loader: loading
 # ----------------------------------------------------------------------------------------------------------------
 
+
 def _split_tokens(nusc, eval_split: str) -> tuple[list[str], bool]:
     """Sample tokens of the split in the devkit's order (``load_gt`` / ``get_samples_of_custom_split``), and
     whether the split is predefined."""
@@ -207,8 +235,11 @@ def _split_tokens(nusc, eval_split: str) -> tuple[list[str], bool]:
     if eval_split not in predefined_split_scenes():
         names = _custom_split_scenes(nusc, eval_split)
         _require(len(nusc.sample) > 0, "no samples")
-        return [s["token"] for s in nusc.sample
-                if nusc.get("scene", nusc.get("sample", s["token"])["scene_token"])["name"] in names], False
+        return [
+            s["token"]
+            for s in nusc.sample
+            if nusc.get("scene", nusc.get("sample", s["token"])["scene_token"])["name"] in names
+        ], False
     version = nusc.version
     if eval_split in {"train", "val", "train_detect", "train_track"}:
         _require(version.endswith("trainval"), "split/version")
@@ -238,8 +269,7 @@ def _custom_split_scenes(nusc, eval_split: str) -> list[str]:
     return splits[eval_split]
 
 
-def _load_predictions(submission, split_tokens: list[str], predefined: bool, cfg,
-                      tracking_names) -> tuple[_Boxes, Any]:
+def _load_predictions(submission, split_tokens: list[str], predefined: bool, cfg, tracking_names) -> tuple[_Boxes, Any]:
     if isinstance(submission, (str, os.PathLike)):
         _require(os.path.exists(os.fspath(submission)), "result file does not exist")
         with open(os.fspath(submission)) as f:
@@ -274,7 +304,7 @@ def _load_predictions(submission, split_tokens: list[str], predefined: bool, cfg
         raise NeedsDevkitLoader("velocity") from exc
     ego = [b["ego_translation"] for b in boxes if "ego_translation" in b]
     _numeric(ego, 3, "ego_translation")
-    _require(all(type(b["sample_token"]) == str for b in boxes), "sample_token")   # noqa: E721 (devkit check)
+    _require(all(type(b["sample_token"]) == str for b in boxes), "sample_token")  # noqa: E721 (devkit check)
     names = [b["tracking_name"] for b in boxes]
     _require(all(n is not None and n in tracking_names for n in names), "tracking_name")
     try:
@@ -284,8 +314,7 @@ def _load_predictions(submission, split_tokens: list[str], predefined: bool, cfg
         raise NeedsDevkitLoader("score/num_pts") from exc
     _require(not np.isnan(np.asarray(scores, dtype=np.float64)).any(), "NaN score")
     ids = [b["tracking_id"] for b in boxes]
-    return _Boxes(tokens, counts, xyz, raw_translation, ids, names, scores,
-                  np.asarray(num_pts, dtype=np.int64)), meta
+    return _Boxes(tokens, counts, xyz, raw_translation, ids, names, scores, np.asarray(num_pts, dtype=np.int64)), meta
 
 
 def _load_gt(nusc, split_tokens: list[str], tracking_names) -> _Boxes:
@@ -306,7 +335,7 @@ def _load_gt(nusc, split_tokens: list[str], tracking_names) -> _Boxes:
             if name is None:
                 continue
             pts = ann["num_lidar_pts"] + ann["num_radar_pts"]
-            _require(type(pts) == int, "num_pts")   # noqa: E721 (devkit check)
+            _require(type(pts) == int, "num_pts")  # noqa: E721 (devkit check)
             raw_translation.append(ann["translation"])
             sizes.append(ann["size"])
             rotations.append(ann["rotation"])
@@ -319,13 +348,22 @@ def _load_gt(nusc, split_tokens: list[str], tracking_names) -> _Boxes:
     xyz = _numeric(raw_translation, 3, "translation")
     _numeric(sizes, 3, "size")
     _numeric(rotations, 4, "rotation")
-    return _Boxes(list(split_tokens), counts, xyz, raw_translation, ids, names, [-1.0] * len(ids),
-                  np.asarray(num_pts, dtype=np.int64))
+    return _Boxes(
+        list(split_tokens),
+        counts,
+        xyz,
+        raw_translation,
+        ids,
+        names,
+        [-1.0] * len(ids),
+        np.asarray(num_pts, dtype=np.int64),
+    )
 
 
 # ----------------------------------------------------------------------------------------------------------------
 # The fast loader: filtering (add_center_dist + filter_eval_boxes)
 # ----------------------------------------------------------------------------------------------------------------
+
 
 class _SampleInfo:
     """Per sample token: ego position (global frame, metres), scene token, timestamp (us); bike racks on demand."""
@@ -348,8 +386,11 @@ class _SampleInfo:
         boxes = self._racks.get(token)
         if boxes is None:
             nusc = self.nusc
-            recs = [nusc.get("sample_annotation", a) for a in nusc.get("sample", token)["anns"]
-                    if nusc.get("sample_annotation", a)["category_name"] == _BIKE_RACK]
+            recs = [
+                nusc.get("sample_annotation", a)
+                for a in nusc.get("sample", token)["anns"]
+                if nusc.get("sample_annotation", a)["category_name"] == _BIKE_RACK
+            ]
             boxes = [_box_corners(r["translation"], r["size"], r["rotation"]) for r in recs]
             self._racks[token] = boxes
         return boxes
@@ -394,7 +435,7 @@ def _keep_mask(b: _Boxes, info: _SampleInfo, class_range: dict[str, float]) -> n
     # EvalBox.ego_dist: sqrt(sum(array(ego_translation[:2]) ** 2)) with ego_translation = translation - pose.
     ex = b.xyz[:, 0] - ego[:, 0]
     ey = b.xyz[:, 1] - ego[:, 1]
-    dist = np.sqrt(ex ** 2 + ey ** 2)
+    dist = np.sqrt(ex**2 + ey**2)
     try:
         max_dist = np.asarray([class_range[name] for name in b.names], dtype=np.float64)
     except KeyError as exc:
@@ -413,6 +454,7 @@ def _keep_mask(b: _Boxes, info: _SampleInfo, class_range: dict[str, float]) -> n
 # ----------------------------------------------------------------------------------------------------------------
 # The fast loader: create_tracks
 # ----------------------------------------------------------------------------------------------------------------
+
 
 def _create_tracks(b: _Boxes, keep: np.ndarray, info: _SampleInfo, nusc, eval_split: str, gt: bool):
     from grutrack.data.nusc_tables import predefined_split_scenes
@@ -442,7 +484,7 @@ def _create_tracks(b: _Boxes, keep: np.ndarray, info: _SampleInfo, nusc, eval_sp
     start = 0
     for token, count in zip(b.tokens, b.counts):
         idx = np.arange(start, start + count)
-        frames[info.scene[token]][info.timestamp[token]] = idx[keep[start:start + count]].tolist()
+        frames[info.scene[token]][info.timestamp[token]] = idx[keep[start : start + count]].tolist()
         start += count
 
     xyz = b.xyz
@@ -461,9 +503,15 @@ def _create_tracks(b: _Boxes, keep: np.ndarray, info: _SampleInfo, nusc, eval_sp
 
     tracks: dict[str, dict[int, list[LiteBox]]] = defaultdict(lambda: defaultdict(list))
     for scene_token, per_ts in frames.items():
+
         def lite(i: int) -> LiteBox:
-            return LiteBox(b.tokens_of_box[i], (float(xyz[i, 0]), float(xyz[i, 1]), float(xyz[i, 2])), b.ids[i],
-                           b.names[i], scores[i])
+            return LiteBox(
+                b.tokens_of_box[i],
+                (float(xyz[i, 0]), float(xyz[i, 1]), float(xyz[i, 2])),
+                b.ids[i],
+                b.names[i],
+                scores[i],
+            )
 
         out: dict[int, list[LiteBox]] = defaultdict(list)
         for ts, boxes in per_ts.items():
@@ -483,7 +531,7 @@ def _create_tracks(b: _Boxes, keep: np.ndarray, info: _SampleInfo, nusc, eval_sp
                 continue
             present = set(tss)
             members = track_boxes[tid]
-            for ts in timestamps[position[tss[0]]:position[tss[-1]] + 1]:
+            for ts in timestamps[position[tss[0]] : position[tss[-1]] + 1]:
                 if ts in present or not tss[0] <= ts <= tss[-1]:
                     continue
                 right = bisect(tss, ts)
@@ -494,8 +542,13 @@ def _create_tracks(b: _Boxes, keep: np.ndarray, info: _SampleInfo, nusc, eval_sp
                 y = (1.0 - ratio) * xyz[li, 1] + ratio * xyz[ri, 1]
                 z = (1.0 - ratio) * xyz[li, 2] + ratio * xyz[ri, 2]
                 score = (1.0 - ratio) * float(scores[li]) + ratio * float(scores[ri])
-                added.append((position[ts], order, LiteBox(b.tokens_of_box[ri], (float(x), float(y), float(z)),
-                                                           b.ids[ri], b.names[ri], score)))
+                added.append(
+                    (
+                        position[ts],
+                        order,
+                        LiteBox(b.tokens_of_box[ri], (float(x), float(y), float(z)), b.ids[ri], b.names[ri], score),
+                    )
+                )
         added.sort(key=lambda item: (item[0], item[1]))
         for pos, _, box in added:
             out[timestamps[pos]].append(box)
