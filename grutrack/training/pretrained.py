@@ -1,0 +1,112 @@
+"""The pretrained GRU-KF shipped with the package (``grutrack/pretrained/<name>/``): a checkpoint of a shipped
+training recipe, trained by ``scripts/pretrain_grukf.sh``, with its training config, log, validation record and
+``provenance.json`` (the command, the package version and commit, the detections' and the model's SHA-256, the
+training data's fingerprint).
+
+The files are what ``grutrack train`` wrote; :func:`package` copies them in and writes the provenance, and
+:func:`recipe_differences` says whether the checkpoint still is the shipped recipe (tests/test_grukf_real.py
+fails, naming the keys, when the recipe changed and the checkpoint was not re-trained).
+
+    python -m grutrack.training.pretrained --from CK_DIR --detections DET.json --out grutrack/pretrained/grukf_default
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import shutil
+import subprocess
+from dataclasses import asdict, replace
+from pathlib import Path
+from typing import Any
+
+#: the shipped pretrained networks: name -> the training recipe (grutrack/configs/training/<recipe>.yaml) it is
+PRETRAINED = {"grukf_default": "grukf"}
+#: the files of a training folder a pretrained network keeps (model.pt without the state a resume needs)
+FILES = ("model.pt", "training.yaml", "train_log.csv", "validation.json")
+#: training-config keys that do not change what is learned
+IGNORED_KEYS = ("device", "checkpoint_every")
+
+
+def pretrained_dir(name: str) -> Path:
+    """The folder of the shipped pretrained network ``name`` (a key of :data:`PRETRAINED`)."""
+    return Path(__file__).resolve().parents[1] / "pretrained" / name
+
+
+def _plain(value: Any) -> Any:
+    """JSON-comparable form of a config value (tuples as lists, nested)."""
+    return json.loads(json.dumps(value, default=list))
+
+
+def recipe_differences(train_config: dict, recipe: str) -> list[str]:
+    """Keys (dotted) whose value in a checkpoint's training config differs from the shipped recipe ``recipe``
+    as loaded today; empty when the checkpoint is that recipe (:data:`IGNORED_KEYS` left out)."""
+    from grutrack.training.config import load_train_config
+
+    shipped = _plain(asdict(load_train_config(recipe)))
+    have = _plain(train_config)
+    out = []
+    for key in sorted(set(shipped) | set(have)):
+        if key in IGNORED_KEYS:
+            continue
+        a, b = shipped.get(key), have.get(key)
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += [f"{key}.{k}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+        elif a != b:
+            out.append(key)
+    return out
+
+
+def _git_commit() -> str | None:
+    try:
+        return subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True, text=True, check=True
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+
+
+def package(src: Path, detections: Path, out: Path, command: str) -> dict:
+    """Copy :data:`FILES` of the training folder ``src`` into ``out`` and write ``provenance.json``; returns it."""
+    from grutrack import __version__
+    from grutrack.documents import Checkpoint
+    from grutrack.io import atomic_path, write_json_atomic
+    from grutrack.provenance import sha256_file
+
+    ck = Checkpoint.read(src / "model.pt")
+    out.mkdir(parents=True, exist_ok=True)
+    # the network, its config, the selected step and provenance; not the optimizer and log a resume needs
+    replace(ck, training=None).write(out / "model.pt")
+    for name in FILES[1:]:
+        with atomic_path(out / name) as tmp:
+            shutil.copyfile(src / name, tmp)
+    prov = {
+        "command": command,
+        "grutrack_version": __version__,
+        "git_commit": _git_commit(),
+        "written": datetime.date.today().isoformat(),
+        "model_sha256": sha256_file(out / "model.pt"),
+        "selected_step": ck.selected.step if ck.selected else None,
+        "detections": {"file": Path(detections).name, "sha256": sha256_file(detections)},
+        "data_fingerprint": ck.data_fingerprint,
+        "data_source": ck.data_source,
+    }
+    write_json_atomic(out / "provenance.json", prov, indent=2)
+    return prov
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description="Package a training folder as a shipped pretrained GRU-KF.")
+    p.add_argument("--from", dest="src", required=True, help="the --out folder of grutrack train")
+    p.add_argument("--detections", required=True, help="the training detections (their SHA-256 is recorded)")
+    p.add_argument("--out", required=True, help="grutrack/pretrained/<name>")
+    p.add_argument("--command", required=True, help="the command that made it (recorded)")
+    args = p.parse_args(argv)
+    prov = package(Path(args.src), Path(args.detections), Path(args.out), args.command)
+    print(f"wrote {args.out}: model.pt sha256 {prov['model_sha256'][:12]}, step {prov['selected_step']}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
