@@ -58,7 +58,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="leave out the config's sources (the default recipe's 700-scene SYNTHETIC demo): train on "
         "--split and any --source only, e.g. a quick run or real data at the paper's scale",
     )
-    p.add_argument("--resume", action="store_true", help="continue from --out/last.pt")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue from --out/last.pt (a run stopped before it saved a step starts from the beginning)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 

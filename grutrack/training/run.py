@@ -112,7 +112,7 @@ def train(
             reference_name=f"tracker preset '{cfg.tracker_preset}' (its EKF)",
         )
     if resume:
-        trainer.resume(out / "last.pt")
+        _resume(trainer, out)
     source["synthetic"] = synthetic_inputs(dataset, loaded_dets, cfg, [e for e, _ in extra])
     write_training_yaml(cfg, config_arg, out / "training.yaml", source)
     final = trainer.run()
@@ -216,3 +216,25 @@ def write_training_yaml(cfg, config_arg: str, path: Path, source: dict) -> None:
         f"the command line's overrides.\n# config hash {config_hash(d)}\n{data}\n"
     )
     write_text_atomic(path, head + yaml.safe_dump(d, sort_keys=False, default_flow_style=None, width=120))
+
+
+def _resume(trainer, out: Path) -> None:
+    """``--resume``: continue from ``out/last.pt``; a run stopped before it saved anything (its training.yaml is
+    there, its last.pt not: interrupted during the start-up validation) starts from the beginning and says so;
+    a folder with neither is refused (a mistyped --out)."""
+    import sys
+
+    last = out / "last.pt"
+    if last.is_file():
+        trainer.resume(last)
+    elif (out / "training.yaml").is_file():
+        print(
+            f"grutrack train: --resume: {last} does not exist (the run stopped before its first step was "
+            f"saved); starting from the beginning",
+            file=sys.stderr,
+        )
+    else:
+        raise ConfigError(
+            f"--resume: nothing to resume in {out} (no last.pt, no training.yaml of a run); expected "
+            f"the --out folder of the interrupted run"
+        )
