@@ -17,4 +17,8 @@ if [ "$(cat "$VENV/.grutrack-stamp" 2>/dev/null)" != "$stamp_src" ]; then
     "$VENV/bin/python" -m pip install --quiet -c "$ROOT/constraints.txt" -e "$ROOT[test]" >&2
     echo "$stamp_src" > "$VENV/.grutrack-stamp"
 fi
+# compile the tracking kernels now (cached on disk), not in the first command
+if ! "$VENV/bin/python" -c "import sys, grutrack.warmup as w; sys.exit(0 if w.cache_is_warm() else 1)"; then
+    "$VENV/bin/python" -m grutrack.warmup
+fi
 export PATH="$VENV/bin:$PATH"

@@ -75,6 +75,9 @@ def run(args: argparse.Namespace) -> int:
     dets = ds.load_detections(args.detections, args.split, scenes, tracker.cfg.measured_yaw)
     for line in dets.warnings:
         print(f"grutrack track: warning: {line}", file=sys.stderr)
+    from grutrack.warmup import cold_cache_notice
+
+    cold_cache_notice()  # a plain pip install: the first run compiles the kernels; say so
     n_frames = sum(len(s) for s in scenes)
     with tqdm(
         total=n_frames, unit="frame", desc=f"tracking {ds.name} {args.split}", disable=args.no_progress, file=sys.stderr
