@@ -3,8 +3,8 @@
 # (grutrack/configs/training/grukf.yaml: nuScenes mini_train plus the recipe's 700-scene SYNTHETIC demo source,
 # 3 epochs, detections resampled over three profiles, 2 mini_train scenes held out for validation) on mini_train
 # with simulated CenterPoint-like detections (seed 1). Run it when the default recipe changes:
-# tests/test_grukf_real.py fails until the checkpoint matches the shipped recipe again. About half an hour on
-# one core. Data: ../shared/data/nuscenes (override with GRUTRACK_TEST_DATA).
+# tests/test_grukf_real.py fails until the checkpoint matches the shipped recipe again. Its time on one core:
+# docs/results/pretrained.md. Data: ../shared/data/nuscenes (override with GRUTRACK_TEST_DATA).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 source "$ROOT/scripts/env.sh"

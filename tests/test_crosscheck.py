@@ -24,28 +24,17 @@ def test_spread_keeps_the_first_and_spaces_the_rest():
     assert len(spread(names, 7)) == 7
 
 
-def _grutrack(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "grutrack", *args], capture_output=True, text=True)
+def _mini_val(command: str, nusc_root: Path, *args: str) -> subprocess.CompletedProcess:
+    """``grutrack COMMAND`` on nuScenes mini_val with ``args``."""
+    common = ["--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_val"]
+    return subprocess.run([sys.executable, "-m", "grutrack", command, *common, *args], capture_output=True, text=True)
 
 
 @pytest.fixture(scope="module")
 def tracks(tmp_path_factory, nusc_root, pointpillars_mini_val) -> Path:
     """The EKF's tracks of mini_val on the real PointPillars detections."""
     out = tmp_path_factory.mktemp("cc") / "tracks.json"
-    proc = _grutrack(
-        "track",
-        "--dataroot",
-        str(nusc_root),
-        "--version",
-        "v1.0-mini",
-        "--split",
-        "mini_val",
-        "--detections",
-        str(pointpillars_mini_val),
-        "--out",
-        str(out),
-        "--no-progress",
-    )
+    proc = _mini_val("track", nusc_root, "--detections", str(pointpillars_mini_val), "--out", str(out), "--no-progress")
     assert proc.returncode == 0, proc.stderr
     return out
 
@@ -58,19 +47,7 @@ def _listing(root: Path) -> dict[str, float]:
 def test_devkit_and_fast_agree_on_all_and_on_a_subset(tracks, nusc_root, tmp_path):
     before = _listing(nusc_root)
     full_out, sub_out = tmp_path / "full.json", tmp_path / "sub.json"
-    proc = _grutrack(
-        "cross-check",
-        "--dataroot",
-        str(nusc_root),
-        "--version",
-        "v1.0-mini",
-        "--split",
-        "mini_val",
-        "--submission",
-        str(tracks),
-        "--out",
-        str(full_out),
-    )
+    proc = _mini_val("cross-check", nusc_root, "--submission", str(tracks), "--out", str(full_out))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "EQUAL at 1e-09" in proc.stdout
     full = CrossCheckDocument.read(full_out)
@@ -78,41 +55,11 @@ def test_devkit_and_fast_agree_on_all_and_on_a_subset(tracks, nusc_root, tmp_pat
     assert full.scenes == ["scene-0103", "scene-0916"] and full.samples == 81 and full.entries > 150
     # the same AMOTA as `grutrack evaluate --evaluator fast` on the whole split
     ev = tmp_path / "metrics.json"
-    assert (
-        _grutrack(
-            "evaluate",
-            "--dataroot",
-            str(nusc_root),
-            "--version",
-            "v1.0-mini",
-            "--split",
-            "mini_val",
-            "--submission",
-            str(tracks),
-            "--evaluator",
-            "fast",
-            "--out",
-            str(ev),
-        ).returncode
-        == 0
-    )
+    proc = _mini_val("evaluate", nusc_root, "--submission", str(tracks), "--evaluator", "fast", "--out", str(ev))
+    assert proc.returncode == 0, proc.stderr
     assert full.amota["fast"] == full.amota["devkit"] == json.loads(ev.read_text())["overall"]["amota"]
     # one scene of two: the submission is cut to its samples and both evaluators score it
-    proc = _grutrack(
-        "cross-check",
-        "--dataroot",
-        str(nusc_root),
-        "--version",
-        "v1.0-mini",
-        "--split",
-        "mini_val",
-        "--submission",
-        str(tracks),
-        "--scenes",
-        "1",
-        "--out",
-        str(sub_out),
-    )
+    proc = _mini_val("cross-check", nusc_root, "--submission", str(tracks), "--scenes", "1", "--out", str(sub_out))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     sub = CrossCheckDocument.read(sub_out)
     assert sub.subset and sub.scenes == ["scene-0103"] and sub.samples == 40 and sub.equal
@@ -139,23 +86,16 @@ def test_a_difference_is_reported_and_not_called_equal(tracks, nusc_root, monkey
 
 
 def test_bad_scene_count_exits_2_naming_the_flag(tracks, nusc_root, tmp_path):
-    proc = _grutrack(
-        "cross-check",
-        "--dataroot",
-        str(nusc_root),
-        "--version",
-        "v1.0-mini",
-        "--split",
-        "mini_val",
-        "--submission",
-        str(tracks),
-        "--scenes",
-        "0",
-        "--out",
-        str(tmp_path / "x.json"),
-    )
+    out = tmp_path / "x.json"
+    proc = _mini_val("cross-check", nusc_root, "--submission", str(tracks), "--scenes", "0", "--out", str(out))
     assert proc.returncode == 2 and "--scenes 0" in proc.stderr and "Traceback" not in proc.stderr
-    assert not (tmp_path / "x.json").exists()
+    assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_a_missing_submission_exits_2_naming_it(nusc_root, tmp_path):
+    missing = tmp_path / "nope.json"
+    proc = _mini_val("cross-check", nusc_root, "--submission", str(missing), "--out", str(tmp_path / "x.json"))
+    assert proc.returncode == 2 and str(missing) in proc.stderr and "Traceback" not in proc.stderr
 
 
 def test_subset_dataroot_merges_the_custom_splits(tmp_path):

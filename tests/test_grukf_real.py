@@ -7,18 +7,19 @@ detections (seed 1), evaluated on mini_val with simulated detections of other se
 PointPillars detections (official semantics via the exact fast evaluator, equal to the devkit's TrackingEval).
 The GRU-KF writes its posterior for matched tracks.
 
-The training takes about half an hour, so CI does not repeat it: the shipped checkpoint must be the shipped recipe
-(test_the_pretrained_network_is_the_shipped_recipe fails, naming the keys, when the recipe changes; then re-train
-with `bash scripts/pretrain_grukf.sh`), and its claims are re-verified here in seconds. A short real training of
-the same recipe through `grutrack train` (one epoch, no extra source) keeps the training path itself under test.
+The training takes tens of minutes (docs/results/pretrained.md), so CI does not repeat it: the shipped checkpoint
+must be the shipped recipe (test_the_pretrained_network_is_the_shipped_recipe fails, naming the keys, when the recipe
+changes; then re-train with `bash scripts/pretrain_grukf.sh`), and its claims are re-verified here in seconds. A
+short real training of the same recipe through `grutrack train` (one epoch, no extra source) keeps the training path
+itself under test.
 
-Measured (docs/results/grukf_eval/README.md, "Coasting at constant speed (`coast_acceleration: zero`) with
-clipping: the default"; training detection seeds 1 and 3 of the six): on these two simulated sets the mean AMOTA
-is the default `ekf` preset's or above and above Poly-MOT's EKF (`polymot`, the paper's baseline), the mean AMOTP
-about 0.028 m below the preset's; the real file above the preset's. The bounds guard those relations with a
-margin for CPU arithmetic: AMOTA not more than 0.003 below the preset's, AMOTP at least 0.010 m below it (two sets:
-one association event moves a set's AMOTP by 0.03 m; the bar of 0.02 m is measured on 14 draws in the results
-file), the real file within 0.002 of it."""
+Measured (docs/results/grukf_eval/README.md, "Coasting at constant speed (`coast_acceleration: zero`) with clipping:
+the default"; training detection seeds 1 and 3 of the six): on these two simulated sets the mean AMOTA is the default
+`ekf` preset's or above and above Poly-MOT's EKF (`polymot`, the paper's baseline), the mean AMOTP about 0.028 m
+below the preset's; the real file above the preset's. The bounds guard those relations with a margin for CPU
+arithmetic: AMOTA not more than 0.003 below the preset's, AMOTP at least 0.010 m below it (two sets: one association
+event moves a set's AMOTP by 0.03 m; the bar of 0.02 m is measured on 14 draws in the results file), the real file
+within 0.002 of it."""
 
 from __future__ import annotations
 
