@@ -42,6 +42,9 @@ KINDS: dict[str, ConfigKind] = {
     "motion": ConfigKind("motion", "motion.schema.yaml", "motion config", "sections models, classes"),
     "paper": ConfigKind(None, "paper.schema.yaml", "paper numbers file", "sections tables, figures"),
     "registry": ConfigKind(None, "registry.schema.yaml", "detection registry", "one key 'sources'"),
+    "published": ConfigKind(
+        "published", "published.schema.yaml", "published results file", "keys publication, source, results"
+    ),
     "detector_profile": ConfigKind(
         "detector_profiles", "detector_profile.schema.yaml", "detector profile", "profile settings"
     ),

@@ -1,20 +1,18 @@
 #!/usr/bin/env bash
-# Re-train the shipped pretrained GRU-KF (grutrack/pretrained/grukf_default/): the default recipe as shipped
-# (grutrack/configs/training/grukf.yaml: nuScenes mini_train plus the recipe's 700-scene SYNTHETIC demo source,
-# 3 epochs, detections resampled over three profiles, 2 mini_train scenes held out for validation) on mini_train
-# with simulated CenterPoint-like detections (seed 1). Run it when the default recipe changes:
-# tests/test_grukf_real.py fails until the checkpoint matches the shipped recipe again. Its time on one core:
-# docs/results/pretrained.md. Data: ../shared/data/nuscenes (override with GRUTRACK_TEST_DATA).
+# Re-train the shipped pretrained GRU-KF (grutrack/pretrained/grukf_default/) through the workflow: the training
+# `grukf_default` of workflow/config/mini.yaml (the default recipe, grutrack/configs/training/grukf.yaml, on
+# nuScenes mini_train with simulated CenterPoint-like detections, seed 1, plus the recipe's SYNTHETIC 700-scene
+# source), packaged by rule package_pretrained and copied into the package. Run it when the default recipe or the
+# default tracker changes: tests/test_grukf_real.py fails until the checkpoint matches the shipped recipe again.
+# Its time: docs/results/pretrained.md. Data: ../shared/data/nuscenes (as workflow/config/mini.yaml says).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 source "$ROOT/scripts/env.sh"
-DATA="${GRUTRACK_TEST_DATA:-$ROOT/../shared/data}/nuscenes"
-OUT="$ROOT/grutrack/pretrained/grukf_default"
-WORK="$(mktemp -d "${TMPDIR:-/tmp}/grutrack-pretrain-XXXXXX")"
-trap 'rm -rf "$WORK"' EXIT
-grutrack simulate-detections --dataroot "$DATA" --version v1.0-mini --split mini_train --profile centerpoint \
-    --seed 1 --out "$WORK/mini_train_centerpoint_s1.json"
-grutrack train --dataroot "$DATA" --version v1.0-mini --split mini_train \
-    --detections "$WORK/mini_train_centerpoint_s1.json" --out "$WORK/ck" --no-progress
-python -m grutrack.training.pretrained --from "$WORK/ck" --detections "$WORK/mini_train_centerpoint_s1.json" \
-    --out "$OUT" --command "bash scripts/pretrain_grukf.sh"
+cd "$ROOT"
+snakemake --cores "${GRUTRACK_CORES:-2}" pretrained/grukf_default/provenance.json \
+    --configfile workflow/config/mini.yaml "$@"
+for f in model.pt training.yaml train_log.csv validation.json provenance.json; do
+    cp "pretrained/grukf_default/$f" "grutrack/pretrained/grukf_default/$f.tmp"
+    mv "grutrack/pretrained/grukf_default/$f.tmp" "grutrack/pretrained/grukf_default/$f"
+done
+echo "grutrack/pretrained/grukf_default/ updated: $(grep -o '"model_sha256": "[0-9a-f]*' grutrack/pretrained/grukf_default/provenance.json)"

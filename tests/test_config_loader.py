@@ -66,7 +66,7 @@ def _tracker_with(tmp_path, edit) -> str:
         ),
         (
             lambda r: r["association"]["first_threshold"].__setitem__("bus", math.inf),
-            r"'association.first_threshold.bus' must be a cost threshold in \[0, 2\]",
+            r"'association.first_threshold.bus' must be a cost threshold in \[0, 3\]",
         ),
         (lambda r: r["association"]["first_threshold"].pop("bus"), r"missing key 'association.first_threshold.bus'"),
         (

@@ -26,13 +26,24 @@ NUSC_PLACEHOLDER = "/data/nuscenes"
 #: commands that run for real (small, on the real fragments beside the checkout); the others are dry runs
 REAL = ("workflow/config/mini.yaml", "workflow/config/av2_sim.yaml")
 #: (substring, why) of commands not run here
-SKIP = (("--executor slurm", "needs the SLURM executor plugin and a cluster"),)
+SKIP = (
+    ("workflow/profiles/slurm", "needs a SLURM cluster (tests/test_slurm.py runs the profile on a one-node cluster)"),
+    ("cluster.yaml", "the SLURM test's own overlay, written by tests/test_slurm.py"),
+)
 
 
 def readme_commands() -> list[str]:
-    """The `snakemake ...` commands of the README's bash blocks (continuation lines joined, comments cut)."""
+    """The `snakemake ...` commands of the bash blocks of the README and the guides under docs/ (continuation
+    lines joined, comments cut)."""
+    out = []
+    for path in [README, *sorted((REPO / "docs").glob("*.md"))]:
+        out += _commands(path.read_text().splitlines())
+    return list(dict.fromkeys(out))
+
+
+def _commands(lines: list[str]) -> list[str]:
+    """The `snakemake ...` lines of the bash blocks of one markdown file."""
     out, in_block = [], False
-    lines = README.read_text().splitlines()
     i = 0
     while i < len(lines):
         line = lines[i]

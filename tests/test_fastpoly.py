@@ -140,6 +140,7 @@ def _lifecycle(scores, rows, det_scores, multiply, average_score, totals=None, c
         average_score,
         np.ones(7),
         2,
+        0,  # write_first_frames (MCTrack's option; not used here)
         matched,
         alive,
         emit,

@@ -678,6 +678,7 @@ def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(
     monkeypatch.setattr(tr, "run_scene", real)
     assert main([*argv[:-2], "2", "--no-progress", "--resume"]) == 2
     assert "last.pt: cannot resume with other training settings (epochs 1 -> 2)" in capsys.readouterr().err
+    assert "\nepochs: 1\n" in (tmp_path / "ck" / "training.yaml").read_text()  # the run's, not the refused settings
 
 
 def test_heading_frame_rotation_against_the_matrix_form_and_its_inverse():

@@ -154,11 +154,12 @@ def test_training_with_network_classes_own_model_takes_loss_terms_of_both_models
     np.testing.assert_array_equal(net.ekf_P0[TRACKING_CLASSES.index("bicycle")].numpy(), motion["bicycle"]["P0"])
 
 
-def test_network_classes_own_model_refuses_several_scenes_per_step():
+def test_network_classes_own_model_takes_several_scenes_per_step():
+    """Its groups of one model each run in lockstep, one network call per group and frame
+    (tests/test_grukf_lockstep.py checks the gradient)."""
     from grutrack.training.config import load_train_config
 
-    with pytest.raises(ConfigError, match="'scenes_per_step' must be 1 with network_classes 'own_model'"):
-        load_train_config("grukf", {"network_classes": "own_model", "scenes_per_step": 2})
+    assert load_train_config("grukf", {"network_classes": "own_model", "scenes_per_step": 2}).scenes_per_step == 2
 
 
 def test_training_classes_own_model_trains_on_the_two_wheelers_and_tracks_with_network_classes(
@@ -208,8 +209,7 @@ def test_training_classes_own_model_is_refused_where_it_cannot_apply():
     assert load_train_config("paper").training_classes == "tracked"  # optional key, the paper's behaviour
     with pytest.raises(ConfigError, match="'training_classes' must be 'tracked' or 'own_model'"):
         load_train_config("grukf", {"training_classes": "all"})
-    with pytest.raises(ConfigError, match="'scenes_per_step' must be 1 with training_classes 'own_model'"):
-        load_train_config("grukf", {"training_classes": "own_model", "scenes_per_step": 2})
+    assert load_train_config("grukf", {"training_classes": "own_model", "scenes_per_step": 2}).scenes_per_step == 2
     with pytest.raises(ConfigError, match="'training_classes' 'own_model' needs network.network_classes 'ss_model' or"):
         load_train_config("grukf", {"training_classes": "own_model", "network_classes": "all"})
 

@@ -105,6 +105,7 @@ def test_nusc_val_report_has_paper_reproduced_and_difference(tmp_path):
         "polymot": (0.725, 0.53, 300),
         "ekf": (0.72, 0.52, 280),
         "fastpoly": (0.737, 0.49, 250),
+        "mctrack": (0.741, 0.48, 240),
     }
     args = [
         "report",
@@ -125,6 +126,10 @@ def test_nusc_val_report_has_paper_reproduced_and_difference(tmp_path):
         "IV:CTRA+EKF=ekf",
         "--extra-row",
         "III:Fast-Poly=fastpoly",
+        "--extra-row",
+        "III:MCTrack=mctrack",
+        "--extra-row",
+        "IV:MCTrack=mctrack",
     ]
     for run, (a, p, i) in runs.items():
         args += ["--run", f"{run}={nusc_metrics(tmp_path / f'{run}.json', a, p, i)}"]
@@ -136,6 +141,8 @@ def test_nusc_val_report_has_paper_reproduced_and_difference(tmp_path):
     # a row that is not in the paper: reproduced, labelled, never among the paper numbers or the differences
     assert len(re.findall(r"^\| Fast-Poly \(not in the paper\) \| 73\.7 \| 49\.0 \| 250 \|$", text, re.M)) == 1
     assert "Fast-Poly" not in text.split("**Reproduced**")[0] and "Fast-Poly" not in text.split("**Difference**")[1]
+    assert len(re.findall(r"^\| MCTrack \(not in the paper\) \| 74\.1 \| 48\.0 \| 240 \|$", text, re.M)) == 1
+    assert len(re.findall(r"^\| MCTrack \(not in the paper\) \|", text, re.M)) == 2  # Tables III and IV
     for link in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text):
         png = tmp_path / link
         assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

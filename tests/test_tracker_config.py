@@ -22,7 +22,7 @@ def test_ekf_preset_values():
     assert cfg.nms_threshold == 0.08 and cfg.two_stage and cfg.second_metric == "giou_bev"
     assert cfg.first_metric[1] == "giou_bev" and cfg.first_metric[2] == "giou_3d"  # bus, car
     assert cfg.max_age.tolist() == [10, 10, 15, 20, 10, 10, 20]
-    assert cfg.punish_num.tolist() == [2, 1, 1, 2, 1, 1, 1]  # bicycle, motorcycle coast two frames
+    assert cfg.punish_num.tolist() == [2, 2, 1, 2, 1, 2, 2]  # all but car and pedestrian coast two frames
     assert cfg.algorithm == "hungarian" and cfg.min_hits.tolist() == [1] * 7  # Poly-MOT's min_hit 1
     assert np.isinf(cfg.max_distance).all()  # the greedy gate: not read by hungarian, so not in the preset
 

@@ -25,7 +25,6 @@ datasets:
   demo: {scenes: 3, frames_per_scene: 12}
 trainings:
   demo_grukf: {overrides: {sources: [], epochs: 1, validation_scenes: 1}}
-  demo_grukf_last: {overrides: {sources: [], epochs: 1, validation_scenes: 1}}
 # a leaderboard-style experiment on the demo (no evaluation; a validated zip and the Table II report)
 experiments:
   demo_lb:
@@ -80,7 +79,7 @@ def demo_run(tmp_path_factory):
 def test_demo_report_tables_match_metrics_json(demo_run):
     text = (demo_run / "reports/demo_val.md").read_text()
     assert "SYNTHETIC" in text and "No comparison between the two is implied" in text
-    for run in ("ekf", "grukf", "grukf_last", "constant_gain"):
+    for run in ("ekf", "grukf", "grukf_demo", "constant_gain"):
         doc = json.loads((demo_run / f"reports/metrics/demo_val/centerpoint_sim/{run}.json").read_text())
         o = doc["overall"]
         row = re.search(rf"^\| {run} \| (.+) \|$", text, re.M).group(1).split(" | ")
@@ -107,7 +106,19 @@ def test_demo_report_tables_match_metrics_json(demo_run):
         r"\(its EKF\) on the same scenes: 0\.\d{3}\.",
         text,
     )
-    assert "model.pt holds step 1 (the last step" in text  # demo_grukf_last
+    # which network each GRU-KF run tracked with: the shipped pretrained one, and the one this job trained
+    assert re.search(
+        r"^\| grukf \| grukf_pretrained \| shipped pretrained network `grukf_default` "
+        r"\(`bash scripts/pretrain_grukf\.sh`, commit [0-9a-f]{10}, written \d{4}-\d\d-\d\d\); not trained by "
+        r"this workflow \| \d+ steps, 3 epochs \|$",
+        text,
+        re.M,
+    )
+    assert re.search(
+        r"^\| grukf_demo \| demo_grukf \| trained by this workflow \(`checkpoints/demo_grukf`\) \|", text, re.M
+    )
+    assert "Validated on 2 scenes held out of mini_train" in text  # the pretrained network's learning curve
+    assert not (demo_run / "checkpoints/grukf_pretrained").exists()  # no training job for a shipped network
     assert "figures/demo_val/learning_curve_demo_grukf.png" in text
     assert "config hash" in text and "grutrack 0.1.0" in text and "centerpoint_sim.json" in text
     links = re.findall(r"!\[[^\]]*\]\(([^)]+\.png)\)", text)
@@ -182,15 +193,14 @@ def test_training_change_reruns_train_and_its_dependents_only(demo_run):
     proc = snakemake(
         demo_run, "reports/demo_val.md", options=("-n", "--quiet", "rules"), configs=("tiny.yaml", "lr.yaml")
     )
-    # only the GRU-KF run depends on the training (its evaluation, and the devkit cross-check of that run); the
-    # EKF run is untouched
+    # only the run tracked with the demo's training depends on it; the EKF run and the run tracked with the
+    # shipped pretrained network (and its devkit cross-check) are untouched
     assert planned(proc) == {
         "train": 1,
         "track": 1,
         "submit": 1,
         "manifest": 1,
         "evaluate": 1,
-        "cross_check": 1,
         "render": 1,
         "report": 1,
     }

@@ -51,6 +51,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="a row that is not in the paper's table, shown reproduced only (e.g. Fast-Poly)",
     )
     p.add_argument("--train-log", action="append", default=[], metavar="LABEL=CSV", help="a train_log.csv")
+    p.add_argument(
+        "--run-training",
+        action="append",
+        default=[],
+        metavar="RUN=LABEL",
+        help="the training (a --train-log label) whose model.pt a GRU-KF run tracked with",
+    )
     p.add_argument("--zip", action="append", default=[], metavar="DETECTOR=ZIP", help="a leaderboard zip")
     p.add_argument(
         "--render",
@@ -121,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
         rows=_rows(args.row),
         extra_rows=_rows(args.extra_row, "--extra-row"),
         train_logs={k: Path(v) for k, v in _pairs(args.train_log, "--train-log").items()},
+        run_trainings=_pairs(args.run_training, "--run-training"),
         zips={k: Path(v) for k, v in _pairs(args.zip, "--zip").items()},
         renders={k: Path(v) for k, v in _pairs(args.render, "--render").items()},
         cross_check=next(
@@ -128,6 +136,9 @@ def run(args: argparse.Namespace) -> int:
             None,
         ),
     )
+    unknown = sorted(set(inp.run_trainings.values()) - set(inp.train_logs))
+    if unknown:
+        raise ConfigError(f"--run-training: training '{unknown[0]}' has no --train-log")
     if inp.renders and "renders" not in KINDS[args.kind].reads:
         raise ConfigError(f"--render: a {args.kind} report shows no key frames ({KINDS[args.kind].no_renders})")
     inp.figures.mkdir(parents=True, exist_ok=True)

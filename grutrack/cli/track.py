@@ -34,8 +34,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--config", default=None, help="tracker preset name or YAML path (default: the preset named like --tracker)"
     )
-    p.add_argument("--checkpoint", default=None, help="trained GRU-KF model (with --tracker grukf)")
-    p.add_argument("--device", default="auto", help="torch device for grukf: auto (GPU when present), cpu, cuda")
+    p.add_argument(
+        "--checkpoint",
+        default=None,
+        help="trained GRU-KF model (with --tracker grukf; default: the shipped pretrained network, "
+        "grutrack/pretrained/grukf_default/model.pt)",
+    )
+    p.add_argument(
+        "--device",
+        default="auto",
+        help="torch device for grukf: auto (the CPU: one scene is a small batch; see resolve_device), cpu, cuda",
+    )
     p.add_argument(
         "--out",
         required=True,
@@ -63,6 +72,11 @@ def run(args: argparse.Namespace) -> int:
     from grutrack.tracking.factory import build_tracker
 
     apply_thread_policy(torch_too=args.tracker == "grukf")
+    if args.tracker == "grukf" and args.checkpoint is None:
+        from grutrack.training.pretrained import pretrained_dir
+
+        args.checkpoint = str(pretrained_dir("grukf_default") / "model.pt")
+        print(f"grutrack track: no --checkpoint: the shipped pretrained network {args.checkpoint}", file=sys.stderr)
     ds = dataset_of(args)
     scenes = ds.scenes(args.split)
     tracker = build_tracker(

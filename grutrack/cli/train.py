@@ -103,6 +103,13 @@ def run(args: argparse.Namespace) -> int:
     except TrainingInterrupted as exc:
         print(f"grutrack train: {exc}", file=sys.stderr)
         return 130
+    except KeyboardInterrupt:  # a second Ctrl-C, or one before training began: nothing more was saved
+        print(
+            f"grutrack train: interrupted; --resume continues from {Path(args.out) / 'last.pt'} (from the "
+            f"beginning where the run saved none)",
+            file=sys.stderr,
+        )
+        return 130
     print(
         f"wrote {result.final} after {result.steps} steps (last loss {result.last_loss}); log: "
         f"{Path(args.out) / 'train_log.csv'}"

@@ -131,6 +131,9 @@ def check_config(cfg: dict, paper: dict, registry: dict) -> None:
         _resolved(f"tracker_presets.{name}", lambda: resolve_tracker(preset["base"], preset["overrides"]))
     for name, tr in cfg["trainings"].items():
         key = f"trainings.{name}"
+        if "pretrained" in tr:
+            _check_pretrained(key, tr["pretrained"])
+            continue
         _need(cfg["datasets"], tr["dataset"], f"{key}.dataset", "datasets")
         _need(cfg["detectors"], tr["detector"], f"{key}.detector", "detectors")
         ds = dataset_class(cfg, tr["dataset"])
@@ -147,6 +150,23 @@ def check_config(cfg: dict, paper: dict, registry: dict) -> None:
         _check_experiment(cfg, registry, name, exp)
     for name, rep in cfg["reports"].items():
         _check_report(cfg, paper, name, rep)
+
+
+def _check_pretrained(key: str, name: str) -> None:
+    """A ``{pretrained: name}`` training must name a network shipped in the package, with its files present."""
+    from grutrack.training.pretrained import FILES, PRETRAINED, pretrained_dir
+
+    if name not in PRETRAINED:
+        raise ConfigError(
+            f"config key {key}.pretrained: '{name}' is not a shipped pretrained network "
+            f"(choose {', '.join(PRETRAINED)})"
+        )
+    missing = [f for f in FILES if not (pretrained_dir(name) / f).is_file()]
+    if missing:
+        raise ConfigError(
+            f"config key {key}.pretrained: {pretrained_dir(name)} lacks {', '.join(missing)} "
+            f"(a checkout without its large files? re-run bash scripts/pretrain_grukf.sh)"
+        )
 
 
 def _resolved(key: str, fn) -> None:
@@ -233,7 +253,7 @@ def _check_report(cfg: dict, paper: dict, name: str, rep: dict) -> None:
             raise ConfigError(f"config key {key}.trainings needs '{role}': <training name>")
         tr = rep["trainings"][role]
         _need(cfg["trainings"], tr, f"{key}.trainings.{role}", "trainings")
-        if cfg["trainings"][tr]["validation"] is None:
+        if cfg["trainings"][tr].get("validation") is None and not is_pretrained(cfg, tr):
             raise ConfigError(
                 f"config key trainings.{tr}.validation must be set (the figure plots validation AMOTA against step)"
             )
@@ -391,6 +411,26 @@ def cross_check_file(experiment: str, detector: str, run: str) -> str:
     return f"reports/metrics/{experiment}/{detector}/{run}.crosscheck.json"
 
 
-def checkpoint_file(training: str) -> str:
-    """The model a training writes."""
-    return f"checkpoints/{training}/model.pt"
+def is_pretrained(cfg: dict, training: str) -> bool:
+    """Whether training entry ``training`` is a shipped pretrained network (``{pretrained: name}``)."""
+    return "pretrained" in cfg["trainings"][training]
+
+
+def trained_names(cfg: dict) -> list[str]:
+    """The training entries the workflow trains (stage train); shipped pretrained networks are not among them."""
+    return [name for name in cfg["trainings"] if not is_pretrained(cfg, name)]
+
+
+def training_dir(cfg: dict, training: str) -> str:
+    """The folder of a training's model.pt, train_log.csv, training.yaml and validation.json: checkpoints/<name>
+    for a workflow training, the package's grutrack/pretrained/<name> for a shipped one."""
+    if is_pretrained(cfg, training):
+        from grutrack.training.pretrained import pretrained_dir
+
+        return str(pretrained_dir(cfg["trainings"][training]["pretrained"]))
+    return f"checkpoints/{training}"
+
+
+def checkpoint_file(cfg: dict, training: str) -> str:
+    """The model a training entry stands for (see :func:`training_dir`)."""
+    return f"{training_dir(cfg, training)}/model.pt"

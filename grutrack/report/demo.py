@@ -3,6 +3,7 @@ dataset, with the paper's Table III shown separately, for reference only (real n
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from grutrack.documents import SELECTION_RULES, TrainingLog, ValidationRecord
@@ -18,6 +19,7 @@ from grutrack.report.markdown import (
     runs_table,
     table,
     training_provenance,
+    training_synthetic,
     worst_scene_strips,
 )
 from grutrack.report.paper import get_table
@@ -58,6 +60,7 @@ def build(inp: ReportInputs) -> str:
     parts += ["", _amota_figure(inp, docs)]
     strips = worst_scene_strips(inp)
     parts += ["", strips] if strips else []
+    parts += _checkpoints_section(inp)
     parts += _training_sections(inp)
     parts += ["", "## Paper numbers (real nuScenes val; reference only, not comparable)", "", _paper_table(inp)]
     parts += ["", "## Provenance", "", provenance(inp.runs, docs)]
@@ -78,6 +81,36 @@ def _amota_figure(inp: ReportInputs, docs: dict) -> str:
     return image(path, inp.out.parent, "AMOTA per class on the synthetic demo")
 
 
+def _checkpoints_section(inp: ReportInputs) -> list[str]:
+    """Which network each GRU-KF run tracked with: a pretrained one shipped in the package (its provenance.json:
+    how, when and from which commit it was trained) or one trained by this workflow."""
+    if not inp.run_trainings:
+        return []
+    rows = []
+    for run, label in inp.run_trainings.items():
+        folder = Path(inp.train_logs[label]).parent
+        steps = TrainingLog.read(inp.train_logs[label]).steps
+        length = f"{steps[-1].step} steps, {steps[-1].epoch + 1} epochs" if steps else "no step"
+        prov = folder / "provenance.json"
+        if prov.is_file():
+            p = json.loads(prov.read_text())
+            what = (
+                f"shipped pretrained network `{folder.name}` (`{p['command']}`, commit {p['git_commit'][:10]}, "
+                f"written {p['written']}); not trained by this workflow"
+            )
+        else:
+            what = f"trained by this workflow (`{folder}`)"
+        rows.append([run, label, what, length])
+    return [
+        "",
+        "## GRU-KF checkpoints",
+        "",
+        "Which network each GRU-KF run tracked with (training data and hashes: Provenance below).",
+        "",
+        table(["run", "training", "checkpoint", "length"], rows, "llll"),
+    ]
+
+
 def _training_sections(inp: ReportInputs) -> list[str]:
     """Loss (and validation AMOTA when logged) against step for each training."""
     out = []
@@ -89,7 +122,7 @@ def _training_sections(inp: ReportInputs) -> list[str]:
         path = figures.lines(
             inp.figures / f"training_{label}.png",
             {"loss": ([s.step for s in tl.steps], [s.loss for s in tl.steps])},
-            f"GRU-KF training '{label}' (SYNTHETIC demo)",
+            f"GRU-KF training '{label}'" + _synthetic_tag(Path(log).parent),
             "step",
             "loss per scene",
         )
@@ -123,7 +156,7 @@ def _learning_curve(inp: ReportInputs, label: str, tl: TrainingLog, record_path:
     path = figures.lines(
         inp.figures / f"learning_curve_{label}.png",
         {"GRU-KF": ([r.step for r in val], [r.val_amota for r in val])},
-        f"Validation AMOTA of '{label}' (SYNTHETIC demo)",
+        f"Validation AMOTA of '{label}'" + _synthetic_tag(record_path.parent),
         "step",
         "AMOTA",
         hlines=ref,
@@ -144,6 +177,11 @@ def _learning_curve(inp: ReportInputs, label: str, tl: TrainingLog, record_path:
         + (f"; {rec.reference} on the same scenes: {rec.reference_amota:.3f}." if ref else ".")
     )
     return ["", text, "", image(path, inp.out.parent, f"validation AMOTA of {label}")]
+
+
+def _synthetic_tag(folder: Path) -> str:
+    """`` (SYNTHETIC data)`` for a figure title when the training's data was partly synthetic, else empty."""
+    return " (SYNTHETIC data)" if training_synthetic(folder / "training.yaml") else ""
 
 
 def _no_step(cfg_path: Path) -> str:

@@ -24,6 +24,7 @@ class ReportInputs:
     rows: dict[str, dict[str, str]] = field(default_factory=dict)  # paper table -> paper row -> run
     extra_rows: dict[str, dict[str, str]] = field(default_factory=dict)  # paper table -> row not in it -> run
     train_logs: dict[str, Path] = field(default_factory=dict)  # label -> train_log.csv
+    run_trainings: dict[str, str] = field(default_factory=dict)  # GRU-KF run -> the train_logs label of its model
     zips: dict[str, Path] = field(default_factory=dict)  # detector -> leaderboard zip
     renders: dict[str, Path] = field(default_factory=dict)  # run -> counts.json of its `grutrack render`
     cross_check: tuple[str, Path] | None = None  # (run, its `grutrack cross-check` JSON)

@@ -33,9 +33,13 @@ NEEDED_WITH = {
     "association.second_metric": ("association.two_stage", True),
     "association.second_threshold": ("association.two_stage", True),
     "lifecycle.delete_threshold": ("lifecycle.termination", "average_score"),
+    "motion.position_noise": ("motion.filter", "decoupled_cv"),
+    "motion.size_noise": ("motion.filter", "decoupled_cv"),
 }
 #: per-class settings that are names (kept as tuples; the numeric ones become (7,) arrays)
-_NAMED_PER_CLASS = ("per_class_metric", "per_class_nms_metric", "per_class_geometry_filter")
+_NAMED_PER_CLASS = ("per_class_metric", "per_class_nms_metric", "per_class_geometry_filter", "per_class_track_pose")
+#: per-class noise diagonals of the decoupled filters (``motion.position_noise``, ``motion.size_noise``)
+_NOISE_PER_CLASS = ("per_class_position_noise", "per_class_size_noise")
 
 
 @dataclass(frozen=True)
@@ -46,7 +50,7 @@ class TrackerConfig:
 
     source: str
     score_threshold: np.ndarray
-    nms_threshold: float
+    nms_threshold: float | np.ndarray  # one value, or (n_labels,) per label (the kept box's class)
     nms_class_aware: bool
     measured_yaw: str
     algorithm: str
@@ -81,6 +85,21 @@ class TrackerConfig:
     delete_threshold: np.ndarray = field(default_factory=lambda: np.zeros(7))
     geometry_filter: tuple[str, ...] = ("none",) * 7
     geometry_window: np.ndarray = field(default_factory=lambda: np.ones(7, dtype=np.int64))
+    # MCTrack options (defaults: the textbook choices, the pipeline above unchanged)
+    nms_order: str = "input"
+    ro_gdiou_weights: np.ndarray = field(default_factory=lambda: np.ones((7, 2)))
+    track_pose: tuple[str, ...] = ("predicted",) * 7
+    track_pose_blend: np.ndarray = field(default_factory=lambda: np.ones(7))
+    track_pose_rule: str = "own_class"
+    geometry_precision: str = "float64"
+    write_first_frames: int = 0
+    filter: str = "joint"
+    position_noise: dict | None = None  # {"P0", "Q", "R"}: (n_labels, 4, 4) diagonal tables
+    size_noise: dict | None = None  # {"P0", "Q"}: (n_labels, 4, 4), {"R"}: (n_labels, 2, 2)
+    missed_update: str = "predict"
+    size_steps: str = "per_frame"
+    compared_size: str = "filter"
+    written_velocity: str = "filter"
 
 
 def preset_path(name_or_path: str | Path) -> Path:
@@ -151,6 +170,20 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         delete_threshold=v["lifecycle.delete_threshold"],
         geometry_filter=v["motion.geometry_filter"],
         geometry_window=v["motion.geometry_window"],
+        nms_order=v["preprocessing.nms_order"],
+        ro_gdiou_weights=v["association.ro_gdiou_weights"],
+        track_pose=v["association.track_pose"],
+        track_pose_blend=v["association.track_pose_blend"],
+        track_pose_rule=v["association.track_pose_rule"],
+        geometry_precision=v["association.geometry_precision"],
+        write_first_frames=v["lifecycle.write_first_frames"],
+        filter=v["motion.filter"],
+        position_noise=v["motion.position_noise"],
+        size_noise=v["motion.size_noise"],
+        missed_update=v["motion.missed_update"],
+        size_steps=v["motion.size_steps"],
+        compared_size=v["motion.compared_size"],
+        written_velocity=v["motion.written_velocity"],
     )
 
 
@@ -192,6 +225,15 @@ def _yaml_scalar(value) -> str:
 def _convert(val: Any, ref: str) -> Any:
     """A validated value in the form the tracker uses: per-class maps as (7,) arrays (tuples of names),
     model overrides upper-case, ``time_step: timestamps`` as None."""
+    if ref in _NOISE_PER_CLASS:
+        if val is None:  # not given: the joint filter reads none
+            return None
+        return {
+            k: np.stack([np.diag(np.asarray(val[c][k], dtype=np.float64)) for c in TRACKING_CLASSES])
+            for k in val["car"]
+        }
+    if ref == "nms_thresholds":  # one number for every class, or (7,) per class
+        return float(val) if not isinstance(val, dict) else np.array([float(val[c]) for c in TRACKING_CLASSES])
     if ref.startswith("per_class_"):
         items = [val[c] for c in TRACKING_CLASSES]
         return tuple(items) if ref in _NAMED_PER_CLASS else np.asarray(items)

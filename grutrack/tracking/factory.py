@@ -64,11 +64,33 @@ def _baseline_groups(name: str, cfg: TrackerConfig, index: np.ndarray) -> list[T
 
     if name == "greedy":
         return [TrackGroup(DetectionBackend(), np.ones(len(index), dtype=bool))]
+    if cfg.filter == "decoupled_cv":
+        return [decoupled_group(cfg, len(index))]
     return ekf_groups(cfg, index, NoVelocityKalmanBackend if name == "ab3dmot" else None)
 
 
+def decoupled_group(cfg: TrackerConfig, n_labels: int) -> TrackGroup:
+    """One track group for every label with MCTrack's decoupled filters (``motion.filter: decoupled_cv``)."""
+    from grutrack.tracking.decoupled_backend import DecoupledCVBackend
+
+    backend = DecoupledCVBackend(
+        cfg.position_noise,
+        cfg.size_noise,
+        dt=cfg.time_step if cfg.time_step is not None else 0.5,
+        missed_update=cfg.missed_update,
+        size_steps=cfg.size_steps,
+        compared_size=cfg.compared_size,
+        written_velocity=cfg.written_velocity,
+    )
+    return TrackGroup(backend, np.ones(n_labels, dtype=bool))
+
+
 def _association(cfg: TrackerConfig):
-    """The association the preset asks for: None (the tracker's two-stage Hungarian) or greedy."""
+    """The association the preset asks for: None (the tracker's two-stage Hungarian), greedy, or Ro_GDIoU."""
+    if "ro_gdiou_bev" in cfg.first_metric:
+        from grutrack.tracking.ro_gdiou import ro_gdiou_association
+
+        return ro_gdiou_association(cfg)
     if cfg.algorithm == "greedy":
         from grutrack.tracking.baselines import greedy_association
 
@@ -165,6 +187,12 @@ def remap_config(cfg: TrackerConfig, index: np.ndarray) -> TrackerConfig:
         delete_threshold=cfg.delete_threshold[index],
         geometry_filter=tuple(cfg.geometry_filter[i] for i in index),
         geometry_window=cfg.geometry_window[index],
+        nms_threshold=cfg.nms_threshold[index] if isinstance(cfg.nms_threshold, np.ndarray) else cfg.nms_threshold,
+        ro_gdiou_weights=cfg.ro_gdiou_weights[index],
+        track_pose=tuple(cfg.track_pose[i] for i in index),
+        track_pose_blend=cfg.track_pose_blend[index],
+        position_noise=None if cfg.position_noise is None else {k: v[index] for k, v in cfg.position_noise.items()},
+        size_noise=None if cfg.size_noise is None else {k: v[index] for k, v in cfg.size_noise.items()},
     )
 
 

@@ -5,7 +5,8 @@ Scores: matched tracks take the detection's score (``detection``) or ``1 - (1 - 
 the last update (``misses``) reset to 0 and their hit count raised by one. A track stays alive while
 ``misses < max_age`` (and, with ``average_score`` termination, while the mean of its per-frame scores since birth
 is at least ``delete_threshold``). A track is written when alive, matched or missed for at most its class's
-``punish_num`` frames, and confirmed: at least ``min_hits`` hits, or the scene no older than ``min_hits`` frames.
+``punish_num`` frames (or at any miss count while the scene is no older than ``write_first_frames`` frames, MCTrack),
+and confirmed: at least ``min_hits`` hits, or the scene no older than ``min_hits`` frames.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ def lifecycle_kernel(
     average_score,
     punish_num,
     frame_count,
+    write_first_frames,
     matched,
     alive,
     emit,
@@ -41,7 +43,8 @@ def lifecycle_kernel(
     scores, score_total (N,) float64 and misses, hits, score_count (N,) int64 are updated; decay_rate, max_age,
     min_hits, delete_threshold (n_labels,) float64 per label; multiply: the ``multiply`` score rule; average_score:
     the ``average_score`` termination; punish_num (n_labels,) float64 per label; frame_count: frames of the scene
-    so far, this one included. Per-label arrays are sized by the dataset's vocabulary (7 nuScenes tracking
+    so far, this one included; write_first_frames: every live confirmed track is written while frame_count is at
+    most this (0: never). Per-label arrays are sized by the dataset's vocabulary (7 nuScenes tracking
     classes, more for AV2 categories).
     Out: matched, alive, emit (N,) bool.
     """
@@ -73,4 +76,5 @@ def lifecycle_kernel(
             live = live and score_total[i] / score_count[i] >= delete_threshold[lab]
         alive[i] = live
         confirmed = hits[i] >= min_hits[lab] or frame_count <= min_hits[lab]
-        emit[i] = live and (matched[i] or misses[i] <= punish_num[lab]) and confirmed
+        shown = matched[i] or misses[i] <= punish_num[lab] or frame_count <= write_first_frames
+        emit[i] = live and shown and confirmed

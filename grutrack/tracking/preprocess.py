@@ -23,9 +23,11 @@ def score_filter(dets: BoxSet, thresholds: np.ndarray, strict: bool = False) -> 
 
 
 @njit(cache=True)
-def _nms_kernel(boxes, terms, labels, order, threshold, class_aware, keep) -> None:
+def _nms_kernel(boxes, terms, labels, order, threshold, class_aware, keep, visited) -> None:
     """Greedy NMS over ``order (N,)`` (descending score): set ``keep[i]`` for each box that no kept box
-    overlaps with BEV IoU > ``threshold``. boxes (N, >=7), terms: :func:`geometry._box_terms`, labels (N,).
+    overlaps with BEV IoU > ``threshold[labels[kept]]`` (``threshold (n_labels,)``). boxes (N, >=7), terms:
+    :func:`geometry._box_terms`, labels (N,). ``visited (N,)``: the kept boxes in the order they were kept
+    (-1 after the last).
 
     Only pairs whose circumscribed circles meet can overlap; IoU is computed for those alone, always with the
     lower index first so that it equals :func:`geometry.paired_bev_iou` of that pair.
@@ -39,10 +41,13 @@ def _nms_kernel(boxes, terms, labels, order, threshold, class_aware, keep) -> No
     want[geometry._IOU_BEV] = True
     out, work, flags = np.zeros((4, 1)), np.empty((12, 16)), np.empty(16, dtype=np.bool_)
     keys = np.empty(16, dtype=np.int64)
+    nk = 0
     for i in order:
         if removed[i]:
             continue
         keep[i] = True
+        visited[nk] = i
+        nk += 1
         for j in range(n):
             if removed[j] or keep[j] or (class_aware and labels[j] != labels[i]):
                 continue
@@ -50,34 +55,48 @@ def _nms_kernel(boxes, terms, labels, order, threshold, class_aware, keep) -> No
             if np.hypot(boxes[lo, 0] - boxes[hi, 0], boxes[lo, 1] - boxes[hi, 1]) >= radius[lo] + radius[hi]:
                 continue
             geometry._pair_measures(terms, lo, terms, hi, want, out, 0, work, flags, keys)
-            if out[geometry._IOU_BEV, 0] > threshold:
+            if out[geometry._IOU_BEV, 0] > threshold[labels[i]]:
                 removed[j] = True
 
 
 def nms_keep(
-    boxes: np.ndarray, scores: np.ndarray, labels: np.ndarray, threshold: float, class_aware: bool = True
+    boxes: np.ndarray,
+    scores: np.ndarray,
+    labels: np.ndarray,
+    threshold: float | np.ndarray,
+    class_aware: bool = True,
+    order: str = "input",
 ) -> np.ndarray:
     """Greedy "blend" NMS: visit boxes of all classes in one descending-score order; each kept box
-    removes the not-yet-visited boxes whose BEV IoU with it exceeds ``threshold`` (only boxes of its own
-    class when ``class_aware``).
+    removes the not-yet-visited boxes whose BEV IoU with it exceeds ``threshold`` (one value, or (n_labels,) by
+    the kept box's label; only boxes of its own class when ``class_aware``).
 
-    boxes (N, 9), scores (N,), labels (N,) -> sorted (K,) int64 indices of the kept boxes.
+    boxes (N, 9), scores (N,), labels (N,) -> (K,) int64 indices of the kept boxes: sorted (``order: input``,
+    visiting boxes of equal score in input order), or in the order they were kept (``score``: descending score,
+    ties as numpy's default sort leaves them, MCTrack's order).
     """
     n = len(boxes)
     if n <= 1:
         return np.arange(n, dtype=np.int64)
     boxes = geometry._check_boxes(boxes, "boxes")
+    labels = np.asarray(labels, dtype=np.int64)
+    thr = np.asarray(threshold, dtype=np.float64)
+    thr = np.full(int(labels.max()) + 1, float(thr)) if thr.ndim == 0 else np.ascontiguousarray(thr)
     keep = np.zeros(n, dtype=np.bool_)
+    visited = np.full(n, -1, dtype=np.int64)
     _nms_kernel(
         boxes,
         geometry._box_terms(boxes),
-        np.asarray(labels, dtype=np.int64),
-        np.argsort(-scores, kind="stable"),
-        float(threshold),
+        labels,
+        np.argsort(-scores, kind="stable") if order == "input" else np.argsort(-scores),
+        thr,
         bool(class_aware),
         keep,
+        visited,
     )
-    return np.flatnonzero(keep).astype(np.int64)
+    if order == "input":
+        return np.flatnonzero(keep).astype(np.int64)
+    return visited[: int(keep.sum())]
 
 
 #: per-class NMS similarities scale_nms_keep accepts
@@ -154,8 +173,10 @@ def preprocess_frame(dets: BoxSet, cfg) -> BoxSet:
     survivors come class by class, each class by descending score, as Fast-Poly orders them)."""
     dets = score_filter(dets, cfg.score_threshold, strict=cfg.score_filter == "above")
     if cfg.nms_method == "blend":
-        return dets.subset(nms_keep(dets.boxes, dets.scores, dets.labels, cfg.nms_threshold, cfg.nms_class_aware))
-    thr = np.full(len(cfg.score_threshold), cfg.nms_threshold)
+        return dets.subset(
+            nms_keep(dets.boxes, dets.scores, dets.labels, cfg.nms_threshold, cfg.nms_class_aware, cfg.nms_order)
+        )
+    thr = np.broadcast_to(np.asarray(cfg.nms_threshold, dtype=np.float64), cfg.score_threshold.shape)
     gate = np.where(cfg.nms_distance_gate > 0, cfg.nms_distance_gate, np.inf)
     return dets.subset(
         scale_nms_keep(

@@ -107,6 +107,15 @@ class GroupUpdate:
     posterior: Any  # the backend state after correcting ``rows`` (``prior`` when K = 0)
 
 
+@dataclass(frozen=True)
+class TrackView:
+    """What an association that asks for it (``wants_tracks``) sees of the tracks besides their predicted boxes:
+    ids (T,) and the boxes before this frame's prediction (T, 9), in the order of the predicted boxes."""
+
+    ids: np.ndarray
+    last_boxes: np.ndarray
+
+
 #: association of one frame: (detections after pre-processing, predicted track boxes (T, 9), track labels (T,),
 #: dt seconds since the previous frame) -> :class:`Matches`
 AssociateFn = Callable[[BoxSet, np.ndarray, np.ndarray, float], Matches]
@@ -226,10 +235,24 @@ class Tracker:
         dets = preprocess_frame(dets, cfg)
         trk_boxes = np.concatenate([g.backend.boxes(g.state) if len(g) else empty_boxes() for g in self.groups])
         trk_labels = np.concatenate([g.labels for g in self.groups])
-        m = self.associate(dets, trk_boxes, trk_labels, dt)
+        if getattr(self.associate, "wants_tracks", False):  # e.g. MCTrack's pose choice: ids, last-update boxes
+            m = self.associate(dets, trk_boxes, trk_labels, dt, tracks=self._track_view(trk_boxes))
+        else:
+            m = self.associate(dets, trk_boxes, trk_labels, dt)
         out = self._update_groups(dets, m.dets, m.tracks, updates, output)
         out.append(self._births(dets, m.unmatched_dets, output))
         return _concat_boxsets(out) if output else None
+
+    def _track_view(self, trk_boxes: np.ndarray) -> TrackView:
+        """The tracks' ids and last-update boxes (a backend's ``last_boxes``, else its current boxes)."""
+        last = [
+            (g.backend.last_boxes(g.state) if hasattr(g.backend, "last_boxes") else g.backend.boxes(g.state))
+            if len(g)
+            else empty_boxes()
+            for g in self.groups
+        ]
+        ids = np.concatenate([g.ids for g in self.groups])
+        return TrackView(ids, np.concatenate(last) if last else trk_boxes)
 
     def _predict(self, dt: float) -> None:
         for g in self.groups:
@@ -258,6 +281,10 @@ class Tracker:
             prior = g.state
             if len(rows):
                 g.state = g.backend.update(g.state, rows, dets.boxes[drows])
+            if hasattr(g.backend, "miss") and len(rows) < n:  # a backend that treats missed tracks itself
+                missed = np.ones(n, dtype=bool)
+                missed[rows] = False
+                g.state = g.backend.miss(g.state, np.flatnonzero(missed))
             if updates is not None:  # copies: the lifecycle kernel changes hits and misses in place
                 updates.append(
                     GroupUpdate(gi, rows, drows, g.ids, g.labels, g.hits.copy(), g.misses.copy(), prior, g.state)
@@ -278,6 +305,7 @@ class Tracker:
                 cfg.termination == "average_score",
                 self._punish,
                 self.frame_count,
+                cfg.write_first_frames,
                 matched,
                 alive,
                 emit,

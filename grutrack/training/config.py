@@ -139,17 +139,6 @@ def config_from_dict(raw: dict, source: str = "<dict>", flags: dict | None = Non
         if node.get("type") == "number" and k in raw:
             vals[k] = float(raw[k])
     network_classes = vals["network"]["network_classes"]
-    own = (
-        "network_classes"
-        if network_classes == "own_model"
-        else ("training_classes" if vals.get("training_classes") == "own_model" else None)
-    )
-    if own and vals.get("scenes_per_step", 1) > 1:
-        where = (flags or {}).get("scenes_per_step", f"{source}: 'scenes_per_step'")
-        raise ConfigError(
-            f"{where} must be 1 with {own} 'own_model' (its groups of one model each call "
-            f"the network separately), got {vals['scenes_per_step']!r}"
-        )
     if vals.get("training_classes") == "own_model" and network_classes == "all":
         where = (flags or {}).get("training_classes", f"{source}: 'training_classes'")
         raise ConfigError(

@@ -4,7 +4,8 @@ detections, :class:`PairedBackend`); the EKF's posterior is the pseudo-label of 
 holds no ground truth. The loss of a scene (:class:`SceneLoss`) sums, over the frames and the tracks corrected in
 them, the weighted squared measurement-space error of the GRU-KF posterior to the GT box (sticky GT association)
 or, in semi-supervised mode, to the EKF posterior; it is divided by the number of terms. :func:`run_scene` tracks
-one scene with gradients on, :func:`run_scenes` several in lockstep (one network call per frame for all)."""
+one scene with gradients on, :func:`run_scenes` several in lockstep (one network call per frame and network group
+for all)."""
 
 from __future__ import annotations
 
@@ -197,13 +198,19 @@ def run_scene(
     With ``network_classes: ss_model`` the other labels run the preset's EKF groups and give no loss terms
     (``training_classes: own_model``: the network runs them too, :func:`training_arch`).
     ``lockstep``: a :class:`~grutrack.training.lockstep.LockstepCorrect` this scene (its ``slot``) shares the
-    network's calls with (several scenes per step); None: the network is called directly."""
-    correct = None if lockstep is None else lockstep.bind(slot)
+    network's calls with (several scenes per step; each network group its channel, named by its SS model,
+    :func:`lockstep_channels`); None: the network is called directly."""
     arch = training_arch(net.cfg, cfg)
     backends = [
         PairedBackend(
             grukf_group(
-                net, len(index), device, train=True, class_index=index, correct=correct, ss_model=model
+                net,
+                len(index),
+                device,
+                train=True,
+                class_index=index,
+                correct=None if lockstep is None else lockstep.bind(slot, model.upper()),
+                ss_model=model,
             ).backend,
             ekf_backend(cfg, index, model),
         )
@@ -221,17 +228,33 @@ def run_scene(
     return loss
 
 
+def lockstep_channels(net: GRUKalmanNet, cfg: TrainConfig, jobs: list[tuple]) -> tuple[str, ...]:
+    """The network track groups of the scenes ``jobs`` ([(scene, label index, tracker config)]) as lockstep
+    channels: their SS model names (upper case) in the order a tracker updates its groups (the network's own model
+    first, :func:`~grutrack.tracking.factory.network_models`), the union over the scenes (a scene whose vocabulary
+    has no label of a model lacks that group)."""
+    from grutrack.motion.grukf import NETWORK_MODELS
+
+    arch = training_arch(net.cfg, cfg)
+    own = arch.ss_model.upper()
+    order = [own, *(m for m in NETWORK_MODELS if m != own)]
+    present = {m.upper() for _, index, tracker_cfg in jobs for m, _ in network_models(arch, tracker_cfg, index)}
+    return tuple(m for m in order if m in present)
+
+
 def run_scenes(
     net: GRUKalmanNet, jobs: list[tuple], cfg: TrainConfig, dets: dict[str, BoxSet], device: torch.device
 ) -> list[SceneLoss]:
-    """:func:`run_scene` for several scenes at once, the network called once per frame for all of them
-    (:mod:`grutrack.training.lockstep`); ``jobs``: [(scene, label index, tracker config)]. One thread per scene;
-    the first scene's failure is raised here (the others stop at their next network call)."""
+    """:func:`run_scene` for several scenes at once, the network called once per frame and network group for all
+    of them (:mod:`grutrack.training.lockstep`: with ``own_model`` classes one call per SS model);
+    ``jobs``: [(scene, label index, tracker config)]. One thread per scene and one making the network calls
+    (:meth:`~grutrack.training.lockstep.LockstepCorrect.serve`); the first scene's failure is raised
+    here (the others stop at their next network call)."""
     from grutrack.training.lockstep import LockstepAborted, LockstepCorrect
 
-    lock = LockstepCorrect(net.correct, len(jobs))
+    lock = LockstepCorrect(net.correct, len(jobs), lockstep_channels(net, cfg, jobs))
     losses: list[SceneLoss | None] = [None] * len(jobs)
-    errors: list[BaseException | None] = [None] * len(jobs)
+    errors: list[BaseException | None] = [None] * (len(jobs) + 1)  # the scenes', then the network thread's
 
     def work(slot: int) -> None:
         scene, index, tracker_cfg = jobs[slot]
@@ -243,8 +266,16 @@ def run_scenes(
         finally:
             lock.leave(slot)
 
+    def serve() -> None:
+        try:
+            lock.serve()
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller's thread below
+            errors[-1] = exc
+            lock.abort(exc)
+
     # daemon: a second Ctrl-C (raised in this thread's join) does not wait for the scenes to finish
     threads = [threading.Thread(target=work, args=(i,), name=f"grukf-scene-{i}", daemon=True) for i in range(len(jobs))]
+    threads.append(threading.Thread(target=serve, name="grukf-network", daemon=True))
     for t in threads:
         t.start()
     for t in threads:

@@ -47,7 +47,9 @@ def train(
     scenes held out of ``split``; a dataset that does not ``validates_training`` trains without (one line on
     stderr). ``config_arg``: the config as given (a name or path; errors name its file). ``resume``: continue
     from ``out/last.pt``. Raises :class:`~grutrack.training.trainer.TrainingInterrupted` on Ctrl-C (after
-    saving last.pt)."""
+    saving last.pt). A run that starts from the beginning writes training.yaml before it reads the data (and
+    again with what it read), so that, stopped at any moment, it leaves a folder ``--resume`` continues (from the
+    beginning where it saved no last.pt)."""
     from grutrack.tracking.config import load_tracker_config
     from grutrack.training.resample import DetectionResampler, ResamplingTrainer
     from grutrack.training.sources import LoadedSource, check_source, load_source, merge, merged_resampler
@@ -66,10 +68,7 @@ def train(
             f"(or validate a checkpoint with grutrack track + evaluate)"
         )
     out = Path(out)
-    scenes = dataset.scenes(split, with_gt=True)
-    yaw = load_tracker_config(cfg.tracker_preset).measured_yaw  # the preset's measured-yaw definition
-    loaded_dets = dataset.load_detections(detections, split, scenes, yaw)
-    dets = loaded_dets.boxes
+    resume_from = _resume_from(out) if resume else None  # before training.yaml is written
     source = {
         "dataset": dataset.name,
         "dataroot": str(Path(dataset.options.dataroot).resolve()),
@@ -77,6 +76,13 @@ def train(
         "split": split,
         "detections": str(Path(detections).resolve()),
     }
+    if resume_from is None:  # a resumed run's training.yaml stays until its last.pt has accepted these settings
+        out.mkdir(parents=True, exist_ok=True)
+        write_training_yaml(cfg, config_arg, out / "training.yaml", source)
+    scenes = dataset.scenes(split, with_gt=True)
+    yaw = load_tracker_config(cfg.tracker_preset).measured_yaw  # the preset's measured-yaw definition
+    loaded_dets = dataset.load_detections(detections, split, scenes, yaw)
+    dets = loaded_dets.boxes
     held = [] if val_split else _held_out(cfg, config_arg, dataset, split, scenes)
     if held:
         names = {sc.name for sc in held}
@@ -111,8 +117,8 @@ def train(
             held_out=True,
             reference_name=f"tracker preset '{cfg.tracker_preset}' (its EKF)",
         )
-    if resume:
-        _resume(trainer, out)
+    if resume_from is not None:
+        trainer.resume(resume_from)
     source["synthetic"] = synthetic_inputs(dataset, loaded_dets, cfg, [e for e, _ in extra])
     write_training_yaml(cfg, config_arg, out / "training.yaml", source)
     final = trainer.run()
@@ -218,23 +224,24 @@ def write_training_yaml(cfg, config_arg: str, path: Path, source: dict) -> None:
     write_text_atomic(path, head + yaml.safe_dump(d, sort_keys=False, default_flow_style=None, width=120))
 
 
-def _resume(trainer, out: Path) -> None:
-    """``--resume``: continue from ``out/last.pt``; a run stopped before it saved anything (its training.yaml is
-    there, its last.pt not: interrupted during the start-up validation) starts from the beginning and says so;
-    a folder with neither is refused (a mistyped --out)."""
+def _resume_from(out: Path) -> Path | None:
+    """``--resume``: the checkpoint to continue from, ``out/last.pt``; None for a run stopped before it saved one
+    (its training.yaml is there, its last.pt not: stopped while it read its data or aborted during its start-up
+    validation), which starts from the beginning and says so; a folder with neither is refused (a mistyped
+    --out), before any data is read."""
     import sys
 
     last = out / "last.pt"
     if last.is_file():
-        trainer.resume(last)
-    elif (out / "training.yaml").is_file():
+        return last
+    if (out / "training.yaml").is_file():
         print(
             f"grutrack train: --resume: {last} does not exist (the run stopped before its first step was "
             f"saved); starting from the beginning",
             file=sys.stderr,
         )
-    else:
-        raise ConfigError(
-            f"--resume: nothing to resume in {out} (no last.pt, no training.yaml of a run); expected "
-            f"the --out folder of the interrupted run"
-        )
+        return None
+    raise ConfigError(
+        f"--resume: nothing to resume in {out} (no last.pt, no training.yaml of a run); expected "
+        f"the --out folder of the interrupted run"
+    )

@@ -58,10 +58,12 @@ class TrainingDiverged(GrutrackError):
 
 
 class TrainingInterrupted(Exception):
-    """Ctrl-C (SIGINT) stopped training after a completed step; ``path`` is the resumable checkpoint."""
+    """Ctrl-C (SIGINT) stopped training after a completed step (step 0: after the validation before the first
+    step); ``path`` is the resumable checkpoint."""
 
     def __init__(self, path: Path, step: int):
-        super().__init__(f"interrupted after step {step}; resumable checkpoint {path} (continue with --resume)")
+        after = f"step {step}" if step else "the validation before the first step"
+        super().__init__(f"interrupted after {after}; resumable checkpoint {path} (continue with --resume)")
         self.path, self.step = path, step
 
 
@@ -128,14 +130,17 @@ class Trainer:
         self.source = dict(source or {})  # where the data came from (dataroot, split, detections), for messages
         self.fingerprint = data_fingerprint(scenes, dets)
         self._interrupted = False
+        self._phase = ""  # what a first Ctrl-C lets finish (said by the SIGINT handler)
         self._log_written = time.monotonic()
         self.out = Path(out_dir)
         self.validate = validate  # a validation.Validator, or None (no validation)
         # select_checkpoint: (the validated step of highest AMOTA so far, the step best.pt holds)
         self._best: TrainingStep | None = None
         self._chosen: TrainingStep | None = None
+        self._best_due = False  # the network just validated was chosen: best.pt is written after last.pt
         self.progress = progress
-        self.device = resolve_device(cfg.device, "training config 'device'")
+        # auto: the GPU only for lockstep steps of many scenes (resolve_device's rule)
+        self.device = resolve_device(cfg.device, "training config 'device'", scenes=cfg.scenes_per_step)
         vocab = scenes[0].vocabulary if scenes else NUSCENES_VOCABULARY
         self._preset = load_tracker_config(cfg.tracker_preset)
         self._setups: dict = {}  # vocabulary -> (label index, remapped preset)
@@ -204,19 +209,28 @@ class Trainer:
         self.state = state.position
         self.log = TrainingLog(state.log)
         self._best, self._chosen = self._resumed_selection()
+        c = self._chosen
+        if c is not None and c.step == self.state.step and self._best_pt_step() != c.step:
+            self._write_best()  # stopped between last.pt and best.pt of a chosen step: the network is at hand
 
     def _resumed_selection(self) -> tuple[TrainingStep | None, TrainingStep | None]:
-        """(best, chosen) of the resumed log replayed through :func:`next_selection` when best.pt holds the chosen
-        step, else (None, None) (a best.pt from beyond the resumed step is rewritten when that step is validated
-        again)."""
-        val = self.log.validated()
-        if self.cfg.select_checkpoint == "last" or not val or not (self.out / "best.pt").is_file():
+        """(best, chosen) of the resumed log replayed through :func:`next_selection`: the state the run had when it
+        wrote the checkpoint. best.pt holds the chosen step (it is written after last.pt, never ahead of it),
+        or the resumed step itself is the chosen one (stopped between the two writes; :meth:`resume` writes
+        best.pt), or best.pt is from beyond the resumed step (a checkpoint of an older version, which wrote
+        best.pt first), which the resumed run rewrites when it chooses that step again."""
+        if self.cfg.select_checkpoint == "last":
             return None, None
         best = chosen = None
-        for row in val:
+        for row in self.log.validated():
             best, chosen = next_selection(self.cfg.select_checkpoint, best, chosen, row)
-        held = Checkpoint.read(self.out / "best.pt").selected
-        return (best, chosen) if held is not None and held.step == chosen.step else (None, None)
+        return best, chosen
+
+    def _best_pt_step(self) -> int | None:
+        """The step best.pt holds (None: no best.pt)."""
+        path = self.out / "best.pt"
+        held = Checkpoint.read(path).selected if path.is_file() else None
+        return None if held is None else held.step
 
     def _check_resumable(self, path: str | Path, ck: Checkpoint) -> TrainingState:
         """``ck``'s training state; refused unless it was written by a run of the same data and settings."""
@@ -257,11 +271,34 @@ class Trainer:
             return self._run(max_steps)
 
     def _run(self, max_steps: int | None) -> Path:
+        """The start-up validation, the steps, the last step's validation, last.pt and the final outputs, all under
+        :meth:`_sigint_deferred`: a first Ctrl-C lets the work under way finish (the start-up validation, a step
+        with its validation), saves last.pt and stops with :class:`TrainingInterrupted`; once the last step is
+        saved, it lets model.pt and validation.json be written and the run ends as usual."""
+        self.out.mkdir(parents=True, exist_ok=True)
+        with self._sigint_deferred():
+            if self.validate is not None and self.state.step == 0 and not self.log.steps:
+                self._phase = "finishing the validation before the first step, then saving last.pt"
+                self._validate_start()
+                self._stop_if_interrupted(self._save_validated())
+            self._phase = "finishing the current step, then saving last.pt"
+            self._steps(max_steps)
+            if self.state.epoch < self.cfg.epochs:
+                return self.save()  # max_steps taken
+            if self.validate is not None and self.log.steps and self.log.steps[-1].val_amota is None:
+                self._validate_into(self.log.steps[-1])  # the last step's validation
+                path = self._save_validated()
+            else:
+                path = self.save()
+            self._stop_if_interrupted(path)
+            self._phase = "the last step is saved; finishing model.pt and validation.json"
+            return self._write_model()
+
+    def _steps(self, max_steps: int | None) -> None:
+        """The steps until all epochs are done (or ``max_steps`` of them): last.pt after each validated step, every
+        ``checkpoint_every`` steps and at a Ctrl-C."""
         from tqdm import tqdm
 
-        self.out.mkdir(parents=True, exist_ok=True)
-        if self.validate is not None and self.state.step == 0 and not self.log.steps:
-            self._validate_start()
         done = 0
         bar = tqdm(
             total=self.total_steps,
@@ -270,7 +307,7 @@ class Trainer:
             desc="training GRU-KF",
             disable=not self.progress,
         )
-        with self._sigint_deferred():
+        try:
             while self.state.epoch < self.cfg.epochs and (max_steps is None or done < max_steps):
                 if self.state.order is None:
                     self.state.order = [int(i) for i in self.np_rng.permutation(len(self.scenes))]
@@ -279,21 +316,27 @@ class Trainer:
                 self._advance(len(batch))
                 done += 1
                 bar.update(1)
-                if self._interrupted:
-                    bar.close()
-                    raise TrainingInterrupted(self.save(), self.state.step)
-                if self.cfg.checkpoint_every and self.state.step % self.cfg.checkpoint_every == 0:
+                saved = self._save_validated() if self.log.steps[-1].val_amota is not None else None
+                self._stop_if_interrupted(saved)
+                if saved is None and self.cfg.checkpoint_every and self.state.step % self.cfg.checkpoint_every == 0:
                     self.save()
-        bar.close()
-        if (
-            self.state.epoch >= self.cfg.epochs
-            and self.validate is not None
-            and self.log.steps
-            and self.log.steps[-1].val_amota is None
-        ):
-            self._validate_into(self.log.steps[-1])
-        self.save()
-        return self._write_model() if self.state.epoch >= self.cfg.epochs else self.out / "last.pt"
+        finally:
+            bar.close()
+
+    def _stop_if_interrupted(self, saved: Path | None) -> None:
+        """After a Ctrl-C: last.pt at the step just completed (``saved``: already written), then
+        :class:`TrainingInterrupted`."""
+        if self._interrupted:
+            raise TrainingInterrupted(saved or self.save(), self.state.step)
+
+    def _save_validated(self) -> Path:
+        """After a validation: last.pt at the validated step, then best.pt when the rule chose its network. In this
+        order best.pt never holds a step beyond last.pt's, so that a resumed run, which replays its log's
+        validations, finds the network it selects in best.pt (or, stopped between the two writes, at hand)."""
+        path = self.save()
+        if self._best_due:
+            self._write_best()
+        return path
 
     # -- validation and the selected checkpoint --------------------------------------------------------------
     def _validate_start(self) -> None:
@@ -318,10 +361,15 @@ class Trainer:
             return
         self._best, chosen = next_selection(self.cfg.select_checkpoint, self._best, self._chosen, row)
         if chosen is row:
-            self._chosen = row
-            network_checkpoint(
-                self.net, train_config=asdict(self.cfg), selected=CheckpointSelection(row.step, row.val_amota)
-            ).write(self.out / "best.pt")
+            self._chosen, self._best_due = row, True  # best.pt is written after last.pt (_save_validated)
+
+    def _write_best(self) -> None:
+        """best.pt: the training network, the chosen step's (the candidate for model.pt)."""
+        c = self._chosen
+        network_checkpoint(
+            self.net, train_config=asdict(self.cfg), selected=CheckpointSelection(c.step, c.val_amota)
+        ).write(self.out / "best.pt")
+        self._best_due = False
 
     def _write_model(self) -> Path:
         """model.pt (the selected step's network with the final run's records) and validation.json."""
@@ -360,8 +408,9 @@ class Trainer:
             self.state.epoch, self.state.index, self.state.order = self.state.epoch + 1, 0, None
 
     def _sigint_deferred(self):
-        """Context: the first Ctrl-C (SIGINT) lets the current step finish, then training saves last.pt and
-        stops with :class:`TrainingInterrupted`; a second one interrupts at once (nothing more is saved)."""
+        """Context: the first Ctrl-C (SIGINT) lets the work under way finish (``_phase`` says which), then training
+        saves last.pt and stops with :class:`TrainingInterrupted` (:meth:`_run`); a second one interrupts at once
+        (nothing more is saved)."""
         import contextlib
 
         @contextlib.contextmanager
@@ -376,11 +425,7 @@ class Trainer:
                 if self._interrupted:
                     raise KeyboardInterrupt
                 self._interrupted = True
-                print(
-                    "\ninterrupt: finishing the current step, then saving last.pt (Ctrl-C again to abort)",
-                    file=sys.stderr,
-                    flush=True,
-                )
+                print(f"\ninterrupt: {self._phase} (Ctrl-C again to abort)", file=sys.stderr, flush=True)
 
             signal.signal(signal.SIGINT, handler)
             try:

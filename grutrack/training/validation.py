@@ -7,6 +7,7 @@ dataset that ``validates_training``."""
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from dataclasses import replace
 from typing import Protocol, runtime_checkable
@@ -86,13 +87,19 @@ class DatasetValidator:
         )
 
     def scores(self, net) -> np.ndarray:
-        """(n_sets,) float64: the score of the GRU-KF tracker with ``net`` on each detection set."""
+        """(n_sets,) float64: the score of the GRU-KF tracker with ``net`` on each detection set. Tracking runs on
+        the device ``device`` gives tracking (``auto``: the CPU, one scene at a time is a small batch,
+        :func:`~grutrack.tracking.grukf_backend.resolve_device`); when that is not the device ``net`` trains on
+        (``auto`` with many scenes per step on a GPU) a copy of ``net`` is tracked there and ``net`` stays put."""
+        from grutrack.tracking.grukf_backend import resolve_device
+
+        device = resolve_device(self.device, "training config 'device'")
+        if next(net.parameters()).device != device:
+            net = copy.deepcopy(net)
         was_training = net.training
         net.eval()
         try:
-            return self._score(
-                Tracker(self.tracker_cfg, network_groups(net, self.tracker_cfg, self.index, self.device))
-            )
+            return self._score(Tracker(self.tracker_cfg, network_groups(net, self.tracker_cfg, self.index, device)))
         finally:
             net.train(was_training)
 

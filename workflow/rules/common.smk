@@ -37,7 +37,7 @@ def _alternation(names):
 wildcard_constraints:
     dataset=_alternation(config["datasets"]),
     detector=_alternation(config["detectors"]),
-    training=_alternation(config["trainings"]),
+    training=_alternation(S.trained_names(config)),
     run=_alternation({r for e in config["experiments"].values() for r in e["runs"]}),
     split="[^/]+",
     source="[^/]+",

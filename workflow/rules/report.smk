@@ -28,7 +28,8 @@ def _report_trainings(rep):
     else:
         runs = config["experiments"][rep["experiment"]]["runs"]
         names = {r["training"]: r["training"] for r in runs.values() if r["training"]}
-    return [(label, f"checkpoints/{t}/train_log.csv", f"checkpoints/{t}/training.yaml") for label, t in names.items()]
+    return [(label, f"{S.training_dir(config, t)}/train_log.csv", f"{S.training_dir(config, t)}/training.yaml")
+            for label, t in names.items()]
 
 
 def _report_renders(rep):
@@ -91,6 +92,10 @@ def _report_args(w):
                     f"{det}{simulated}")
     args += [f"--run {run}={metrics}" for run, metrics, _ in _report_runs(rep)]
     args += [f"--train-log {label}={log_csv}" for label, log_csv, _ in _report_trainings(rep)]
+    kind = S.report_kind(rep["kind"])
+    if rep["experiment"] and "trainings" in kind.reads and not kind.training_roles:
+        runs = config["experiments"][rep["experiment"]]["runs"]
+        args += [f"--run-training {run}={r['training']}" for run, r in runs.items() if r["training"]]
     args += [f"--zip {det}={zp}" for det, zp, _ in _report_zips(rep)]
     args += [f"--render {run}={folder}/counts.json" for run, folder in _report_renders(rep)]
     cc = _report_cross_check(rep)

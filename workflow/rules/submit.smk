@@ -11,7 +11,7 @@ def _submit_inputs(w):
            "detections": S.detections_file(config, exp["dataset"], exp["split"], w.detector),
            "data": dataset_input(exp["dataset"], exp["split"])}
     if run["training"]:
-        out["checkpoint"] = S.checkpoint_file(run["training"])
+        out["checkpoint"] = S.checkpoint_file(config, run["training"])
     return out
 
 

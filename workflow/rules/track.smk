@@ -13,7 +13,7 @@ def _track_inputs(w):
            "preset": f"results/{w.experiment}/{w.detector}/{w.run}/tracker.yaml",
            "detections": S.detections_file(config, exp["dataset"], exp["split"], w.detector)}
     if run["training"]:
-        out["checkpoint"] = S.checkpoint_file(run["training"])
+        out["checkpoint"] = S.checkpoint_file(config, run["training"])
     return out
 
 

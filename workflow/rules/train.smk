@@ -47,3 +47,24 @@ rule train:
         "{GRUTRACK} train {params.data} "
         "--detections {input.detections} --config {output.config} --out checkpoints/{wildcards.training} "
         "{params.val} --no-progress ) > {log} 2>&1 " + ON_FAIL
+
+
+rule package_pretrained:
+    """A training packaged as a pretrained network (model.pt without its resume state, config, log, validation
+    record, provenance.json): `bash scripts/pretrain_grukf.sh` builds pretrained/grukf_default with
+    workflow/config/mini.yaml and copies it into grutrack/pretrained/."""
+    input:
+        model="checkpoints/{training}/model.pt",
+        log_csv="checkpoints/{training}/train_log.csv",
+        config="checkpoints/{training}/training.yaml",
+        validation="checkpoints/{training}/validation.json",
+        detections=lambda w: S.detections_file(config, _training(w)["dataset"], _training(w)["split"],
+                                               _training(w)["detector"]),
+    output:
+        model="pretrained/{training}/model.pt",
+        provenance="pretrained/{training}/provenance.json",
+    log: "logs/train/{training}.pretrained.log"
+    shell:
+        "{PY} -m grutrack.training.pretrained --from checkpoints/{wildcards.training} "
+        "--detections {input.detections} --out pretrained/{wildcards.training} "
+        "--command 'bash scripts/pretrain_grukf.sh' > {log} 2>&1 " + ON_FAIL

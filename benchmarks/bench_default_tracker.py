@@ -1,0 +1,313 @@
+"""The default tracker preset decided by evidence: AMOTA of candidate presets against Poly-MOT, Fast-Poly and MCTrack.
+
+For every detection set (the four reference sets of ../shared/data/nuscenes/reference, three of them SYNTHETIC and
+one the real PointPillars file; and SYNTHETIC sets made here with ``simulate_nuscenes`` for other detector profiles
+and seeds) the script tracks with the three trackers' presets (``polymot``, ``fastpoly``, ``mctrack``: box for box
+their own code's output) and with every candidate (the ``ekf`` preset with one or more keys changed), scores each
+output with the fast evaluator (equal to the devkit) and prints one table: AMOTA per set, the best of the three,
+and per candidate the sets where it is below that best and by how much.
+
+    .venv/bin/python benchmarks/bench_default_tracker.py                      # reference + held-out sets
+    .venv/bin/python benchmarks/bench_default_tracker.py --groups reference,dev --candidates ekf,ekf_mct_nms
+
+Groups: ``reference`` (the four reference sets), ``dev`` (SYNTHETIC, seeds 100-101: the sets the candidates were
+compared on while choosing) and ``heldout`` (SYNTHETIC, seeds 300-302, mini_val and mini_train, all four profiles:
+looked at only once the choice was frozen). Candidates: :data:`CANDIDATES` (names; ``--candidates`` a comma list).
+docs/results/default_tracker.md records the table and the decision.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+from grutrack.data.detection_sim import simulate_nuscenes
+from grutrack.data.nusc_detections import load_detections
+from grutrack.data.nuscenes import load_scenes, open_nuscenes
+from grutrack.evaluation.nuscenes_fast.amota import fast_tracking_eval
+from grutrack.export.nuscenes_json import build_submission
+from grutrack.tracking.config import preset_path
+from grutrack.tracking.factory import build_tracker
+from grutrack.tracking.tracker import track_scenes
+
+DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "nuscenes"
+CLASSES = ("bicycle", "bus", "car", "motorcycle", "pedestrian", "trailer", "truck")
+THREE = ("polymot", "fastpoly", "mctrack")
+PROFILES = ("centerpoint", "pointpillars", "centerpoint_drift", "centerpoint_velfail")
+
+#: reference set -> (split, detection file relative to the nuScenes data root)
+REFERENCE = {
+    "ref mini_val cp s7": ("mini_val", "reference/mini_val_centerpoint_sim_s7.json"),
+    "ref mini_val pp s7": ("mini_val", "reference/mini_val_pointpillars_sim_s7.json"),
+    "ref mini_train cp s7": ("mini_train", "reference/mini_train_centerpoint_sim_s7.json"),
+    "REAL mini_val pointpillars": ("mini_val", "detections/pointpillars_mini_val.json"),
+}
+
+
+def generated(seeds: tuple[int, ...], splits: tuple[str, ...]) -> dict[str, tuple[str, str, int]]:
+    """name -> (split, profile, seed) of SYNTHETIC sets."""
+    return {
+        f"{split} {profile} s{seed}": (split, profile, seed)
+        for split in splits
+        for seed in seeds
+        for profile in PROFILES
+    }
+
+
+GROUPS = {
+    "reference": None,
+    "dev": ((100, 101), ("mini_val",)),
+    "heldout": ((300, 301, 302), ("mini_val", "mini_train")),
+}
+
+
+def _per_class(value) -> dict:
+    return {c: value for c in CLASSES}
+
+
+def _mctrack() -> dict:
+    return yaml.safe_load(preset_path("mctrack").read_text())
+
+
+# --- candidates: each a function of the ekf preset's dict (changed in place) ---------------------------------------
+
+
+def _nms(raw):  # MCTrack's per-class NMS thresholds (kept box's class)
+    raw["preprocessing"]["nms_threshold"] = _mctrack()["preprocessing"]["nms_threshold"]
+
+
+def _nms_order(raw):  # detections numbered in NMS's score order
+    raw["preprocessing"]["nms_order"] = "score"
+
+
+def _ro_gdiou(raw):  # Ro_GDIoU one stage, MCTrack's weights and thresholds, predicted pose
+    m = _mctrack()["association"]
+    a = raw["association"]
+    a.update(
+        first_metric=m["first_metric"], first_threshold=m["first_threshold"], ro_gdiou_weights=m["ro_gdiou_weights"]
+    )
+    a["two_stage"] = False
+
+
+def _first_frames(raw):  # every live track written in a scene's first 3 frames
+    raw["lifecycle"]["write_first_frames"] = 3
+
+
+def _lifetimes(raw):  # MCTrack's max_age
+    raw["lifecycle"]["max_age"] = _mctrack()["lifecycle"]["max_age"]
+
+
+def _decoupled(raw):  # MCTrack's decoupled CV position / size filters with all their options
+    m = _mctrack()["motion"]
+    raw["motion"] = {k: v for k, v in m.items()}
+    raw["association"]["track_pose"] = _mctrack()["association"]["track_pose"]
+    raw["association"]["track_pose_blend"] = _mctrack()["association"]["track_pose_blend"]
+
+
+def _decoupled_ts(raw):  # the same with the timestamps' step
+    _decoupled(raw)
+    raw["motion"]["time_step"] = "timestamps"
+
+
+def _motion_q(scale_q: float, scale_r: float, name: str):
+    """Per-class Q / R: a motion config equal to the ekf preset's with each class's Q and R scaled."""
+
+    def change(raw):
+        base = yaml.safe_load(Path(_motion_file(raw["motion"]["config"])).read_text())
+        for cls in base["classes"].values():
+            for key, s in (("Q", scale_q), ("R", scale_r)):
+                v = cls[key]
+                cls[key] = [x * s for x in v] if isinstance(v, list) else v * s
+        raw["motion"]["config"] = _write_motion(base, name)
+
+    return change
+
+
+def _velocity_r(values: dict, name: str):
+    """Per-class measurement noise of the detector's velocity (R entries vx, vy, (m/s)^2) for the classes given."""
+
+    def change(raw):
+        base = yaml.safe_load(Path(_motion_file(raw["motion"]["config"])).read_text())
+        for cls, r in values.items():
+            entry = base["classes"][cls]
+            entry["R"] = list(entry["R"][:7]) + [r, r]
+        raw["motion"]["config"] = _write_motion(base, name)
+
+    return change
+
+
+def _process_q(values: dict, name: str, then=None):
+    """Per-class process noise Q (one scale for the diagonal) for the classes given; ``then``: a change first."""
+
+    def change(raw):
+        if then is not None:
+            then(raw)
+        base = yaml.safe_load(Path(_motion_file(raw["motion"]["config"])).read_text())
+        for cls, q in values.items():
+            base["classes"][cls]["Q"] = q
+        raw["motion"]["config"] = _write_motion(base, name)
+
+    return change
+
+
+#: MCTrack's per-class velocity noise relative to its position noise (R_v / R_xy of KALMAN_FILTER_POSE.CV), applied
+#: to the ekf preset's position noise 1; trailer (CA, no velocity measurement of this form) keeps its own
+MCT_VEL_RATIO = {"bicycle": 10.0, "bus": 333.3, "car": 0.714, "motorcycle": 1.0, "pedestrian": 1.75, "truck": 2.667}
+
+
+def _motion_file(name: str) -> str:
+    p = Path(name)
+    return str(p) if p.suffix else str(Path(preset_path("ekf")).parents[1] / "motion" / f"{name}.yaml")
+
+
+_TMP = Path(tempfile.mkdtemp(prefix="bench_default_tracker_"))
+
+
+def _write_motion(cfg: dict, name: str) -> str:
+    path = _TMP / f"motion_{name}.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return str(path)
+
+
+def _punish(values: dict):
+    def change(raw):
+        raw["lifecycle"]["punish_num"].update(values)
+
+    return change
+
+
+def _combine(*changes):
+    def change(raw):
+        for c in changes:
+            c(raw)
+
+    return change
+
+
+#: the preset before this decision (punish_num 1 for bus, trailer, truck); every candidate but ``ekf`` (the preset as
+#: it is) starts from it, so ``+punish_large2`` is the preset now
+BEFORE = {"bus": 1, "trailer": 1, "truck": 1}
+
+CANDIDATES = {
+    "ekf": lambda raw: None,
+    "ekf_before": lambda raw: None,
+    "+mct_nms": _nms,
+    "+nms_order": _nms_order,
+    "+ro_gdiou": _ro_gdiou,
+    "+first_frames": _first_frames,
+    "+mct_max_age": _lifetimes,
+    "+decoupled_cv": _decoupled,
+    "+decoupled_cv_ts": _decoupled_ts,
+    "+Q2": _motion_q(2.0, 1.0, "q2"),
+    "+R2": _motion_q(1.0, 2.0, "r2"),
+    "+R_vel_bus100": _velocity_r({"bus": 100.0}, "rbus100"),
+    "+R_vel_bus10": _velocity_r({"bus": 10.0}, "rbus10"),
+    "+R_vel_mct": _velocity_r(MCT_VEL_RATIO, "rmct"),
+    "+R_vel_bic10": _velocity_r({"bicycle": 10.0}, "rbic10"),
+    "+R_vel_bic10_bus30": _velocity_r({"bicycle": 10.0, "bus": 30.0}, "rbic10bus30"),
+    "+R_vel_bic10_bus100": _velocity_r({"bicycle": 10.0, "bus": 100.0}, "rbic10bus100"),
+    "+R_vel_mct_nocar": _velocity_r({k: v for k, v in MCT_VEL_RATIO.items() if k != "car"}, "rmctnocar"),
+    "+R_vel_bic10+Q_bus4": _process_q({"bus": 4.0}, "bic10qbus4", _velocity_r({"bicycle": 10.0}, "rbic10")),
+    "+R_vel_bic10+Q_bus10": _process_q({"bus": 10.0}, "bic10qbus10", _velocity_r({"bicycle": 10.0}, "rbic10")),
+    "+R_vel_bic10+punish_bus2": _combine(_velocity_r({"bicycle": 10.0}, "rbic10"), _punish({"bus": 2})),
+    "+R_vel_bic10+punish_car2": _combine(_velocity_r({"bicycle": 10.0}, "rbic10"), _punish({"car": 2})),
+    "+R_vel_bic10+punish_large2": _combine(
+        _velocity_r({"bicycle": 10.0}, "rbic10"), _punish({"bus": 2, "trailer": 2, "truck": 2})
+    ),
+    "+punish_bus2": _punish({"bus": 2}),
+    "+punish_large2": _punish({"bus": 2, "trailer": 2, "truck": 2}),
+    "+nms+first_frames": _combine(_nms, _first_frames),
+    "+nms+ro_gdiou+first_frames": _combine(_nms, _ro_gdiou, _first_frames),
+}
+
+
+def candidate_path(name: str) -> Path:
+    raw = yaml.safe_load(preset_path("ekf").read_text())
+    raw = copy.deepcopy(raw)
+    if name != "ekf":
+        _punish(BEFORE)(raw)
+    CANDIDATES[name](raw)
+    path = _TMP / f"{name.replace('+', 'plus_')}.yaml"
+    path.write_text(yaml.safe_dump(raw, sort_keys=False))
+    return path
+
+
+def amota(nusc, preset, split: str, det_path: Path, scenes) -> float:
+    tokens = [f.token for s in scenes for f in s.frames]
+    tracker = build_tracker("ekf", preset)
+    dets = load_detections(det_path, tokens, tracker.cfg.measured_yaw)
+    run = track_scenes(tracker, scenes, dets)
+    sub = build_submission(run.results, tokens, tracker.cfg.max_boxes_per_sample)
+    return fast_tracking_eval(nusc, sub, split)["amota"]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="nuScenes data root (holds v1.0-mini)")
+    ap.add_argument("--groups", default="reference,heldout", help="comma list of: " + ", ".join(GROUPS))
+    ap.add_argument("--candidates", default=",".join(CANDIDATES), help="comma list of: " + ", ".join(CANDIDATES))
+    ap.add_argument("--cache", type=Path, default=None, help="folder for the simulated detection files (reused)")
+    ap.add_argument("--json", type=Path, default=None, help="also write the table as JSON here")
+    args = ap.parse_args(argv)
+    names = [c for c in args.candidates.split(",") if c]
+    unknown = [c for c in names if c not in CANDIDATES]
+    if unknown:
+        print(f"unknown candidate(s): {', '.join(unknown)}", file=sys.stderr)
+        return 2
+    cache = args.cache or _TMP
+    cache.mkdir(parents=True, exist_ok=True)
+    nusc = open_nuscenes(args.data, "v1.0-mini")
+    scenes = {s: load_scenes(nusc, s) for s in ("mini_val", "mini_train")}
+
+    sets: dict[str, tuple[str, Path]] = {}
+    for group in args.groups.split(","):
+        if group == "reference":
+            sets.update({k: (split, args.data / rel) for k, (split, rel) in REFERENCE.items()})
+            continue
+        for key, (split, profile, seed) in generated(*GROUPS[group]).items():
+            path = cache / f"{split}_{profile}_s{seed}.json"
+            if not path.is_file():
+                simulate_nuscenes(None, "v1.0-mini", split, profile, seed, out=path, nusc=nusc)
+            sets[key] = (split, path)
+
+    presets = {t: t for t in THREE} | {c: candidate_path(c) for c in names}
+    table: dict[str, dict[str, float]] = {}
+    t0 = time.perf_counter()
+    for key, (split, path) in sets.items():
+        table[key] = {p: amota(nusc, cfg, split, path, scenes[split]) for p, cfg in presets.items()}
+        print(f"  {key}: done ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+
+    width = max(len(k) for k in sets) + 1
+    print("AMOTA (fast evaluator = devkit); best3: the best of Poly-MOT, Fast-Poly, MCTrack; * below best3")
+    print(f"{'set':<{width}}" + "".join(f"{c:>{max(9, len(c) + 1)}}" for c in THREE + ("best3",) + tuple(names)))
+    for key, row in table.items():
+        best = max(row[t] for t in THREE)
+        cells = [f"{row[t]:.4f}" for t in THREE] + [f"{best:.4f}"]
+        cells += [f"{row[c]:.4f}{'*' if row[c] < best else ' '}" for c in names]
+        heads = THREE + ("best3",) + tuple(names)
+        print(f"{key:<{width}}" + "".join(f"{v:>{max(9, len(h) + 1)}}" for v, h in zip(cells, heads)))
+    print()
+    print("per candidate over the sets: mean margin to best3, sets below best3 (worst margin, set)")
+    for c in names:
+        margins = {k: row[c] - max(row[t] for t in THREE) for k, row in table.items()}
+        below = {k: m for k, m in margins.items() if m < 0}
+        worst = min(margins, key=margins.get)
+        mean = sum(margins.values()) / len(margins)
+        print(
+            f"  {c:<28} mean {mean:+.4f}  below on {len(below)}/{len(margins)}"
+            + (f"  worst {margins[worst]:+.4f} ({worst})" if below else "")
+        )
+    if args.json:
+        args.json.write_text(json.dumps(table, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
