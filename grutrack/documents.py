@@ -150,17 +150,14 @@ class MetricsDocument:
 
     @classmethod
     def from_dict(cls, d: Any, where: str = "metrics JSON") -> MetricsDocument:
-        """Parse and check the layout; unknown top-level keys are ignored (newer writers may add some). An AV2
+        """Parse and check the layout against its description (``grutrack/configs/schemas/formats/metrics.schema.yaml``;
+        an error names the field, ``per_class.car.amota``); unknown top-level keys are ignored (newer writers may add
+        some). An AV2
         document written before absent classes were left out of the averages is read in the current layout
         (see :func:`_upgraded`)."""
-        if not isinstance(d, dict):
-            raise InputFormatError(f"{where}: not a metrics JSON of grutrack evaluate (expected a JSON object)")
-        for key in ("overall", "per_class"):
-            if not isinstance(d.get(key), dict):
-                raise InputFormatError(f"{where}: not a metrics JSON of grutrack evaluate (no '{key}' object)")
-        bad = next((c for c, m in d["per_class"].items() if not isinstance(m, dict)), None)
-        if bad is not None:
-            raise InputFormatError(f"{where}: per_class.{bad} must be an object of metric values")
+        from grutrack import formats
+
+        formats.check("metrics", d, where)  # the layout's one description (metrics.schema.yaml)
         d = _upgraded(d)
         names = {f.name for f in fields(cls)}
         kw = {k: v for k, v in d.items() if k in names}

@@ -57,6 +57,12 @@ def read_json(path: str | os.PathLike, what: str = "JSON file"):
         from grutrack.errors import InputFormatError
 
         raise InputFormatError(f"{path}: not valid JSON ({exc})") from exc
+    except RecursionError as exc:
+        from grutrack.errors import InputFormatError
+
+        raise InputFormatError(
+            f"{path}: not a JSON document grutrack reads (lists or objects nested too deeply)"
+        ) from exc
 
 
 def parse_yaml(text: str):
@@ -84,6 +90,8 @@ def _read_text(path: str | os.PathLike, what: str, fmt: str) -> tuple[Path, str]
     from grutrack.errors import InputFormatError
 
     path = Path(path)
+    if path.is_dir():
+        raise InputFormatError(f"{path}: {what} is a folder; expected a {fmt} file")
     if not path.is_file():
         raise InputFormatError(f"{path}: {what} does not exist")
     try:
@@ -93,6 +101,8 @@ def _read_text(path: str | os.PathLike, what: str, fmt: str) -> tuple[Path, str]
             f"{path}: {what} must be {fmt} text, but this file is binary (not UTF-8 at byte "
             f"{exc.start}; a feather or pickle file?)"
         ) from exc
+    except OSError as exc:
+        raise InputFormatError(f"{path}: {what} cannot be read ({exc.strerror or exc})") from exc
 
 
 def _umask() -> int:

@@ -234,14 +234,17 @@ def test_lt3d_roundtrip_and_drop_policy(av2_root, scenes, oracle_table, tmp_path
             lambda d: d.__setitem__("timestamp_ns", d["timestamp_ns"].where(d.index != 5, 123)),
             "row 5 .*field 'timestamp_ns' 123 is not a sweep time",
         ),
-        (lambda d: d.__setitem__("tx_m", d["tx_m"].where(d.index != 5, np.nan)), "row 5 .*field 'tx_m' is nan"),
+        (
+            lambda d: d.__setitem__("tx_m", d["tx_m"].where(d.index != 5, np.nan)),
+            "row 5 .*field 'tx_m' must be a finite number .*, got nan",
+        ),
         (
             lambda d: d.__setitem__("qw", d["qw"].where(d.index != 5, 3.0)),
             "row 5 .*'qw/qx/qy/qz' must be a unit quaternion",
         ),
         (
             lambda d: d.__setitem__("score", d["score"].where(d.index != 5, 1.5)),
-            "row 5 .*'score' must be in \\[0, 1\\]",
+            "row 5 .*'score' must be a number in \\[0, 1\\], got 1.5",
         ),
         (
             lambda d: d.__setitem__("category", d["category"].where(d.index != 5, "CAR")),

@@ -153,17 +153,24 @@ def _submission(tokens, mutate=None):
 
 BAD_SUBMISSIONS = {
     "missing_samples": (lambda s, t: [s["results"].pop(x) for x in t[:5]], "5 missing, 0 not in the split"),
-    "unknown_name": (lambda s, t: s["results"][t[0]].append(_box(t[0], "van")), "tracking_name 'van' is not one of"),
-    "over_500": (lambda s, t: s["results"][t[1]].extend([_box(t[1])] * 500), "has 501 boxes (max 500)"),
+    "unknown_name": (
+        lambda s, t: s["results"][t[0]].append(_box(t[0], "van")),
+        "[1].tracking_name' must be one of bicycle, bus, car, motorcycle, pedestrian, trailer, truck, got 'van'",
+    ),
+    "over_500": (
+        lambda s, t: s["results"][t[1]].extend([_box(t[1])] * 500),
+        "' must be a list of at most 500 boxes (the official format's limit), got a list of 501 items",
+    ),
     "string_number": (
         lambda s, t: s["results"][t[2]].append(_box(t[2], tracking_score="0.5")),
-        "tracking_score must be a number in [0, 1], got '0.5'",
+        "[1].tracking_score' must be a number in [0, 1], got '0.5' (a number written as a string)",
     ),
     "string_translation": (
         lambda s, t: s["results"][t[2]].append(_box(t[2], translation=["1", "2", "3"])),
-        "'translation' must be 3 finite numbers, got ['1', '2', '3']",
+        "[1].translation' must be a list of 3 finite numbers [x, y, z] (box centre, metres, global frame), "
+        "got ['1', '2', '3'] (a number written as a string)",
     ),
-    "other_token": (lambda s, t: s["results"][t[3]].append(_box(t[4])), "box 1: sample_token is"),
+    "other_token": (lambda s, t: s["results"][t[3]].append(_box(t[4])), "[1].sample_token' is '"),
 }
 
 
@@ -231,8 +238,12 @@ def test_evaluate_rejects_wrong_split_truncated_json_and_detections(
     )
     cut = tmp_path / "cut.json"
     cut.write_text(json.dumps(_submission(mini_val_tokens))[:5000])
-    fails(capsys, ["evaluate", *common, "--submission", cut], f"{cut}: cannot read a tracking submission JSON")
-    fails(capsys, ["evaluate", *common, "--submission", pointpillars_mini_val], "box 0: keys must be", "tracking_id")
+    fails(capsys, ["evaluate", *common, "--submission", cut], f"{cut}: not valid JSON")
+    fails(
+        capsys,
+        ["evaluate", *common, "--submission", pointpillars_mini_val],
+        "[0].tracking_id' is missing; expected a string (the track's identity)",
+    )
     ok = tmp_path / "ok.json"
     ok.write_text(json.dumps(_submission(mini_val_tokens)))
     assert main(["evaluate", *map(str, common), "--submission", str(ok)]) == 0
@@ -273,7 +284,12 @@ def test_detection_json_bad_values(nusc_root, pp_results, tmp_path, capsys):
         res[t] = [dict(res[t][0])] * 100_000
 
     path, t = _with(pp_results, tmp_path, many)
-    fails(capsys, [*common, path], f"{path}: sample {t} has 100000 boxes; the detection format allows at most 500")
+    fails(
+        capsys,
+        [*common, path],
+        f"{path}: field 'results['{t}']' must be a list of at most 500 boxes",
+        "got a list of 100000 items",
+    )
 
     def string_number(res, t):
         res[t][1]["translation"] = [str(x) for x in res[t][1]["translation"]]
@@ -282,7 +298,7 @@ def test_detection_json_bad_values(nusc_root, pp_results, tmp_path, capsys):
     fails(
         capsys,
         [*common, path],
-        f"sample {t}, box 1: field 'translation' must hold JSON numbers",
+        f"field 'results['{t}'][1].translation' must be a list of 3 finite numbers",
         "(a number written as a string)",
     )
 
@@ -290,7 +306,11 @@ def test_detection_json_bad_values(nusc_root, pp_results, tmp_path, capsys):
         res[t][2]["sample_token"] = "another"
 
     path, t = _with(pp_results, tmp_path, other_sample)
-    fails(capsys, [*common, path], f"results['{t}'] box 2: field 'sample_token' is 'another', expected the sample")
+    fails(
+        capsys,
+        [*common, path],
+        f"field 'results['{t}'][2].sample_token' is 'another', expected the sample it is listed under",
+    )
     feather = tmp_path / "d.feather"
     import pandas as pd
 

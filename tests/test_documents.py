@@ -49,9 +49,9 @@ def test_metrics_values_by_path_skip_nan_and_missing():
 @pytest.mark.parametrize(
     "text,expect",
     [
-        ("[1, 2]", "expected a JSON object"),
-        ('{"per_class": {}}', "no 'overall' object"),
-        ('{"overall": {}, "per_class": {"car": 3}}', "per_class.car must be an object"),
+        ("[1, 2]", "the document must be a metrics JSON of grutrack evaluate"),
+        ('{"per_class": {}}', "field 'overall' is missing"),
+        ('{"overall": {}, "per_class": {"car": 3}}', "field 'per_class.car' must be an object"),
         ("{not json", "not valid JSON"),
     ],
 )

@@ -68,7 +68,8 @@ BAD_META = {
     "null": (dict(CAMERA_META, use_map=None), "field 'meta.use_map' must be true or false, got None"),
     "no_meta": (
         ...,
-        "field 'meta' must be an object with the booleans use_camera, use_lidar, use_radar, use_map, use_external",
+        "field 'meta' is missing; expected an object with the booleans use_camera, use_lidar, use_radar, use_map, "
+        "use_external",
     ),
     "meta_list": ([True], "field 'meta' must be an object with the booleans"),
     "no_sensor": (dict(CAMERA_META, use_camera=False), "field 'meta' declares no sensor"),

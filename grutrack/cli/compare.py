@@ -29,14 +29,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _results(path: str) -> dict:
+    """A tracking submission, checked against the format's description (any samples: the comparison pairs the
+    split's)."""
+    from grutrack.export.nuscenes_json import check_document
     from grutrack.io import read_json
 
     doc = read_json(path, "tracking submission")
-    if not isinstance(doc, dict) or not isinstance(doc.get("results"), dict):
-        raise InputFormatError(
-            f"{path}: expected a JSON object with a 'results' object "
-            f"{{sample_token: [box, ...]}} (official nuScenes tracking format)"
-        )
+    check_document(doc, path)
     return doc
 
 

@@ -181,15 +181,16 @@ def list_logs(root: str | Path, split: str) -> list[str]:
     return logs
 
 
-def _read_feather(path: Path, columns: tuple[str, ...]) -> pd.DataFrame:
-    """A feather table with the given columns present; InputFormatError naming the file otherwise."""
+def _read_feather(path: Path, table: str) -> pd.DataFrame:
+    """A feather table checked against its description (``table``: ``av2_poses`` or ``av2_annotations``, schemas
+    in grutrack/configs/schemas/formats/); InputFormatError naming the file, the row and the column otherwise."""
+    from grutrack import formats
+
     try:
         df = pd.read_feather(path)
     except (OSError, ValueError) as exc:
         raise InputFormatError(f"{path}: not a readable feather table ({exc})") from exc
-    missing = [c for c in columns if c not in df.columns]
-    if missing:
-        raise InputFormatError(f"{path}: missing column(s) {missing}; expected {list(columns)}")
+    formats.check_table(table, df, path)
     return df
 
 
@@ -217,7 +218,7 @@ def read_poses(log_dir: str | Path) -> Poses:
     path = Path(log_dir) / "city_SE3_egovehicle.feather"
     if not path.is_file():
         raise DatasetError(f"{path} does not exist (every AV2 log needs its ego poses)")
-    df = _read_feather(path, POSE_COLUMNS).sort_values("timestamp_ns", kind="stable")
+    df = _read_feather(path, "av2_poses").sort_values("timestamp_ns", kind="stable")
     q = df[["qw", "qx", "qy", "qz"]].to_numpy(np.float64)
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
     return Poses(
@@ -230,7 +231,7 @@ def read_annotations(log_dir: str | Path) -> pd.DataFrame | None:
     path = Path(log_dir) / "annotations.feather"
     if not path.is_file():
         return None
-    return _read_feather(path, ANNOTATION_COLUMNS)
+    return _read_feather(path, "av2_annotations")
 
 
 # ------------------------------------------------------------------------------------------------------------

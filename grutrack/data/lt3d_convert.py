@@ -1,7 +1,8 @@
 """Conversion of a downloaded LT3D detection table (Argoverse 2; feather, CSV or pickled DataFrame) into a
-feather table of one split's detections: required columns checked, rows restricted to the split's logs,
-written atomically. Box-level validation (finite numbers, unit quaternions, timestamps) happens when
-``grutrack track --dataset av2`` loads the table."""
+feather table of one split's detections: the table checked against its description (columns, numbers, sizes,
+quaternions, scores, categories, timestamps: ``lt3d_detections.schema.yaml``), rows restricted to the split's logs,
+written atomically. Whether each timestamp is a sweep of its log is checked when ``grutrack track --dataset av2``
+loads the table."""
 
 from __future__ import annotations
 

@@ -7,9 +7,11 @@ format), one row per box in the EGO frame of its sweep: ``tx_m, ty_m, tz_m`` (bo
 absent). Accepted files: feather (``.feather`` / ``.arrow``), CSV (LT3D writes ``val_detections.csv``) and a
 pickled pandas DataFrame of the same columns (``.pkl`` / ``.pickle``, what ``format_results`` returns).
 
-Validation (an :class:`InputFormatError` names the file, the field and what was expected): required columns
-present; numbers finite; sizes positive; unit quaternions; scores in [0, 1]; category an AV2 category;
-``log_id`` one of the split's logs; ``timestamp_ns`` one of that log's ego-pose timestamps.
+Validation (an :class:`InputFormatError` names the file, the row, the column and what was expected): against the
+table's one description, ``grutrack/configs/schemas/formats/lt3d_detections.schema.yaml`` (:mod:`grutrack.formats`:
+required columns present; numbers finite; sizes positive; unit quaternions; scores in [0, 1]; category an AV2
+category; integer timestamps), then ``log_id`` one of the split's logs and ``timestamp_ns`` one of that log's
+ego-pose timestamps.
 
 Policy for detections at valid sweep times that are not tracked frames (the tracker runs at the evaluated
 rate, 2 Hz by default, on the label timestamps): they are DROPPED and counted in
@@ -26,40 +28,21 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from grutrack.data.av2 import (
-    COMPETITION_CATEGORIES,
-    OTHER_ANNOTATION_CATEGORIES,
-    ego_to_city,
-    quat_to_matrix,
-    read_poses,
-    split_dir,
-    token_timestamp_ns,
-)
+from grutrack import formats
+from grutrack.data.av2 import ego_to_city, quat_to_matrix, read_poses, split_dir, token_timestamp_ns
 from grutrack.data.scene import BoxSet, Scene, Vocabulary
 from grutrack.errors import InputFormatError
 from grutrack.io import atomic_path
 
-REQUIRED_COLUMNS = (
-    "tx_m",
-    "ty_m",
-    "tz_m",
-    "length_m",
-    "width_m",
-    "height_m",
-    "qw",
-    "qx",
-    "qy",
-    "qz",
-    "score",
-    "log_id",
-    "timestamp_ns",
-    "category",
-)
+#: the table's description (grutrack/configs/schemas/formats/<FORMAT>.schema.yaml): one row
+FORMAT = "lt3d_detections"
+_ROW = formats.node(FORMAT, (0,))
+REQUIRED_COLUMNS = tuple(_ROW["required"])
 NUMERIC_COLUMNS = ("tx_m", "ty_m", "tz_m", "length_m", "width_m", "height_m", "qw", "qx", "qy", "qz", "score")
 VELOCITY_COLUMNS = ("vx", "vy")
 #: LT3D writes OTHER for a label outside its class list; such boxes are dropped like untracked categories
-KNOWN_CATEGORIES = frozenset(COMPETITION_CATEGORIES + OTHER_ANNOTATION_CATEGORIES + ("OTHER",))
-QUATERNION_TOLERANCE = 1e-2
+KNOWN_CATEGORIES = frozenset(_ROW["properties"]["category"]["enum"])
+QUATERNION_TOLERANCE = _ROW["unitNormOf"]["tolerance"]
 
 
 #: detections per sweep accepted: NMS compares every pair of a frame's boxes (memory grows with its square)
@@ -100,72 +83,8 @@ def read_detection_table(path: str | Path) -> pd.DataFrame:
         raise InputFormatError(f"{path}: cannot read the detection table ({exc})") from exc
     if not isinstance(df, pd.DataFrame):
         raise InputFormatError(f"{path}: expected a pandas DataFrame of LT3D detections, got {type(df).__name__}")
-    missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
-    if missing:
-        raise InputFormatError(
-            f"{path}: missing column(s) {missing}; LT3D detections need {list(REQUIRED_COLUMNS)} (+ optional vx, vy)"
-        )
+    formats.check_table(FORMAT, df, path)  # the table's one description: columns, types, ranges, quaternions
     return df.reset_index(drop=True)
-
-
-def _numbers(path: Path, df: pd.DataFrame, columns: tuple[str, ...]) -> np.ndarray:
-    """(N, len(columns)) float64 of the given columns; error naming the first non-numeric / non-finite field."""
-    try:
-        arr = df[list(columns)].to_numpy(dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputFormatError(f"{path}: columns {list(columns)} must be numeric ({exc})") from exc
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        i, j = np.argwhere(bad)[0]
-        raise InputFormatError(
-            f"{path}: row {i} (log {df['log_id'].iat[i]}, timestamp_ns {df['timestamp_ns'].iat[i]}):"
-            f" field '{columns[j]}' is {arr[i, j]}; a finite number is required"
-        )
-    return arr
-
-
-def _check_values(path: Path, df: pd.DataFrame, num: np.ndarray) -> None:
-    """Sizes positive, quaternions unit, scores in [0, 1], categories known."""
-
-    def fail(mask: np.ndarray, field: str, expect: str, value) -> None:
-        i = int(np.argmax(mask))
-        raise InputFormatError(
-            f"{path}: row {i} (log {df['log_id'].iat[i]}, timestamp_ns {df['timestamp_ns'].iat[i]})"
-            f": field '{field}' {expect}, got {value(i)}"
-        )
-
-    size = num[:, 3:6]
-    if (size <= 0).any():
-        fail(
-            (size <= 0).any(axis=1), "length_m/width_m/height_m", "must be positive metres", lambda i: size[i].tolist()
-        )
-    norm = np.linalg.norm(num[:, 6:10], axis=1)
-    if (np.abs(norm - 1.0) > QUATERNION_TOLERANCE).any():
-        fail(
-            np.abs(norm - 1.0) > QUATERNION_TOLERANCE,
-            "qw/qx/qy/qz",
-            "must be a unit quaternion",
-            lambda i: f"norm {norm[i]:.4f}",
-        )
-    score = num[:, 10]
-    if ((score < 0) | (score > 1)).any():
-        fail((score < 0) | (score > 1), "score", "must be in [0, 1]", lambda i: score[i])
-    cats = df["category"].astype(str).to_numpy()
-    unknown = ~np.isin(cats, list(KNOWN_CATEGORIES))
-    if unknown.any():
-        fail(unknown, "category", "must be an AV2 category (e.g. REGULAR_VEHICLE)", lambda i: repr(cats[i]))
-
-
-def _timestamps(path: Path, df: pd.DataFrame) -> np.ndarray:
-    """(N,) int64 ``timestamp_ns``; error when a value is not an integer."""
-    ts = pd.to_numeric(df["timestamp_ns"], errors="coerce").to_numpy()
-    bad = ~np.isfinite(ts.astype(np.float64)) | (ts.astype(np.float64) != np.round(ts.astype(np.float64)))
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise InputFormatError(
-            f"{path}: row {i}: field 'timestamp_ns' must be an integer (nanoseconds), got {df['timestamp_ns'].iat[i]!r}"
-        )
-    return df["timestamp_ns"].to_numpy().astype(np.int64)
 
 
 def load_detections(
@@ -178,11 +97,10 @@ def load_detections(
     """
     path = Path(path)
     df = read_detection_table(path)
-    num = _numbers(path, df, NUMERIC_COLUMNS)
+    num = df[list(NUMERIC_COLUMNS)].to_numpy(dtype=np.float64)
     has_vel = all(c in df.columns for c in VELOCITY_COLUMNS)
-    vel = _numbers(path, df, VELOCITY_COLUMNS) if has_vel else np.zeros((len(df), 2))
-    _check_values(path, df, num)
-    ts = _timestamps(path, df)
+    vel = df[list(VELOCITY_COLUMNS)].to_numpy(dtype=np.float64) if has_vel else np.zeros((len(df), 2))
+    ts = df["timestamp_ns"].to_numpy().astype(np.int64)
     logs = df["log_id"].astype(str).to_numpy()
     _check_sweep_counts(path, logs, ts)
     known = {s.name for s in scenes}

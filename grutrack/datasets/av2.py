@@ -152,10 +152,11 @@ class AV2Dataset:
     def write_submission(self, tracks: str | Path, split: str, out: str | Path) -> dict[str, int]:
         """The pickle checked against the official layout for exactly the split's frames at ``rate_hz`` (as the
         evaluation checks it), then copied to ``out`` atomically."""
-        from grutrack.export.av2_tracks import expected_frames, read_tracks_pickle, write_tracks_pickle
+        from grutrack.export.av2_tracks import expected_frames, read_valid_tracks, write_tracks_pickle
 
-        seqs = read_tracks_pickle(tracks)
-        write_tracks_pickle(out, seqs, expected_frames(self.scenes(split)))  # validates first
+        expected = expected_frames(self.scenes(split))
+        seqs = read_valid_tracks(tracks, expected)  # an error names the tracks file, not the output
+        write_tracks_pickle(out, seqs, expected)
         return {
             "logs": len(seqs),
             "frames": sum(len(v) for v in seqs.values()),

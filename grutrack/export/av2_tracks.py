@@ -25,7 +25,9 @@ position after regrouping the labels in that order, so this order makes the pair
 
 Feather table (one per split): one row per box with ``log_id, timestamp_ns, track_uuid, category, tx_m, ty_m,
 tz_m, length_m, width_m, height_m, qw, qx, qy, qz, vx_m_per_s, vy_m_per_s, score`` (city frame).
-Both files are written atomically after validation.
+Both files are written atomically after validation. The pickle's layout is described once, by
+``grutrack/configs/schemas/formats/av2_tracks.schema.yaml`` (:mod:`grutrack.formats`), and checked by
+:func:`validate_sequences` wherever a pickle is read or written.
 """
 
 from __future__ import annotations
@@ -36,12 +38,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from grutrack import formats
 from grutrack.boxes import quaternion_from_yaw, yaw_from_quaternion
 from grutrack.data.av2 import COMPETITION_CATEGORIES, token_timestamp_ns
 from grutrack.data.scene import BoxSet, Scene, Vocabulary
 from grutrack.errors import InputFormatError
 from grutrack.io import atomic_path
 
+#: the format's description (grutrack/configs/schemas/formats/<FORMAT>.schema.yaml)
+FORMAT = "av2_tracks"
 ARRAY_KEYS = ("track_id", "translation_m", "size", "yaw", "velocity_m_per_s", "label", "name")
 TABLE_COLUMNS = (
     "log_id",
@@ -140,19 +145,19 @@ def expected_frames(scenes: list[Scene]) -> dict[str, list[int]]:
 # ------------------------------------------------------------------------------------------------------------
 
 
-def validate_sequences(seqs, expected: dict[str, list[int]], where: str = "tracks", require_score: bool = True) -> None:
-    """Check a tracking object against the official format and the expected frames; InputFormatError else."""
-    if not isinstance(seqs, dict):
-        raise InputFormatError(f"{where}: expected a dict {{log_id: [frame, ...]}}, got {type(seqs).__name__}")
-    missing, extra = sorted(set(expected) - set(seqs)), sorted(set(seqs) - set(expected))
+def validate_sequences(seqs, expected: dict[str, list[int]], where: str = "tracks") -> None:
+    """Check a tracking object against the format's description (``av2_tracks.schema.yaml``, frame by frame, naming
+    the first failing field) and the expected frames (``expected``: log id -> frame timestamps in time order);
+    raises :class:`InputFormatError` naming the file (``where``) and the field."""
+    formats.require_type(FORMAT, seqs, where, ())
+    missing, extra = sorted(set(expected) - set(seqs)), sorted(set(seqs) - set(expected), key=str)
     if missing or extra:
         raise InputFormatError(
             f"{where}: logs must be exactly the {len(expected)} logs of the split "
             f"(missing {missing[:3]}, not in the split {extra[:3]})"
         )
     for log_id, frames in seqs.items():
-        if not isinstance(frames, list):
-            raise InputFormatError(f"{where}: log {log_id}: expected a list of frame dicts")
+        formats.require_type(FORMAT, frames, where, (log_id,))
         ts = [f.get("timestamp_ns") if isinstance(f, dict) else None for f in frames]
         if ts != list(expected[log_id]):
             raise InputFormatError(
@@ -160,45 +165,13 @@ def validate_sequences(seqs, expected: dict[str, list[int]], where: str = "track
                 f"label frames in time order (timestamp_ns), got {len(frames)} frames"
                 f"{'' if len(frames) != len(expected[log_id]) else ' with other timestamps'}"
             )
-        for f in frames:
-            _validate_frame(where, log_id, f, require_score)
-
-
-def _validate_frame(where: str, log_id: str, f: dict, require_score: bool) -> None:
-    """Keys, shapes, finiteness and category names of one frame."""
-    at = f"{where}: log {log_id} frame {f['timestamp_ns']}"
-    keys = ARRAY_KEYS + (("score",) if require_score else ())
-    absent = [k for k in keys + ("seq_id",) if k not in f]
-    if absent:
-        raise InputFormatError(f"{at}: missing key(s) {absent}")
-    if f["seq_id"] != log_id:
-        raise InputFormatError(f"{at}: seq_id is {f['seq_id']!r}, expected the log id")
-    n = len(f["track_id"])
-    shapes = {
-        "translation_m": (n, 3),
-        "size": (n, 3),
-        "yaw": (n,),
-        "velocity_m_per_s": (n, 3),
-        "label": (n,),
-        "name": (n,),
-        **({"score": (n,)} if require_score else {}),
-    }
-    for key, shape in shapes.items():
-        v = f[key]
-        if not isinstance(v, np.ndarray) or v.shape != shape:
-            raise InputFormatError(
-                f"{at}: '{key}' must be a numpy array of shape {shape}, got {getattr(v, 'shape', type(v).__name__)}"
-            )
-    for key in ("translation_m", "size", "yaw", "velocity_m_per_s") + (("score",) if require_score else ()):
-        if not np.all(np.isfinite(f[key])):
-            raise InputFormatError(f"{at}: '{key}' has non-finite values")
-    if (f["size"] <= 0).any():
-        raise InputFormatError(f"{at}: 'size' must be positive [length, width, height]")
-    bad = sorted({str(x) for x in f["name"]} - set(COMPETITION_CATEGORIES))
-    if bad:
-        raise InputFormatError(f"{at}: 'name' has {bad}, not among the 26 AV2 competition categories")
-    if len(set(f["track_id"].tolist())) != n:
-        raise InputFormatError(f"{at}: 'track_id' must be unique within a frame")
+        for i, f in enumerate(frames):
+            formats.check(FORMAT, f, where, at=(log_id, i))
+            if f["seq_id"] != log_id:
+                raise InputFormatError(
+                    f"{where}: field '{formats.field_path(FORMAT, (log_id, i, 'seq_id'))}' is {f['seq_id']!r}, "
+                    f"expected the log id it is listed under"
+                )
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -224,6 +197,14 @@ def read_tracks_pickle(path: str | Path) -> dict:
             return pickle.load(fh)
     except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, ValueError) as exc:
         raise InputFormatError(f"{path}: not a readable pickle ({exc})") from exc
+
+
+def read_valid_tracks(path: str | Path, expected: dict[str, list[int]]) -> dict:
+    """A tracking pickle checked against the format's description and the expected frames; an error names
+    ``path`` and the field."""
+    seqs = read_tracks_pickle(path)
+    validate_sequences(seqs, expected, where=str(path))
+    return seqs
 
 
 def sequences_to_table(seqs: dict[str, list[dict]]) -> pd.DataFrame:

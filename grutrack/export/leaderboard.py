@@ -3,22 +3,17 @@ field-by-field check and the devkit's own loader), write it to ``submissions/``,
 
 from __future__ import annotations
 
-import json
 import zipfile
 from pathlib import Path
 
 from grutrack.errors import InputFormatError
 from grutrack.export.nuscenes_json import MAX_BOXES_PER_SAMPLE, validate_submission
-from grutrack.io import atomic_path, write_json_atomic
+from grutrack.io import atomic_path, read_json, write_json_atomic
 
 
 def read_submission(path: str | Path) -> dict:
-    """Parse a tracking submission JSON."""
-    path = Path(path)
-    try:
-        return json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise InputFormatError(f"{path}: cannot read a tracking submission JSON ({exc})") from exc
+    """Parse a tracking submission JSON (a missing file, a folder or text that is not JSON: one line naming it)."""
+    return read_json(path, "tracking submission")
 
 
 def load_valid_submission(path: str | Path, tokens: list[str]) -> dict:

@@ -4,24 +4,29 @@
 [box, ...]}}``; the meta is the detection file's (what the detector used), lidar-only by default. Each box has
 sample_token, translation [x, y, z], size [w, l, h], rotation [w, x, y, z], velocity [vx, vy] (global frame,
 m/s), tracking_id (string), tracking_name (one of the 7 tracking classes) and tracking_score.
-Every sample token of the split is present and no sample has more than 500 boxes.
+Every sample token of the split is present and no sample has more than 500 boxes. The format is described once, by
+``grutrack/configs/schemas/formats/nusc_tracking.schema.yaml`` (:mod:`grutrack.formats`); every command that reads
+a submission checks it with :func:`validate_submission` (or :func:`check_document` where the split is not known).
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 
+from grutrack import formats
 from grutrack.boxes import quaternion_from_yaw
 from grutrack.classes import TRACKING_CLASSES
-from grutrack.data.nusc_detections import LIDAR_META, META_KEYS, SENSOR_KEYS
+from grutrack.data.nusc_detections import LIDAR_META, SENSOR_KEYS, results_chunks
 from grutrack.data.scene import BoxSet
 from grutrack.errors import InputFormatError
 from grutrack.io import write_json_atomic
 
-MAX_BOXES_PER_SAMPLE = 500
+#: the format's description (grutrack/configs/schemas/formats/<FORMAT>.schema.yaml)
+FORMAT = "nusc_tracking"
+#: boxes per sample the official format allows (the schema's ``maxItems``)
+MAX_BOXES_PER_SAMPLE = formats.node(FORMAT, ("results", "*"))["maxItems"]
 #: the meta of a submission built with no detection meta (the tracker's own evaluations: validation, scripts)
 META = dict(LIDAR_META)
 BOX_KEYS = (
@@ -78,14 +83,10 @@ def build_submission(
 
 
 def validate_submission(sub: dict, sample_tokens: list[str], where: str = "submission") -> None:
-    """Check a tracking submission against the official format; raises :class:`InputFormatError`."""
-    if not isinstance(sub, dict) or set(sub) != {"meta", "results"}:
-        raise InputFormatError(f"{where}: expected exactly the keys 'meta' and 'results'")
-    meta = sub["meta"]
-    if not isinstance(meta, dict) or not all(isinstance(meta.get(k), bool) for k in META_KEYS):
-        raise InputFormatError(f"{where}: 'meta' must have boolean {', '.join(META_KEYS)}")
-    if not any(meta[k] for k in SENSOR_KEYS):
-        raise InputFormatError(f"{where}: 'meta' must declare at least one sensor (use_lidar true for lidar)")
+    """Check a tracking submission against the format's description (``nusc_tracking.schema.yaml``: the boxes
+    array by array, the schema naming the first failing field) and for exactly the split's samples
+    (``sample_tokens``); raises :class:`InputFormatError` naming the file (``where``) and the field."""
+    check_document(sub, where)
     res = sub["results"]
     missing = [t for t in sample_tokens if t not in res]
     extra = set(res) - set(sample_tokens)
@@ -94,57 +95,28 @@ def validate_submission(sub: dict, sample_tokens: list[str], where: str = "submi
             f"{where}: 'results' must hold exactly the {len(sample_tokens)} samples of the "
             f"split ({len(missing)} missing, {len(extra)} not in the split)"
         )
-    for token, boxes in res.items():
-        if len(boxes) > MAX_BOXES_PER_SAMPLE:
-            raise InputFormatError(f"{where}: sample {token} has {len(boxes)} boxes (max {MAX_BOXES_PER_SAMPLE})")
-        for i, box in enumerate(boxes):
-            _validate_box(where, token, i, box)
 
 
-_BOX_KEY_SET = frozenset(BOX_KEYS)
-_CLASS_SET = frozenset(TRACKING_CLASSES)
-_VECTORS = (("translation", 3), ("size", 3), ("rotation", 4), ("velocity", 2))
-
-
-def _validate_box(where: str, token: str, i: int, box: dict) -> None:
-    if box.keys() != _BOX_KEY_SET:
-        raise InputFormatError(f"{where}: sample {token} box {i}: keys must be {', '.join(BOX_KEYS)}")
-    if box["sample_token"] != token:
-        raise InputFormatError(f"{where}: sample {token} box {i}: sample_token is {box['sample_token']}")
-    if box["tracking_name"] not in _CLASS_SET:
+def check_document(sub, where: str) -> None:
+    """The submission's top level, ``meta`` and every sample's boxes against the format's description (whatever
+    its samples); raises :class:`InputFormatError` naming the file and the first failing field."""
+    formats.require_type(FORMAT, sub, where, ())
+    for key in ("meta", "results"):
+        formats.require_key(FORMAT, sub, key, where)
+    extra = next((k for k in sub if k not in ("meta", "results")), None)
+    if extra is not None:
         raise InputFormatError(
-            f"{where}: sample {token} box {i}: tracking_name '{box['tracking_name']}' is not "
-            f"one of {', '.join(TRACKING_CLASSES)}"
+            f"{where}: the document has the unknown field {extra!r}; expected exactly the fields 'meta' and 'results'"
         )
-    if not isinstance(box["tracking_id"], str):
-        raise InputFormatError(f"{where}: sample {token} box {i}: tracking_id must be a string")
-    for key, n in _VECTORS:
-        v = box[key]
-        if not _numbers(v, n):
-            raise InputFormatError(f"{where}: sample {token} box {i}: '{key}' must be {n} finite numbers, got {v!r}")
-    if min(box["size"]) <= 0:
-        raise InputFormatError(f"{where}: sample {token} box {i}: 'size' must be positive, got {box['size']}")
-    if abs(math.sqrt(sum(q * q for q in box["rotation"])) - 1) > 1e-6:
-        raise InputFormatError(f"{where}: sample {token} box {i}: 'rotation' must be a unit quaternion")
-    s = box["tracking_score"]
-    if not _finite(s) or not 0 <= s <= 1:
-        raise InputFormatError(f"{where}: sample {token} box {i}: tracking_score must be a number in [0, 1], got {s!r}")
-
-
-def _numbers(v, n: int) -> bool:
-    """Whether ``v`` is a list of ``n`` finite JSON numbers (not strings, not booleans); plain Python, since
-    numpy calls on 2-4 numbers cost more than the check itself (a float, what JSON gives, is tested first)."""
-    if type(v) is not list or len(v) != n:
-        return False
-    for x in v:
-        if not (math.isfinite(x) if type(x) is float else _finite(x)):
-            return False
-    return True
-
-
-def _finite(x) -> bool:
-    """A finite real number (bool excluded)."""
-    return isinstance(x, (int, float, np.floating, np.integer)) and not isinstance(x, bool) and math.isfinite(x)
+    formats.check(FORMAT, sub["meta"], where, at=("meta",))
+    if not any(sub["meta"][k] for k in SENSOR_KEYS):
+        raise InputFormatError(
+            f"{where}: field 'meta' declares no sensor ({', '.join(SENSOR_KEYS)} all false); expected at least one "
+            f"true (use_lidar for lidar)"
+        )
+    formats.require_type(FORMAT, sub["results"], where, ("results",))
+    for _ in results_chunks(FORMAT, where, sub["results"], list(sub["results"])):
+        pass
 
 
 def write_submission(path: str | Path, sub: dict, sample_tokens: list[str]) -> None:

@@ -16,7 +16,17 @@ from grutrack import __version__
 
 PACKAGE = Path(__file__).resolve().parents[1]
 #: files every stage runs (the package version itself is part of every code version)
-_COMMON = ("errors.py", "io.py", "provenance.py", "boxes.py", "classes.py", "geometry.py", "data/scene.py")
+_COMMON = (
+    "errors.py",
+    "io.py",
+    "formats.py",
+    "configs/schemas/formats",
+    "provenance.py",
+    "boxes.py",
+    "classes.py",
+    "geometry.py",
+    "data/scene.py",
+)
 _TRACKING = (
     "tracking",
     "motion",

@@ -33,9 +33,10 @@ def load_evaluation(dataroot: str, version: str, split: str, submission: str | P
     nusc = open_nuscenes(dataroot, version)
     scenes = load_scenes(nusc, split, with_gt=True)
     doc = read_json(submission, "tracking submission")
-    results = doc.get("results") if isinstance(doc, dict) else None
-    if not isinstance(results, dict) or not isinstance(doc.get("meta"), dict):
-        raise InputFormatError(f"{submission}: expected a tracking submission with 'meta' and 'results' objects")
+    from grutrack.export.nuscenes_json import check_document
+
+    check_document(doc, str(submission))  # the format's description, box by box (one line naming the field)
+    results = doc["results"]
     tokens = {f.token for s in scenes for f in s.frames}
     missing, extra = tokens - set(results), set(results) - tokens
     if missing or extra:
