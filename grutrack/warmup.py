@@ -20,12 +20,13 @@ KERNEL_MODULES = ("motion/kalman.py", "motion/models.py", "tracking/association.
 
 
 def cache_is_warm() -> bool:
-    """Whether the compiled kernels of every :data:`KERNEL_MODULES` module are cached (numba ``*.nbi`` index
-    files beside them)."""
+    """Whether the compiled kernels of every :data:`KERNEL_MODULES` module are cached for this Python (numba
+    ``*.py311.nbi`` index files beside them, one set per Python version)."""
     root = Path(__file__).resolve().parent
+    tag = f"py{sys.version_info.major}{sys.version_info.minor}"
     for mod in KERNEL_MODULES:
         path = root / mod
-        if not any((path.parent / "__pycache__").glob(f"{path.stem}.*.nbi")):
+        if not any((path.parent / "__pycache__").glob(f"{path.stem}.*.{tag}.nbi")):
             return False
     return True
 
