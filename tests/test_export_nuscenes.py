@@ -48,11 +48,15 @@ def test_validation_errors(tmp_path):
         validate_submission(sub, ["s1", "s2"])
     bad = json.loads(json.dumps(sub))
     bad["results"]["s1"][0]["tracking_name"] = "van"
-    with pytest.raises(InputFormatError, match="tracking_name 'van'"):
+    with pytest.raises(
+        InputFormatError, match=r"field 'results\['s1'\]\[0\]\.tracking_name' must be one of .*, got 'van'"
+    ):
         validate_submission(bad, ["s1"])
     bad = json.loads(json.dumps(sub))
     bad["results"]["s1"][0]["velocity"] = [float("nan"), 0.0]
-    with pytest.raises(InputFormatError, match="'velocity' must be 2 finite numbers"):
+    with pytest.raises(
+        InputFormatError, match=r"field 'results\['s1'\]\[0\]\.velocity' must be a list of 2 finite numbers"
+    ):
         validate_submission(bad, ["s1"])
     # an invalid submission is never written, not even partly
     out = tmp_path / "sub.json"

@@ -104,9 +104,10 @@ def test_compare_tracks_cli(nusc_root, nusc_reference, tmp_path, capsys):
     assert main(base + ["--submission", str(nusc_reference / "fastpoly_pointpillars_mini_val.json")]) == 1
     assert capsys.readouterr().out.strip().endswith("different")
     bad = tmp_path / "bad.json"
-    bad.write_text('{"results": []}')
+    meta = {"use_camera": False, "use_lidar": True, "use_radar": False, "use_map": False, "use_external": False}
+    bad.write_text(json.dumps({"meta": meta, "results": []}))
     assert main(base + ["--submission", str(bad)]) == 2
-    assert f"{bad}: expected a JSON object with a 'results' object" in capsys.readouterr().err
+    assert f"{bad}: field 'results' must be an object {{sample_token: [box, ...]}}" in capsys.readouterr().err
 
 
 #: the default preset's AMOTA on the reference sets (docs/results/default_tracker.md gives the evidence for its

@@ -184,7 +184,17 @@ def test_mini_val_report_numbers_equal_the_cli_and_metrics(mini_run):
     cli = json.loads((mini_run / "cli/metrics.json").read_text())["overall"]
 
     every = _table(text, "## Every run", "")
-    assert set(every) == {"ekf", "polymot", "fastpoly", "grukf", "ekf_bicycle", "ekf_ctra", "kf_ca", "grukf_bicycle"}
+    assert set(every) == {
+        "ekf",
+        "polymot",
+        "fastpoly",
+        "mctrack",
+        "grukf",
+        "ekf_bicycle",
+        "ekf_ctra",
+        "kf_ca",
+        "grukf_bicycle",
+    }
     # columns: AMOTA AMOTP MOTA recall IDS FRAG TP FP FN
     ekf = every["ekf"]
     assert [ekf[0], ekf[1], ekf[4]] == [f"{100 * cli['amota']:.1f}", f"{100 * cli['amotp']:.1f}", f"{cli['ids']:.0f}"]
@@ -199,7 +209,9 @@ def test_mini_val_report_numbers_equal_the_cli_and_metrics(mini_run):
         ], run
 
     t3 = _table(text, "## Table III", "**Reproduced**")
-    for row, run in {"Ours": "grukf", "Poly-MOT": "polymot", "Fast-Poly (not in the paper)": "fastpoly"}.items():
+    rows3 = {"Ours": "grukf", "Poly-MOT": "polymot", "Fast-Poly (not in the paper)": "fastpoly"}
+    rows3["MCTrack (not in the paper)"] = "mctrack"
+    for row, run in rows3.items():
         o = _metrics(mini_run, run)["overall"]
         assert t3[row] == [f"{100 * o['amota']:.1f}", f"{100 * o['amotp']:.1f}", f"{o['ids']:.0f}"], row
     assert "Fast-Poly" not in _table(text, "## Table III", "**Difference**")  # no paper number to subtract
@@ -211,6 +223,7 @@ def test_mini_val_report_numbers_equal_the_cli_and_metrics(mini_run):
         "CA+KF": "kf_ca",
         "CTRA+Ours": "grukf",
         "Bicycle+Ours": "grukf_bicycle",
+        "MCTrack (not in the paper)": "mctrack",
     }
     assert set(t4) == set(rows)
     for row, run in rows.items():
