@@ -271,6 +271,14 @@ def _snakemake_cmd(*args: str) -> list[str]:
     ]
 
 
+def _stepped(train_log: Path) -> bool:
+    """Whether a train_log.csv being written holds a row of step 1 or later."""
+    if not train_log.exists():
+        return False
+    rows = list(csv.DictReader(train_log.open()))
+    return any(r.get("step", "").isdigit() and int(r["step"]) >= 1 for r in rows)
+
+
 @pytest.mark.slow
 def test_killed_rule_is_incomplete_and_a_rerun_finishes_it(tmp_path):
     (tmp_path / "kill.yaml").write_text(KILL_CFG)
@@ -283,7 +291,7 @@ def test_killed_rule_is_incomplete_and_a_rerun_finishes_it(tmp_path):
     train_log = tmp_path / TRAIN_OUTPUTS[1]
     try:
         deadline = time.monotonic() + 120
-        while not train_log.exists():  # the train rule has made >= 1 step
+        while not _stepped(train_log):  # the train rule has made >= 1 step (step 0: the start-up validation)
             assert proc.poll() is None, f"snakemake ended before the kill:\n{log.read_text()[-3000:]}"
             assert time.monotonic() < deadline, f"train rule not started within 120 s:\n{log.read_text()[-3000:]}"
             time.sleep(0.2)
