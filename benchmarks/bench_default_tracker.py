@@ -65,6 +65,11 @@ GROUPS = {
     "reference": None,
     "dev": ((100, 101), ("mini_val",)),
     "heldout": ((300, 301, 302), ("mini_val", "mini_train")),
+    "dev2": ((110, 111), ("mini_val", "mini_train")),
+    "heldout2": ((500, 501, 502), ("mini_val", "mini_train")),
+    "heldout3": ((700, 701, 702), ("mini_val", "mini_train")),
+    "trailer": ((110, 111, 300, 301, 302), ("mini_train",)),
+    "trailer_pp": ((110, 111, 300, 301, 302, 500, 501, 502, 700, 701, 702), ("mini_train",)),
 }
 
 
@@ -183,6 +188,81 @@ def _punish(values: dict):
     return change
 
 
+def _model(values: dict):
+    """Per-class motion model override (a class switched takes that model's defaults of the motion config)."""
+
+    def change(raw):
+        raw["motion"]["model_override"] = {**raw["motion"].get("model_override", {}), **values}
+
+    return change
+
+
+def _first_stage(cls: str, metric: str, threshold: float):
+    """One class's stage-1 metric and threshold (e.g. MCTrack's Ro_GDIoU for pedestrians), the rest unchanged."""
+
+    def change(raw):
+        raw["association"]["first_metric"][cls] = metric
+        raw["association"]["first_threshold"][cls] = threshold
+
+    return change
+
+
+def _track_pose(values: dict):
+    """Per-class pose a track is compared at (MCTrack: last_update for car, pedestrian, trailer, truck)."""
+
+    def change(raw):
+        pose = {c: "predicted" for c in CLASSES}
+        pose.update(raw["association"].get("track_pose", {}))
+        raw["association"]["track_pose"] = {**pose, **values}
+
+    return change
+
+
+def _class_motion(cls: str, name: str, model: str | None = None, scale: dict | None = None, **noise):
+    """One class's motion model and noise in the motion config: ``model`` (None keeps it), ``noise`` P0 / Q / R
+    (number or diagonal list) replacing the entry, ``scale``: {key: factor} applied after."""
+
+    def change(raw):
+        base = yaml.safe_load(Path(_motion_file(raw["motion"]["config"])).read_text())
+        entry = base["classes"][cls]
+        if model is not None and model != entry["model"]:
+            entry.update(copy.deepcopy(base["models"][model]), model=model)
+            entry.pop("params", None)
+        entry.update(noise)
+        for key, f in (scale or {}).items():
+            v = entry[key]
+            entry[key] = [x * f for x in v] if isinstance(v, list) else v * f
+        raw["motion"]["config"] = _write_motion(base, name)
+
+    return change
+
+
+#: MCTrack-like CV noise for one class (its position / velocity R, Q of the decoupled filter) on the CV state
+#: (x, y, z, w, l, h, vx, vy, yaw); measurement order (x, y, z, w, l, h, yaw, vx, vy)
+def _cv_mct(q_xy, q_v, r_xy, r_v):
+    return dict(
+        P0=[1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 10.0, 10.0, 1.0],
+        Q=[q_xy, q_xy, q_xy, 0.5, 0.5, 0.5, q_v, q_v, 1.0],
+        R=[r_xy, r_xy, r_xy, 2.0, 2.0, 2.0, 1.0, r_v, r_v],
+    )
+
+
+def _nms_class(raw, cls: str, threshold: float):
+    """One class's NMS threshold (the others keep the preset's)."""
+    t = raw["preprocessing"]["nms_threshold"]
+    raw["preprocessing"]["nms_threshold"] = {
+        **({c: t for c in CLASSES} if not isinstance(t, dict) else t),
+        cls: threshold,
+    }
+
+
+def _age(values: dict):
+    def change(raw):
+        raw["lifecycle"]["max_age"].update(values)
+
+    return change
+
+
 def _combine(*changes):
     def change(raw):
         for c in changes:
@@ -221,6 +301,63 @@ CANDIDATES = {
     "+R_vel_bic10+punish_large2": _combine(
         _velocity_r({"bicycle": 10.0}, "rbic10"), _punish({"bus": 2, "trailer": 2, "truck": 2})
     ),
+    "+trailer_ctra": _model({"trailer": "CTRA"}),
+    "+ped_rogdiou": _first_stage("pedestrian", "ro_gdiou_bev", 2.06),
+    "+ped_last_update": _track_pose({"pedestrian": "last_update"}),
+    "+trailer_last_update": _track_pose({"trailer": "last_update"}),
+    "+ped_age8": _age({"pedestrian": 8}),
+    "+ped_cv_mct": _class_motion("pedestrian", "pedcv", "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
+    "+ped_cv_q3": _class_motion("pedestrian", "pedcvq3", "CV", **_cv_mct(3.0, 3.0, 2.0, 3.5)),
+    "+ped_cv_q07": _class_motion("pedestrian", "pedcvq07", "CV", **_cv_mct(0.75, 0.75, 2.0, 3.5)),
+    "+ped_cv_r1": _class_motion("pedestrian", "pedcvr1", "CV", **_cv_mct(1.5, 1.5, 1.0, 3.5)),
+    "+ped_cv_r4": _class_motion("pedestrian", "pedcvr4", "CV", **_cv_mct(1.5, 1.5, 4.0, 3.5)),
+    "+ped_cv_rv2": _class_motion("pedestrian", "pedcvrv2", "CV", **_cv_mct(1.5, 1.5, 2.0, 2.0)),
+    "+ped_cv_rv7": _class_motion("pedestrian", "pedcvrv7", "CV", **_cv_mct(1.5, 1.5, 2.0, 7.0)),
+    "+ped_ctra_mct": _class_motion("pedestrian", "pedctramct", scale={"R": 2.0, "Q": 1.5}),
+    "+trailer_ca_R3": _class_motion("trailer", "trlcar3", R=3.0, Q=1.0, P0=1.0),
+    "+trailer_ca_R1Q03": _class_motion("trailer", "trlcar1q03", R=1.0, Q=0.3, P0=1.0),
+    "+trailer_ca_R01": _class_motion("trailer", "trlcar01", R=0.1, Q=1.0, P0=1.0),
+    "+trailer_cv_R1": _class_motion("trailer", "trlcvr1", "CV", R=1.0, Q=1.0, P0=1.0),
+    "+trailer_cv_fp": _class_motion("trailer", "trlcvfp", "CV", P0=0.01, Q=0.04, R=0.001),
+    "+trailer_ca_q004": _class_motion("trailer", "trlcaq004", P0=0.01, Q=0.04, R=0.001),
+    "+trailer_ca_q1": _class_motion("trailer", "trlcaq1", P0=0.01, Q=1.0, R=0.001),
+    "+trailer_cv_q1": _class_motion("trailer", "trlcvq1", "CV", P0=0.01, Q=1.0, R=0.001),
+    "+trailer_score017": lambda raw: raw["preprocessing"]["score_threshold"].update(trailer=0.17),
+    "+trailer_punish1": _punish({"trailer": 1}),
+    "+trailer_age8": _age({"trailer": 8}),
+    "+trailer_median": lambda raw: raw["motion"]["geometry_filter"].update(trailer="median"),
+    "+trailer_thr116": lambda raw: raw["association"]["first_threshold"].update(trailer=1.16),
+    "+trailer_thr14": lambda raw: raw["association"]["first_threshold"].update(trailer=1.4),
+    "+trailer_giou_bev": _first_stage("trailer", "giou_bev", 1.25),
+    "+trailer_cv_mct_all": _combine(
+        _class_motion("trailer", "trlcvmct", "CV", **_cv_mct(0.3, 0.1, 2.0, 2.5)),
+        _track_pose({"trailer": "last_update"}),
+    ),
+    "+trailer_nms012": lambda raw: _nms_class(raw, "trailer", 0.12),
+    "+trailer_nms02": lambda raw: _nms_class(raw, "trailer", 0.2),
+    "+trailer_nms05": lambda raw: _nms_class(raw, "trailer", 0.5),
+    "+trailer_gate3": lambda raw: raw["association"]["distance_gate"].update(trailer=3.0),
+    "+trailer_gate5": lambda raw: raw["association"]["distance_gate"].update(trailer=5.0),
+    "+trailer_thr1": lambda raw: raw["association"]["first_threshold"].update(trailer=1.0),
+    "+trailer_gate5+cv_fp": lambda raw: (
+        raw["association"]["distance_gate"].update(trailer=5.0),
+        _class_motion("trailer", "trlcvfp", "CV", P0=0.01, Q=0.04, R=0.001)(raw),
+    ),
+    "+trailer_gate5+thr116": lambda raw: (
+        raw["association"]["distance_gate"].update(trailer=5.0),
+        raw["association"]["first_threshold"].update(trailer=1.16),
+    ),
+    "-ped_cv": _class_motion("pedestrian", "pedctra", "CTRA"),  # the preset before the pedestrian decision
+    "+ped_cv_mct+trailer_ca_R01": _combine(
+        _class_motion("pedestrian", "pedcv", "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
+        _class_motion("trailer", "pedcv_trlcar01", R=0.1, Q=1.0, P0=1.0),
+    ),
+    "+ped_R2": _class_motion("pedestrian", "pedr2", scale={"R": 2.0}),
+    "+ped_Q05": _class_motion("pedestrian", "pedq05", scale={"Q": 0.5}),
+    "+ped_Q2": _class_motion("pedestrian", "pedq2", scale={"Q": 2.0}),
+    "+trailer_cv_mct": _class_motion("trailer", "trlcv", "CV", **_cv_mct(0.3, 0.1, 2.0, 2.5)),
+    "+trailer_ctra_R2": _class_motion("trailer", "trlctrar2", "CTRA", scale={"R": 2.0}),
+    "+trailer_ca_R1": _class_motion("trailer", "trlcar1", R=1.0, Q=1.0, P0=1.0),
     "+punish_bus2": _punish({"bus": 2}),
     "+punish_large2": _punish({"bus": 2, "trailer": 2, "truck": 2}),
     "+nms+first_frames": _combine(_nms, _first_frames),
@@ -228,10 +365,11 @@ CANDIDATES = {
 }
 
 
-def candidate_path(name: str) -> Path:
+def candidate_path(name: str, base: str = "before") -> Path:
+    """The candidate's preset file; ``base``: ``before`` (the preset before the punish_num decision) or ``now``."""
     raw = yaml.safe_load(preset_path("ekf").read_text())
     raw = copy.deepcopy(raw)
-    if name != "ekf":
+    if name == "ekf_before" or (name != "ekf" and base == "before"):
         _punish(BEFORE)(raw)
     CANDIDATES[name](raw)
     path = _TMP / f"{name.replace('+', 'plus_')}.yaml"
@@ -253,6 +391,12 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="nuScenes data root (holds v1.0-mini)")
     ap.add_argument("--groups", default="reference,heldout", help="comma list of: " + ", ".join(GROUPS))
     ap.add_argument("--candidates", default=",".join(CANDIDATES), help="comma list of: " + ", ".join(CANDIDATES))
+    ap.add_argument(
+        "--base",
+        choices=("before", "now"),
+        default="before",
+        help="what a +candidate changes: the preset before the punish_num decision (before) or the preset now (now)",
+    )
     ap.add_argument("--cache", type=Path, default=None, help="folder for the simulated detection files (reused)")
     ap.add_argument("--json", type=Path, default=None, help="also write the table as JSON here")
     args = ap.parse_args(argv)
@@ -277,7 +421,7 @@ def main(argv=None) -> int:
                 simulate_nuscenes(None, "v1.0-mini", split, profile, seed, out=path, nusc=nusc)
             sets[key] = (split, path)
 
-    presets = {t: t for t in THREE} | {c: candidate_path(c) for c in names}
+    presets = {t: t for t in THREE} | {c: candidate_path(c, args.base) for c in names}
     table: dict[str, dict[str, float]] = {}
     t0 = time.perf_counter()
     for key, (split, path) in sets.items():
