@@ -543,6 +543,7 @@ def test_composition_equals_the_unpatched_official_evaluate(av2_root, simulated_
     assert any(thresholds[c] > 0 for c in present)
 
 
+@pytest.mark.slow  # a whole official evaluation in a fresh interpreter
 def test_evaluation_patches_nothing(av2_root, tmp_path):
     import ast
     import inspect
@@ -587,6 +588,7 @@ def test_evaluation_patches_nothing(av2_root, tmp_path):
     assert list(tmp_path.iterdir()) == []  # nothing written to the working directory
 
 
+@pytest.mark.slow  # three trackers through track + evaluate; test_oracle_hota_pickle_feather_and_metrics is quick
 def test_simulated_detections_table(av2_root, scenes, tmp_path, capsys):
     vocab = av2.vocabulary()
     table = lt3d_table(scenes, simulated_boxsets(scenes, vocab, seed=0))

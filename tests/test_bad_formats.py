@@ -146,7 +146,26 @@ def _detection_file(tmp_path: Path, pp: dict, source: Path, make) -> tuple[Path,
     return path, _first(pp)
 
 
-@pytest.mark.parametrize("case", sorted(DETECTION_CASES))
+#: detection cases in the slow tier only: each is a second case of a kind a quick one has (top_level_list,
+#: size_negative, translation_nan, rotation_not_unit, velocity_null, score_a_string, name_not_a_class); every
+#: layout stays checked against the schema in the quick tier (test_the_schema_alone_rejects_...)
+SLOW_DETECTION_CASES = {
+    "top_level_null",
+    "size_two_numbers",
+    "size_nested",
+    "translation_infinity",
+    "rotation_three_numbers",
+    "velocity_one_number",
+    "score_out_of_range",
+    "name_a_list",
+}
+
+
+def _tiered(cases, slow) -> list:
+    return [pytest.param(c, marks=pytest.mark.slow) if c in slow else c for c in sorted(cases)]
+
+
+@pytest.mark.parametrize("case", _tiered(DETECTION_CASES, SLOW_DETECTION_CASES))
 def test_malformed_detection_json(nusc_root, pointpillars_mini_val, pp, tmp_path, capsys, case):
     make, field, expect = DETECTION_CASES[case]
     path, token = _detection_file(tmp_path, pp, pointpillars_mini_val, make)
@@ -287,7 +306,12 @@ def _tracking_argv(command: str, path: Path, nusc_root: Path, tmp_path: Path) ->
     }[command]
 
 
-@pytest.mark.parametrize("case", sorted(TRACKING_CASES))
+#: tracking cases in the slow tier only: box fields of a kind the quick detection cases have, read by commands the
+#: quick tracking cases run (box_a_number runs all five of tracking_name_a_list's and more)
+SLOW_TRACKING_CASES = {"size_two_numbers", "score_nan", "rotation_not_unit", "tracking_name_a_list"}
+
+
+@pytest.mark.parametrize("case", _tiered(TRACKING_CASES, SLOW_TRACKING_CASES))
 def test_malformed_tracking_json(nusc_root, submission, tmp_path, capsys, case):
     make, commands, field, expect = TRACKING_CASES[case]
     doc = copy.deepcopy(submission)

@@ -111,6 +111,7 @@ def test_custom_splits(small_demo, small_nusc):
     assert sorted(splits["demo_train"] + splits["demo_val"]) == sorted(splits["demo_all"])
 
 
+@pytest.mark.slow  # the devkit's TrackingEval on the demo is quick in test_demo_tracking
 def test_tracking_eval_oracle_amota_is_one(small_demo, small_nusc, tmp_path):
     """Official TrackingEval with the demo_val ground truth fed back as tracks: AMOTA 1.0."""
     from nuscenes.eval.common.config import config_factory

@@ -39,6 +39,7 @@ def demo(tmp_path_factory):
     return root, data, dets
 
 
+@pytest.mark.slow  # the ekf on simulated demo detections is quick in test_fast_eval::test_ekf_on_simulated_demo_val
 def test_ekf_on_demo_val_realistic_metrics(demo):
     root, data, dets = demo
     common = ["--dataroot", str(data), "--version", "v1.0-demo", "--split", "demo_val"]

@@ -325,6 +325,7 @@ def test_a_new_report_is_its_module_and_one_kinds_line(monkeypatch, tmp_path, ca
     assert "--render: a amota_list report shows no key frames (it has no tracking run)" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # two whole AV2 evaluations; AV2 track + evaluate are quick in test_av2
 def test_a_new_av2_metric_is_one_line(monkeypatch, av2_root, tmp_path):
     """A column from a TrackEval metric class is one TRACKEVAL_COLUMNS line (a class the official run lacks, as
     Identity for idf1, runs in the same final evaluation; a field of one it has is read from its tree): here

@@ -39,6 +39,19 @@ def devkit_evaluate(nusc, submission, split: str, config=None, workdir: str | No
     :return: ``(metrics_summary dict as TrackingEval.main writes it, TrackingMetricDataList, tracks_gt,
         tracks_pred)``.
     """
+    return _devkit_run(nusc, submission, split, config, workdir, evaluate=True)
+
+
+def devkit_load_tracks(nusc, submission, split: str, config=None, workdir: str | None = None):
+    """``TrackingEval.__init__``'s loading steps alone (those of :func:`devkit_evaluate`, without its
+    ``evaluate``).
+
+    :return: ``(tracks_gt, tracks_pred, meta)``: the devkit's tracks and the submission's meta as it read them.
+    """
+    return _devkit_run(nusc, submission, split, config, workdir, evaluate=False)
+
+
+def _devkit_run(nusc, submission, split: str, config, workdir: str | None, evaluate: bool):
     import contextlib
     import io
     import tempfile
@@ -86,6 +99,8 @@ def devkit_evaluate(nusc, submission, split: str, config=None, workdir: str | No
         ev.sample_tokens = gt_boxes.sample_tokens
         ev.tracks_gt = create_tracks(gt_boxes, nusc, split, gt=True)
         ev.tracks_pred = create_tracks(pred_boxes, nusc, split, gt=False)
+        if not evaluate:
+            return ev.tracks_gt, ev.tracks_pred, ev.meta.copy()
         metrics, md_list = ev.evaluate()
     summary = metrics.serialize()
     summary["meta"] = ev.meta.copy()
@@ -212,6 +227,7 @@ def test_oracle_with_empty_boxes_mini_val(nusc_mini, mini_val_gt, devkit_referen
     _case(nusc_mini, "oracle_all_mini_val", "mini_val", mini_val_gt, devkit_reference)
 
 
+@pytest.mark.slow  # the oracle of test_oracle_mini_val on the larger split (the devkit's run: seconds)
 def test_oracle_mini_train(nusc_mini, devkit_reference):
     sub = gt_submission(nusc_mini, "mini_train", skip_empty=True)
     _case(nusc_mini, "oracle_mini_train", "mini_train", sub, devkit_reference)
@@ -443,26 +459,24 @@ def _same_tracks(ref, ours) -> int:
 
 
 @pytest.mark.parametrize("loader", ["fast", "devkit"])
-def test_load_tracks_matches_devkit(nusc_mini, mini_val_gt, devkit_reference, loader):
+def test_load_tracks_matches_devkit(nusc_mini, mini_val_gt, loader):
     """Both loaders give the devkit's tracks: same frames, same boxes in the same order (interpolated boxes
-    included), same track-averaged scores."""
-    for name, sub in (
-        ("corrupted_mini_val", corrupt_submission(nusc_mini, "mini_val", seed=0, base=mini_val_gt)),
-        (
-            "contested_mini_val",
-            corrupt_submission(
-                nusc_mini,
-                "mini_val",
-                seed=2,
-                base=mini_val_gt,
-                duplicate=0.3,
-                exact_duplicate=0.15,
-                repeated_id=0.01,
-                noise=0.4,
-            ),
+    included), same track-averaged scores. The reference is the devkit's loading alone (``TrackingEval.__init__``'s
+    steps, as in :func:`devkit_evaluate`): its whole evaluation of these two cases takes half a minute."""
+    for sub in (
+        corrupt_submission(nusc_mini, "mini_val", seed=0, base=mini_val_gt),
+        corrupt_submission(
+            nusc_mini,
+            "mini_val",
+            seed=2,
+            base=mini_val_gt,
+            duplicate=0.3,
+            exact_duplicate=0.15,
+            repeated_id=0.01,
+            noise=0.4,
         ),
     ):
-        _, _, ref_gt, ref_pred = devkit_reference(name, nusc_mini, sub, "mini_val")
+        ref_gt, ref_pred, _ = devkit_load_tracks(nusc_mini, sub, "mini_val")
         tracks_gt, tracks_pred, meta = load_tracks(nusc_mini, sub, "mini_val", loader=loader)
         assert meta == sub["meta"]
         assert _same_tracks(ref_gt, tracks_gt) == 3669
@@ -529,6 +543,7 @@ def _tracked_submission(nusc, split: str, detections) -> dict[str, Any]:
     return build_submission(run.results, tokens)
 
 
+@pytest.mark.slow  # the ekf on the real file end to end is quick in test_track_nuscenes, the parity in the cases above
 def test_ekf_on_pointpillars_mini_val(nusc_mini, pointpillars_mini_val):
     sub = _tracked_submission(nusc_mini, "mini_val", pointpillars_mini_val)
     assert_parity(nusc_mini, sub, "mini_val")
@@ -595,6 +610,7 @@ def _assert_decisions_match(decisions, label_metrics: dict[str, dict[str, float]
                 assert sums[key] == ref, (name, key, sums[key], ref)
 
 
+@pytest.mark.slow  # the devkit's whole evaluation of corrupted_mini_val (shared with the slow cases above)
 def test_match_decisions_sum_to_the_devkit_counts(nusc_mini, mini_val_gt, devkit_reference):
     """Per-box decisions at each class's best-MOTA threshold add up to the devkit's TP / FP / FN / IDS."""
     from grutrack.evaluation.nuscenes_fast import match_decisions
@@ -659,6 +675,7 @@ def _plugin_evaluate(reference, tmp_path):
     return ev.evaluate()
 
 
+@pytest.mark.slow  # the devkit's whole evaluation of both cases (shared with the slow cases above)
 @pytest.mark.parametrize("case", ["corrupted_mini_val", "contested_mini_val"])
 def test_devkit_tracking_eval_with_the_fast_accumulation(nusc_mini, mini_val_gt, devkit_reference, case, tmp_path):
     """The devkit's own TrackingEval (its aggregation code) driving FastTrackingEvaluation gives the devkit's

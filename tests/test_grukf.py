@@ -625,6 +625,7 @@ def test_progress_is_written_from_the_first_step_and_training_yaml_beside_the_ch
     )
 
 
+@pytest.mark.slow  # a training on mini_train; Ctrl-C through the CLI is quick in test_resume_cli
 def test_cli_ctrl_c_saves_and_exits_130_and_resume_elsewhere_is_refused(
     nusc_mini, nusc_root, tmp_path, capsys, monkeypatch
 ):

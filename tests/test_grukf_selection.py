@@ -349,6 +349,7 @@ def test_bad_selection_settings_are_refused_naming_the_key(key, value, message):
     assert (load_train_config("paper").validation_scenes, load_train_config("paper").select_checkpoint) == (0, "last")
 
 
+@pytest.mark.slow  # an AV2 training; test_datasets::test_train_on_av2_then_track_av2_with_the_model is quick
 def test_av2_training_validates_on_a_held_out_log_with_the_datasets_hota(av2_root, tmp_path, capsys):
     """Training on AV2 validates as on nuScenes, through the dataset: a log held out of the split, scored with
     AV2's metric (HOTA, the official evaluation, :meth:`AV2Dataset.score_tracks`), the preset's EKF as reference."""

@@ -231,6 +231,7 @@ def test_id_switch_marked_on_its_ground_truth(rendered, av2_root):
     assert _near(view, IDS_RGB, 60).sum() == 0
 
 
+@pytest.mark.slow  # a second AV2 render; --worst is quick in test_render::test_worst_scenes_rank_by_errors
 def test_worst_log_ranks_by_errors(rendered, av2_root, tmp_path):
     """--worst 1 renders the log with the most IDS + FP + FN, and its counts are that log's."""
     out, _, sub, _ = rendered

@@ -155,7 +155,20 @@ PHASES = {
 }
 
 
-@pytest.mark.parametrize("phase", PHASES.values(), ids=PHASES.keys())
+#: phases in the slow tier only: the quick tier keeps one of each kind (Ctrl-C in the data, during a validation
+#: (start-up, last step's), in a step, twice (abort at once), while the final outputs are written)
+SLOW_PHASES = {
+    "start_up_validation_twice",
+    "a_validation",
+    "a_validation_twice",
+    "the_last_step",
+    "the_final_outputs_twice",
+}
+
+
+@pytest.mark.parametrize(
+    "phase", [pytest.param(p, id=k, marks=[pytest.mark.slow] if k in SLOW_PHASES else []) for k, p in PHASES.items()]
+)
 def test_ctrl_c_at_any_phase_then_resume_ends_as_the_uninterrupted_run(
     small, whole, phase, tmp_path, monkeypatch, capsys, python_sigint
 ):

@@ -76,7 +76,13 @@ BAD_META = {
 }
 
 
-@pytest.mark.parametrize("case", sorted(BAD_META))
+#: cases of a kind another quick case has (a non-boolean flag: string; no meta: test_bad_formats' meta_missing)
+SLOW_META = {"number", "null", "no_meta"}
+
+
+@pytest.mark.parametrize(
+    "case", [pytest.param(c, marks=pytest.mark.slow) if c in SLOW_META else c for c in sorted(BAD_META)]
+)
 def test_bad_meta_is_one_line_naming_the_field(mini_val, pointpillars_mini_val, tmp_path, capsys, case):
     meta, message = BAD_META[case]
     dets = _with_meta(pointpillars_mini_val, tmp_path / "d.json", meta)
