@@ -347,6 +347,12 @@ CANDIDATES = {
         raw["association"]["distance_gate"].update(trailer=5.0),
         raw["association"]["first_threshold"].update(trailer=1.16),
     ),
+    # the preset before the pedestrian / trailer decision (pedestrian CTRA, no trailer gate)
+    "ekf_prev": lambda raw: (
+        raw["association"]["distance_gate"].update(trailer=0.0),
+        _class_motion("pedestrian", "pedctra", "CTRA")(raw),
+    ),
+    "-trailer_gate": lambda raw: raw["association"]["distance_gate"].update(trailer=0.0),
     "-ped_cv": _class_motion("pedestrian", "pedctra", "CTRA"),  # the preset before the pedestrian decision
     "+ped_cv_mct+trailer_ca_R01": _combine(
         _class_motion("pedestrian", "pedcv", "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),

@@ -1,8 +1,8 @@
 """Batched extended / linear Kalman filter over N tracks that share one motion model.
 
 Every track carries its own state ``x (N, dim_x)``, covariance ``P (N, dim_x, dim_x)`` and noise
-``Q (N, dim_x, dim_x)``, ``R (N, 9, 9)``, so tracks of different classes that use the same model (car, bus, truck
-and pedestrian all use CTRA) are filtered in one array operation with their own class noise. ``Q``, ``R`` and
+``Q (N, dim_x, dim_x)``, ``R (N, 9, 9)``, so tracks of different classes that use the same model (car, bus and
+truck all use CTRA) are filtered in one array operation with their own class noise. ``Q``, ``R`` and
 ``P0`` may also be given as one ``(d, d)`` matrix for all tracks. With a linear model the same code is the
 ordinary Kalman filter (its F and H are exact).
 
