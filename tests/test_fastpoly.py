@@ -331,3 +331,22 @@ def test_score_filter_above_drops_scores_equal_to_the_threshold():
     assert score_filter(dets, thr).scores.tolist() == [0.0, 0.16, 0.17]
     assert score_filter(dets, thr, strict=True).scores.tolist() == [0.17]
     assert preprocess_frame(dets, load_tracker_config("fastpoly")).scores.tolist() == [0.17]
+
+
+def test_gated_costs_never_pass_a_track_kilometres_away():
+    """A diverged track far away (1e12 m) costs at least 2 in both stages: the dense GIoU loses its digits there
+    (it returns 0), and the similarity bound keeps the pair from passing any threshold below 2; near pairs keep
+    their exact dense cost."""
+    from grutrack.tracking.association import _dense_similarity, gated_costs
+
+    det = np.array([[1723.6, 858.5, 1.4, 0.9, 0.8, 1.8, -0.6, 0.0, 0.0]])
+    far = np.array([[-2.733e11, -1.929e12, 1.5, 1.06, 1.16, 2.1, -0.63, 0.0, 0.0]])
+    near = det + np.array([[0.3, -0.2, 0.0, 0.1, 0.0, 0.0, 0.05, 0.0, 0.0]])
+    trk = np.concatenate([far, near])
+    labels = np.array([4])
+    gate = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 5.0, 0.0])  # a gate on another class: the gated path for all
+    metrics = ("giou_3d",) * 7
+    c1, c2 = gated_costs(det, labels, trk, np.array([4, 4]), metrics, "giou_bev", gate)
+    assert c1[0, 0] >= 2.0 - 1e-9 and c2[0, 0] >= 2.0 - 1e-9
+    assert c1[0, 1] == 1.0 - _dense_similarity("giou_3d", det, near)[0, 0]
+    assert c2[0, 1] == 1.0 - _dense_similarity("giou_bev", det, near)[0, 0]

@@ -366,6 +366,32 @@ def _dense_similarity(name: str, a: np.ndarray, b: np.ndarray, qa: np.ndarray | 
     return fn(a, b)
 
 
+def _dense_bound(name: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(Na, Nb) upper bound of similarity ``name`` between boxes a (Na, 9) and b (Nb, 9): the bound of
+    :func:`_similarity_bound` (1 where the footprints may overlap) for every pair at once; for IoU and GIoU only
+    (Fast-Poly's A-GIoU can exceed it: trivial bound 1)."""
+    ta = geometry._box_terms(geometry._check_boxes(a, "detection boxes"))
+    tb = geometry._box_terms(geometry._check_boxes(b, "track boxes"))
+    col, row = (lambda k: ta[k][:, None]), (lambda k: tb[k][None, :])
+    d = np.hypot(col(geometry._X) - row(geometry._X), col(geometry._Y) - row(geometry._Y))
+    disjoint = d > col(geometry._RADIUS) + row(geometry._RADIUS)
+    if name.startswith("a_"):
+        return np.ones_like(d)
+    if name in ("iou_bev", "iou_3d"):
+        return np.where(disjoint, 0.0, 1.0)
+    area = col(geometry._AREA) + row(geometry._AREA)
+    rho = np.minimum(col(geometry._HL), col(geometry._HW)) + np.minimum(row(geometry._HL), row(geometry._HW))
+    hull = np.maximum(area, d * rho + 0.5 * area)  # C >= max(A_a + A_b, d (rho_a + rho_b) + (A_a + A_b) / 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if name == "giou_3d":
+            span = np.maximum(col(geometry._HI), row(geometry._HI)) - np.minimum(col(geometry._LO), row(geometry._LO))
+            volume = col(geometry._VOL) + row(geometry._VOL)
+            bound = np.where(volume > 0.0, np.minimum(volume / (hull * span) - 1.0, 1.0), 1.0)
+        else:
+            bound = np.where(area > 0.0, np.minimum(area / hull - 1.0, 1.0), 1.0)
+    return np.where(disjoint, bound, 1.0)
+
+
 def gated_costs(
     det_boxes: np.ndarray,
     det_labels: np.ndarray,
@@ -401,7 +427,9 @@ def gated_costs(
     sub = np.ix_(rows, cols)
     names = {first_metric[c] for c in np.unique(det_labels[rows])} | {second_metric}
     qa = None if det_quaternion is None else det_quaternion[rows]
-    sims = {n: _dense_similarity(n, a, b, qa) for n in sorted(names)}
+    # each similarity at most its bound: far apart (a diverged track kilometres away) the dense geometry loses
+    # its digits, and the bound, exact there, keeps such a pair from passing a threshold
+    sims = {n: np.minimum(_dense_similarity(n, a, b, qa), _dense_bound(n, a, b)) for n in sorted(names)}
     first = np.full((len(rows), len(cols)), -np.inf)
     for c in np.unique(det_labels[rows]):
         r = det_labels[rows] == c
