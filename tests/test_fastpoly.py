@@ -350,3 +350,35 @@ def test_gated_costs_never_pass_a_track_kilometres_away():
     assert c1[0, 0] >= 2.0 - 1e-9 and c2[0, 0] >= 2.0 - 1e-9
     assert c1[0, 1] == 1.0 - _dense_similarity("giou_3d", det, near)[0, 0]
     assert c2[0, 1] == 1.0 - _dense_similarity("giou_bev", det, near)[0, 0]
+
+
+def test_a_gate_on_some_classes_is_stage_one_of_the_compiled_path(nusc_mini, pointpillars_mini_val):
+    """The default's trailer gate runs in the compiled (sparse) association, not Fast-Poly's dense one; on the real
+    PointPillars file both give the same tracks, box for box, and so does a gate on every class but one."""
+    from dataclasses import replace
+
+    from grutrack.data.nusc_detections import load_detections
+    from grutrack.data.nuscenes import load_scenes
+    from grutrack.tracking.association import gated_association, gated_association_needed
+    from grutrack.tracking.factory import build_tracker
+    from grutrack.tracking.tracker import track_scenes, two_stage_association
+
+    scenes = load_scenes(nusc_mini, "mini_val")
+    dets = load_detections(pointpillars_mini_val, [f.token for s in scenes for f in s.frames])
+
+    def boxes(tracker):
+        out = track_scenes(tracker, scenes, dets).results
+        return {t: (b.ids.tolist(), b.boxes.round(9).tolist()) for t, b in out.items()}
+
+    ekf = build_tracker("ekf")
+    assert ekf.cfg.distance_gate.max() > 0 and not gated_association_needed(ekf.cfg)
+    gates = [ekf.cfg.distance_gate, np.where(np.arange(7) == 2, 0.0, 2.0)]  # the preset's; all but car at 2 m
+    for gate in gates:
+        sparse = build_tracker("ekf")
+        sparse.cfg = replace(sparse.cfg, distance_gate=gate)
+        sparse.associate = two_stage_association(sparse.cfg)
+        dense = build_tracker("ekf")
+        dense.cfg = replace(dense.cfg, distance_gate=gate)
+        dense.associate = gated_association(dense.cfg)
+        assert boxes(sparse) == boxes(dense)
+    assert gated_association_needed(replace(ekf.cfg, distance_gate=np.full(7, 3.0)))  # Fast-Poly's stage 2 rows

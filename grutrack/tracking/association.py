@@ -212,18 +212,24 @@ def associate(
     second_metric: str,
     second_threshold: np.ndarray,
     assignment: str = "most_pairs",
+    distance_gate: np.ndarray | None = None,
 ) -> Matches:
     """Two-stage association of D detections with T (predicted) tracks.
 
     det_boxes (D, 9), trk_boxes (T, 9): canonical boxes; labels (D,), (T,) class indices;
     first_metric: similarity name per class; thresholds: cost thresholds per class;
-    assignment: the rule of both stages, a key of :data:`ASSIGNMENT`.
+    assignment: the rule of both stages, a key of :data:`ASSIGNMENT`; distance_gate (C,) metres, 0 = none: stage 1
+    scores a pair only when its 3D centre distance is below its class's gate (stage 2 is not gated).
     """
     solve = ASSIGNMENT[assignment]
     stages = [(tuple(first_metric), first_threshold)]
     if two_stage:
         stages.append(((second_metric,) * len(first_metric), second_threshold))
     costs = _candidate_costs(det_boxes, det_labels, trk_boxes, trk_labels, stages)
+    if distance_gate is not None and np.any(distance_gate > 0) and costs[0].size:
+        radii = np.where(distance_gate > 0, distance_gate, np.inf)[det_labels]
+        dist = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2)
+        costs[0] = np.where(dist < radii[:, None], costs[0], _INVALID)
     return _solve_stages(solve, costs, det_labels, first_threshold, second_threshold)
 
 
@@ -440,9 +446,11 @@ def gated_costs(
 
 
 def gated_association_needed(cfg) -> bool:
-    """Whether a preset needs :func:`gated_association` (alignment-GIoU metrics or a distance gate)."""
+    """Whether a preset needs :func:`gated_association`: alignment-GIoU metrics, or a distance gate on every class
+    (then Fast-Poly's stage 2 takes only the rows and columns within the largest gate). A gate on some classes
+    only is stage 1's alone, which :func:`associate` applies."""
     metrics = set(cfg.first_metric) | {cfg.second_metric}
-    return bool(np.any(cfg.distance_gate > 0)) or any(m.startswith("a_") for m in metrics)
+    return bool(np.all(cfg.distance_gate > 0)) or any(m.startswith("a_") for m in metrics)
 
 
 def gated_association(cfg):

@@ -139,6 +139,7 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
             cfg.second_metric,
             cfg.second_threshold,
             cfg.assignment,
+            cfg.distance_gate,
         )
 
     return run
