@@ -246,20 +246,15 @@ def test_corrupted_tracks_mini_val(nusc_mini, mini_val_gt, devkit_reference):
     assert math.isnan(summary["label_metrics"]["amota"]["trailer"])  # predictions but no GT
 
 
+#: the contested case: shadow tracks, exact duplicates (distance ties broken by the solver), an id used twice
+CONTESTED = dict(seed=2, duplicate=0.3, exact_duplicate=0.15, repeated_id=0.01, noise=0.4)
+
+
 @pytest.mark.slow
 def test_contested_tracks_mini_val(nusc_mini, mini_val_gt, devkit_reference):
     """Many competing candidates: shadow tracks, exact duplicates (distance ties broken by the solver), an id
     used twice in a frame."""
-    sub = corrupt_submission(
-        nusc_mini,
-        "mini_val",
-        seed=2,
-        base=mini_val_gt,
-        duplicate=0.3,
-        exact_duplicate=0.15,
-        repeated_id=0.01,
-        noise=0.4,
-    )
+    sub = corrupt_submission(nusc_mini, "mini_val", base=mini_val_gt, **CONTESTED)
     _case(nusc_mini, "contested_mini_val", "mini_val", sub, devkit_reference)
 
 
@@ -465,16 +460,7 @@ def test_load_tracks_matches_devkit(nusc_mini, mini_val_gt, loader):
     steps, as in :func:`devkit_evaluate`): its whole evaluation of these two cases takes half a minute."""
     for sub in (
         corrupt_submission(nusc_mini, "mini_val", seed=0, base=mini_val_gt),
-        corrupt_submission(
-            nusc_mini,
-            "mini_val",
-            seed=2,
-            base=mini_val_gt,
-            duplicate=0.3,
-            exact_duplicate=0.15,
-            repeated_id=0.01,
-            noise=0.4,
-        ),
+        corrupt_submission(nusc_mini, "mini_val", base=mini_val_gt, **CONTESTED),
     ):
         ref_gt, ref_pred, _ = devkit_load_tracks(nusc_mini, sub, "mini_val")
         tracks_gt, tracks_pred, meta = load_tracks(nusc_mini, sub, "mini_val", loader=loader)

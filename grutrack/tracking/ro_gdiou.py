@@ -231,6 +231,15 @@ def _f32_intersection_area(cx2, cy2, l1, w1, yaw1, l2, w2, yaw2, work) -> float:
     return 0.5 * abs(area2)
 
 
+@njit(cache=True, inline="always")
+def _turn(hull, m, srt, k) -> float:
+    """Cross product (hull[m-1] - hull[m-2]) x (srt[k] - hull[m-2]): > 0 when srt[k] turns left of the hull's last
+    edge (m^2)."""
+    return (hull[m - 1, 0] - hull[m - 2, 0]) * (srt[k, 1] - hull[m - 2, 1]) - (hull[m - 1, 1] - hull[m - 2, 1]) * (
+        srt[k, 0] - hull[m - 2, 0]
+    )
+
+
 @njit(cache=True)
 def _hull(pts, n, hull) -> int:
     """Convex hull (monotone chain, counter-clockwise, collinear points dropped) of ``pts[:n]`` -> its size."""
@@ -246,27 +255,13 @@ def _hull(pts, n, hull) -> int:
             j -= 1
     m = 0
     for k in range(n):
-        while (
-            m >= 2
-            and (
-                (hull[m - 1, 0] - hull[m - 2, 0]) * (srt[k, 1] - hull[m - 2, 1])
-                - (hull[m - 1, 1] - hull[m - 2, 1]) * (srt[k, 0] - hull[m - 2, 0])
-            )
-            <= 0.0
-        ):
+        while m >= 2 and _turn(hull, m, srt, k) <= 0.0:
             m -= 1
         hull[m] = srt[k]
         m += 1
     low = m + 1
     for k in range(n - 2, -1, -1):
-        while (
-            m >= low
-            and (
-                (hull[m - 1, 0] - hull[m - 2, 0]) * (srt[k, 1] - hull[m - 2, 1])
-                - (hull[m - 1, 1] - hull[m - 2, 1]) * (srt[k, 0] - hull[m - 2, 0])
-            )
-            <= 0.0
-        ):
+        while m >= low and _turn(hull, m, srt, k) <= 0.0:
             m -= 1
         hull[m] = srt[k]
         m += 1
