@@ -43,7 +43,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--device",
         default="auto",
-        help="torch device for grukf: auto (the CPU: one scene is a small batch; see resolve_device), cpu, cuda",
+        help="torch device for grukf: auto (the CPU; docs/results/lockstep.md#gpu), cpu, cuda",
     )
     p.add_argument(
         "--out",

@@ -25,27 +25,17 @@ import torch
 from grutrack.errors import ConfigError
 from grutrack.motion.grukf import GRUKalmanNet
 
-#: ``device: auto`` chooses CUDA only for a network run once per frame over at least this many scenes
-#: (training with ``scenes_per_step`` >= 8, :mod:`grutrack.training.lockstep`); see :func:`resolve_device`
-AUTO_CUDA_MIN_SCENES = 8
 
-
-def resolve_device(device: str = "auto", what: str = "--device", scenes: int = 1) -> torch.device:
+def resolve_device(device: str = "auto", what: str = "--device") -> torch.device:
     """The torch device for ``device``: a named one (cpu, cuda, cuda:N), which must exist here, or ``auto``.
     ``what`` names the flag or config field the value came from, for the error message.
 
-    ``auto`` chooses by the size of the network's per-frame batch: ``scenes`` is the number of scenes the network
-    runs over at once in a frame (1: tracking, which runs one scene at a time, and training one scene per step;
-    ``scenes_per_step`` when training in lockstep). CUDA when torch has CUDA, a GPU is visible and ``scenes`` >=
-    :data:`AUTO_CUDA_MIN_SCENES` (8); else the CPU. A frame of one scene is a few dozen tracks, too small a batch
-    for a GPU: each of the network's few hundred operators per frame costs a kernel launch and a host-device
-    round trip that take longer than the arithmetic (measured on an H100, docs/results/lockstep.md: GRU-KF
-    tracking ran at 157-216 frames/s on the GPU against 278-301 on its CPU), so small batches stay on the CPU,
-    while k >= 8 scenes per network call in lockstep training amortise the launches. Naming ``cuda`` uses the
-    GPU whatever the batch."""
+    ``auto`` is the CPU, with or without a GPU. A frame is a few dozen tracks through a small network, and the
+    tracker's association and bookkeeping between the network calls run on the CPU either way; on an H100 machine
+    every setting measured, tracking and training with 1, 8 and 32 scenes per step, ran slower on its GPU than on
+    its CPU (docs/results/lockstep.md#gpu). Naming ``cuda`` uses the GPU."""
     if device == "auto":
-        big = scenes >= AUTO_CUDA_MIN_SCENES
-        return torch.device("cuda" if big and torch.cuda.is_available() else "cpu")
+        return torch.device("cpu")
     try:
         dev = torch.device(device)
     except (RuntimeError, TypeError) as exc:

@@ -139,8 +139,7 @@ class Trainer:
         self._chosen: TrainingStep | None = None
         self._best_due = False  # the network just validated was chosen: best.pt is written after last.pt
         self.progress = progress
-        # auto: the GPU only for lockstep steps of many scenes (resolve_device's rule)
-        self.device = resolve_device(cfg.device, "training config 'device'", scenes=cfg.scenes_per_step)
+        self.device = resolve_device(cfg.device, "training config 'device'")
         vocab = scenes[0].vocabulary if scenes else NUSCENES_VOCABULARY
         self._preset = load_tracker_config(cfg.tracker_preset)
         self._setups: dict = {}  # vocabulary -> (label index, remapped preset)

@@ -88,9 +88,8 @@ class DatasetValidator:
 
     def scores(self, net) -> np.ndarray:
         """(n_sets,) float64: the score of the GRU-KF tracker with ``net`` on each detection set. Tracking runs on
-        the device ``device`` gives tracking (``auto``: the CPU, one scene at a time is a small batch,
-        :func:`~grutrack.tracking.grukf_backend.resolve_device`); when that is not the device ``net`` trains on
-        (``auto`` with many scenes per step on a GPU) a copy of ``net`` is tracked there and ``net`` stays put."""
+        the device ``device`` names (``auto``: the CPU, :func:`~grutrack.tracking.grukf_backend.resolve_device`);
+        when that is not the device ``net`` trains on, a copy of ``net`` is tracked there and ``net`` stays put."""
         from grutrack.tracking.grukf_backend import resolve_device
 
         device = resolve_device(self.device, "training config 'device'")
