@@ -3,7 +3,8 @@
 # `grukf_default` of workflow/config/mini.yaml (the default recipe, grutrack/configs/training/grukf.yaml, on
 # nuScenes mini_train with simulated CenterPoint-like detections, seed 1, plus the recipe's SYNTHETIC 700-scene
 # source), packaged by rule package_pretrained and copied into the package. Run it when the default recipe or the
-# default tracker changes: tests/test_grukf_real.py fails until the checkpoint matches the shipped recipe again.
+# default tracker (preset or motion config) changes: tests/test_grukf_real.py fails, naming what changed, until the
+# checkpoint matches the shipped recipe and tracker again (provenance.json's trained_with).
 # Its time: docs/results/pretrained.md. Data: ../shared/data/nuscenes (as workflow/config/mini.yaml says).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

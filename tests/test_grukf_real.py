@@ -69,11 +69,12 @@ def trained(tmp_path_factory):
 
 
 def test_the_pretrained_network_is_the_shipped_recipe():
-    """The shipped checkpoint was trained with the default recipe as it is now, and is the file its provenance
-    names; a change of grutrack/configs/training/grukf.yaml without re-training fails here."""
+    """The shipped checkpoint was trained with the default recipe, on the default tracker preset and motion config,
+    as they are now, and is the file its provenance names; a change of grutrack/configs/training/grukf.yaml, or of
+    the tracker preset or motion config it names, without re-training fails here."""
     from grutrack.documents import Checkpoint
     from grutrack.provenance import sha256_file
-    from grutrack.training.pretrained import PRETRAINED, pretrained_dir, recipe_differences
+    from grutrack.training.pretrained import PRETRAINED, pipeline_differences, pretrained_dir, recipe_differences
 
     folder = pretrained_dir("grukf_default")
     prov = json.loads((folder / "provenance.json").read_text())
@@ -84,7 +85,42 @@ def test_the_pretrained_network_is_the_shipped_recipe():
         f"the default recipe changed since the pretrained network was trained ({', '.join(diff)}): "
         f"re-train it with `bash scripts/pretrain_grukf.sh` and commit grutrack/pretrained/"
     )
+    stale = pipeline_differences(prov["trained_with"], ck.train_config)
+    assert not stale, (
+        f"the tracker the pretrained network was trained on changed ({', '.join(stale)}): "
+        f"re-train it with `bash scripts/pretrain_grukf.sh` and commit grutrack/pretrained/"
+    )
     assert ck.selected is not None and ck.selected.step == prov["selected_step"]
+
+
+def test_pipeline_differences_name_a_changed_preset_field_and_motion_class(monkeypatch):
+    """A changed tracker-preset field or motion-config class is named; the preset's file path is not part of it."""
+    import dataclasses
+
+    import grutrack.motion.config as motion_config
+    import grutrack.tracking.config as tracker_config
+    from grutrack.documents import Checkpoint
+    from grutrack.training.pretrained import pipeline_differences, pipeline_digest, pretrained_dir
+
+    train_config = Checkpoint.read(pretrained_dir("grukf_default") / "model.pt").train_config
+    recorded = pipeline_digest(train_config)
+    assert pipeline_differences(recorded, train_config) == []
+    load_preset, load_motion = tracker_config.load_tracker_config, motion_config.load_motion_config
+
+    def moved_preset(name):
+        cfg = load_preset(name)
+        return dataclasses.replace(cfg, source="/elsewhere/ekf.yaml", max_age=cfg.max_age + 1)
+
+    monkeypatch.setattr(tracker_config, "load_tracker_config", moved_preset)
+    assert pipeline_differences(recorded, train_config) == ["tracker_preset.max_age"]
+
+    def louder_pedestrians(name):
+        cfg = load_motion(name)
+        cfg["pedestrian"] = dict(cfg["pedestrian"], R=cfg["pedestrian"]["R"] * 2)
+        return cfg
+
+    monkeypatch.setattr(motion_config, "load_motion_config", louder_pedestrians)
+    assert pipeline_differences(recorded, train_config) == ["motion_config.pedestrian", "tracker_preset.max_age"]
 
 
 def test_recipe_differences_name_a_changed_key():
@@ -157,3 +193,18 @@ def test_grukf_at_least_the_ekf_on_real_pointpillars(nusc_mini, pointpillars_min
     gru = _score(nusc_mini, build_tracker("grukf", checkpoint=checkpoint, device="cpu"), scenes, dets)
     assert gru["amota"] >= polymot["amota"] + 0.005, (gru["amota"], polymot["amota"])
     assert gru["amota"] >= ekf["amota"] - 0.002, (gru["amota"], ekf["amota"])
+
+
+def test_package_records_the_tracker_the_network_was_trained_on(tmp_path):
+    """``package`` (rule package_pretrained) writes the digests that the staleness check above compares."""
+    from grutrack.documents import Checkpoint
+    from grutrack.training.pretrained import package, pipeline_differences, pipeline_digest, pretrained_dir
+
+    src = pretrained_dir("grukf_default")
+    dets = tmp_path / "dets.json"
+    dets.write_text("{}")
+    prov = package(src, dets, tmp_path / "out", "a test")
+    train_config = Checkpoint.read(tmp_path / "out" / "model.pt").train_config
+    assert prov["trained_with"] == pipeline_digest(train_config)
+    assert json.loads((tmp_path / "out" / "provenance.json").read_text())["trained_with"] == prov["trained_with"]
+    assert pipeline_differences(prov["trained_with"], train_config) == []

@@ -3,9 +3,11 @@ training recipe, trained by ``scripts/pretrain_grukf.sh``, with its training con
 ``provenance.json`` (the command, the package version and commit, the detections' and the model's SHA-256, the
 training data's fingerprint).
 
-The files are what ``grutrack train`` wrote; :func:`package` copies them in and writes the provenance, and
-:func:`recipe_differences` says whether the checkpoint still is the shipped recipe (tests/test_grukf_real.py
-fails, naming the keys, when the recipe changed and the checkpoint was not re-trained).
+The files are what ``grutrack train`` wrote; :func:`package` copies them in and writes the provenance, with a
+digest of each section of the tracker preset and motion config the recipe trained with (:func:`pipeline_digest`).
+:func:`recipe_differences` and :func:`pipeline_differences` say whether the checkpoint still is the shipped recipe
+on the shipped tracker (tests/test_grukf_real.py fails, naming the keys or sections, when the recipe, the default
+tracker preset or its motion config changed and the checkpoint was not re-trained).
 
     python -m grutrack.training.pretrained --from CK_DIR --detections DET.json --out grutrack/pretrained/grukf_default
 """
@@ -27,6 +29,8 @@ PRETRAINED = {"grukf_default": "grukf"}
 FILES = ("model.pt", "training.yaml", "train_log.csv", "validation.json")
 #: training-config keys that do not change what is learned
 IGNORED_KEYS = ("device", "checkpoint_every")
+#: tracker-config fields that say where the preset was read from, not how it tracks
+IGNORED_TRACKER_FIELDS = ("source",)
 
 
 def pretrained_dir(name: str) -> Path:
@@ -55,6 +59,57 @@ def recipe_differences(train_config: dict, recipe: str) -> list[str]:
             out += [f"{key}.{k}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
         elif a != b:
             out.append(key)
+    return out
+
+
+def _canonical(value: Any) -> Any:
+    """JSON-comparable form of a resolved config value: dataclasses as dicts, arrays and tuples as lists, numpy
+    scalars as Python numbers (nested)."""
+    import dataclasses
+
+    import numpy as np
+
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        value = {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
+    if isinstance(value, dict):
+        return {str(k): _canonical(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_canonical(v) for v in value]
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def pipeline_digest(train_config: dict) -> dict[str, dict[str, str]]:
+    """SHA-256 of each field of the tracker preset (but :data:`IGNORED_TRACKER_FIELDS`) and of each class of the
+    motion config that ``train_config`` (a checkpoint's training config, a dict) names, as they load today:
+    ``{"tracker_preset": {field: hex}, "motion_config": {class: hex}}``. The network learns on that tracker (its
+    association, lifecycle and the parallel EKF's noise), so a change there makes a shipped network stale."""
+    import hashlib
+
+    from grutrack.motion.config import load_motion_config
+    from grutrack.tracking.config import load_tracker_config
+
+    def digests(resolved: dict) -> dict[str, str]:
+        return {
+            key: hashlib.sha256(json.dumps(val, sort_keys=True).encode()).hexdigest()
+            for key, val in sorted(_canonical(resolved).items())
+            if key not in IGNORED_TRACKER_FIELDS
+        }
+
+    return {
+        "tracker_preset": digests(load_tracker_config(train_config["tracker_preset"])),
+        "motion_config": digests(load_motion_config(train_config["motion_config"])),
+    }
+
+
+def pipeline_differences(recorded: dict, train_config: dict) -> list[str]:
+    """Sections (``tracker_preset.<field>``, ``motion_config.<class>``) whose digest in ``recorded`` (a
+    provenance's ``trained_with``) differs from :func:`pipeline_digest` of ``train_config`` today; empty when the
+    network was trained on the tracker as it is."""
+    today = pipeline_digest(train_config)
+    out = []
+    for part in sorted(set(today) | set(recorded)):
+        a, b = today.get(part, {}), recorded.get(part, {})
+        out += [f"{part}.{k}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
     return out
 
 
@@ -91,6 +146,7 @@ def package(src: Path, detections: Path, out: Path, command: str) -> dict:
         "detections": {"file": Path(detections).name, "sha256": sha256_file(detections)},
         "data_fingerprint": ck.data_fingerprint,
         "data_source": ck.data_source,
+        "trained_with": pipeline_digest(ck.train_config),
     }
     write_json_atomic(out / "provenance.json", prov, indent=2)
     return prov
