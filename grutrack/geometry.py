@@ -325,7 +325,8 @@ def _pair_measures(ta, i, tb, j, want, out, k, work, flags, keys) -> None:
     ``flags (16,) bool`` and ``keys (16,) int64`` are work arrays. Work is done in the frame of ``b``:
 
     * ``I`` BEV intersection (0 unless the circumscribed circles meet and both areas are positive), clipped
-      to ``[0, min(A_a, A_b)]``; ``C`` hull area (0 below ``HULL_EPS (d + r_a + r_b)^2``);
+      to ``[0, min(A_a, A_b)]``; ``C`` hull area (below ``HULL_EPS (d + r_a + r_b)^2``: 0, or for boxes whose
+      circumscribed circles are apart, ``d (r_a + r_b)`` with the inscribed radii, a lower bound of ``C``);
     * BEV IoU ``I / U``, ``U = A_a + A_b - I``; GIoU ``IoU - (C - U) / C``;
     * 3D IoU ``I dz / (V_a + V_b - I dz)``; GIoU with ``V_C = C * span``.
     """
@@ -347,7 +348,9 @@ def _pair_measures(ta, i, tb, j, want, out, k, work, flags, keys) -> None:
     if want[_GIOU_BEV] or want[_GIOU_3D]:
         hull = _hull_area(cx, cy, c, s, al, aw, bl, bw, px, py, flags, work[6:12, :4], keys)
         if hull <= HULL_EPS * (dist + reach) ** 2:
-            hull = 0.0
+            # rounding noise: a collinear set (0), or corners lost in rounding at ~1e12 sizes apart; then the
+            # hull holds the trapezoid of the boxes' inscribed discs, d (r_a + r_b), and GIoU tends to -1
+            hull = dist * (min(al, aw) + min(bl, bw)) if dist > reach else 0.0
     if want[_IOU_BEV] or want[_GIOU_BEV]:
         union = area_a + area_b - inter
         iou = min(max(_ratio(inter, union), 0.0), 1.0)

@@ -293,9 +293,12 @@ def test_same_centre_rotated():
 
 def test_far_apart_boxes_giou_tends_to_minus_one():
     a = _box(w=2.0, l=4.0, yaw=0.2)
-    for dist in (1e2, 1e4, 1e6):
+    # up to distances where the corners are lost in rounding (a diverged track): GIoU stays at -1, not 0
+    for dist in (1e2, 1e4, 1e6, 1e12, 1e15, 1e18):
         b = _box(x=dist, y=0.5 * dist, w=1.0, l=1.0, yaw=-1.0)
         got = _all_paired(a, b)
+        for name in ("bev_giou", "giou_3d"):
+            assert MEASURES[name][1](a, b)[0, 0] == got[name][0], name
         assert got["bev_iou"][0] == 0.0 and got["iou_3d"][0] == 0.0
         assert -1.0 <= got["bev_giou"][0] < -1.0 + 100.0 / dist
         assert -1.0 <= got["giou_3d"][0] < -1.0 + 100.0 / dist
