@@ -68,6 +68,7 @@ GROUPS = {
     "dev2": ((110, 111), ("mini_val", "mini_train")),
     "heldout2": ((500, 501, 502), ("mini_val", "mini_train")),
     "heldout3": ((700, 701, 702), ("mini_val", "mini_train")),
+    "heldout4": ((900, 901, 902), ("mini_val", "mini_train")),
     "trailer": ((110, 111, 300, 301, 302), ("mini_train",)),
     "trailer_pp": ((110, 111, 300, 301, 302, 500, 501, 502, 700, 701, 702), ("mini_train",)),
 }
@@ -354,6 +355,9 @@ CANDIDATES = {
     ),
     "-trailer_gate": lambda raw: raw["association"]["distance_gate"].update(trailer=0.0),
     "-ped_cv": _class_motion("pedestrian", "pedctra", "CTRA"),  # the preset before the pedestrian decision
+    "+velocity_check4": lambda raw: raw["motion"].update(velocity_check_updates=4),
+    "+velocity_check5": lambda raw: raw["motion"].update(velocity_check_updates=5),
+    "+velocity_check6": lambda raw: raw["motion"].update(velocity_check_updates=6),
     "+ped_cv_mct+trailer_ca_R01": _combine(
         _class_motion("pedestrian", "pedcv", "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
         _class_motion("trailer", "pedcv_trlcar01", R=0.1, Q=1.0, P0=1.0),

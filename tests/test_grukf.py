@@ -460,7 +460,7 @@ def test_a_singular_innovation_covariance_stops_training_with_the_last_good_chec
     t = _trainer(scenes, dets, tmp_path, epochs=2)
     t.run(max_steps=1)
 
-    def singular(self, s, rows, z):
+    def singular(self, s, rows, z, *noise):
         raise np.linalg.LinAlgError("Singular matrix")
 
     monkeypatch.setattr(GRUKFBackend, "_ekf_gain", singular)

@@ -100,6 +100,10 @@ class TrackerConfig:
     size_steps: str = "per_frame"
     compared_size: str = "filter"
     written_velocity: str = "filter"
+    # the detector's velocity checked against a track's displacement (default off; ekf_backend.VelocityCheck)
+    velocity_check_updates: int = 0
+    velocity_check_difference: float = 2.0  # m/s
+    velocity_check_ratio: float = 0.5
 
 
 def preset_path(name_or_path: str | Path) -> Path:
@@ -184,6 +188,9 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         size_steps=v["motion.size_steps"],
         compared_size=v["motion.compared_size"],
         written_velocity=v["motion.written_velocity"],
+        velocity_check_updates=v["motion.velocity_check_updates"],
+        velocity_check_difference=v["motion.velocity_check_difference"],
+        velocity_check_ratio=v["motion.velocity_check_ratio"],
     )
 
 
@@ -241,7 +248,7 @@ def _convert(val: Any, ref: str) -> Any:
         return {c: str(m).upper() for c, m in val.items()}
     if ref == "time_step":
         return None if val == "timestamps" else float(val)
-    if ref in ("unit", "scale", "gate", "metres", "cost"):
+    if ref in ("unit", "scale", "gate", "metres", "speed", "cost"):
         return float(val)
     if ref in ("posint", "nonnegint"):
         return int(val)

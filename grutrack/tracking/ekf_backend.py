@@ -8,46 +8,69 @@ import numpy as np
 
 from grutrack.motion.kalman import BatchKalmanFilter, Correction
 from grutrack.motion.models import MotionModel
+from grutrack.tracking.velocity_check import CheckState, VelocityCheck, without_velocity
 
 
 @dataclass
 class KFState:
     """Filter state of N tracks: x (N, dim_x), P (N, dim_x, dim_x), labels (N,) class indices; after an update,
     ``corrected``: what it computed for the tracks it corrected (innovation, its covariance and the gain, rows in
-    the order of the update's ``rows``; :class:`~grutrack.motion.kalman.Correction`), else None."""
+    the order of the update's ``rows``; :class:`~grutrack.motion.kalman.Correction`), else None; ``check``: the
+    velocity check's memory of the tracks (:class:`~grutrack.tracking.velocity_check.CheckState`; None without a
+    check)."""
 
     x: np.ndarray
     P: np.ndarray
     labels: np.ndarray
     corrected: Correction | None = None
+    check: CheckState | None = None
 
 
 class KalmanBackend:
     """Batched (E)KF over the tracks of one state-space model.
 
     Q, R, P0: per-class tables (7, d, d) indexed by label; classes this backend never sees may be zeros.
+    velocity_check: the check of the detector's velocity (:mod:`grutrack.tracking.velocity_check`), or None
+    (every update takes the detector's velocity with R).
     """
 
-    def __init__(self, model: MotionModel, Q: np.ndarray, R: np.ndarray, P0: np.ndarray, yaw_flip: bool = True):
+    def __init__(
+        self,
+        model: MotionModel,
+        Q: np.ndarray,
+        R: np.ndarray,
+        P0: np.ndarray,
+        yaw_flip: bool = True,
+        velocity_check: VelocityCheck | None = None,
+    ):
         self.model = model
         self.kf = BatchKalmanFilter(model, yaw_flip=yaw_flip)
         self.Q, self.R, self.P0 = Q, R, P0
+        self.velocity_check = velocity_check
 
     def initiate(self, z: np.ndarray, labels: np.ndarray) -> KFState:
         """State of new tracks from detections z (N, 9)."""
         x, P = self.kf.initiate(z, self.P0[labels])
-        return KFState(x, P, labels.copy())
+        check = None if self.velocity_check is None else self.velocity_check.start(np.asarray(z).reshape(-1, 9))
+        return KFState(x, P, labels.copy(), None, check)
 
     def predict(self, s: KFState, dt: float) -> KFState:
         """Predict every track dt seconds ahead."""
         x, P = self.kf.predict(s.x, s.P, self.Q[s.labels], dt)
-        return KFState(x, P, s.labels)
+        return KFState(x, P, s.labels, None, None if s.check is None else s.check.predicted(dt))
 
     def update(self, s: KFState, rows: np.ndarray, z: np.ndarray) -> KFState:
-        """Correct tracks ``rows`` with measurements z (K, 9)."""
+        """Correct tracks ``rows`` with measurements z (K, 9); with a velocity check, the tracks whose velocity
+        failed take none from z (:func:`~grutrack.tracking.velocity_check.without_velocity`)."""
         x, P = s.x.copy(), s.P.copy()
-        corrected = self.kf.correct(x, P, rows, z, self.R, s.labels[rows])
-        return KFState(x, P, s.labels, corrected)
+        R, R_index, check = self.R, s.labels[rows], None
+        if self.velocity_check is not None:
+            z = np.asarray(z, dtype=np.float64).reshape(-1, 9)
+            check, failed = self.velocity_check.observe(s.check, rows, z)
+            if failed.any():
+                z, R, R_index = without_velocity(z, self.model.measurement(x[rows])[0], failed, R, R_index)
+        corrected = self.kf.correct(x, P, rows, z, R, R_index)
+        return KFState(x, P, s.labels, corrected, check)
 
     def boxes(self, s: KFState) -> np.ndarray:
         """Canonical boxes (N, 9) of the current state."""
@@ -55,8 +78,15 @@ class KalmanBackend:
 
     def select(self, s: KFState, index: np.ndarray) -> KFState:
         """Subset of the tracks."""
-        return KFState(s.x[index], s.P[index], s.labels[index])
+        check = None if s.check is None else s.check.select(index)
+        return KFState(s.x[index], s.P[index], s.labels[index], None, check)
 
     def concat(self, a: KFState, b: KFState) -> KFState:
         """Tracks of a then b."""
-        return KFState(np.concatenate([a.x, b.x]), np.concatenate([a.P, b.P]), np.concatenate([a.labels, b.labels]))
+        return KFState(
+            np.concatenate([a.x, b.x]),
+            np.concatenate([a.P, b.P]),
+            np.concatenate([a.labels, b.labels]),
+            None,
+            CheckState.concat(a.check, b.check),
+        )

@@ -107,16 +107,25 @@ def grukf_group(
     members: np.ndarray | None = None,
     correct=None,
     ss_model: str | None = None,
+    velocity_check=None,
 ) -> TrackGroup:
     """One track group run by the GRU-Kalman filter ``net`` for the labels ``members`` (n_labels,) bool (default:
     every label); ``class_index`` (n_labels,) int maps a dataset label to the tracking class the network's
-    per-class gain uses (default: identity); ``correct``, ``ss_model``: see :class:`GRUKFBackend`."""
+    per-class gain uses (default: identity); ``correct``, ``ss_model``, ``velocity_check``: see
+    :class:`GRUKFBackend`."""
     from grutrack.tracking.grukf_backend import GRUKFBackend
 
     members = np.ones(n_labels, dtype=bool) if members is None else np.asarray(members, dtype=bool)
-    return TrackGroup(
-        GRUKFBackend(net, device, train=train, class_index=class_index, correct=correct, ss_model=ss_model), members
+    backend = GRUKFBackend(
+        net,
+        device,
+        train=train,
+        class_index=class_index,
+        correct=correct,
+        ss_model=ss_model,
+        velocity_check=velocity_check,
     )
+    return TrackGroup(backend, members)
 
 
 def network_models(arch, cfg: TrackerConfig, index: np.ndarray) -> list[tuple[str, np.ndarray]]:
@@ -152,7 +161,12 @@ def network_groups(net, cfg: TrackerConfig, index: np.ndarray, device: str = "au
     members = np.logical_or.reduce([m for _, m in models])
     rest = ekf_groups(cfg, index, only=~members) if not members.all() else []
     return [
-        *(grukf_group(net, len(index), device, class_index=index, members=m, ss_model=name) for name, m in models),
+        *(
+            grukf_group(
+                net, len(index), device, class_index=index, members=m, ss_model=name, velocity_check=velocity_check(cfg)
+            )
+            for name, m in models
+        ),
         *rest,
     ]
 
@@ -228,10 +242,22 @@ def ekf_groups(
             tables[key] = np.stack(
                 [motion[TRACKING_CLASSES[c]][key] if members[i] else np.zeros((d, d)) for i, c in enumerate(index)]
             )
-        backend = (backend_cls or KalmanBackend)(model, tables["Q"], tables["R"], tables["P0"], yaw_flip=cfg.yaw_flip)
+        backend = (backend_cls or KalmanBackend)(
+            model, tables["Q"], tables["R"], tables["P0"], yaw_flip=cfg.yaw_flip, velocity_check=velocity_check(cfg)
+        )
         backend = with_geometry_filter(backend, cfg)
         groups.append(TrackGroup(backend, members))
     return groups
+
+
+def velocity_check(cfg: TrackerConfig):
+    """The preset's check of the detector's velocity (``motion.velocity_check_*``): a
+    :class:`~grutrack.tracking.velocity_check.VelocityCheck`, or None when ``velocity_check_updates`` is 0."""
+    if cfg.velocity_check_updates == 0:
+        return None
+    from grutrack.tracking.velocity_check import VelocityCheck
+
+    return VelocityCheck(cfg.velocity_check_updates, cfg.velocity_check_difference, cfg.velocity_check_ratio)
 
 
 def with_geometry_filter(backend, cfg: TrackerConfig):

@@ -24,6 +24,7 @@ import torch
 
 from grutrack.errors import ConfigError
 from grutrack.motion.grukf import GRUKalmanNet
+from grutrack.tracking.velocity_check import CheckState, VelocityCheck, without_velocity
 
 
 def resolve_device(device: str = "auto", what: str = "--device") -> torch.device:
@@ -82,6 +83,8 @@ class GRUState:
     corrected: torch.Tensor | None = None
     #: after an update: the largest |K| entry (K, 1) float64 of each corrected track's gain (no graph); None otherwise
     corrected_gain: torch.Tensor | None = None
+    #: the velocity check's memory of the tracks (:mod:`grutrack.tracking.velocity_check`); None without a check
+    check: CheckState | None = None
 
     @property
     def m(self) -> int:
@@ -98,11 +101,12 @@ class GRUState:
         """(N,) float64: the largest |K| entry of each track's last gain."""
         return self.rows[:, -1].detach()
 
-    def with_x(self, x: torch.Tensor, P: np.ndarray | None) -> GRUState:
-        """The tracks with state ``x`` (N, m) and covariance ``P``, one more frame since their last update."""
-        return GRUState(
-            torch.cat([x, self.rows[:, self.m :]], dim=1), self.hid, self.labels, self.n_updates, self.since + 1, P
-        )
+    def with_x(self, x: torch.Tensor, P: np.ndarray | None, dt: float) -> GRUState:
+        """The tracks with state ``x`` (N, m) and covariance ``P``, one more frame (``dt`` seconds) since their
+        last update."""
+        check = None if self.check is None else self.check.predicted(dt)
+        rows = torch.cat([x, self.rows[:, self.m :]], dim=1)
+        return GRUState(rows, self.hid, self.labels, self.n_updates, self.since + 1, P, check=check)
 
     def take(self, r: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """(x, y_prev, post1, post2, prior1, hid) of tracks ``r`` (K,) int64: two row gathers."""
@@ -119,7 +123,9 @@ class GRUKFBackend:
     ``net.correct``; training several scenes per step passes one that batches the scenes' calls,
     :mod:`grutrack.training.lockstep`). ``ss_model``: the group's SS model when it is not the network's own
     (``network_classes: own_model``: e.g. the Bicycle classes of a CTRA network; same state layout, the weights
-    shared).
+    shared). ``velocity_check``: the check of the detector's velocity (:mod:`grutrack.tracking.velocity_check`; a
+    track whose velocity failed gets its predicted velocity as the measured one, zero innovation, and the EKF gain
+    prior leaves the velocity out), or None.
     """
 
     def __init__(
@@ -130,8 +136,10 @@ class GRUKFBackend:
         class_index: np.ndarray | None = None,
         correct=None,
         ss_model: str | None = None,
+        velocity_check: VelocityCheck | None = None,
     ):
         self.net = net
+        self.velocity_check = velocity_check
         own = ss_model is None or ss_model.upper() == net.cfg.ss_model.upper()
         self.ss = net.ss if own else net.cfg.torch_model(ss_model)
         correct = net.correct if correct is None else correct
@@ -177,7 +185,8 @@ class GRUKFBackend:
             P = None if self.kf is None else self.P0[self._classes(labels)].copy()  # P = P0 of the class
             rows = torch.cat([x, zt, x, x, x, zt.new_zeros(len(z), 1)], dim=1)
             hid = torch.zeros(len(z), sum(self._hidden_layout[1]), dtype=self._hidden_dtype, device=self.device)
-            return GRUState(rows, hid, labels.copy(), zero, zero, P)
+            check = None if self.velocity_check is None else self.velocity_check.start(np.asarray(z).reshape(-1, 9))
+            return GRUState(rows, hid, labels.copy(), zero, zero, P, check=check)
 
     def hidden(self, hid: torch.Tensor) -> dict[str, torch.Tensor]:
         """The network's hidden states {name: (K, size)} from packed rows ``hid`` (K, H) (one split)."""
@@ -208,7 +217,7 @@ class GRUKFBackend:
         if self.kf is not None:  # P^- = F P F^T + Q, F at the posterior
             _, P = self.kf.predict(self._np(x), s.P, self.Q[self._classes(s.labels)], dt)
         with self._ctx():
-            return s.with_x(self.ss.f(x, dt), P)
+            return s.with_x(self.ss.f(x, dt), P, dt)
 
     def _coast_slots(self) -> list[int]:
         """State columns a coasting track holds at 0: the turn rate (CTRA omega, Bicycle steering angle) with
@@ -236,25 +245,42 @@ class GRUKFBackend:
         """A detached float64 numpy copy of a tensor."""
         return t.detach().cpu().numpy().astype(np.float64)
 
-    def _ekf_gain(self, s: GRUState, rows: np.ndarray, z: np.ndarray) -> tuple[torch.Tensor | None, np.ndarray | None]:
-        """The EKF's Joseph-form update of tracks ``rows`` with z (K, 9) at the GRU-KF's (detached) prior: the gain
-        ``K_ekf = P^- H^T S^-1`` (K, m, 9) tensor it applied and the covariance of all tracks after it ((N, m, m));
-        (None, None) without an EKF gain prior. A singular S (a state driven far off) raises LinAlgError."""
+    def _ekf_gain(
+        self, s: GRUState, rows: np.ndarray, z: np.ndarray, R: np.ndarray | None, R_index: np.ndarray | None
+    ) -> tuple[torch.Tensor | None, np.ndarray | None]:
+        """The EKF's Joseph-form update of tracks ``rows`` with z (K, 9) and noise ``R[R_index]`` at the GRU-KF's
+        (detached) prior: the gain ``K_ekf = P^- H^T S^-1`` (K, m, 9) tensor it applied and the covariance of all
+        tracks after it ((N, m, m)); (None, None) without an EKF gain prior. A singular S (a state driven far off)
+        raises LinAlgError."""
         if self.kf is None:
             return None, None
         P = np.ascontiguousarray(s.P, dtype=np.float64).copy()
-        K = self.kf.correct(self._np(s.x), P, rows, z, self.R, self._classes(s.labels[rows])).K
+        K = self.kf.correct(self._np(s.x), P, rows, z, R, R_index).K
         if not np.isfinite(K).all():
             raise np.linalg.LinAlgError("Singular matrix")
         return torch.as_tensor(K, device=self.device), P
+
+    def _checked(self, s: GRUState, rows: np.ndarray, z: np.ndarray, prior: torch.Tensor):
+        """The velocity check at this update (:mod:`grutrack.tracking.velocity_check`): (z, R, R_index, check)
+        with the tracks whose velocity failed taking none (``prior`` (K, m) their prior states)."""
+        R = self.R if self.kf is not None else None
+        R_index = self._classes(s.labels[rows]) if self.kf is not None else None
+        if self.velocity_check is None:
+            return z, R, R_index, None
+        z = np.asarray(z, dtype=np.float64).reshape(-1, 9)
+        check, failed = self.velocity_check.observe(s.check, rows, z)
+        if failed.any():
+            z, R, R_index = without_velocity(z, self._np(self.ss.h(prior)), failed, R, R_index)
+        return z, R, R_index, check
 
     def update(self, s: GRUState, rows: np.ndarray, z: np.ndarray) -> GRUState:
         """Correct tracks ``rows`` (K,) with measurements z (K, 9) through the learned gain."""
         with self._ctx():
             r = torch.as_tensor(rows, device=self.device, dtype=torch.long)
-            y = self._t(z)
             prior, y_prev, post1, post2, prior1, hid = s.take(r)
-            K_ekf, P = self._ekf_gain(s, rows, z)
+            z, R, R_index, check = self._checked(s, rows, z, prior)
+            y = self._t(z)
+            K_ekf, P = self._ekf_gain(s, rows, z, R, R_index)
             post, new_hidden, K = self.correct(
                 prior,
                 y,
@@ -279,6 +305,7 @@ class GRUKFBackend:
                 P,
                 corrected=post,
                 corrected_gain=gain,
+                check=check,
             )
 
     def measure(self, s: GRUState) -> torch.Tensor:
@@ -309,6 +336,7 @@ class GRUKFBackend:
                 s.n_updates[idx],
                 s.since[idx],
                 None if s.P is None else s.P[idx],
+                check=None if s.check is None else s.check.select(idx),
             )
 
     def concat(self, a: GRUState, b: GRUState) -> GRUState:
@@ -323,6 +351,7 @@ class GRUKFBackend:
             torch.cat([a.hid, b.hid]),
             *(np.concatenate([getattr(a, n), getattr(b, n)]) for n in ("labels", "n_updates", "since")),
             None if a.P is None else np.concatenate([a.P, b.P]),
+            check=CheckState.concat(a.check, b.check),
         )
 
 

@@ -20,7 +20,7 @@ from grutrack.motion.grukf import GRUKalmanNet
 from grutrack.motion.torch_models import wrap_angle_t
 from grutrack.tracking.config import TrackerConfig
 from grutrack.tracking.ekf_backend import KalmanBackend
-from grutrack.tracking.factory import grukf_group, network_models
+from grutrack.tracking.factory import grukf_group, network_models, velocity_check
 from grutrack.tracking.grukf_backend import GRUKFBackend
 from grutrack.tracking.tracker import GroupUpdate, Tracker
 from grutrack.training.config import TrainConfig
@@ -211,8 +211,9 @@ def run_scene(
                 class_index=index,
                 correct=None if lockstep is None else lockstep.bind(slot, model.upper()),
                 ss_model=model,
+                velocity_check=velocity_check(tracker_cfg),
             ).backend,
-            ekf_backend(cfg, index, model),
+            ekf_backend(cfg, index, model, velocity_check(tracker_cfg)),
         )
         for model, _ in network_models(arch, tracker_cfg, index)
     ]

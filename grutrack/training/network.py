@@ -58,16 +58,20 @@ def _model_forms(cfg: TrainConfig) -> dict[str, str]:
     return {m: forms[m] for m in NETWORK_MODELS if m != ss_model(cfg).upper()}
 
 
-def ekf_backend(cfg: TrainConfig, index: np.ndarray, model: str | None = None) -> KalmanBackend:
+def ekf_backend(cfg: TrainConfig, index: np.ndarray, model: str | None = None, velocity_check=None) -> KalmanBackend:
     """The parallel EKF: the training SS model (or ``model``, a network group's own, ``network_classes:
     own_model``) for every label, with the motion config's Q, R, P0 of the tracking class each label takes its
-    parameters from (``index`` (n_labels,), :func:`~grutrack.tracking.factory.param_index`) under that model."""
+    parameters from (``index`` (n_labels,), :func:`~grutrack.tracking.factory.param_index`) under that model, and
+    the tracker preset's velocity check (``velocity_check``, :func:`~grutrack.tracking.factory.velocity_check`)."""
     form = "arc" if model is None else _model_forms(cfg).get(model.upper(), "arc")
-    return _ekf_backend(cfg.motion_config, model or ss_model(cfg), tuple(int(c) for c in index), form)
+    index = tuple(int(c) for c in index)
+    return _ekf_backend(cfg.motion_config, model or ss_model(cfg), index, form, velocity_check)
 
 
 @functools.lru_cache(maxsize=16)
-def _ekf_backend(motion_config: str, ss_model: str, index: tuple[int, ...], form: str = "arc") -> KalmanBackend:
+def _ekf_backend(
+    motion_config: str, ss_model: str, index: tuple[int, ...], form: str = "arc", velocity_check=None
+) -> KalmanBackend:
     """:func:`ekf_backend`, made once per process and settings (run once per training scene; the backend keeps
     no state of its own)."""
     from grutrack.classes import TRACKING_CLASSES
@@ -77,7 +81,8 @@ def _ekf_backend(motion_config: str, ss_model: str, index: tuple[int, ...], form
     motion = load_motion_config(motion_config, ss_model)
     first = motion[TRACKING_CLASSES[0]]
     tables = {k: np.stack([motion[TRACKING_CLASSES[c]][k] for c in index]) for k in ("Q", "R", "P0")}
-    return KalmanBackend(make_model(first["model"], form, **first["params"]), tables["Q"], tables["R"], tables["P0"])
+    model = make_model(first["model"], form, **first["params"])
+    return KalmanBackend(model, tables["Q"], tables["R"], tables["P0"], velocity_check=velocity_check)
 
 
 def ekf_noise(cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

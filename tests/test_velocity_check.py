@@ -1,0 +1,122 @@
+"""The check of the detector's velocity against a track's displacement (tracker preset ``motion.velocity_check_*``,
+``grutrack/tracking/velocity_check.py``): a track whose detected velocity keeps disagreeing with the
+motion of its detections stops taking it; a track whose velocity agrees is filtered exactly as without the check."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from grutrack.motion.models import make_model
+from grutrack.tracking.ekf_backend import KalmanBackend
+from grutrack.tracking.velocity_check import IGNORED_VELOCITY_VARIANCE, VelocityCheck
+
+DT = 0.5
+CHECK = VelocityCheck(updates=5, difference=2.0, ratio=0.5)
+
+
+def _backend(model: str, check: VelocityCheck | None) -> KalmanBackend:
+    m = make_model(model)
+    d = m.dim_x
+    R = np.tile(np.diag([1.0, 1, 1, 1, 1, 1, 1, 2, 2]), (7, 1, 1))
+    return KalmanBackend(m, np.tile(np.eye(d), (7, 1, 1)), R, np.tile(np.eye(d) * 4.0, (7, 1, 1)), velocity_check=check)
+
+
+def _detections(speed: float, reported: float, frames: int) -> np.ndarray:
+    """(frames, 1, 9) detections of a bus driving along x at ``speed`` m/s whose detector reports ``reported``
+    times its velocity."""
+    z = np.zeros((frames, 1, 9))
+    z[:, 0, 0] = speed * DT * np.arange(frames)
+    z[:, 0, 3:6] = (2.9, 11.0, 3.5)
+    z[:, 0, 7] = reported * speed
+    return z
+
+
+def _run(backend: KalmanBackend, z: np.ndarray):
+    s = backend.initiate(z[0], np.array([1]))
+    for frame in z[1:]:
+        s = backend.update(backend.predict(s, DT), np.array([0]), frame)
+    return s
+
+
+def test_disagreement_is_against_the_displacement_velocity():
+    z = np.zeros((4, 9))
+    z[:, 0] = [2.5, 2.5, 0.5, 20.0]  # 2.5 m in 0.5 s = 5 m/s, except row 2 (1 m/s) and row 3 (40 m/s)
+    z[:, 7] = [0.5, 4.0, -0.9, 30.0]
+    got = CHECK.disagree_with(z, np.zeros((4, 2)), np.array([0.5, 0.5, 0.5, 0.5]))
+    # 4.5 m/s off at 5 m/s: disagrees; 1 m/s off: agrees; 1.9 m/s off at 1 m/s: under 2 m/s; 10 m/s off at 40 m/s:
+    # within 50 %
+    assert got.tolist() == [True, False, False, False]
+
+
+@pytest.mark.parametrize("model", ["CTRA", "CV"])
+def test_a_failed_velocity_is_ignored_after_the_set_number_of_updates(model):
+    """A bus at 8 m/s detected at 0.8 m/s: with the check the filter's speed reaches the true one, without it the
+    detected velocity holds it back."""
+    z = _detections(8.0, 0.1, 16)
+    checked, plain = _run(_backend(model, CHECK), z), _run(_backend(model, None), z)
+    assert checked.check.disagree[0] == CHECK.updates  # frozen there: failed for the rest of the track's life
+    v_checked = np.hypot(*_backend(model, None).boxes(checked)[0, 7:9])
+    v_plain = np.hypot(*_backend(model, None).boxes(plain)[0, 7:9])
+    assert abs(v_checked - 8.0) < 1.0 < abs(v_plain - 8.0)
+
+
+def test_the_failed_track_takes_the_ignored_variance_only_after_the_count():
+    backend = _backend("CTRA", CHECK)
+    z = _detections(8.0, 0.1, 8)
+    s = backend.initiate(z[0], np.array([1]))
+    counts = []
+    for frame in z[1:]:
+        s = backend.update(backend.predict(s, DT), np.array([0]), frame)
+        counts.append(int(s.check.disagree[0]))
+        S_vv = s.corrected.S[0, 7, 7]
+        assert (S_vv > IGNORED_VELOCITY_VARIANCE) == (counts[-1] >= CHECK.updates)
+    assert counts == [1, 2, 3, 4, 5, 5, 5]
+
+
+def test_an_agreeing_update_resets_the_count():
+    backend = _backend("CV", CHECK)
+    z = _detections(8.0, 0.1, 8)
+    z[4, 0, 7] = 8.0  # one frame with the right velocity
+    s = backend.initiate(z[0], np.array([1]))
+    counts = []
+    for frame in z[1:]:
+        s = backend.update(backend.predict(s, DT), np.array([0]), frame)
+        counts.append(int(s.check.disagree[0]))
+    assert counts == [1, 2, 3, 0, 1, 2, 3]
+
+
+@pytest.mark.parametrize("model", ["CTRA", "CV", "Bicycle"])
+def test_agreeing_velocities_are_filtered_exactly_as_without_the_check(model):
+    z = _detections(8.0, 1.0, 12)
+    z[:, 0, 0] += np.random.default_rng(0).normal(0, 0.2, 12)
+    checked, plain = _run(_backend(model, CHECK), z), _run(_backend(model, None), z)
+    assert np.array_equal(checked.x, plain.x) and np.array_equal(checked.P, plain.P)
+    assert checked.check.disagree[0] < CHECK.updates
+
+
+def test_select_and_concat_carry_the_check_state():
+    backend = _backend("CV", CHECK)
+    z = np.concatenate([_detections(8.0, 0.1, 7), _detections(3.0, 1.0, 7)], axis=1)
+    s = backend.initiate(z[0], np.array([1, 2]))
+    for frame in z[1:]:
+        s = backend.update(backend.predict(s, DT), np.array([0, 1]), frame)
+    both = backend.concat(backend.select(s, np.array([1])), backend.select(s, np.array([0])))
+    assert both.check.disagree.tolist() == [0, 5]
+    np.testing.assert_array_equal(both.check.last_xy, s.check.last_xy[::-1])
+    np.testing.assert_array_equal(both.check.elapsed, s.check.elapsed[::-1])
+
+
+def test_the_preset_keys_build_the_check():
+    from grutrack.config_loader import read_config
+    from grutrack.errors import ConfigError
+    from grutrack.tracking.config import config_from_dict, load_tracker_config, preset_path
+    from grutrack.tracking.factory import velocity_check
+
+    assert velocity_check(load_tracker_config("polymot")) is None  # off unless a preset asks for it
+    raw, _ = read_config("tracker", preset_path("polymot"))
+    raw["motion"].update(velocity_check_updates=3, velocity_check_difference=1.5, velocity_check_ratio=0.25)
+    assert velocity_check(config_from_dict(raw, "test")) == VelocityCheck(3, 1.5, 0.25)
+    raw["motion"]["velocity_check_updates"] = -1
+    with pytest.raises(ConfigError, match="velocity_check_updates"):
+        config_from_dict(raw, "test")
