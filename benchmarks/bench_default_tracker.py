@@ -10,9 +10,10 @@ and per candidate the sets where it is below that best and by how much.
     .venv/bin/python benchmarks/bench_default_tracker.py                      # reference + held-out sets
     .venv/bin/python benchmarks/bench_default_tracker.py --groups reference,dev --candidates ekf,ekf_mct_nms
 
-Groups: ``reference`` (the four reference sets), ``dev`` (SYNTHETIC, seeds 100-101: the sets the candidates were
-compared on while choosing) and ``heldout`` (SYNTHETIC, seeds 300-302, mini_val and mini_train, all four profiles:
-looked at only once the choice was frozen). Candidates: :data:`CANDIDATES` (names; ``--candidates`` a comma list).
+Groups: ``reference`` (the four reference sets), ``dev`` / ``dev2`` (SYNTHETIC, seeds 100-101 / 110-111: the sets
+the candidates were compared on while choosing) and ``heldout`` ... ``heldout4`` (SYNTHETIC, seeds 300-302, 500-502,
+700-702, 900-902, mini_val and mini_train, all four profiles: each first looked at once a decision was frozen;
+docs/results/default_tracker.md says which decision each group checked). Candidates: :data:`CANDIDATES` (names; ``--candidates`` a comma list).
 docs/results/default_tracker.md records the table and the decision.
 """
 
@@ -355,6 +356,7 @@ CANDIDATES = {
     ),
     "-trailer_gate": lambda raw: raw["association"]["distance_gate"].update(trailer=0.0),
     "-ped_cv": _class_motion("pedestrian", "pedctra", "CTRA"),  # the preset before the pedestrian decision
+    "-velocity_check": lambda raw: raw["motion"].update(velocity_check_updates=0),  # the preset before it
     "+velocity_check4": lambda raw: raw["motion"].update(velocity_check_updates=4),
     "+velocity_check5": lambda raw: raw["motion"].update(velocity_check_updates=5),
     "+velocity_check6": lambda raw: raw["motion"].update(velocity_check_updates=6),
