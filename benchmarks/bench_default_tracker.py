@@ -11,9 +11,10 @@ and per candidate the sets where it is below that best and by how much.
     .venv/bin/python benchmarks/bench_default_tracker.py --groups reference,dev --candidates ekf,ekf_mct_nms
 
 Groups: ``reference`` (the four reference sets), ``dev`` / ``dev2`` (SYNTHETIC, seeds 100-101 / 110-111: the sets
-the candidates were compared on while choosing) and ``heldout`` ... ``heldout4`` (SYNTHETIC, seeds 300-302, 500-502,
-700-702, 900-902, mini_val and mini_train, all four profiles: each first looked at once a decision was frozen;
-docs/results/default_tracker.md says which decision each group checked). Candidates: :data:`CANDIDATES` (names; ``--candidates`` a comma list).
+the candidates were compared on while choosing) and ``heldout`` ... ``heldout4`` (SYNTHETIC, seeds 300-302,
+500-502, 700-702, 900-902, mini_val and mini_train, all four profiles: each first looked at once a decision was
+frozen; docs/results/default_tracker.md says which decision each group checked). Candidates: :data:`CANDIDATES`
+(names; ``--candidates`` a comma list).
 docs/results/default_tracker.md records the table and the decision.
 """
 
