@@ -101,6 +101,22 @@ def test_every_preset_key_has_a_comment(preset):
             lambda r: r["lifecycle"]["punish_num"].__setitem__("car", 1.5),
             "'lifecycle.punish_num.car' must be an integer",
         ),
+        (
+            lambda r: r["motion"].__setitem__("velocity_check_updates", -1),
+            "'motion.velocity_check_updates' must be an integer >= 0",
+        ),
+        (
+            lambda r: r["motion"].__setitem__("velocity_check_difference", 0),
+            "'motion.velocity_check_difference' must be a positive speed in metres per second",
+        ),
+        (
+            lambda r: r["motion"].update(
+                filter="decoupled_cv",
+                position_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["position_noise"],
+                size_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["size_noise"],
+            ),
+            "'motion.velocity_check_updates' must be 0 with 'motion.filter: decoupled_cv'",
+        ),
     ],
 )
 def test_bad_preset_keys(mutate, message):

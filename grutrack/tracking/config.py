@@ -100,7 +100,7 @@ class TrackerConfig:
     size_steps: str = "per_frame"
     compared_size: str = "filter"
     written_velocity: str = "filter"
-    # the detector's velocity checked against a track's displacement (default off; ekf_backend.VelocityCheck)
+    # the detector's velocity checked against a track's displacement (default off; tracking/velocity_check.py)
     velocity_check_updates: int = 0
     velocity_check_difference: float = 2.0  # m/s
     velocity_check_ratio: float = 0.5
@@ -132,6 +132,11 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         if v[setting] == value and key not in given:
             raise ConfigError(f"{source}: '{key}' is required with '{setting}: {_yaml_scalar(value)}'")
     _check_model_names(v["motion.model_override"], source)
+    if v["motion.velocity_check_updates"] > 0 and v["motion.filter"] == "decoupled_cv":
+        raise ConfigError(
+            f"{source}: 'motion.velocity_check_updates' must be 0 with 'motion.filter: decoupled_cv' (the velocity "
+            f"check runs in the joint EKF and the GRU-KF; MCTrack's decoupled filters always take the velocity)"
+        )
     if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
         raise ConfigError(
             f"{source}: 'association.two_stage' must be false with 'association.algorithm' greedy "

@@ -51,6 +51,7 @@ class CheckState:
         return CheckState(*(np.concatenate([u, v]) for u, v in zip(a.fields(), b.fields())))
 
     def fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(last_xy (N, 2), elapsed (N,), disagree (N,))."""
         return self.last_xy, self.elapsed, self.disagree
 
 

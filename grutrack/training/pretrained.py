@@ -38,33 +38,9 @@ def pretrained_dir(name: str) -> Path:
     return Path(__file__).resolve().parents[1] / "pretrained" / name
 
 
-def _plain(value: Any) -> Any:
-    """JSON-comparable form of a config value (tuples as lists, nested)."""
-    return json.loads(json.dumps(value, default=list))
-
-
-def recipe_differences(train_config: dict, recipe: str) -> list[str]:
-    """Keys (dotted) whose value in a checkpoint's training config differs from the shipped recipe ``recipe``
-    as loaded today; empty when the checkpoint is that recipe (:data:`IGNORED_KEYS` left out)."""
-    from grutrack.training.config import load_train_config
-
-    shipped = _plain(asdict(load_train_config(recipe)))
-    have = _plain(train_config)
-    out = []
-    for key in sorted(set(shipped) | set(have)):
-        if key in IGNORED_KEYS:
-            continue
-        a, b = shipped.get(key), have.get(key)
-        if isinstance(a, dict) and isinstance(b, dict):
-            out += [f"{key}.{k}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
-        elif a != b:
-            out.append(key)
-    return out
-
-
 def _canonical(value: Any) -> Any:
-    """JSON-comparable form of a resolved config value: dataclasses as dicts, arrays and tuples as lists, numpy
-    scalars as Python numbers (nested)."""
+    """JSON-comparable form of a config value (a training config, a resolved preset): dataclasses as dicts,
+    arrays and tuples as lists, numpy scalars as Python numbers, keys as strings (nested)."""
     import dataclasses
 
     import numpy as np
@@ -76,6 +52,25 @@ def _canonical(value: Any) -> Any:
     if isinstance(value, (list, tuple, np.ndarray)):
         return [_canonical(v) for v in value]
     return value.item() if isinstance(value, np.generic) else value
+
+
+def recipe_differences(train_config: dict, recipe: str) -> list[str]:
+    """Keys (dotted) whose value in a checkpoint's training config differs from the shipped recipe ``recipe``
+    as loaded today; empty when the checkpoint is that recipe (:data:`IGNORED_KEYS` left out)."""
+    from grutrack.training.config import load_train_config
+
+    shipped = _canonical(asdict(load_train_config(recipe)))
+    have = _canonical(train_config)
+    out = []
+    for key in sorted(set(shipped) | set(have)):
+        if key in IGNORED_KEYS:
+            continue
+        a, b = shipped.get(key), have.get(key)
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += [f"{key}.{k}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+        elif a != b:
+            out.append(key)
+    return out
 
 
 def pipeline_digest(train_config: dict) -> dict[str, dict[str, str]]:
