@@ -102,6 +102,7 @@ def _ro_gdiou(raw):  # Ro_GDIoU one stage, MCTrack's weights and thresholds, pre
         first_metric=m["first_metric"], first_threshold=m["first_threshold"], ro_gdiou_weights=m["ro_gdiou_weights"]
     )
     a["two_stage"] = False
+    a["distance_gate"] = dict.fromkeys(CLASSES, 0.0)  # MCTrack's association has no centre gate
 
 
 def _first_frames(raw):  # every live track written in a scene's first 3 frames
@@ -115,8 +116,6 @@ def _lifetimes(raw):  # MCTrack's max_age
 def _decoupled(raw):  # MCTrack's decoupled CV position / size filters with all their options
     m = _mctrack()["motion"]
     raw["motion"] = {k: v for k, v in m.items()}
-    raw["association"]["track_pose"] = _mctrack()["association"]["track_pose"]
-    raw["association"]["track_pose_blend"] = _mctrack()["association"]["track_pose_blend"]
 
 
 def _decoupled_ts(raw):  # the same with the timestamps' step
@@ -201,22 +200,11 @@ def _model(values: dict):
 
 
 def _first_stage(cls: str, metric: str, threshold: float):
-    """One class's stage-1 metric and threshold (e.g. MCTrack's Ro_GDIoU for pedestrians), the rest unchanged."""
+    """One class's stage-1 metric and threshold (e.g. BEV GIoU for trailers), the rest unchanged."""
 
     def change(raw):
         raw["association"]["first_metric"][cls] = metric
         raw["association"]["first_threshold"][cls] = threshold
-
-    return change
-
-
-def _track_pose(values: dict):
-    """Per-class pose a track is compared at (MCTrack: last_update for car, pedestrian, trailer, truck)."""
-
-    def change(raw):
-        pose = {c: "predicted" for c in CLASSES}
-        pose.update(raw["association"].get("track_pose", {}))
-        raw["association"]["track_pose"] = {**pose, **values}
 
     return change
 
@@ -305,9 +293,6 @@ CANDIDATES = {
         _velocity_r({"bicycle": 10.0}, "rbic10"), _punish({"bus": 2, "trailer": 2, "truck": 2})
     ),
     "+trailer_ctra": _model({"trailer": "CTRA"}),
-    "+ped_rogdiou": _first_stage("pedestrian", "ro_gdiou_bev", 2.06),
-    "+ped_last_update": _track_pose({"pedestrian": "last_update"}),
-    "+trailer_last_update": _track_pose({"trailer": "last_update"}),
     "+ped_age8": _age({"pedestrian": 8}),
     "+ped_cv_mct": _class_motion("pedestrian", "pedcv", "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
     "+ped_cv_q3": _class_motion("pedestrian", "pedcvq3", "CV", **_cv_mct(3.0, 3.0, 2.0, 3.5)),
@@ -332,10 +317,6 @@ CANDIDATES = {
     "+trailer_thr116": lambda raw: raw["association"]["first_threshold"].update(trailer=1.16),
     "+trailer_thr14": lambda raw: raw["association"]["first_threshold"].update(trailer=1.4),
     "+trailer_giou_bev": _first_stage("trailer", "giou_bev", 1.25),
-    "+trailer_cv_mct_all": _combine(
-        _class_motion("trailer", "trlcvmct", "CV", **_cv_mct(0.3, 0.1, 2.0, 2.5)),
-        _track_pose({"trailer": "last_update"}),
-    ),
     "+trailer_nms012": lambda raw: _nms_class(raw, "trailer", 0.12),
     "+trailer_nms02": lambda raw: _nms_class(raw, "trailer", 0.2),
     "+trailer_nms05": lambda raw: _nms_class(raw, "trailer", 0.5),
@@ -365,6 +346,15 @@ CANDIDATES = {
         _class_motion("pedestrian", "pedcv", "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
         _class_motion("trailer", "pedcv_trlcar01", R=0.1, Q=1.0, P0=1.0),
     ),
+    "+moto_cv_mct": _class_motion("motorcycle", "motocvmct", "CV", **_cv_mct(0.5, 4.0, 0.1, 0.1)),
+    "+moto_cv_ped": _class_motion("motorcycle", "motocvped", "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
+    "+moto_cv_ped_thr16": _combine(
+        _class_motion("motorcycle", "motocvped", "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
+        lambda raw: raw["association"]["first_threshold"].update(motorcycle=1.6),
+    ),
+    "+moto_bic_ryaw01": _class_motion("motorcycle", "motobicryaw01", R=[1, 1, 1, 1, 1, 1, 0.1, 2, 2]),
+    "+moto_ctra": _class_motion("motorcycle", "motoctra", "CTRA"),
+    "+moto_thr16": lambda raw: raw["association"]["first_threshold"].update(motorcycle=1.6),
     "+ped_R2": _class_motion("pedestrian", "pedr2", scale={"R": 2.0}),
     "+ped_Q05": _class_motion("pedestrian", "pedq05", scale={"Q": 0.5}),
     "+ped_Q2": _class_motion("pedestrian", "pedq2", scale={"Q": 2.0}),

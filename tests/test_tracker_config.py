@@ -117,6 +117,30 @@ def test_every_preset_key_has_a_comment(preset):
             ),
             "'motion.velocity_check_updates' must be 0 with 'motion.filter: decoupled_cv'",
         ),
+        (
+            lambda r: r["association"]["first_metric"].__setitem__("motorcycle", "ro_gdiou_bev"),
+            "'association.first_metric' must be ro_gdiou_bev for every class or for none .*got it for motorcycle only",
+        ),
+        (
+            lambda r: r["association"].__setitem__("first_metric", dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev")),
+            "'association.two_stage' must be false with 'association.first_metric: ro_gdiou_bev'",
+        ),
+        (
+            lambda r: r["association"].update(
+                first_metric=dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev"),
+                two_stage=False,
+                distance_gate={**dict.fromkeys(TRACKING_CLASSES, 0.0), "trailer": 5.0},
+            ),
+            "'association.distance_gate' must be 0 for every class with 'association.first_metric: ro_gdiou_bev'",
+        ),
+        (
+            lambda r: r["association"].__setitem__("track_pose", dict.fromkeys(TRACKING_CLASSES, "last_update")),
+            "'association.track_pose' is read only with 'association.first_metric: ro_gdiou_bev'",
+        ),
+        (
+            lambda r: r["association"].__setitem__("geometry_precision", "float32"),
+            "'association.geometry_precision' is read only with 'association.first_metric: ro_gdiou_bev'",
+        ),
     ],
 )
 def test_bad_preset_keys(mutate, message):

@@ -137,6 +137,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
             f"{source}: 'motion.velocity_check_updates' must be 0 with 'motion.filter: decoupled_cv' (the velocity "
             f"check runs in the joint EKF and the GRU-KF; MCTrack's decoupled filters always take the velocity)"
         )
+    _check_ro_gdiou(v, given, source)
     if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
         raise ConfigError(
             f"{source}: 'association.two_stage' must be false with 'association.algorithm' greedy "
@@ -197,6 +198,47 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         velocity_check_difference=v["motion.velocity_check_difference"],
         velocity_check_ratio=v["motion.velocity_check_ratio"],
     )
+
+
+#: keys only MCTrack's Ro_GDIoU association reads (grutrack/tracking/ro_gdiou.py)
+RO_GDIOU_KEYS = (
+    "association.ro_gdiou_weights",
+    "association.track_pose",
+    "association.track_pose_blend",
+    "association.track_pose_rule",
+    "association.geometry_precision",
+)
+
+
+def _check_ro_gdiou(v: dict, given: dict, source: str) -> None:
+    """MCTrack's association (``first_metric: ro_gdiou_bev``) is one Hungarian stage that scores every class with
+    Ro_GDIoU: refuse a preset that names it for some classes only, asks it for two stages, a centre gate or greedy
+    matching, or sets a key only it reads without it (each would be silently ignored)."""
+    ro = [c for c, m in zip(TRACKING_CLASSES, v["association.first_metric"]) if m == "ro_gdiou_bev"]
+    if not ro:
+        for key in RO_GDIOU_KEYS:
+            if key in given:
+                raise ConfigError(
+                    f"{source}: '{key}' is read only with 'association.first_metric: ro_gdiou_bev' for every class "
+                    f"(MCTrack's association); remove it"
+                )
+        return
+    if len(ro) < len(TRACKING_CLASSES):
+        raise ConfigError(
+            f"{source}: 'association.first_metric' must be ro_gdiou_bev for every class or for none (MCTrack's "
+            f"association scores all pairs with it in one stage), got it for {', '.join(ro)} only"
+        )
+    refused = {
+        "association.algorithm": (v["association.algorithm"] != "hungarian", "hungarian"),
+        "association.two_stage": (v["association.two_stage"], "false"),
+        "association.distance_gate": (bool(np.any(v["association.distance_gate"] > 0)), "0 for every class"),
+    }
+    for key, (bad, expected) in refused.items():
+        if bad:
+            raise ConfigError(
+                f"{source}: '{key}' must be {expected} with 'association.first_metric: ro_gdiou_bev' (MCTrack's "
+                f"association is one Hungarian stage without a centre gate)"
+            )
 
 
 def _check_model_names(override: dict[str, str], source: str) -> None:
