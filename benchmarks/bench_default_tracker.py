@@ -273,6 +273,9 @@ CANDIDATES = {
     "+nms_order": _nms_order,
     "+ro_gdiou": _ro_gdiou,
     "+first_frames": _first_frames,
+    "+ro_gdiou_own_thr": lambda raw: raw["association"].update(
+        first_metric=dict.fromkeys(CLASSES, "ro_gdiou_bev"), two_stage=False, distance_gate=dict.fromkeys(CLASSES, 0.0)
+    ),
     "+mct_max_age": _lifetimes,
     "+decoupled_cv": _decoupled,
     "+decoupled_cv_ts": _decoupled_ts,
@@ -352,9 +355,7 @@ CANDIDATES = {
         _class_motion("motorcycle", "motocvped", "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
         lambda raw: raw["association"]["first_threshold"].update(motorcycle=1.6),
     ),
-    "+moto_bic_ryaw01": _class_motion("motorcycle", "motobicryaw01", R=[1, 1, 1, 1, 1, 1, 0.1, 2, 2]),
-    "+moto_ctra": _class_motion("motorcycle", "motoctra", "CTRA"),
-    "+moto_thr16": lambda raw: raw["association"]["first_threshold"].update(motorcycle=1.6),
+    "+moto_bic_qyaw01": _class_motion("motorcycle", "motobicqyaw01", Q=[1, 1, 1, 1, 1, 1, 1, 1, 0.1, 0.1]),
     "+ped_R2": _class_motion("pedestrian", "pedr2", scale={"R": 2.0}),
     "+ped_Q05": _class_motion("pedestrian", "pedq05", scale={"Q": 0.5}),
     "+ped_Q2": _class_motion("pedestrian", "pedq2", scale={"Q": 2.0}),

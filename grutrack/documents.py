@@ -653,13 +653,15 @@ class Checkpoint:
         )
 
     def write(self, path: str | Path) -> None:
-        """Write the checkpoint atomically (torch's file format)."""
+        """Write the checkpoint atomically (torch's file format). Saved through a file object, so the archive's
+        inner folder is torch's fixed ``archive`` rather than the temporary file's random name: the same checkpoint
+        gives the same bytes (and SHA-256) wherever and whenever it is written."""
         import torch
 
         from grutrack.io import atomic_path
 
-        with atomic_path(path) as tmp:
-            torch.save(self.to_dict(), tmp)
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:
+            torch.save(self.to_dict(), f)
 
     @classmethod
     def read(cls, path: str | Path, map_location: Any = "cpu") -> Checkpoint:

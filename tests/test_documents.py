@@ -284,6 +284,9 @@ def test_checkpoint_round_trip_through_its_one_writer_and_reader(tmp_path):
     assert back.training.position == state.position and back.training.log == state.log
     assert back.train_config == {"matched_box": "filter"} and back.data_fingerprint == "f"
     assert all(torch.equal(back.weights[k], v) for k, v in gru.state_dict().items())
+    (tmp_path / "elsewhere").mkdir()
+    doc.write(tmp_path / "elsewhere" / "other_name.pt")  # the same checkpoint: the same bytes (provenance SHA-256)
+    assert (tmp_path / "elsewhere" / "other_name.pt").read_bytes() == (tmp_path / "m.pt").read_bytes()
     raw = torch.load(tmp_path / "m.pt", weights_only=False)
     assert raw["selected"] == {"rule": "best_val_amota", "step": 4, "val_amota": 0.7}
     assert raw["train_state"] == {"step": 4, "epoch": 1, "index": 0, "order": None} and raw["log"][0]["step"] == 4

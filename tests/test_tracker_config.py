@@ -110,6 +110,10 @@ def test_every_preset_key_has_a_comment(preset):
             "'motion.velocity_check_difference' must be a positive speed in metres per second",
         ),
         (
+            lambda r: r["motion"].__setitem__("velocity_check_window", -0.1),
+            "'motion.velocity_check_window' must be a number of seconds >= 0",
+        ),
+        (
             lambda r: r["motion"].update(
                 filter="decoupled_cv",
                 position_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["position_noise"],

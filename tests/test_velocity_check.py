@@ -95,6 +95,54 @@ def test_agreeing_velocities_are_filtered_exactly_as_without_the_check(model):
     assert checked.check.disagree[0] < CHECK.updates
 
 
+def _counts(check: VelocityCheck, z: np.ndarray, dts: np.ndarray) -> list[int]:
+    """The disagreement count of one track after each update with detections ``z (F, 9)``, ``dts (F - 1,)`` s apart."""
+    s, counts = check.start(z[:1]), []
+    for frame, dt in zip(z[1:], dts):
+        s, _ = check.observe(s.predicted(dt), np.array([0]), frame[None])
+        counts.append(int(s.disagree[0]))
+    return counts
+
+
+def _bus(speed: float, reported: float, times: np.ndarray, noise: float, seed: int = 0) -> np.ndarray:
+    """(F, 9) detections at ``times`` (s) of a vehicle along x at ``speed`` m/s, centres with ``noise`` m (sigma) of
+    noise, its velocity reported at ``reported`` times the true one."""
+    z = np.zeros((len(times), 9))
+    z[:, :2] = np.random.default_rng(seed).normal(0.0, noise, (len(times), 2))
+    z[:, 0] += speed * times
+    z[:, 7] = reported * speed
+    return z
+
+
+def test_the_window_compares_updates_at_least_that_far_apart():
+    """At 10 Hz with a 0.25 s window, a failed velocity is compared at every third update (0.3 s of displacement)."""
+    t = np.arange(16) * 0.1
+    counts = _counts(VelocityCheck(5, 2.0, 0.5, window=0.25), _bus(8.0, 0.1, t, 0.0), np.diff(t))
+    assert counts == [0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5]
+
+
+def test_the_window_keeps_noisy_centres_at_10_hz_from_failing_a_right_velocity():
+    """A car at 3 m/s whose centres carry 0.2 m of noise, 0.1 s apart, makes a displacement velocity some 2.8 m/s off
+    the true one: compared at every update, a right velocity fails on nearly every draw; over 0.3 s (the preset's
+    window of 0.25 s at 10 Hz) on none."""
+    t = np.arange(40) * 0.1
+    failed_every, failed_window = 0, 0
+    for seed in range(10):
+        z = _bus(3.0, 1.0, t, 0.2, seed)
+        failed_every += max(_counts(VelocityCheck(5, 2.0, 0.5), z, np.diff(t))) == 5
+        failed_window += max(_counts(VelocityCheck(5, 2.0, 0.5, window=0.25), z, np.diff(t))) == 5
+    assert failed_every >= 8 and failed_window == 0
+
+
+def test_the_window_changes_nothing_at_nuscenes_keyframe_intervals():
+    rng = np.random.default_rng(1)
+    dts = rng.uniform(0.40, 0.60, 30)  # nuScenes keyframes are 0.40-0.60 s apart
+    t = np.concatenate([[0.0], np.cumsum(dts)])
+    for reported in (0.1, 1.0):
+        z = _bus(8.0, reported, t, 0.3, seed=2)
+        assert _counts(VelocityCheck(5, 2.0, 0.5, window=0.25), z, dts) == _counts(CHECK, z, dts)
+
+
 def test_select_and_concat_carry_the_check_state():
     backend = _backend("CV", CHECK)
     z = np.concatenate([_detections(8.0, 0.1, 7), _detections(3.0, 1.0, 7)], axis=1)
@@ -116,7 +164,7 @@ def test_the_preset_keys_build_the_check():
     assert velocity_check(load_tracker_config("polymot")) is None  # off unless a preset asks for it
     raw, _ = read_config("tracker", preset_path("polymot"))
     raw["motion"].update(velocity_check_updates=3, velocity_check_difference=1.5, velocity_check_ratio=0.25)
-    assert velocity_check(config_from_dict(raw, "test")) == VelocityCheck(3, 1.5, 0.25)
+    assert velocity_check(config_from_dict(raw, "test")) == VelocityCheck(3, 1.5, 0.25, 0.25)
     raw["motion"]["velocity_check_updates"] = -1
     with pytest.raises(ConfigError, match="velocity_check_updates"):
         config_from_dict(raw, "test")

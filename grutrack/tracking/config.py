@@ -104,6 +104,7 @@ class TrackerConfig:
     velocity_check_updates: int = 0
     velocity_check_difference: float = 2.0  # m/s
     velocity_check_ratio: float = 0.5
+    velocity_check_window: float = 0.25  # s
 
 
 def preset_path(name_or_path: str | Path) -> Path:
@@ -197,6 +198,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         velocity_check_updates=v["motion.velocity_check_updates"],
         velocity_check_difference=v["motion.velocity_check_difference"],
         velocity_check_ratio=v["motion.velocity_check_ratio"],
+        velocity_check_window=v["motion.velocity_check_window"],
     )
 
 
@@ -295,7 +297,7 @@ def _convert(val: Any, ref: str) -> Any:
         return {c: str(m).upper() for c, m in val.items()}
     if ref == "time_step":
         return None if val == "timestamps" else float(val)
-    if ref in ("unit", "scale", "gate", "metres", "speed", "cost"):
+    if ref in ("unit", "scale", "gate", "metres", "speed", "seconds", "cost"):
         return float(val)
     if ref in ("posint", "nonnegint"):
         return int(val)

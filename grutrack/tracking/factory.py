@@ -257,7 +257,9 @@ def velocity_check(cfg: TrackerConfig):
         return None
     from grutrack.tracking.velocity_check import VelocityCheck
 
-    return VelocityCheck(cfg.velocity_check_updates, cfg.velocity_check_difference, cfg.velocity_check_ratio)
+    return VelocityCheck(
+        cfg.velocity_check_updates, cfg.velocity_check_difference, cfg.velocity_check_ratio, cfg.velocity_check_window
+    )
 
 
 def with_geometry_filter(backend, cfg: TrackerConfig):

@@ -1,9 +1,12 @@
 """The detector's velocity checked against a track's own motion (tracker preset ``motion.velocity_check_*``).
 
-At an update the displacement velocity ``v_disp = (z_xy - z_xy_prev) / t`` is the track's detected BEV centre minus
-the one of its previous update, over the seconds ``t`` between them; the detected velocity ``v_det`` disagrees with
-it when ``|v_det - v_disp| > max(difference, ratio |v_disp|)`` (m/s). After ``updates`` disagreeing updates in a
-row the track's velocity has failed: from then on, for the rest of its life, its updates take no velocity from the
+At an update at least ``window`` seconds after the track's last compared one, the displacement velocity
+``v_disp = (z_xy - z_xy_prev) / t`` is the track's detected BEV centre minus the one of that update, over the seconds
+``t`` between them; the detected velocity ``v_det`` disagrees with it when ``|v_det - v_disp| > max(difference,
+ratio |v_disp|)`` (m/s). Updates sooner than ``window`` are not compared (they neither count nor reset the count), so
+the test sees a displacement of about the same length at any frame rate: at nuScenes' 2 Hz every update is compared
+(keyframes are 0.40-0.60 s apart), at 10 Hz (AV2's sweeps) every third. After ``updates`` disagreeing comparisons in
+a row the track's velocity has failed: from then on, for the rest of its life, its updates take no velocity from the
 detector. A detector whose velocity head fails on an object fails over its whole life (a moving bus reported
 nearly static in every frame), and a filter that keeps measuring that velocity lags behind the object until the
 association loses it (docs/results/default_tracker.md#velocity-check).
@@ -27,9 +30,9 @@ VELOCITY = slice(7, 9)
 
 @dataclass
 class CheckState:
-    """The check's memory of N tracks: ``last_xy (N, 2)`` the detected BEV centre of each track's last update or
-    birth (metres, global frame), ``elapsed (N,)`` the seconds since it, ``disagree (N,) int64`` its disagreeing
-    updates in a row (frozen once it reaches the check's ``updates``: the velocity has failed)."""
+    """The check's memory of N tracks: ``last_xy (N, 2)`` the detected BEV centre of each track's last compared
+    update or birth (metres, global frame), ``elapsed (N,)`` the seconds since it, ``disagree (N,) int64`` its
+    disagreeing comparisons in a row (frozen once it reaches the check's ``updates``: the velocity has failed)."""
 
     last_xy: np.ndarray
     elapsed: np.ndarray
@@ -57,12 +60,14 @@ class CheckState:
 
 @dataclass(frozen=True)
 class VelocityCheck:
-    """The check's settings: ``updates`` disagreeing updates in a row make a velocity failed; ``difference``
-    (m/s) and ``ratio`` (of ``|v_disp|``) the disagreement test (see the module docstring)."""
+    """The check's settings: ``updates`` disagreeing comparisons in a row make a velocity failed; ``difference``
+    (m/s) and ``ratio`` (of ``|v_disp|``) the disagreement test; ``window`` (s) the least time between two compared
+    updates of a track (see the module docstring)."""
 
     updates: int
     difference: float
     ratio: float
+    window: float = 0.0
 
     def start(self, z: np.ndarray) -> CheckState:
         """The memory of new tracks born from detections ``z (N, 9)``."""
@@ -78,12 +83,15 @@ class VelocityCheck:
 
     def observe(self, s: CheckState, rows: np.ndarray, z: np.ndarray) -> tuple[CheckState, np.ndarray]:
         """Tracks ``rows (K,)`` updated with detections ``z (K, 9)``: the new memory and ``failed (K,) bool``,
-        whose velocity has failed (this update included) and is to be left out of this update."""
-        count = s.disagree[rows]
-        bad = self.disagree_with(z, s.last_xy[rows], s.elapsed[rows])
+        whose velocity has failed (this update included) and is to be left out of this update. Only the rows at
+        least ``window`` seconds after their last compared update are compared (and become the reference)."""
+        count, since = s.disagree[rows], s.elapsed[rows]
+        due = since >= self.window
+        bad = self.disagree_with(z, s.last_xy[rows], since)
         disagree, last_xy, elapsed = s.disagree.copy(), s.last_xy.copy(), s.elapsed.copy()
-        disagree[rows] = np.where(count >= self.updates, count, np.where(bad, count + 1, 0))
-        last_xy[rows], elapsed[rows] = z[:, :2], 0.0
+        disagree[rows] = np.where((count >= self.updates) | ~due, count, np.where(bad, count + 1, 0))
+        last_xy[rows] = np.where(due[:, None], z[:, :2], s.last_xy[rows])
+        elapsed[rows] = np.where(due, 0.0, since)
         return CheckState(last_xy, elapsed, disagree), disagree[rows] >= self.updates
 
 
