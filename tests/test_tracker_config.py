@@ -138,6 +138,16 @@ def test_every_preset_key_has_a_comment(preset):
             "'association.distance_gate' must be 0 for every class with 'association.first_metric: ro_gdiou_bev'",
         ),
         (
+            lambda r: r["association"].update(
+                first_metric=dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev"),
+                two_stage=False,
+                distance_gate=dict.fromkeys(TRACKING_CLASSES, 0.0),
+                algorithm="greedy",
+                max_distance=dict.fromkeys(TRACKING_CLASSES, 2.0),
+            ),
+            "'association.algorithm' must be hungarian with 'association.first_metric: ro_gdiou_bev'",
+        ),
+        (
             lambda r: r["association"].__setitem__("track_pose", dict.fromkeys(TRACKING_CLASSES, "last_update")),
             "'association.track_pose' is read only with 'association.first_metric: ro_gdiou_bev'",
         ),
