@@ -95,6 +95,35 @@ def test_code_version_changes_only_for_the_stages_that_run_the_file(tmp_path, mo
     assert codever.code_version("report").startswith("0.") or codever.code_version("report") == "pinned"
 
 
+def test_code_version_ignores_docstrings_and_comments_but_not_code(tmp_path, monkeypatch):
+    """A corrected docstring or comment re-runs nothing (no re-training for a typo); any change of what runs does,
+    and so does an edit that leaves a file unparsable."""
+    monkeypatch.delenv("GRUTRACK_CODE_VERSION", raising=False)
+    py = '"""Module doc."""\n\n\ndef f(x):\n    """Doc."""\n    return x + 1  # note\n'
+    cfg = "# Preset.\nkey: {a: 1, b: 2}  # why\n"
+    _tree(tmp_path, {"tracking/tracker.py": py, "configs/trackers/p.yaml": cfg})
+
+    def version(files: dict[str, str]) -> str:
+        _tree(tmp_path, files)
+        return codever.code_version("track", tmp_path)
+
+    base = version({})
+    same = {
+        "tracking/tracker.py": '"""Doc 2."""\n\n\ndef f(x):\n    """Other."""\n\n    # comment\n    return x + 1\n',
+        "configs/trackers/p.yaml": "# Changed comment.\nkey:\n  a: 1\n  b: 2\n",
+    }
+    for rel, text in same.items():
+        assert version({rel: text}) == base, rel
+    changed = {
+        "tracking/tracker.py": '"""Doc."""\n\n\ndef f(x):\n    return x + 2\n',
+        "configs/trackers/p.yaml": "key: {a: 1, b: 3}\n",
+    }
+    for rel, text in changed.items():
+        assert version({rel: text}) != base, rel
+        version(same)
+    assert version({"tracking/tracker.py": "def f(x:\n"}) != version({"tracking/tracker.py": "def f(x:\n\n"})
+
+
 def test_default_config_cross_references(cfg, paper):
     spec.check_config(cfg, paper, load_registry())
 
