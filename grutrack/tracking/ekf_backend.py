@@ -8,7 +8,7 @@ import numpy as np
 
 from grutrack.motion.kalman import BatchKalmanFilter, Correction
 from grutrack.motion.models import MotionModel
-from grutrack.tracking.velocity_check import CheckState, VelocityCheck, without_velocity
+from grutrack.tracking.velocity_check import CheckState, VelocityCheck
 
 
 @dataclass
@@ -65,10 +65,8 @@ class KalmanBackend:
         x, P = s.x.copy(), s.P.copy()
         R, R_index, check = self.R, s.labels[rows], None
         if self.velocity_check is not None:
-            z = np.asarray(z, dtype=np.float64).reshape(-1, 9)
-            check, failed = self.velocity_check.observe(s.check, rows, z)
-            if failed.any():
-                z, R, R_index = without_velocity(z, self.model.measurement(x[rows])[0], failed, R, R_index)
+            prior = self.model.measurement
+            z, R, R_index, check = self.velocity_check.apply(s.check, rows, z, lambda: prior(x[rows])[0], R, R_index)
         corrected = self.kf.correct(x, P, rows, z, R, R_index)
         return KFState(x, P, s.labels, corrected, check)
 

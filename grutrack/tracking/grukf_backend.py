@@ -24,7 +24,7 @@ import torch
 
 from grutrack.errors import ConfigError
 from grutrack.motion.grukf import GRUKalmanNet
-from grutrack.tracking.velocity_check import CheckState, VelocityCheck, without_velocity
+from grutrack.tracking.velocity_check import CheckState, VelocityCheck
 
 
 def resolve_device(device: str = "auto", what: str = "--device") -> torch.device:
@@ -267,11 +267,7 @@ class GRUKFBackend:
         R_index = self._classes(s.labels[rows]) if self.kf is not None else None
         if self.velocity_check is None:
             return z, R, R_index, None
-        z = np.asarray(z, dtype=np.float64).reshape(-1, 9)
-        check, failed = self.velocity_check.observe(s.check, rows, z)
-        if failed.any():
-            z, R, R_index = without_velocity(z, self._np(self.ss.h(prior)), failed, R, R_index)
-        return z, R, R_index, check
+        return self.velocity_check.apply(s.check, rows, z, lambda: self._np(self.ss.h(prior)), R, R_index)
 
     def update(self, s: GRUState, rows: np.ndarray, z: np.ndarray) -> GRUState:
         """Correct tracks ``rows`` (K,) with measurements z (K, 9) through the learned gain."""

@@ -94,6 +94,16 @@ class VelocityCheck:
         elapsed[rows] = np.where(due, 0.0, since)
         return CheckState(last_xy, elapsed, disagree), disagree[rows] >= self.updates
 
+    def apply(self, s: CheckState, rows: np.ndarray, z, predicted, R: np.ndarray | None, R_index: np.ndarray | None):
+        """One update of tracks ``rows (K,)`` with detections ``z (K, 9)`` through the check: :meth:`observe`, then
+        :func:`without_velocity` for the failed tracks; ``predicted()`` gives their prior in measurement space
+        (K, 9) (called only when a track failed). -> (z, R, R_index, the new memory)."""
+        z = np.asarray(z, dtype=np.float64).reshape(-1, 9)
+        check, failed = self.observe(s, rows, z)
+        if failed.any():
+            z, R, R_index = without_velocity(z, predicted(), failed, R, R_index)
+        return z, R, R_index, check
+
 
 def without_velocity(
     z: np.ndarray, predicted: np.ndarray, failed: np.ndarray, R: np.ndarray | None, R_index: np.ndarray | None
