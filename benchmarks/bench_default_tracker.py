@@ -362,6 +362,9 @@ CANDIDATES = {
     "+trailer_cv_mct": _class_motion("trailer", "trlcv", "CV", **_cv_mct(0.3, 0.1, 2.0, 2.5)),
     "+trailer_ctra_R2": _class_motion("trailer", "trlctrar2", "CTRA", scale={"R": 2.0}),
     "+trailer_ca_R1": _class_motion("trailer", "trlcar1", R=1.0, Q=1.0, P0=1.0),
+    "+trailer_mct_life": lambda raw: [  # MCTrack's trailer score threshold, NMS, max_age and punish_num together
+        CANDIDATES[n](raw) for n in ("+trailer_score017", "+trailer_nms012", "+trailer_age8", "+trailer_punish1")
+    ],
     "+punish_bus2": _punish({"bus": 2}),
     "+punish_large2": _punish({"bus": 2, "trailer": 2, "truck": 2}),
     "+nms+first_frames": _combine(_nms, _first_frames),
