@@ -13,8 +13,10 @@ and per candidate the sets where it is below that best and by how much.
 Groups: ``reference`` (the four reference sets), ``dev`` / ``dev2`` (SYNTHETIC, seeds 100-101 / 110-111: the sets
 the candidates were compared on while choosing) and ``heldout`` ... ``heldout4`` (SYNTHETIC, seeds 300-302,
 500-502, 700-702, 900-902, mini_val and mini_train, all four profiles: each first looked at once a decision was
-frozen; docs/results/default_tracker.md says which decision each group checked). Candidates: :data:`CANDIDATES`
-(names; ``--candidates`` a comma list).
+frozen; docs/results/default_tracker.md says which decision each group checked); ``variants`` (SYNTHETIC, seeds
+1001-1003, four detector profiles no decision looked at, :data:`PROFILE_VARIANTS`: noisier velocities, three times
+the false positives, noisier poses, a weaker recall). Candidates: :data:`CANDIDATES` (names; ``--candidates`` a comma
+list).
 docs/results/default_tracker.md records the table and the decision.
 """
 
@@ -30,6 +32,7 @@ from pathlib import Path
 
 import yaml
 
+from grutrack.data import detection_sim
 from grutrack.data.detection_sim import simulate_nuscenes
 from grutrack.data.nusc_detections import load_detections
 from grutrack.data.nuscenes import load_scenes, open_nuscenes
@@ -53,13 +56,49 @@ REFERENCE = {
 }
 
 
-def generated(seeds: tuple[int, ...], splits: tuple[str, ...]) -> dict[str, tuple[str, str, int]]:
+def _scaled(**factors):
+    """A profile edit multiplying ``defaults`` keys (and the same keys in every class override) by ``factors``."""
+
+    def edit(prof: dict) -> None:
+        for block in (prof["defaults"], *prof["classes"].values()):
+            for key, f in factors.items():
+                if key in block:
+                    block[key] = block[key] * f
+
+    return edit
+
+
+#: detector profiles no preset decision was measured on (group ``variants``): name -> (shipped profile, edit of it)
+PROFILE_VARIANTS = {
+    "cp_noisyvel": ("centerpoint", _scaled(vel_sigma_mps=2.5, vel_sigma_rel=2.0, vel_tail_prob=2.0)),
+    "cp_highfp": ("centerpoint", _scaled(free_fp_per_frame=3.0, near_fp_rate=3.0, fp_score_logit_mean=0.5)),
+    "cp_noisypose": ("centerpoint", _scaled(yaw_sigma_rad=2.5, yaw_flip_prob=3.0, pos_sigma_m=1.8)),
+    "pp_lowrecall": ("pointpillars", _scaled(recall_max=0.9, score_logit_sigma=1.5)),
+}
+
+
+def profile_arg(profile: str, folder: Path) -> str:
+    """What ``simulate_nuscenes`` takes for ``profile``: a shipped name, or a variant's YAML written to ``folder``."""
+    if profile not in PROFILE_VARIANTS:
+        return profile
+    base, edit = PROFILE_VARIANTS[profile]
+    prof = yaml.safe_load((detection_sim.PROFILE_DIR / f"{base}.yaml").read_text())
+    edit(prof)
+    prof["name"], prof["description"] = profile, f"{base} edited for benchmarks/bench_default_tracker.py (SYNTHETIC)"
+    path = folder / f"profile_{profile}.yaml"
+    path.write_text(yaml.safe_dump(prof, sort_keys=False))
+    return str(path)
+
+
+def generated(
+    seeds: tuple[int, ...], splits: tuple[str, ...], profiles: tuple[str, ...] = PROFILES
+) -> dict[str, tuple[str, str, int]]:
     """name -> (split, profile, seed) of SYNTHETIC sets."""
     return {
         f"{split} {profile} s{seed}": (split, profile, seed)
         for split in splits
         for seed in seeds
-        for profile in PROFILES
+        for profile in profiles
     }
 
 
@@ -73,6 +112,7 @@ GROUPS = {
     "heldout4": ((900, 901, 902), ("mini_val", "mini_train")),
     "trailer": ((110, 111, 300, 301, 302), ("mini_train",)),
     "trailer_pp": ((110, 111, 300, 301, 302, 500, 501, 502, 700, 701, 702), ("mini_train",)),
+    "variants": ((1001, 1002, 1003), ("mini_val", "mini_train"), tuple(PROFILE_VARIANTS)),
 }
 
 
@@ -365,6 +405,10 @@ CANDIDATES = {
     "+trailer_mct_life": lambda raw: [  # MCTrack's trailer score threshold, NMS, max_age and punish_num together
         CANDIDATES[n](raw) for n in ("+trailer_score017", "+trailer_nms012", "+trailer_age8", "+trailer_punish1")
     ],
+    "+mct_score": lambda raw: raw["preprocessing"].update(  # MCTrack's per-class score thresholds
+        score_threshold=_mctrack()["preprocessing"]["score_threshold"]
+    ),
+    "+score_detection": lambda raw: raw["lifecycle"].update(score_update="detection"),
     "+punish_bus2": _punish({"bus": 2}),
     "+punish_large2": _punish({"bus": 2, "trailer": 2, "truck": 2}),
     "+nms+first_frames": _combine(_nms, _first_frames),
@@ -425,7 +469,7 @@ def main(argv=None) -> int:
         for key, (split, profile, seed) in generated(*GROUPS[group]).items():
             path = cache / f"{split}_{profile}_s{seed}.json"
             if not path.is_file():
-                simulate_nuscenes(None, "v1.0-mini", split, profile, seed, out=path, nusc=nusc)
+                simulate_nuscenes(None, "v1.0-mini", split, profile_arg(profile, cache), seed, out=path, nusc=nusc)
             sets[key] = (split, path)
 
     presets = {t: t for t in THREE} | {c: candidate_path(c, args.base) for c in names}
