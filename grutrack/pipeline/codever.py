@@ -6,13 +6,12 @@ not the demo data or the detections. The file lists are deliberately generous (a
 imports from the package, and the shipped configs it reads).
 
 What is hashed is what runs: a Python file's syntax tree without its docstrings and comments, a YAML file's
-parsed data without its comments (:func:`_content`), so a corrected docstring or config comment re-runs nothing.
+parsed data without its comments (:func:`_runs`), so a corrected docstring or config comment re-runs nothing.
 """
 
 from __future__ import annotations
 
 import ast
-import functools
 import hashlib
 import json
 import os
@@ -110,17 +109,24 @@ def _strip_docstrings(tree: ast.AST) -> ast.AST:
     return tree
 
 
+#: SHA-256 of a file's content (suffix and bytes) -> SHA-256 of what of it runs (:func:`_runs`), so a file read by
+#: several stages is parsed once
+_DIGESTS: dict[bytes, bytes] = {}
+
+
 def _content(f: Path) -> bytes:
-    """What of file ``f`` defines behaviour: for .py the dump of its syntax tree without docstrings (comments
-    are not in the tree), for .yaml its data as JSON (comments, quoting and layout dropped); the bytes
-    themselves when the file does not parse (so an edit that breaks it still changes the hash)."""
+    """32-byte digest of what of file ``f`` defines behaviour (:func:`_runs`)."""
     raw = f.read_bytes()
-    return _parsed(f.suffix, raw)
+    key = hashlib.sha256(f.suffix.encode() + b"\0" + raw).digest()
+    if key not in _DIGESTS:
+        _DIGESTS[key] = hashlib.sha256(_runs(f.suffix, raw)).digest()
+    return _DIGESTS[key]
 
 
-@functools.lru_cache(maxsize=1024)
-def _parsed(suffix: str, raw: bytes) -> bytes:
-    """:func:`_content` of a file's bytes ``raw``, once per content (the stages share most of their files)."""
+def _runs(suffix: str, raw: bytes) -> bytes:
+    """What of a file's bytes ``raw`` defines behaviour: for .py the dump of its syntax tree without docstrings
+    (comments are not in the tree), for .yaml its data as JSON (comments, quoting and layout dropped); the bytes
+    themselves when the file does not parse (so an edit that breaks it still changes the hash)."""
     try:
         if suffix == ".py":
             return ast.dump(_strip_docstrings(ast.parse(raw))).encode()
@@ -132,7 +138,7 @@ def _parsed(suffix: str, raw: bytes) -> bytes:
 
 
 def source_hash(paths: tuple[str, ...], root: Path = PACKAGE) -> str:
-    """Short SHA-256 over the (relative path, :func:`_content`) of every file under ``paths``."""
+    """Short SHA-256 over the (relative path, :func:`_content` digest) of every file under ``paths``."""
     h = hashlib.sha256()
     files = sorted({f for rel in (*_COMMON, *paths) for f in _files(rel, root)})
     for f in files:
