@@ -268,6 +268,17 @@ def _class_motion(cls: str, name: str, model: str | None = None, scale: dict | N
     return change
 
 
+def _moving_motion(cls: str, name: str, speed: float, model: str, **noise):
+    """A second model for one class's tracks born at or above ``speed`` m/s (motion config ``moving``)."""
+
+    def change(raw):
+        base = yaml.safe_load(Path(_motion_file(raw["motion"]["config"])).read_text())
+        base["classes"][cls]["moving"] = {"speed": speed, "model": model, **noise}
+        raw["motion"]["config"] = _write_motion(base, name)
+
+    return change
+
+
 #: MCTrack-like CV noise for one class (its position / velocity R, Q of the decoupled filter) on the CV state
 #: (x, y, z, w, l, h, vx, vy, yaw); measurement order (x, y, z, w, l, h, yaw, vx, vy)
 def _cv_mct(q_xy, q_v, r_xy, r_v):
@@ -395,6 +406,8 @@ CANDIDATES = {
         _class_motion("motorcycle", "motocvped", "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
         lambda raw: raw["association"]["first_threshold"].update(motorcycle=1.6),
     ),
+    "+moto_moving_cv": _moving_motion("motorcycle", "motomovcv", 2.0, "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
+    "+moto_moving_cv1": _moving_motion("motorcycle", "motomovcv1", 1.0, "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
     "+moto_bic_qyaw01": _class_motion("motorcycle", "motobicqyaw01", Q=[1, 1, 1, 1, 1, 1, 1, 1, 0.1, 0.1]),
     "+ped_R2": _class_motion("pedestrian", "pedr2", scale={"R": 2.0}),
     "+ped_Q05": _class_motion("pedestrian", "pedq05", scale={"Q": 0.5}),

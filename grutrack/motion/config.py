@@ -125,7 +125,9 @@ def load_motion_config(path: str | Path | None = None, model_override=None) -> d
 
     Returns:
         ``{class_name: {"model": str, "Q": (d, d), "R": (9, 9), "P0": (d, d), "params": dict}}`` for the 7
-        tracking classes, d the state dimension of the class's model, float64 arrays.
+        tracking classes, d the state dimension of the class's model, float64 arrays; a class with a ``moving``
+        block (and no override) also has ``"moving": {"model", "Q", "R", "P0", "params", "speed" (m/s)}``, the
+        model of its tracks born at or above that detected speed (:func:`_moving`).
 
     Raises:
         ConfigError: unreadable file, missing / unknown key, unknown model or class, wrong matrix size,
@@ -152,7 +154,25 @@ def load_motion_config(path: str | Path | None = None, model_override=None) -> d
         if model != own:
             noise = {k: defaults[model][k].copy() for k in ("Q", "R", "P0")}
         out[cls] = {"model": model, **noise, "params": dict(defaults[model]["params"])}
+        if node.get("moving") is not None and cls not in override:  # an override sets the class's one model
+            out[cls]["moving"] = _moving(path, f"{where}.moving", node["moving"], own, defaults)
     return out
+
+
+def _moving(path: Path, where: str, node: Mapping, own: str, defaults: dict) -> dict:
+    """A class's model for the tracks born moving (``classes.<class>.moving``): ``{"model", "Q", "R", "P0",
+    "params", "speed"}``, speed in m/s (a track is born in it when its first detection's speed is at least this)."""
+    model = _canonical_model(path, f"{where}.model", node["model"])
+    if model == own:
+        raise _fail(path, f"{where}.model", f"is the class's own model {own}; a moving model must differ from it")
+    if model not in defaults:
+        raise _fail(path, f"{where}.model", f"no defaults for motion model {model} under 'models' (its params)")
+    return {
+        "model": model,
+        **_noise(path, where, node, model),
+        "params": dict(defaults[model]["params"]),
+        "speed": float(node["speed"]),
+    }
 
 
 def build_models(config: Mapping[str, dict]) -> dict[str, MotionModel]:

@@ -218,7 +218,9 @@ def ekf_groups(
     ``index`` (n_labels,) maps dataset labels to tracking classes (identity for nuScenes). Labels of other
     groups keep zero rows in a group's tables; they are never indexed there. ``backend_cls``: a
     ``KalmanBackend`` subclass to use instead (AB3DMOT's velocity-free start), default ``KalmanBackend``.
-    ``only`` (n_labels,) bool: groups for these labels alone (default: every label).
+    ``only`` (n_labels,) bool: groups for these labels alone (default: every label). A class with a ``moving``
+    model in the motion config has rows in that model's group too, which takes its tracks born at or above the
+    model's speed (``TrackGroup.moving_speed``).
     """
     index = np.arange(len(TRACKING_CLASSES)) if index is None else index
     from grutrack.motion.config import load_motion_config
@@ -226,27 +228,30 @@ def ekf_groups(
     from grutrack.tracking.ekf_backend import KalmanBackend
 
     motion = load_motion_config(cfg.motion_config, cfg.model_override or None)
+    moves = {c: m["moving"] for c, m in motion.items() if "moving" in m}  # a class's model for its moving tracks
+    keep = np.ones(len(index), dtype=bool) if only is None else np.asarray(only, dtype=bool)
     groups = []
-    for model_name in sorted({m["model"] for m in motion.values()}):
-        members = np.array([motion[TRACKING_CLASSES[i]]["model"] == model_name for i in index])
-        if only is not None:
-            members &= np.asarray(only, dtype=bool)
-        if not members.any():
+    for model_name in sorted({m["model"] for m in motion.values()} | {m["model"] for m in moves.values()}):
+        entries = [motion[TRACKING_CLASSES[c]] for c in index]
+        members = np.array([e["model"] == model_name for e in entries]) & keep
+        moving = [moves.get(TRACKING_CLASSES[c]) for c in index]
+        moving = [m if m is not None and m["model"] == model_name and keep[i] else None for i, m in enumerate(moving)]
+        if not members.any() and all(m is None for m in moving):
             continue
-        first = motion[TRACKING_CLASSES[index[int(np.argmax(members))]]]
+        rows = [e if members[i] else moving[i] for i, e in enumerate(entries)]  # each label's noise in this group
+        first = next(r for r in rows if r is not None)
         form = {"CTRA": cfg.ctra_form, "Bicycle": cfg.bicycle_form}.get(model_name, "arc")
         model = make_model(model_name, form, **first["params"])
-        tables = {}
-        for key in ("Q", "R", "P0"):
-            d = first[key].shape[0]
-            tables[key] = np.stack(
-                [motion[TRACKING_CLASSES[c]][key] if members[i] else np.zeros((d, d)) for i, c in enumerate(index)]
-            )
+        tables = {
+            key: np.stack([r[key] if r is not None else np.zeros_like(first[key]) for r in rows])
+            for key in ("Q", "R", "P0")
+        }
         backend = (backend_cls or KalmanBackend)(
             model, tables["Q"], tables["R"], tables["P0"], yaw_flip=cfg.yaw_flip, velocity_check=velocity_check(cfg)
         )
         backend = with_geometry_filter(backend, cfg)
-        groups.append(TrackGroup(backend, members))
+        speed = np.array([np.inf if m is None else m["speed"] for m in moving])
+        groups.append(TrackGroup(backend, members, None if np.isinf(speed).all() else speed))
     return groups
 
 

@@ -52,6 +52,9 @@ class TrackGroup:
 
     backend: MotionBackend
     classes: np.ndarray  # (n_labels,) bool: which labels this group takes
+    #: (n_labels,) m/s: this group also takes the tracks of a label born with a detected speed at least this (the
+    #: label's motion-config ``moving`` model); inf for none; None: inf for every label
+    moving_speed: np.ndarray | None = None
     state: Any = None
     ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     labels: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
@@ -159,6 +162,11 @@ class Tracker:
         self.cfg = cfg
         self.groups = groups
         self.group_of_class = np.argmax(np.stack([g.classes for g in groups]), axis=0)
+        speeds = np.stack([np.full(len(owners), np.inf) if g.moving_speed is None else g.moving_speed for g in groups])
+        if np.any(np.isfinite(speeds).sum(axis=0) > 1):
+            raise ValueError("each tracking class may have at most one track group for its moving tracks")
+        #: (n_labels,) the group taking a label's tracks born at or above ``moving_speed`` (n_labels,) m/s
+        self.moving_group, self.moving_speed = np.argmin(speeds, axis=0), np.min(speeds, axis=0)
         self.next_id = 0
         self.last_timestamp: int | None = None
         self.frame_count = 0  # frames of the current scene, this one included
@@ -325,12 +333,15 @@ class Tracker:
         return (hits >= need) | (self.frame_count <= need)
 
     def _births(self, dets: BoxSet, new: np.ndarray, output: bool = True) -> BoxSet:
-        """Start a track for every unmatched detection; returns their boxes as this frame's output (none without
-        ``output``)."""
+        """Start a track for every unmatched detection (in its class's group, or in the group of its class's
+        moving model when its detected speed is at least that model's ``speed``); returns their boxes as this
+        frame's output (none without ``output``)."""
         out = []
         ids = np.arange(self.next_id, self.next_id + len(new), dtype=np.int64)
         self.next_id += len(new)
-        owner = self.group_of_class[dets.labels[new]]
+        labels = dets.labels[new]
+        moving = np.hypot(dets.boxes[new, 7], dets.boxes[new, 8]) >= self.moving_speed[labels]
+        owner = np.where(moving, self.moving_group[labels], self.group_of_class[labels])
         for gi, g in enumerate(self.groups):
             sel = owner == gi
             if sel.any():
