@@ -14,7 +14,7 @@ Groups: ``reference`` (the four reference sets), ``dev`` / ``dev2`` (SYNTHETIC, 
 the candidates were compared on while choosing) and ``heldout`` ... ``heldout4`` (SYNTHETIC, seeds 300-302,
 500-502, 700-702, 900-902, mini_val and mini_train, all four profiles: each first looked at once a decision was
 frozen; docs/results/default_tracker.md says which decision each group checked); ``variants`` (SYNTHETIC, seeds
-1001-1003, four detector profiles no decision looked at, :data:`PROFILE_VARIANTS`: noisier velocities, three times
+1001-1003, four detector profiles Decisions 1-3 never saw, :data:`PROFILE_VARIANTS`: noisier velocities, three times
 the false positives, noisier poses, a weaker recall). Candidates: :data:`CANDIDATES` (names; ``--candidates`` a comma
 list).
 docs/results/default_tracker.md records the table and the decision.
@@ -68,7 +68,7 @@ def _scaled(**factors):
     return edit
 
 
-#: detector profiles no preset decision was measured on (group ``variants``): name -> (shipped profile, edit of it)
+#: detector profiles Decisions 1-3 never saw (group ``variants``): name -> (shipped profile, edit of it)
 PROFILE_VARIANTS = {
     "cp_noisyvel": ("centerpoint", _scaled(vel_sigma_mps=2.5, vel_sigma_rel=2.0, vel_tail_prob=2.0)),
     "cp_highfp": ("centerpoint", _scaled(free_fp_per_frame=3.0, near_fp_rate=3.0, fp_score_logit_mean=0.5)),
