@@ -415,9 +415,12 @@ CANDIDATES = {
     "+trailer_cv_mct": _class_motion("trailer", "trlcv", "CV", **_cv_mct(0.3, 0.1, 2.0, 2.5)),
     "+trailer_ctra_R2": _class_motion("trailer", "trlctrar2", "CTRA", scale={"R": 2.0}),
     "+trailer_ca_R1": _class_motion("trailer", "trlcar1", R=1.0, Q=1.0, P0=1.0),
-    "+trailer_mct_life": lambda raw: [  # MCTrack's trailer score threshold, NMS, max_age and punish_num together
-        CANDIDATES[n](raw) for n in ("+trailer_score017", "+trailer_nms012", "+trailer_age8", "+trailer_punish1")
-    ],
+    "+trailer_mct_life": _combine(  # MCTrack's trailer score threshold, NMS, max_age and punish_num together
+        lambda raw: raw["preprocessing"]["score_threshold"].update(trailer=0.17),
+        lambda raw: _nms_class(raw, "trailer", 0.12),
+        _age({"trailer": 8}),
+        _punish({"trailer": 1}),
+    ),
     "+mct_score": lambda raw: raw["preprocessing"].update(  # MCTrack's per-class score thresholds
         score_threshold=_mctrack()["preprocessing"]["score_threshold"]
     ),
