@@ -115,6 +115,37 @@ GROUPS = {
     "variants": ((1001, 1002, 1003), ("mini_val", "mini_train"), tuple(PROFILE_VARIANTS)),
 }
 
+#: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
+#: tracked (split demo_all): group -> (world seeds, edit of the demo's class specs or None). ``worlds``: the demo as
+#: shipped (trailers parked, as in mini); ``towed``: a third of the trailers towed at truck speeds, which mini lacks.
+WORLD_SCENES = 20
+WORLDS = {"worlds": ((1, 2, 3), None), "towed": ((4, 5), "towed")}
+
+
+def _towed(specs: dict) -> dict:
+    """The demo's class specs with trailers also towed (moving like trucks, 7 +- 2 m/s)."""
+    import dataclasses
+
+    trailer = dataclasses.replace(
+        specs["trailer"], static_per_100m=0.5, moving_per_100m=1.5, motion="vehicle", speed=(7.0, 2.0)
+    )
+    return {**specs, "trailer": trailer}
+
+
+def world_root(cache: Path, seed: int, edit: str | None) -> Path:
+    """The dataroot of one SYNTHETIC world under ``cache`` (generated once)."""
+    from grutrack.data import demo
+
+    root = cache / f"world_{edit or 'demo'}_s{seed}"
+    if not (root / "v1.0-demo").is_dir():
+        shipped = demo.CLASS_SPECS
+        demo.CLASS_SPECS = _towed(shipped) if edit == "towed" else shipped
+        try:
+            demo.generate_demo(root, scenes=WORLD_SCENES, seed=seed)
+        finally:
+            demo.CLASS_SPECS = shipped
+    return root
+
 
 def _per_class(value) -> dict:
     return {c: value for c in CLASSES}
@@ -279,6 +310,17 @@ def _moving_motion(cls: str, name: str, speed: float, model: str, **noise):
     return change
 
 
+def _without_moving(cls: str, name: str):
+    """One class's ``moving`` model removed (its tracks all on the class's model)."""
+
+    def change(raw):
+        base = yaml.safe_load(Path(_motion_file(raw["motion"]["config"])).read_text())
+        base["classes"][cls].pop("moving", None)
+        raw["motion"]["config"] = _write_motion(base, name)
+
+    return change
+
+
 #: MCTrack-like CV noise for one class (its position / velocity R, Q of the decoupled filter) on the CV state
 #: (x, y, z, w, l, h, vx, vy, yaw); measurement order (x, y, z, w, l, h, yaw, vx, vy)
 def _cv_mct(q_xy, q_v, r_xy, r_v):
@@ -408,6 +450,27 @@ CANDIDATES = {
     ),
     "+moto_moving_cv": _moving_motion("motorcycle", "motomovcv", 2.0, "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
     "+moto_moving_cv1": _moving_motion("motorcycle", "motomovcv1", 1.0, "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
+    "+trailer_cv_mct_movca": _combine(  # parked trailers smoothed by CV (MCTrack's noise), towed ones Poly-MOT's CA
+        _class_motion("trailer", "trlcvmv", "CV", **_cv_mct(0.3, 0.1, 2.0, 2.5)),
+        _moving_motion("trailer", "trlcvmvca", 2.0, "CA", P0=0.01, Q=100.0, R=0.001),
+    ),
+    # Decision 5 taken back: trailers on Poly-MOT's CA (the box is the detection), bicycles all on Bicycle
+    "-trailer_cv": _combine(
+        _class_motion("trailer", "trlca", "CA", P0=0.01, Q=100.0, R=0.001), _without_moving("trailer", "trlcanomov")
+    ),
+    "-bic_moving": _without_moving("bicycle", "bicnomov"),
+    "ekf_prev5": _combine(
+        _class_motion("trailer", "trlca5", "CA", P0=0.01, Q=100.0, R=0.001),
+        _without_moving("trailer", "trlcanomov5"),
+        _without_moving("bicycle", "bicnomov5"),
+    ),
+    "+bic_moving_cv": _moving_motion("bicycle", "bicmovcv", 2.0, "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
+    "+bic_moving_mct": _moving_motion("bicycle", "bicmovmct", 2.0, "CV", **_cv_mct(0.3, 1.0, 0.1, 1.0)),
+    "+trailer_movca_bic": _combine(
+        _class_motion("trailer", "trlcvmv2", "CV", **_cv_mct(0.3, 0.1, 2.0, 2.5)),
+        _moving_motion("trailer", "trlcvmvca2", 2.0, "CA", P0=0.01, Q=100.0, R=0.001),
+        _moving_motion("bicycle", "bicmovmct2", 2.0, "CV", **_cv_mct(0.3, 1.0, 0.1, 1.0)),
+    ),
     "+moto_bic_qyaw01": _class_motion("motorcycle", "motobicqyaw01", Q=[1, 1, 1, 1, 1, 1, 1, 1, 0.1, 0.1]),
     "+ped_R2": _class_motion("pedestrian", "pedr2", scale={"R": 2.0}),
     "+ped_Q05": _class_motion("pedestrian", "pedq05", scale={"Q": 0.5}),
@@ -444,13 +507,34 @@ def candidate_path(name: str, base: str = "before") -> Path:
     return path
 
 
-def amota(nusc, preset, split: str, det_path: Path, scenes) -> float:
+def amota(nusc, preset, split: str, det_path: Path, scenes, cls: str | None = None) -> float:
+    """AMOTA of one preset on one detection file (of one class if ``cls``; NaN where the split has none)."""
     tokens = [f.token for s in scenes for f in s.frames]
     tracker = build_tracker("ekf", preset)
     dets = load_detections(det_path, tokens, tracker.cfg.measured_yaw)
     run = track_scenes(tracker, scenes, dets)
     sub = build_submission(run.results, tokens, tracker.cfg.max_boxes_per_sample)
-    return fast_tracking_eval(nusc, sub, split)["amota"]
+    summary = fast_tracking_eval(nusc, sub, split)
+    return summary["amota"] if cls is None else float(summary["label_metrics"]["amota"][cls])
+
+
+def _world_sets(group: str, cache: Path, data: dict) -> dict[str, tuple[str, Path]]:
+    """The SYNTHETIC sets of a world group (every profile, detection seed = world seed); adds the worlds to
+    ``data`` (key -> (database, scenes of demo_all))."""
+    seeds, edit = WORLDS[group]
+    out = {}
+    for seed in seeds:
+        root = world_root(cache, seed, edit)
+        where = f"world_{edit or 'demo'}_s{seed}"
+        if where not in data:
+            db = open_nuscenes(root, "v1.0-demo")
+            data[where] = (db, load_scenes(db, "demo_all"))
+        for profile in PROFILES:
+            path = cache / f"{where}_{profile}.json"
+            if not path.is_file():
+                simulate_nuscenes(None, "v1.0-demo", "demo_all", profile, seed, out=path, nusc=data[where][0])
+            out[f"{group} s{seed} {profile}"] = (where, path)
+    return out
 
 
 def main(argv=None) -> int:
@@ -466,6 +550,7 @@ def main(argv=None) -> int:
     )
     ap.add_argument("--cache", type=Path, default=None, help="folder for the simulated detection files (reused)")
     ap.add_argument("--json", type=Path, default=None, help="also write the table as JSON here")
+    ap.add_argument("--class", dest="cls", choices=CLASSES, default=None, help="one class's AMOTA instead of the mean")
     args = ap.parse_args(argv)
     names = [c for c in args.candidates.split(",") if c]
     unknown = [c for c in names if c not in CANDIDATES]
@@ -475,28 +560,35 @@ def main(argv=None) -> int:
     cache = args.cache or _TMP
     cache.mkdir(parents=True, exist_ok=True)
     nusc = open_nuscenes(args.data, "v1.0-mini")
-    scenes = {s: load_scenes(nusc, s) for s in ("mini_val", "mini_train")}
+    data = {s: (nusc, load_scenes(nusc, s)) for s in ("mini_val", "mini_train")}
 
-    sets: dict[str, tuple[str, Path]] = {}
+    sets: dict[str, tuple[str, Path]] = {}  # name -> (key of ``data``, detection file)
     for group in args.groups.split(","):
         if group == "reference":
             sets.update({k: (split, args.data / rel) for k, (split, rel) in REFERENCE.items()})
-            continue
-        for key, (split, profile, seed) in generated(*GROUPS[group]).items():
-            path = cache / f"{split}_{profile}_s{seed}.json"
-            if not path.is_file():
-                simulate_nuscenes(None, "v1.0-mini", split, profile_arg(profile, cache), seed, out=path, nusc=nusc)
-            sets[key] = (split, path)
+        elif group in WORLDS:
+            sets.update(_world_sets(group, cache, data))
+        else:
+            for key, (split, profile, seed) in generated(*GROUPS[group]).items():
+                path = cache / f"{split}_{profile}_s{seed}.json"
+                if not path.is_file():
+                    simulate_nuscenes(None, "v1.0-mini", split, profile_arg(profile, cache), seed, out=path, nusc=nusc)
+                sets[key] = (split, path)
 
     presets = {t: t for t in THREE} | {c: candidate_path(c, args.base) for c in names}
     table: dict[str, dict[str, float]] = {}
     t0 = time.perf_counter()
-    for key, (split, path) in sets.items():
-        table[key] = {p: amota(nusc, cfg, split, path, scenes[split]) for p, cfg in presets.items()}
+    for key, (where, path) in sets.items():
+        db, scenes = data[where]
+        split = "demo_all" if where.startswith("world_") else where
+        table[key] = {p: amota(db, cfg, split, path, scenes, args.cls) for p, cfg in presets.items()}
         print(f"  {key}: done ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
 
+    if args.cls:  # sets without the class (AMOTA NaN) are left out
+        table = {k: row for k, row in table.items() if all(v == v for v in row.values())}
     width = max(len(k) for k in sets) + 1
-    print("AMOTA (fast evaluator = devkit); best3: the best of Poly-MOT, Fast-Poly, MCTrack; * below best3")
+    what = f"{args.cls} AMOTA" if args.cls else "AMOTA"
+    print(f"{what} (fast evaluator = devkit); best3: the best of Poly-MOT, Fast-Poly, MCTrack; * below best3")
     print(f"{'set':<{width}}" + "".join(f"{c:>{max(9, len(c) + 1)}}" for c in THREE + ("best3",) + tuple(names)))
     for key, row in table.items():
         best = max(row[t] for t in THREE)
