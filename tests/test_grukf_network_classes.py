@@ -60,12 +60,25 @@ def test_untrained_ekf_prior_with_network_classes_ss_model_is_the_ekf_preset(sce
     ck = _trainer(scenes, dets, tmp_path / "hyb", network_classes="ss_model", **over).save("model.pt")
     ck_all = _trainer(scenes, dets, tmp_path / "all", **over).save("model.pt")
     hyb = build_tracker("grukf", checkpoint=ck, device="cpu")
-    # the network's group takes the CTRA classes, the preset's Bicycle and CA groups the others
+    # the network's group takes the CTRA classes, the preset's Bicycle, CV and CA groups the others: (classes born
+    # slow, classes born moving) per model, as the motion config's `moving` blocks say
     assert [TRACKING_CLASSES[i] for i in np.flatnonzero(hyb.groups[0].classes)] == list(CTRA_CLASSES)
+
+    def names(mask):
+        return [TRACKING_CLASSES[i] for i in np.flatnonzero(mask)]
+
     rest = {
-        type(g.backend.model).__name__: [TRACKING_CLASSES[i] for i in np.flatnonzero(g.classes)] for g in hyb.groups[1:]
+        type(g.backend.model).__name__: (
+            names(g.classes),
+            names(np.isfinite(g.moving_speed)) if g.moving_speed is not None else [],
+        )
+        for g in hyb.groups[1:]
     }
-    assert rest == {"BicyclePiecewise": ["bicycle", "motorcycle"], "CV": ["pedestrian"], "CA": ["trailer"]}
+    assert rest == {
+        "BicyclePiecewise": (["bicycle", "motorcycle"], []),
+        "CV": (["pedestrian", "trailer"], ["bicycle", "motorcycle"]),
+        "CA": ([], ["trailer"]),
+    }
     assert len(build_tracker("grukf", checkpoint=ck_all, device="cpu").groups) == 1
 
     ekf = _boxes_by_label(track_scenes(build_tracker("ekf"), scenes, dets).results)

@@ -118,7 +118,7 @@ EKF_AMOTA = {
     "mini_val_centerpoint_sim_s7": 0.8732,
     "mini_val_pointpillars_sim_s7": 0.6182,
     "pointpillars_mini_val": 0.2019,
-    "mini_train_centerpoint_sim_s7": 0.8729,
+    "mini_train_centerpoint_sim_s7": 0.8755,
 }
 
 

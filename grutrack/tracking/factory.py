@@ -211,7 +211,11 @@ def remap_config(cfg: TrackerConfig, index: np.ndarray) -> TrackerConfig:
 
 
 def ekf_groups(
-    cfg: TrackerConfig, index: np.ndarray | None = None, backend_cls=None, only: np.ndarray | None = None
+    cfg: TrackerConfig,
+    index: np.ndarray | None = None,
+    backend_cls=None,
+    only: np.ndarray | None = None,
+    hand_off_moving: bool = True,
 ) -> list[TrackGroup]:
     """One track group per state-space model in use, each with per-label (n_labels, d, d) Q, R, P0 tables.
 
@@ -220,7 +224,9 @@ def ekf_groups(
     ``KalmanBackend`` subclass to use instead (AB3DMOT's velocity-free start), default ``KalmanBackend``.
     ``only`` (n_labels,) bool: groups for these labels alone (default: every label). A class with a ``moving``
     model in the motion config has rows in that model's group too, which takes its tracks born at or above the
-    model's speed (``TrackGroup.moving_speed``).
+    model's speed (``TrackGroup.moving_speed``). With ``hand_off_moving`` those rows are built for every label,
+    ``only`` or not, so a GRU-KF network that owns a class hands that class's tracks born moving to the model its
+    motion config names; without it, for ``only``'s labels alone (while training, the network keeps them all).
     """
     index = np.arange(len(TRACKING_CLASSES)) if index is None else index
     from grutrack.motion.config import load_motion_config
@@ -235,7 +241,10 @@ def ekf_groups(
         entries = [motion[TRACKING_CLASSES[c]] for c in index]
         members = np.array([e["model"] == model_name for e in entries]) & keep
         moving = [moves.get(TRACKING_CLASSES[c]) for c in index]
-        moving = [m if m is not None and m["model"] == model_name and keep[i] else None for i, m in enumerate(moving)]
+        moving = [
+            m if m is not None and m["model"] == model_name and (hand_off_moving or keep[i]) else None
+            for i, m in enumerate(moving)
+        ]
         if not members.any() and all(m is None for m in moving):
             continue
         rows = [e if members[i] else moving[i] for i, e in enumerate(entries)]  # each label's noise in this group

@@ -105,5 +105,6 @@ def track_groups(backends: list, arch: GRUKFConfig, tracker_cfg: TrackerConfig, 
     with ``network_classes: all``)."""
     models = network_models(arch, tracker_cfg, index)
     members = network_members(arch, tracker_cfg, index)
-    rest = ekf_groups(tracker_cfg, index, only=~members) if not members.all() else []
+    # the network's classes keep every track while training, those born moving too (training material)
+    rest = ekf_groups(tracker_cfg, index, only=~members, hand_off_moving=False) if not members.all() else []
     return [*(TrackGroup(b, m) for b, (_, m) in zip(backends, models)), *rest]
