@@ -15,8 +15,10 @@ the candidates were compared on while choosing) and ``heldout`` ... ``heldout4``
 500-502, 700-702, 900-902, mini_val and mini_train, all four profiles: each first looked at once a decision was
 frozen; docs/results/default_tracker.md says which decision each group checked); ``variants`` (SYNTHETIC, seeds
 1001-1003, four detector profiles Decisions 1-3 never saw, :data:`PROFILE_VARIANTS`: noisier velocities, three times
-the false positives, noisier poses, a weaker recall). Candidates: :data:`CANDIDATES` (names; ``--candidates`` a comma
-list).
+the false positives, noisier poses, a weaker recall); ``worlds`` and ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds
+of 20 scenes, every scene tracked, the four profiles; ``towed`` with a third of the trailers towed). Candidates:
+:data:`CANDIDATES` (names; ``--candidates`` a comma list). ``--class NAME`` prints one class's AMOTA instead (sets
+without that class left out).
 docs/results/default_tracker.md records the table and the decision.
 """
 
@@ -459,6 +461,7 @@ CANDIDATES = {
         _class_motion("trailer", "trlca", "CA", P0=0.01, Q=100.0, R=0.001), _without_moving("trailer", "trlcanomov")
     ),
     "-bic_moving": _without_moving("bicycle", "bicnomov"),
+    "-trailer_towed_ca": _without_moving("trailer", "trlcvall"),  # every trailer on CV, towed ones too
     "ekf_prev5": _combine(
         _class_motion("trailer", "trlca5", "CA", P0=0.01, Q=100.0, R=0.001),
         _without_moving("trailer", "trlcanomov5"),
