@@ -16,7 +16,8 @@ the candidates were compared on while choosing) and ``heldout`` ... ``heldout4``
 frozen; docs/results/default_tracker.md says which decision each group checked); ``variants`` (SYNTHETIC, seeds
 1001-1003, four detector profiles Decisions 1-3 never saw, :data:`PROFILE_VARIANTS`: noisier velocities, three times
 the false positives, noisier poses, a weaker recall); ``worlds`` and ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds
-of 20 scenes, every scene tracked, the four profiles; ``towed`` with a third of the trailers towed). Candidates:
+of 20 scenes, every scene tracked, the four profiles; ``towed`` with a third of the trailers towed;
+``worlds_variants`` with the variant profiles). Candidates:
 :data:`CANDIDATES` (names; ``--candidates`` a comma list). ``--class NAME`` prints one class's AMOTA instead (sets
 without that class left out).
 docs/results/default_tracker.md records the table and the decision.
@@ -118,10 +119,15 @@ GROUPS = {
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
-#: tracked (split demo_all): group -> (world seeds, edit of the demo's class specs or None). ``worlds``: the demo as
-#: shipped (trailers parked, as in mini); ``towed``: a third of the trailers towed at truck speeds, which mini lacks.
+#: tracked (split demo_all): group -> (world seeds, edit of the demo's class specs or None, detector profiles).
+#: ``worlds``: the demo as shipped (trailers parked, as in mini); ``towed``: a third of the trailers towed at truck
+#: speeds, which mini lacks; ``worlds_variants``: the ``worlds`` with the profiles of :data:`PROFILE_VARIANTS`.
 WORLD_SCENES = 20
-WORLDS = {"worlds": ((1, 2, 3), None), "towed": ((4, 5), "towed")}
+WORLDS = {
+    "worlds": ((1, 2, 3), None, PROFILES),
+    "towed": ((4, 5), "towed", PROFILES),
+    "worlds_variants": ((1, 2, 3), None, tuple(PROFILE_VARIANTS)),
+}
 
 
 def _towed(specs: dict) -> dict:
@@ -467,6 +473,12 @@ CANDIDATES = {
         _without_moving("trailer", "trlcanomov5"),
         _without_moving("bicycle", "bicnomov5"),
     ),
+    # CTRA vehicles' position measured with more noise (R x, y, z), i.e. smoothed over their detections
+    "+truck_rpos2": _class_motion("truck", "trkrpos2", R=[2, 2, 2, 1, 1, 1, 1, 2, 2]),
+    "+truck_rpos4": _class_motion("truck", "trkrpos4", R=[4, 4, 4, 1, 1, 1, 1, 2, 2]),
+    "+vehicle_rpos2": _combine(
+        *(_class_motion(c, f"{c}rpos2v", R=[2, 2, 2, 1, 1, 1, 1, 2, 2]) for c in ("bus", "car", "truck"))
+    ),
     "+bic_moving_cv": _moving_motion("bicycle", "bicmovcv", 2.0, "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
     "+bic_moving_mct": _moving_motion("bicycle", "bicmovmct", 2.0, "CV", **_cv_mct(0.3, 1.0, 0.1, 1.0)),
     "+trailer_movca_bic": _combine(
@@ -522,9 +534,9 @@ def amota(nusc, preset, split: str, det_path: Path, scenes, cls: str | None = No
 
 
 def _world_sets(group: str, cache: Path, data: dict) -> dict[str, tuple[str, Path]]:
-    """The SYNTHETIC sets of a world group (every profile, detection seed = world seed); adds the worlds to
+    """The SYNTHETIC sets of a world group (each of its profiles, detection seed = world seed); adds the worlds to
     ``data`` (key -> (database, scenes of demo_all))."""
-    seeds, edit = WORLDS[group]
+    seeds, edit, profiles = WORLDS[group]
     out = {}
     for seed in seeds:
         root = world_root(cache, seed, edit)
@@ -532,10 +544,11 @@ def _world_sets(group: str, cache: Path, data: dict) -> dict[str, tuple[str, Pat
         if where not in data:
             db = open_nuscenes(root, "v1.0-demo")
             data[where] = (db, load_scenes(db, "demo_all"))
-        for profile in PROFILES:
+        for profile in profiles:
             path = cache / f"{where}_{profile}.json"
             if not path.is_file():
-                simulate_nuscenes(None, "v1.0-demo", "demo_all", profile, seed, out=path, nusc=data[where][0])
+                prof = profile_arg(profile, cache)
+                simulate_nuscenes(None, "v1.0-demo", "demo_all", prof, seed, out=path, nusc=data[where][0])
             out[f"{group} s{seed} {profile}"] = (where, path)
     return out
 
