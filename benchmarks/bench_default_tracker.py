@@ -510,8 +510,9 @@ CANDIDATES = {
 }
 
 
-def candidate_path(name: str, base: str = "before") -> Path:
-    """The candidate's preset file; ``base``: ``before`` (the preset before the punish_num decision) or ``now``."""
+def candidate_path(name: str, base: str = "now") -> Path:
+    """The candidate's preset file; ``base``: ``now`` (the preset) or ``before`` (the preset before the punish_num
+    decision, Decision 1's baseline)."""
     raw = yaml.safe_load(preset_path("ekf").read_text())
     raw = copy.deepcopy(raw)
     if name == "ekf_before" or (name != "ekf" and base == "before"):
@@ -561,8 +562,9 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--base",
         choices=("before", "now"),
-        default="before",
-        help="what a +candidate changes: the preset before the punish_num decision (before) or the preset now (now)",
+        default="now",
+        help="what a +candidate changes: the preset now (now) or the preset before the punish_num decision (before, "
+        "Decision 1's baseline)",
     )
     ap.add_argument("--cache", type=Path, default=None, help="folder for the simulated detection files (reused)")
     ap.add_argument("--json", type=Path, default=None, help="also write the table as JSON here")
