@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import json
 import sys
 import tempfile
@@ -132,8 +133,6 @@ WORLDS = {
 
 def _towed(specs: dict) -> dict:
     """The demo's class specs with trailers also towed (moving like trucks, 7 +- 2 m/s)."""
-    import dataclasses
-
     trailer = dataclasses.replace(
         specs["trailer"], static_per_100m=0.5, moving_per_100m=1.5, motion="vehicle", speed=(7.0, 2.0)
     )
@@ -363,6 +362,12 @@ def _combine(*changes):
     return change
 
 
+#: Decision 5's trailers taken back: Poly-MOT's CA for every trailer
+_TRAILER_CA = _combine(
+    _class_motion("trailer", "trlca", "CA", P0=0.01, Q=100.0, R=0.001), _without_moving("trailer", "trlcanomov")
+)
+
+
 #: the preset before this decision (punish_num 1 for bus, trailer, truck); every candidate but ``ekf`` (the preset as
 #: it is) starts from it, so ``+punish_large2`` is the preset now
 BEFORE = {"bus": 1, "trailer": 1, "truck": 1}
@@ -458,21 +463,11 @@ CANDIDATES = {
     ),
     "+moto_moving_cv": _moving_motion("motorcycle", "motomovcv", 2.0, "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
     "+moto_moving_cv1": _moving_motion("motorcycle", "motomovcv1", 1.0, "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
-    "+trailer_cv_mct_movca": _combine(  # parked trailers smoothed by CV (MCTrack's noise), towed ones Poly-MOT's CA
-        _class_motion("trailer", "trlcvmv", "CV", **_cv_mct(0.3, 0.1, 2.0, 2.5)),
-        _moving_motion("trailer", "trlcvmvca", 2.0, "CA", P0=0.01, Q=100.0, R=0.001),
-    ),
     # Decision 5 taken back: trailers on Poly-MOT's CA (the box is the detection), bicycles all on Bicycle
-    "-trailer_cv": _combine(
-        _class_motion("trailer", "trlca", "CA", P0=0.01, Q=100.0, R=0.001), _without_moving("trailer", "trlcanomov")
-    ),
+    "-trailer_cv": _TRAILER_CA,
     "-bic_moving": _without_moving("bicycle", "bicnomov"),
     "-trailer_towed_ca": _without_moving("trailer", "trlcvall"),  # every trailer on CV, towed ones too
-    "ekf_prev5": _combine(
-        _class_motion("trailer", "trlca5", "CA", P0=0.01, Q=100.0, R=0.001),
-        _without_moving("trailer", "trlcanomov5"),
-        _without_moving("bicycle", "bicnomov5"),
-    ),
+    "ekf_prev5": _combine(_TRAILER_CA, _without_moving("bicycle", "bicnomov5")),
     # CTRA vehicles' position measured with more noise (R x, y, z), i.e. smoothed over their detections
     "+truck_rpos2": _class_motion("truck", "trkrpos2", R=[2, 2, 2, 1, 1, 1, 1, 2, 2]),
     "+truck_rpos4": _class_motion("truck", "trkrpos4", R=[4, 4, 4, 1, 1, 1, 1, 2, 2]),
@@ -481,11 +476,6 @@ CANDIDATES = {
     ),
     "+bic_moving_cv": _moving_motion("bicycle", "bicmovcv", 2.0, "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
     "+bic_moving_mct": _moving_motion("bicycle", "bicmovmct", 2.0, "CV", **_cv_mct(0.3, 1.0, 0.1, 1.0)),
-    "+trailer_movca_bic": _combine(
-        _class_motion("trailer", "trlcvmv2", "CV", **_cv_mct(0.3, 0.1, 2.0, 2.5)),
-        _moving_motion("trailer", "trlcvmvca2", 2.0, "CA", P0=0.01, Q=100.0, R=0.001),
-        _moving_motion("bicycle", "bicmovmct2", 2.0, "CV", **_cv_mct(0.3, 1.0, 0.1, 1.0)),
-    ),
     "+moto_bic_qyaw01": _class_motion("motorcycle", "motobicqyaw01", Q=[1, 1, 1, 1, 1, 1, 1, 1, 0.1, 0.1]),
     "+ped_R2": _class_motion("pedestrian", "pedr2", scale={"R": 2.0}),
     "+ped_Q05": _class_motion("pedestrian", "pedq05", scale={"Q": 0.5}),
