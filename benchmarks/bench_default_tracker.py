@@ -354,6 +354,13 @@ def _age(values: dict):
     return change
 
 
+def _young(discount: float):
+    def change(raw):
+        raw["lifecycle"]["young_track_discount"] = discount
+
+    return change
+
+
 def _combine(*changes):
     def change(raw):
         for c in changes:
@@ -497,6 +504,9 @@ CANDIDATES = {
     "+punish_large2": _punish({"bus": 2, "trailer": 2, "truck": 2}),
     "+nms+first_frames": _combine(_nms, _first_frames),
     "+nms+ro_gdiou+first_frames": _combine(_nms, _ro_gdiou, _first_frames),
+    # a young track's box written at a lower score: s (1 - d^hits)
+    **{f"+young{d}": _young(d) for d in (0.3, 0.4, 0.5, 0.6)},
+    "+young0.4+score_detection": _combine(_young(0.4), lambda raw: raw["lifecycle"].update(score_update="detection")),
 }
 
 

@@ -102,6 +102,10 @@ def test_every_preset_key_has_a_comment(preset):
             "'lifecycle.punish_num.car' must be an integer",
         ),
         (
+            lambda r: r["lifecycle"].__setitem__("young_track_discount", 1.0),
+            r"'lifecycle.young_track_discount' must be a number in \[0, 1\), got 1.0",
+        ),
+        (
             lambda r: r["motion"].__setitem__("velocity_check_updates", -1),
             "'motion.velocity_check_updates' must be an integer >= 0",
         ),

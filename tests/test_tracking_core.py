@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import yaml
 from support.association_bounds import similarity_upper_bound
 
 from grutrack import geometry
 from grutrack.classes import CLASS_INDEX
 from grutrack.data.scene import BoxSet, Frame, Scene
 from grutrack.tracking.association import associate
-from grutrack.tracking.config import load_tracker_config
+from grutrack.tracking.config import PRESET_DIR, load_tracker_config
 from grutrack.tracking.factory import build_tracker
 from grutrack.tracking.preprocess import nms_keep, score_filter
 from grutrack.tracking.tracker import track_scenes
@@ -129,9 +130,33 @@ def test_lifecycle_ids_punish_decay_and_death():
     s = 0.9  # born with the detection's score; matched: 1 - (1 - s_det)(1 - 0.52 s)
     for _ in range(5):
         s = 1 - (1 - 0.9) * (1 - 0.52 * s)
-    assert np.allclose([o.scores[0] for o in out[5:7]], [s, s * 0.52])  # car decay rate 0.52, multiply update
+    young = 1 - tracker.cfg.young_track_discount**6  # written at s (1 - d^hits), 6 hits
+    assert np.allclose([o.scores[0] for o in out[5:7]], [s * young, s * 0.52 * young])  # car decay 0.52, multiply
     assert out[6].boxes[0, 0] == pytest.approx(30.0, abs=1.0)  # predicted ahead at ~10 m/s
     assert len(tracker.groups[[g.classes[CAR] for g in tracker.groups].index(True)]) == 0  # died (max_age 15)
+
+
+def test_young_track_discount_scales_written_scores_only(tmp_path):
+    # car 0 detected in every frame, car 1 missed in frame 2, car 2 a single false detection in frame 1
+    det = [[_box(5.0 * i, 0, vx=10.0)] for i in range(5)]
+    for i in (0, 1, 3, 4):
+        det[i].append(_box(5.0 * i, 10, vx=10.0))
+    det[1].append(_box(0, 40))
+    scene, dets = _scene(det)
+    raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
+    runs = {}
+    for d in (0.0, 0.4):
+        raw["lifecycle"]["young_track_discount"] = d
+        (tmp_path / f"{d}.yaml").write_text(yaml.safe_dump(raw))
+        runs[d] = track_scenes(build_tracker("ekf", tmp_path / f"{d}.yaml"), [scene], dets)
+    # matched frames since birth of each written track, per frame (a missed track keeps its count)
+    hits = [{0: 1, 1: 1}, {0: 2, 1: 2, 2: 1}, {0: 3, 1: 2, 2: 1}, {0: 4, 1: 3}, {0: 5, 1: 4}]
+    for f, h in zip(scene.frames, hits):
+        a, b = runs[0.0].results[f.token], runs[0.4].results[f.token]
+        assert sorted(a.ids.tolist()) == sorted(h)
+        assert np.array_equal(a.ids, b.ids) and np.array_equal(a.boxes, b.boxes)  # tracks and boxes unchanged
+        want = [a.scores[k] * (1 - 0.4 ** h[int(t)]) for k, t in enumerate(a.ids)]
+        assert np.allclose(b.scores, want)
 
 
 def test_punish_num_per_class():

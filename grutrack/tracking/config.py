@@ -93,6 +93,7 @@ class TrackerConfig:
     track_pose_rule: str = "own_class"
     geometry_precision: str = "float64"
     write_first_frames: int = 0
+    young_track_discount: float = 0.0  # written score = score * (1 - discount ** hits)
     filter: str = "joint"
     position_noise: dict | None = None  # {"P0", "Q", "R"}: (n_labels, 4, 4) diagonal tables
     size_noise: dict | None = None  # {"P0", "Q"}: (n_labels, 4, 4), {"R"}: (n_labels, 2, 2)
@@ -188,6 +189,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         track_pose_rule=v["association.track_pose_rule"],
         geometry_precision=v["association.geometry_precision"],
         write_first_frames=v["lifecycle.write_first_frames"],
+        young_track_discount=v["lifecycle.young_track_discount"],
         filter=v["motion.filter"],
         position_noise=v["motion.position_noise"],
         size_noise=v["motion.size_noise"],

@@ -323,9 +323,17 @@ class Tracker:
                 boxes = g.backend.boxes(g.state)
                 if self.cfg.matched_box == "detection" and len(rows):
                     boxes[rows, :6] = dets.boxes[drows, :6]  # detection centre and size; filter yaw, velocity
-                out.append(BoxSet(boxes[emit], g.scores[emit], g.labels[emit], g.ids[emit]))
+                written = self._written(g.scores[emit], g.hits[emit])
+                out.append(BoxSet(boxes[emit], written, g.labels[emit], g.ids[emit]))
             g.keep(alive)
         return out
+
+    def _written(self, scores: np.ndarray, hits: np.ndarray) -> np.ndarray:
+        """(M,) float64 written scores of tracks with scores (M,) and hits (M,) int64 matched frames since birth:
+        ``s (1 - d^h)``, d the preset's ``young_track_discount`` (0: the scores themselves). With d the chance that
+        one detection is a false alarm, ``1 - d^h`` is the chance that h of them are not all false."""
+        d = self.cfg.young_track_discount
+        return scores if d == 0.0 else scores * (1.0 - d ** hits.astype(np.float64))
 
     def _confirmed(self, hits: np.ndarray, labels: np.ndarray) -> np.ndarray:
         """(N,) bool: tracks with at least min_hits matched frames, or all while the scene is that young."""
@@ -353,7 +361,7 @@ class Tracker:
                 out.append(
                     BoxSet(
                         g.backend.boxes(g.state)[-len(d) :][show],
-                        dets.scores[d][show],
+                        self._written(dets.scores[d][show], np.ones(int(show.sum()), dtype=np.int64)),
                         dets.labels[d][show],
                         ids[sel][show],
                     )
