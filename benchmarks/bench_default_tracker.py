@@ -506,6 +506,10 @@ CANDIDATES = {
     "+nms+ro_gdiou+first_frames": _combine(_nms, _ro_gdiou, _first_frames),
     # a young track's box written at a lower score: s (1 - d^hits)
     **{f"+young{d}": _young(d) for d in (0.3, 0.4, 0.5, 0.6)},
+    # a 5 m centre gate (stage 1) beyond trailers: a far-off detection starts a track instead of pulling one
+    "+bus_gate5": lambda raw: raw["association"]["distance_gate"].update(bus=5.0),
+    "+bus_truck_gate5": lambda raw: raw["association"]["distance_gate"].update(bus=5.0, truck=5.0),
+    "+all_gate5": lambda raw: raw["association"]["distance_gate"].update(dict.fromkeys(CLASSES, 5.0)),
     "+young0.4+score_detection": _combine(_young(0.4), lambda raw: raw["lifecycle"].update(score_update="detection")),
 }
 
