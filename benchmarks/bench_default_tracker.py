@@ -474,7 +474,7 @@ CANDIDATES = {
     "-trailer_cv": _TRAILER_CA,
     "-bic_moving": _without_moving("bicycle", "bicnomov"),
     "-trailer_towed_ca": _without_moving("trailer", "trlcvall"),  # every trailer on CV, towed ones too
-    "ekf_prev5": _combine(_TRAILER_CA, _without_moving("bicycle", "bicnomov5")),
+    "ekf_prev5": _combine(_TRAILER_CA, _without_moving("bicycle", "bicnomov5"), _young(0.0)),
     # CTRA vehicles' position measured with more noise (R x, y, z), i.e. smoothed over their detections
     "+truck_rpos2": _class_motion("truck", "trkrpos2", R=[2, 2, 2, 1, 1, 1, 1, 2, 2]),
     "+truck_rpos4": _class_motion("truck", "trkrpos4", R=[4, 4, 4, 1, 1, 1, 1, 2, 2]),
@@ -504,7 +504,8 @@ CANDIDATES = {
     "+punish_large2": _punish({"bus": 2, "trailer": 2, "truck": 2}),
     "+nms+first_frames": _combine(_nms, _first_frames),
     "+nms+ro_gdiou+first_frames": _combine(_nms, _ro_gdiou, _first_frames),
-    # a young track's box written at a lower score: s (1 - d^hits)
+    # a young track's box written at a lower score: s (1 - d^hits); ekf_prev6 the preset before Decision 6 (off)
+    "ekf_prev6": _young(0.0),
     **{f"+young{d}": _young(d) for d in (0.3, 0.4, 0.5, 0.6)},
     # a 5 m centre gate (stage 1) beyond trailers: a far-off detection starts a track instead of pulling one
     "+bus_gate5": lambda raw: raw["association"]["distance_gate"].update(bus=5.0),
