@@ -6,7 +6,8 @@ the last update (``misses``) reset to 0 and their hit count raised by one. A tra
 ``misses < max_age`` (and, with ``average_score`` termination, while the mean of its per-frame scores since birth
 is at least ``delete_threshold``). A track is written when alive, matched or missed for at most its class's
 ``punish_num`` frames (or at any miss count while the scene is no older than ``write_first_frames`` frames, MCTrack),
-and confirmed: at least ``min_hits`` hits, or the scene no older than ``min_hits`` frames.
+and confirmed: at least ``min_hits`` hits, or the scene no older than ``min_hits`` frames. The score written with
+the box is the track's score, discounted for young tracks by ``young_track_discount`` (``Tracker._written``).
 """
 
 from __future__ import annotations
