@@ -316,15 +316,20 @@ def test_batch_equals_one_track_at_a_time(model):
         np.testing.assert_allclose(Pb[i], Pi[0], rtol=1e-12, atol=1e-12)
 
 
-@pytest.mark.parametrize("model", MODELS, ids=MODEL_IDS)
-def test_update_matches_the_information_form(model):
-    rng = np.random.default_rng(9)
-    n = 12
-    x = random_states(model, n=n, seed=10)
+def random_update(model, n: int, seed: int, noise: float):
+    """An update of n random tracks: x (n, dim_x), a random SPD P per track, diagonal R (n, 9, 9) and z (n, 9)
+    ``noise`` (standard deviation) off h(x)."""
+    rng = np.random.default_rng(seed)
+    x = random_states(model, n=n, seed=seed + 1)
     A = rng.normal(size=(n, model.dim_x, model.dim_x))
     P = A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(model.dim_x)
     R = np.stack([np.diag(rng.uniform(0.05, 2.0, 9)) for _ in range(n)])
-    z = model.h(x) + rng.normal(0, 0.2, (n, 9))
+    return x, P, R, model.h(x) + rng.normal(0, noise, (n, 9))
+
+
+@pytest.mark.parametrize("model", MODELS, ids=MODEL_IDS)
+def test_update_matches_the_information_form(model):
+    x, P, R, z = random_update(model, 12, 9, 0.2)
     kf = BatchKalmanFilter(model)
     xu, Pu = kf.update(x, P, z, R)
     H = model.H(x)
@@ -540,3 +545,33 @@ def test_correct_rows_in_place_equals_update_of_those_rows(yaw_flip):
     rest = np.setdiff1d(np.arange(n), rows)
     np.testing.assert_array_equal(x_c[rest], x[rest])
     np.testing.assert_array_equal(P_c[rest], P[rest])
+
+
+@pytest.mark.parametrize("model", [CTRA(), CV()], ids=["CTRA", "CV"])
+def test_nis_limit_scales_R_of_outlying_detections_only(model):
+    """``nis_limit`` g: a detection whose position NIS d2 = r_xy^T S_xy^-1 r_xy exceeds g is the textbook update
+    with R * d2 / g (computed here by hand); one within g is the plain update, bit for bit; g = 0 is off."""
+    n = 16
+    x, P, R, z = random_update(model, n, 31, 0.1)
+    z[::2, :2] += np.random.default_rng(33).normal(0, 30.0, (n // 2, 2))  # far-off detections, every other track
+    H = model.H(x)
+    S = H[:, :2] @ P @ np.swapaxes(H[:, :2], 1, 2) + R[:, :2, :2]
+    r = z[:, :2] - model.h(x)[:, :2]
+    d2 = np.einsum("ni,nij,nj->n", r, np.linalg.inv(S), r)
+    g = 3.0
+    assert (d2[::2] > g).all() and (d2[1::2] < g).all()
+    plain = BatchKalmanFilter(model)
+    x_r, P_r = BatchKalmanFilter(model, nis_limit=g).update(x, P, z, R)
+    x_p, P_p = plain.update(x, P, z, R)
+    x_w, P_w = plain.update(x, P, z, R * np.maximum(1.0, d2 / g)[:, None, None])
+    np.testing.assert_allclose(x_r, x_w, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(P_r, P_w, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(x_r[1::2], x_p[1::2])
+    # an outlier moves the track less than the plain update, and its NIS under the inflated S is smaller
+    step_r = np.linalg.norm(x_r[::2, :2] - x[::2, :2], axis=1)
+    step_p = np.linalg.norm(x_p[::2, :2] - x[::2, :2], axis=1)
+    assert (step_r < step_p).all()
+    S_in = H[::2, :2] @ P[::2] @ np.swapaxes(H[::2, :2], 1, 2) + (R[::2] * (d2[::2] / g)[:, None, None])[:, :2, :2]
+    assert (np.einsum("ni,nij,nj->n", r[::2], np.linalg.inv(S_in), r[::2]) < d2[::2]).all()
+    off = BatchKalmanFilter(model, nis_limit=0.0).update(x, P, z, R)
+    np.testing.assert_array_equal(off[0], x_p)

@@ -117,6 +117,7 @@ def test_every_preset_key_has_a_comment(preset):
             lambda r: r["motion"].__setitem__("velocity_check_window", -0.1),
             "'motion.velocity_check_window' must be a number of seconds >= 0",
         ),
+        (lambda r: r["motion"].__setitem__("nis_limit", -1.0), "'motion.nis_limit' must be a number >= 0"),
         (
             lambda r: r["motion"].update(
                 filter="decoupled_cv",
@@ -124,6 +125,16 @@ def test_every_preset_key_has_a_comment(preset):
                 size_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["size_noise"],
             ),
             "'motion.velocity_check_updates' must be 0 with 'motion.filter: decoupled_cv'",
+        ),
+        (
+            lambda r: r["motion"].update(
+                filter="decoupled_cv",
+                position_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["position_noise"],
+                size_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["size_noise"],
+                velocity_check_updates=0,
+                nis_limit=2.0,
+            ),
+            "'motion.nis_limit' must be 0 with 'motion.filter: decoupled_cv'",
         ),
         (
             lambda r: r["association"]["first_metric"].__setitem__("motorcycle", "ro_gdiou_bev"),
@@ -224,3 +235,20 @@ def test_presets_carry_only_what_their_algorithm_reads():
         "arc",
         False,
     )
+
+
+def test_nis_limit_reaches_every_kalman_filter_of_the_ekf_and_the_gru_kf(tmp_path):
+    """``motion.nis_limit`` is the robust update of every joint filter the preset builds: the EKF groups and the
+    GRU-KF's EKF gain prior."""
+    from grutrack.tracking.factory import build_tracker
+    from grutrack.training.pretrained import pretrained_dir
+
+    raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
+    raw["motion"]["nis_limit"] = 2.5
+    path = tmp_path / "robust.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    ckpt = pretrained_dir("grukf_default") / "model.pt"
+    for name, kw in (("ekf", {}), ("grukf", {"checkpoint": ckpt, "device": "cpu"})):
+        groups = build_tracker(name, path, **kw).groups
+        filters = [getattr(g.backend, "inner", g.backend).kf for g in groups]
+        assert filters and [f.nis_limit for f in filters] == [2.5] * len(filters), name

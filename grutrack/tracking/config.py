@@ -106,6 +106,7 @@ class TrackerConfig:
     velocity_check_difference: float = 2.0  # m/s
     velocity_check_ratio: float = 0.5
     velocity_check_window: float = 0.25  # s
+    nis_limit: float = 0.0  # robust update: R * max(1, NIS / nis_limit); 0: off (motion/kalman.py)
 
 
 def preset_path(name_or_path: str | Path) -> Path:
@@ -138,6 +139,11 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         raise ConfigError(
             f"{source}: 'motion.velocity_check_updates' must be 0 with 'motion.filter: decoupled_cv' (the velocity "
             f"check runs in the joint EKF and the GRU-KF; MCTrack's decoupled filters always take the velocity)"
+        )
+    if v["motion.nis_limit"] > 0 and v["motion.filter"] == "decoupled_cv":
+        raise ConfigError(
+            f"{source}: 'motion.nis_limit' must be 0 with 'motion.filter: decoupled_cv' (the robust update runs in "
+            f"the joint EKF and the GRU-KF's EKF gain prior, not in MCTrack's decoupled filters)"
         )
     _check_ro_gdiou(v, given, source)
     if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
@@ -201,6 +207,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         velocity_check_difference=v["motion.velocity_check_difference"],
         velocity_check_ratio=v["motion.velocity_check_ratio"],
         velocity_check_window=v["motion.velocity_check_window"],
+        nis_limit=v["motion.nis_limit"],
     )
 
 

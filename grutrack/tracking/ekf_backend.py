@@ -32,6 +32,7 @@ class KalmanBackend:
     Q, R, P0: per-class tables (7, d, d) indexed by label; classes this backend never sees may be zeros.
     velocity_check: the check of the detector's velocity (:mod:`grutrack.tracking.velocity_check`), or None
     (every update takes the detector's velocity with R).
+    nis_limit: the robust update's NIS limit (:class:`~grutrack.motion.kalman.BatchKalmanFilter`; 0: off).
     """
 
     def __init__(
@@ -42,9 +43,10 @@ class KalmanBackend:
         P0: np.ndarray,
         yaw_flip: bool = True,
         velocity_check: VelocityCheck | None = None,
+        nis_limit: float = 0.0,
     ):
         self.model = model
-        self.kf = BatchKalmanFilter(model, yaw_flip=yaw_flip)
+        self.kf = BatchKalmanFilter(model, yaw_flip=yaw_flip, nis_limit=nis_limit)
         self.Q, self.R, self.P0 = Q, R, P0
         self.velocity_check = velocity_check
 

@@ -108,10 +108,11 @@ def grukf_group(
     correct=None,
     ss_model: str | None = None,
     velocity_check=None,
+    nis_limit: float = 0.0,
 ) -> TrackGroup:
     """One track group run by the GRU-Kalman filter ``net`` for the labels ``members`` (n_labels,) bool (default:
     every label); ``class_index`` (n_labels,) int maps a dataset label to the tracking class the network's
-    per-class gain uses (default: identity); ``correct``, ``ss_model``, ``velocity_check``: see
+    per-class gain uses (default: identity); ``correct``, ``ss_model``, ``velocity_check``, ``nis_limit``: see
     :class:`GRUKFBackend`."""
     from grutrack.tracking.grukf_backend import GRUKFBackend
 
@@ -124,6 +125,7 @@ def grukf_group(
         correct=correct,
         ss_model=ss_model,
         velocity_check=velocity_check,
+        nis_limit=nis_limit,
     )
     return TrackGroup(backend, members)
 
@@ -163,7 +165,14 @@ def network_groups(net, cfg: TrackerConfig, index: np.ndarray, device: str = "au
     return [
         *(
             grukf_group(
-                net, len(index), device, class_index=index, members=m, ss_model=name, velocity_check=velocity_check(cfg)
+                net,
+                len(index),
+                device,
+                class_index=index,
+                members=m,
+                ss_model=name,
+                velocity_check=velocity_check(cfg),
+                nis_limit=cfg.nis_limit,
             )
             for name, m in models
         ),
@@ -256,7 +265,13 @@ def ekf_groups(
             for key in ("Q", "R", "P0")
         }
         backend = (backend_cls or KalmanBackend)(
-            model, tables["Q"], tables["R"], tables["P0"], yaw_flip=cfg.yaw_flip, velocity_check=velocity_check(cfg)
+            model,
+            tables["Q"],
+            tables["R"],
+            tables["P0"],
+            yaw_flip=cfg.yaw_flip,
+            velocity_check=velocity_check(cfg),
+            nis_limit=cfg.nis_limit,
         )
         backend = with_geometry_filter(backend, cfg)
         speed = np.array([np.inf if m is None else m["speed"] for m in moving])

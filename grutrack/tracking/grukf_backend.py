@@ -125,7 +125,8 @@ class GRUKFBackend:
     (``network_classes: own_model``: e.g. the Bicycle classes of a CTRA network; same state layout, the weights
     shared). ``velocity_check``: the check of the detector's velocity (:mod:`grutrack.tracking.velocity_check`; a
     track whose velocity failed gets its predicted velocity as the measured one, zero innovation, and the EKF gain
-    prior leaves the velocity out), or None.
+    prior leaves the velocity out), or None. ``nis_limit``: the EKF gain prior's robust update
+    (:class:`~grutrack.motion.kalman.BatchKalmanFilter`; 0: off).
     """
 
     def __init__(
@@ -137,6 +138,7 @@ class GRUKFBackend:
         correct=None,
         ss_model: str | None = None,
         velocity_check: VelocityCheck | None = None,
+        nis_limit: float = 0.0,
     ):
         self.net = net
         self.velocity_check = velocity_check
@@ -159,7 +161,8 @@ class GRUKFBackend:
             name = net.cfg.ss_model if own else ss_model
             params = dict(net.cfg.ss_params if own else net.cfg.model_params.get(ss_model.upper(), {}))
             form = params.pop("form", "arc")  # the torch model's form (:meth:`GRUKFConfig.torch_model`)
-            self.kf = BatchKalmanFilter(make_model(name, form, **params), yaw_flip=net.cfg.yaw_flip)
+            model = make_model(name, form, **params)
+            self.kf = BatchKalmanFilter(model, yaw_flip=net.cfg.yaw_flip, nis_limit=nis_limit)
             self.Q, self.R, self.P0 = (
                 getattr(net, k).detach().cpu().numpy().astype(np.float64) for k in ("ekf_Q", "ekf_R", "ekf_P0")
             )

@@ -212,8 +212,9 @@ def run_scene(
                 correct=None if lockstep is None else lockstep.bind(slot, model.upper()),
                 ss_model=model,
                 velocity_check=velocity_check(tracker_cfg),
+                nis_limit=tracker_cfg.nis_limit,
             ).backend,
-            ekf_backend(cfg, index, model, velocity_check(tracker_cfg)),
+            ekf_backend(cfg, index, model, velocity_check(tracker_cfg), tracker_cfg.nis_limit),
         )
         for model, _ in network_models(arch, tracker_cfg, index)
     ]

@@ -58,19 +58,27 @@ def _model_forms(cfg: TrainConfig) -> dict[str, str]:
     return {m: forms[m] for m in NETWORK_MODELS if m != ss_model(cfg).upper()}
 
 
-def ekf_backend(cfg: TrainConfig, index: np.ndarray, model: str | None = None, velocity_check=None) -> KalmanBackend:
+def ekf_backend(
+    cfg: TrainConfig, index: np.ndarray, model: str | None = None, velocity_check=None, nis_limit: float = 0.0
+) -> KalmanBackend:
     """The parallel EKF: the training SS model (or ``model``, a network group's own, ``network_classes:
     own_model``) for every label, with the motion config's Q, R, P0 of the tracking class each label takes its
     parameters from (``index`` (n_labels,), :func:`~grutrack.tracking.factory.param_index`) under that model, and
-    the tracker preset's velocity check (``velocity_check``, :func:`~grutrack.tracking.factory.velocity_check`)."""
+    the tracker preset's velocity check (``velocity_check``, :func:`~grutrack.tracking.factory.velocity_check`) and
+    robust update (``nis_limit``, ``motion.nis_limit``)."""
     form = "arc" if model is None else _model_forms(cfg).get(model.upper(), "arc")
     index = tuple(int(c) for c in index)
-    return _ekf_backend(cfg.motion_config, model or ss_model(cfg), index, form, velocity_check)
+    return _ekf_backend(cfg.motion_config, model or ss_model(cfg), index, form, velocity_check, nis_limit)
 
 
 @functools.lru_cache(maxsize=16)
 def _ekf_backend(
-    motion_config: str, ss_model: str, index: tuple[int, ...], form: str = "arc", velocity_check=None
+    motion_config: str,
+    ss_model: str,
+    index: tuple[int, ...],
+    form: str = "arc",
+    velocity_check=None,
+    nis_limit: float = 0.0,
 ) -> KalmanBackend:
     """:func:`ekf_backend`, made once per process and settings (run once per training scene; the backend keeps
     no state of its own)."""
@@ -82,7 +90,9 @@ def _ekf_backend(
     first = motion[TRACKING_CLASSES[0]]
     tables = {k: np.stack([motion[TRACKING_CLASSES[c]][k] for c in index]) for k in ("Q", "R", "P0")}
     model = make_model(first["model"], form, **first["params"])
-    return KalmanBackend(model, tables["Q"], tables["R"], tables["P0"], velocity_check=velocity_check)
+    return KalmanBackend(
+        model, tables["Q"], tables["R"], tables["P0"], velocity_check=velocity_check, nis_limit=nis_limit
+    )
 
 
 def ekf_noise(cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
