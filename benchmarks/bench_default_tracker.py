@@ -361,6 +361,13 @@ def _young(discount: float):
     return change
 
 
+def _nis(limit: float):
+    def change(raw):
+        raw["motion"]["nis_limit"] = limit
+
+    return change
+
+
 def _combine(*changes):
     def change(raw):
         for c in changes:
@@ -474,7 +481,7 @@ CANDIDATES = {
     "-trailer_cv": _TRAILER_CA,
     "-bic_moving": _without_moving("bicycle", "bicnomov"),
     "-trailer_towed_ca": _without_moving("trailer", "trlcvall"),  # every trailer on CV, towed ones too
-    "ekf_prev5": _combine(_TRAILER_CA, _without_moving("bicycle", "bicnomov5"), _young(0.0)),
+    "ekf_prev5": _combine(_TRAILER_CA, _without_moving("bicycle", "bicnomov5"), _young(0.0), _nis(0.0)),
     # CTRA vehicles' position measured with more noise (R x, y, z), i.e. smoothed over their detections
     "+truck_rpos2": _class_motion("truck", "trkrpos2", R=[2, 2, 2, 1, 1, 1, 1, 2, 2]),
     "+truck_rpos4": _class_motion("truck", "trkrpos4", R=[4, 4, 4, 1, 1, 1, 1, 2, 2]),
@@ -505,13 +512,17 @@ CANDIDATES = {
     "+nms+first_frames": _combine(_nms, _first_frames),
     "+nms+ro_gdiou+first_frames": _combine(_nms, _ro_gdiou, _first_frames),
     # a young track's box written at a lower score: s (1 - d^hits); ekf_prev6 the preset before Decision 6 (off)
-    "ekf_prev6": _young(0.0),
+    "ekf_prev6": _combine(_young(0.0), _nis(0.0)),
     **{f"+young{d}": _young(d) for d in (0.3, 0.4, 0.5, 0.6)},
     # a 5 m centre gate (stage 1) beyond trailers: a far-off detection starts a track instead of pulling one
     "+bus_gate5": lambda raw: raw["association"]["distance_gate"].update(bus=5.0),
     "+bus_truck_gate5": lambda raw: raw["association"]["distance_gate"].update(bus=5.0, truck=5.0),
     "+all_gate5": lambda raw: raw["association"]["distance_gate"].update(dict.fromkeys(CLASSES, 5.0)),
     "+young0.4+score_detection": _combine(_young(0.4), lambda raw: raw["lifecycle"].update(score_update="detection")),
+    # robust update: a detection's R scaled by NIS / g when its position NIS exceeds g (motion.nis_limit); ekf_prev7
+    # the preset before Decision 7 (off)
+    "ekf_prev7": _nis(0.0),
+    **{f"+nis{g}": _nis(g) for g in (1.5, 2.0, 3.0)},
 }
 
 
