@@ -462,6 +462,7 @@ CANDIDATES = {
     "-trailer_gate": lambda raw: raw["association"]["distance_gate"].update(trailer=0.0),
     "-ped_cv": _class_motion("pedestrian", "pedctra", "CTRA"),  # the preset before the pedestrian decision
     "-velocity_check": lambda raw: raw["motion"].update(velocity_check_updates=0),  # the preset before it
+    "+velocity_check3": lambda raw: raw["motion"].update(velocity_check_updates=3),
     "+velocity_check4": lambda raw: raw["motion"].update(velocity_check_updates=4),
     "+velocity_check5": lambda raw: raw["motion"].update(velocity_check_updates=5),
     "+velocity_check6": lambda raw: raw["motion"].update(velocity_check_updates=6),
