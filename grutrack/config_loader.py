@@ -16,6 +16,7 @@ from functools import cache
 from pathlib import Path
 
 from grutrack.errors import ConfigError
+from grutrack.formats import expectation_of_type
 
 CONFIG_ROOT = Path(__file__).resolve().parent / "configs"
 
@@ -204,16 +205,7 @@ def _expectation(err) -> str:
     if err.validator == "enum":
         return "one of " + ", ".join(str(x) for x in v)
     if err.validator == "type":
-        names = {
-            "object": "a mapping",
-            "array": "a list",
-            "boolean": "true or false",
-            "integer": "an integer",
-            "number": "a finite number",
-            "string": "a string",
-            "null": "null",
-        }
-        return " or ".join(names.get(t, t) for t in (v if isinstance(v, list) else [v]))
+        return expectation_of_type(v, "a mapping")
     bounds = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=", "exclusiveMaximum": "<"}
     if err.validator in bounds:
         return f"a number {bounds[err.validator]} {v}"

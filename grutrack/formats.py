@@ -293,7 +293,7 @@ def require_type(name: str, value: Any, source: str | Path, at: Sequence[str | i
     checker = _validator_class()({})
     if kinds and not any(checker.is_type(value, k) for k in kinds):
         where = f"field '{field_path(name, at)}'" if at else "the document"
-        expected = spec.get("description") or _expectation_of_type(spec["type"])
+        expected = spec.get("description") or expectation_of_type(spec["type"])
         raise InputFormatError(f"{source}: {where} must be {expected}, got {short_repr(value)}")
 
 
@@ -317,9 +317,11 @@ _TYPE_NAMES = {
 }
 
 
-def _expectation_of_type(kind: str | list[str]) -> str:
-    """``a finite number or null`` for ``[number, "null"]``."""
-    return " or ".join(_TYPE_NAMES.get(t, t) for t in ([kind] if isinstance(kind, str) else kind))
+def expectation_of_type(kind: str | list[str], object_word: str = "an object") -> str:
+    """``a finite number or null`` for the JSON-schema type ``[number, "null"]``; an object is ``object_word`` (a
+    config file says "a mapping")."""
+    names = {**_TYPE_NAMES, "object": object_word}
+    return " or ".join(names.get(t, t) for t in ([kind] if isinstance(kind, str) else kind))
 
 
 def message(
@@ -398,7 +400,7 @@ def _expectation(err) -> str:
     if err.validator == "enum":
         return "one of " + ", ".join(str(x) for x in v)
     if err.validator == "type":
-        return _expectation_of_type(v)
+        return expectation_of_type(v)
     bounds = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=", "exclusiveMaximum": "<"}
     if err.validator in bounds:
         return f"a number {bounds[err.validator]} {v}"
