@@ -361,9 +361,9 @@ def _young(discount: float):
     return change
 
 
-def _nis(limit: float):
+def _nis(limit: float):  # the robust update's limit, on every track (nis_min_hits 0)
     def change(raw):
-        raw["motion"]["nis_limit"] = limit
+        raw["motion"].update(nis_limit=limit, nis_min_hits=0)
 
     return change
 
@@ -524,6 +524,8 @@ CANDIDATES = {
     # the preset before Decision 7 (off)
     "ekf_prev7": _nis(0.0),
     **{f"+nis{g}": _nis(g) for g in (1.5, 2.0, 3.0)},
+    # the robust update only for tracks with at least h matched detections before the update (motion.nis_min_hits)
+    **{f"+nis_hits{h}": (lambda h: lambda raw: raw["motion"].update(nis_min_hits=h))(h) for h in (3, 4, 6)},
 }
 
 

@@ -15,6 +15,7 @@ from grutrack.motion import (
     DEFAULT_CONFIG,
     BatchKalmanFilter,
     Bicycle,
+    RobustUpdate,
     arc_moments,
     class_matrices,
     load_motion_config,
@@ -561,7 +562,7 @@ def test_nis_limit_scales_R_of_outlying_detections_only(model):
     g = 3.0
     assert (d2[::2] > g).all() and (d2[1::2] < g).all()
     plain = BatchKalmanFilter(model)
-    x_r, P_r = BatchKalmanFilter(model, nis_limit=g).update(x, P, z, R)
+    x_r, P_r = BatchKalmanFilter(model, robust=RobustUpdate(g)).update(x, P, z, R)
     x_p, P_p = plain.update(x, P, z, R)
     x_w, P_w = plain.update(x, P, z, R * np.maximum(1.0, d2 / g)[:, None, None])
     np.testing.assert_allclose(x_r, x_w, rtol=1e-12, atol=1e-12)
@@ -573,5 +574,13 @@ def test_nis_limit_scales_R_of_outlying_detections_only(model):
     assert (step_r < step_p).all()
     S_in = H[::2, :2] @ P[::2] @ np.swapaxes(H[::2, :2], 1, 2) + (R[::2] * (d2[::2] / g)[:, None, None])[:, :2, :2]
     assert (np.einsum("ni,nij,nj->n", r[::2], np.linalg.inv(S_in), r[::2]) < d2[::2]).all()
-    off = BatchKalmanFilter(model, nis_limit=0.0).update(x, P, z, R)
+    off = BatchKalmanFilter(model, robust=RobustUpdate(0.0)).update(x, P, z, R)
     np.testing.assert_array_equal(off[0], x_p)
+    # min_hits: a track with fewer matched detections before the update (updates + 1) is not tested
+    updates = np.arange(n) % 4  # 0-3 corrections before: 1-4 hits
+    kf = BatchKalmanFilter(model, robust=RobustUpdate(g, min_hits=3))
+    x_h, P_h = x.copy(), P.copy()
+    kf.correct(x_h, P_h, np.arange(n), z, R, np.arange(n), updates)
+    old = updates + 1 >= 3
+    np.testing.assert_allclose(x_h[old], x_w[old], rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(x_h[~old], x_p[~old])

@@ -118,6 +118,7 @@ def test_every_preset_key_has_a_comment(preset):
             "'motion.velocity_check_window' must be a number of seconds >= 0",
         ),
         (lambda r: r["motion"].__setitem__("nis_limit", -1.0), "'motion.nis_limit' must be a number >= 0"),
+        (lambda r: r["motion"].__setitem__("nis_min_hits", 2.5), "'motion.nis_min_hits' must be an integer >= 0"),
         (
             lambda r: r["motion"].update(
                 filter="decoupled_cv",
@@ -238,17 +239,18 @@ def test_presets_carry_only_what_their_algorithm_reads():
 
 
 def test_nis_limit_reaches_every_kalman_filter_of_the_ekf_and_the_gru_kf(tmp_path):
-    """``motion.nis_limit`` is the robust update of every joint filter the preset builds: the EKF groups and the
-    GRU-KF's EKF gain prior."""
+    """``motion.nis_limit`` and ``nis_min_hits`` are the robust update of every joint filter the preset builds: the
+    EKF groups and the GRU-KF's EKF gain prior."""
+    from grutrack.motion.kalman import RobustUpdate
     from grutrack.tracking.factory import build_tracker
     from grutrack.training.pretrained import pretrained_dir
 
     raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
-    raw["motion"]["nis_limit"] = 2.5
+    raw["motion"].update(nis_limit=2.5, nis_min_hits=4)
     path = tmp_path / "robust.yaml"
     path.write_text(yaml.safe_dump(raw))
     ckpt = pretrained_dir("grukf_default") / "model.pt"
     for name, kw in (("ekf", {}), ("grukf", {"checkpoint": ckpt, "device": "cpu"})):
         groups = build_tracker(name, path, **kw).groups
         filters = [getattr(g.backend, "inner", g.backend).kf for g in groups]
-        assert filters and [f.nis_limit for f in filters] == [2.5] * len(filters), name
+        assert filters and [f.robust for f in filters] == [RobustUpdate(2.5, 4)] * len(filters), name

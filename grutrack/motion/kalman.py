@@ -29,7 +29,9 @@ toward g (to g where R dominates S). One far-off detection (a neighbour's box, a
 track by a bounded step instead of the gain's full pull, and a real manoeuvre still moves it, over two or three
 frames. This is the chi-square-scaled R of robust Kalman filtering (a Huber-type M-estimate of the innovation; e.g.
 Chang 2014, "Robust Kalman filtering based on Mahalanobis distance as outlier judging criterion", J. Geodesy
-88:391-401).
+88:391-401). The test needs a prior worth trusting: with ``min_hits`` h (:class:`RobustUpdate`) a track is tested
+only once it has h matched detections (birth included) before the update; a newborn track's prior carries its
+first detections' errors (a failed detected velocity among them), and its large innovations are its own lag.
 """
 
 from __future__ import annotations
@@ -192,6 +194,22 @@ def _lu_solve(S, B, X, perm) -> None:
             X[i, col] = acc / S[i, i]
 
 
+@dataclass(frozen=True)
+class RobustUpdate:
+    """The robust update's settings (module docstring): ``nis_limit`` g > 0, ``min_hits`` the matched detections a
+    track needs before the update for its detection to be tested (0 or 1: from its first update)."""
+
+    nis_limit: float
+    min_hits: int = 0
+
+    def tested(self, updates: np.ndarray | None, k: int) -> np.ndarray:
+        """(k,) bool: which of k updates are tested, ``updates`` (k,) int64 the corrections each track has had
+        before (its hits minus its birth; None: all tested)."""
+        if updates is None or self.min_hits <= 1:
+            return np.ones(k, dtype=bool)
+        return np.asarray(updates) + 1 >= self.min_hits
+
+
 @dataclass
 class Correction:
     """What an update of K tracks computed, row k for the k-th corrected track: the innovation ``y = z - h(x^-)``
@@ -211,13 +229,13 @@ class Correction:
 class BatchKalmanFilter:
     """EKF (non-linear model) or KF (linear model) over a batch of tracks; see the module docstring."""
 
-    def __init__(self, model: MotionModel, yaw_flip: bool = True, nis_limit: float = 0.0) -> None:
+    def __init__(self, model: MotionModel, yaw_flip: bool = True, robust: RobustUpdate | None = None) -> None:
         self.model = model
         self.yaw_flip = bool(yaw_flip)
-        self.nis_limit = float(nis_limit)
+        self.robust = robust if robust is not None and robust.nis_limit > 0 else None
 
     def __repr__(self) -> str:
-        return f"BatchKalmanFilter({self.model!r}, yaw_flip={self.yaw_flip}, nis_limit={self.nis_limit})"
+        return f"BatchKalmanFilter({self.model!r}, yaw_flip={self.yaw_flip}, robust={self.robust})"
 
     def initiate(self, z: np.ndarray, P0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Start tracks from detections ``z (N, 9)`` -> ``x (N, dim_x)``, ``P (N, dim_x, dim_x)`` (a copy of P0)."""
@@ -259,19 +277,29 @@ class BatchKalmanFilter:
         return x, P
 
     def correct(
-        self, x: np.ndarray, P: np.ndarray, rows: np.ndarray, z: np.ndarray, R: np.ndarray, R_index: np.ndarray
+        self,
+        x: np.ndarray,
+        P: np.ndarray,
+        rows: np.ndarray,
+        z: np.ndarray,
+        R: np.ndarray,
+        R_index: np.ndarray,
+        updates: np.ndarray | None = None,
     ) -> Correction:
         """Correct the tracks ``rows (K,)`` of ``x (N, dim_x)``, ``P (N, dim_x, dim_x)`` (C-contiguous float64,
         changed in place) with ``z (K, 9)``; ``R (C, 9, 9)`` a table indexed by ``R_index (K,)`` (e.g. the
-        per-class noise and the tracks' labels). Row k of the result equals :meth:`update` of that track.
+        per-class noise and the tracks' labels); ``updates`` (K,) int64 the corrections each of those tracks has had
+        (the robust update's ``min_hits``; None: every track tested). Row k of the result equals :meth:`update` of
+        that track.
         Returns the update's innovation, its covariance and the gain (:class:`Correction`)."""
         d, k = self.model.dim_x, len(rows)
         if k == 0:
             return Correction.empty(d)
         h, H = self.model.measurement(x[rows])
         z = np.ascontiguousarray(z, dtype=np.float64).reshape(-1, BOX_DIM)
-        if self.nis_limit > 0:
-            R, R_index = self._inflated(P[rows], z, h, H, np.asarray(R, dtype=np.float64)[R_index])
+        if self.robust is not None:
+            tested = self.robust.tested(updates, k)
+            R, R_index = self._inflated(P[rows], z, h, H, np.asarray(R, dtype=np.float64)[R_index], tested)
         out = Correction(np.empty((k, BOX_DIM)), np.empty((k, BOX_DIM, BOX_DIM)), np.empty((k, d, BOX_DIM)))
         _correct_kernel(
             x,
@@ -291,14 +319,15 @@ class BatchKalmanFilter:
         return out
 
     def _inflated(
-        self, P: np.ndarray, z: np.ndarray, h: np.ndarray, H: np.ndarray, R: np.ndarray
+        self, P: np.ndarray, z: np.ndarray, h: np.ndarray, H: np.ndarray, R: np.ndarray, tested: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """Robust R of K updates (module docstring, ``nis_limit`` g): ``P (K, d, d)`` the priors, ``z``, ``h``
-        (K, 9), ``H (K, 9, d)``, ``R (K, 9, 9)`` each update's noise -> ``(R * max(1, d2 / g), arange(K))`` with
-        ``d2 = r^T (H P H^T + R)^-1 r`` over x, y (metres^2 normalised, 2 dof)."""
+        (K, 9), ``H (K, 9, d)``, ``R (K, 9, 9)`` each update's noise, ``tested`` (K,) bool -> ``(R * max(1, d2 /
+        g), arange(K))`` with ``d2 = r^T (H P H^T + R)^-1 r`` over x, y (metres^2 normalised, 2 dof) for the tested
+        updates, R itself for the others."""
         Hp = H[:, :2, :]  # (K, 2, d)
         S = Hp @ P @ np.swapaxes(Hp, 1, 2) + R[:, :2, :2]  # (K, 2, 2)
         r = (z[:, :2] - h[:, :2])[:, :, None]  # (K, 2, 1)
         d2 = (np.swapaxes(r, 1, 2) @ np.linalg.solve(S, r))[:, 0, 0]  # (K,)
-        scale = np.maximum(1.0, d2 / self.nis_limit)
+        scale = np.where(tested, np.maximum(1.0, d2 / self.robust.nis_limit), 1.0)
         return R * scale[:, None, None], np.arange(len(R), dtype=np.int64)

@@ -107,6 +107,7 @@ class TrackerConfig:
     velocity_check_ratio: float = 0.5
     velocity_check_window: float = 0.25  # s
     nis_limit: float = 0.0  # robust update: R * max(1, NIS / nis_limit); 0: off (motion/kalman.py)
+    nis_min_hits: int = 0  # ... for tracks with at least this many matched detections before the update
 
 
 def preset_path(name_or_path: str | Path) -> Path:
@@ -208,6 +209,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         velocity_check_ratio=v["motion.velocity_check_ratio"],
         velocity_check_window=v["motion.velocity_check_window"],
         nis_limit=v["motion.nis_limit"],
+        nis_min_hits=v["motion.nis_min_hits"],
     )
 
 

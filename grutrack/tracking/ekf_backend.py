@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grutrack.motion.kalman import BatchKalmanFilter, Correction
+from grutrack.motion.kalman import BatchKalmanFilter, Correction, RobustUpdate
 from grutrack.motion.models import MotionModel
 from grutrack.tracking.velocity_check import CheckState, VelocityCheck
 
@@ -17,13 +17,18 @@ class KFState:
     ``corrected``: what it computed for the tracks it corrected (innovation, its covariance and the gain, rows in
     the order of the update's ``rows``; :class:`~grutrack.motion.kalman.Correction`), else None; ``check``: the
     velocity check's memory of the tracks (:class:`~grutrack.tracking.velocity_check.CheckState`; None without a
-    check)."""
+    check); ``updates`` (N,) int64 the corrections each track has had (None: all 0)."""
 
     x: np.ndarray
     P: np.ndarray
     labels: np.ndarray
     corrected: Correction | None = None
     check: CheckState | None = None
+    updates: np.ndarray | None = None
+
+    def counts(self) -> np.ndarray:
+        """(N,) int64 the corrections each track has had."""
+        return np.zeros(len(self.x), dtype=np.int64) if self.updates is None else self.updates
 
 
 class KalmanBackend:
@@ -32,7 +37,7 @@ class KalmanBackend:
     Q, R, P0: per-class tables (7, d, d) indexed by label; classes this backend never sees may be zeros.
     velocity_check: the check of the detector's velocity (:mod:`grutrack.tracking.velocity_check`), or None
     (every update takes the detector's velocity with R).
-    nis_limit: the robust update's NIS limit (:class:`~grutrack.motion.kalman.BatchKalmanFilter`; 0: off).
+    robust: the robust update (:class:`~grutrack.motion.kalman.RobustUpdate`), or None.
     """
 
     def __init__(
@@ -43,10 +48,10 @@ class KalmanBackend:
         P0: np.ndarray,
         yaw_flip: bool = True,
         velocity_check: VelocityCheck | None = None,
-        nis_limit: float = 0.0,
+        robust: RobustUpdate | None = None,
     ):
         self.model = model
-        self.kf = BatchKalmanFilter(model, yaw_flip=yaw_flip, nis_limit=nis_limit)
+        self.kf = BatchKalmanFilter(model, yaw_flip=yaw_flip, robust=robust)
         self.Q, self.R, self.P0 = Q, R, P0
         self.velocity_check = velocity_check
 
@@ -54,12 +59,12 @@ class KalmanBackend:
         """State of new tracks from detections z (N, 9)."""
         x, P = self.kf.initiate(z, self.P0[labels])
         check = None if self.velocity_check is None else self.velocity_check.start(np.asarray(z).reshape(-1, 9))
-        return KFState(x, P, labels.copy(), None, check)
+        return KFState(x, P, labels.copy(), None, check, np.zeros(len(x), dtype=np.int64))
 
     def predict(self, s: KFState, dt: float) -> KFState:
         """Predict every track dt seconds ahead."""
         x, P = self.kf.predict(s.x, s.P, self.Q[s.labels], dt)
-        return KFState(x, P, s.labels, None, None if s.check is None else s.check.predicted(dt))
+        return KFState(x, P, s.labels, None, None if s.check is None else s.check.predicted(dt), s.updates)
 
     def update(self, s: KFState, rows: np.ndarray, z: np.ndarray) -> KFState:
         """Correct tracks ``rows`` with measurements z (K, 9); with a velocity check, the tracks whose velocity
@@ -69,8 +74,11 @@ class KalmanBackend:
         if self.velocity_check is not None:
             prior = self.model.measurement
             z, R, R_index, check = self.velocity_check.apply(s.check, rows, z, lambda: prior(x[rows])[0], R, R_index)
-        corrected = self.kf.correct(x, P, rows, z, R, R_index)
-        return KFState(x, P, s.labels, corrected, check)
+        counts = s.counts()
+        corrected = self.kf.correct(x, P, rows, z, R, R_index, counts[rows])
+        updates = counts.copy()
+        updates[rows] += 1
+        return KFState(x, P, s.labels, corrected, check, updates)
 
     def boxes(self, s: KFState) -> np.ndarray:
         """Canonical boxes (N, 9) of the current state."""
@@ -79,7 +87,7 @@ class KalmanBackend:
     def select(self, s: KFState, index: np.ndarray) -> KFState:
         """Subset of the tracks."""
         check = None if s.check is None else s.check.select(index)
-        return KFState(s.x[index], s.P[index], s.labels[index], None, check)
+        return KFState(s.x[index], s.P[index], s.labels[index], None, check, s.counts()[index])
 
     def concat(self, a: KFState, b: KFState) -> KFState:
         """Tracks of a then b."""
@@ -89,4 +97,5 @@ class KalmanBackend:
             np.concatenate([a.labels, b.labels]),
             None,
             CheckState.concat(a.check, b.check),
+            np.concatenate([a.counts(), b.counts()]),
         )

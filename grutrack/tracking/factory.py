@@ -108,11 +108,11 @@ def grukf_group(
     correct=None,
     ss_model: str | None = None,
     velocity_check=None,
-    nis_limit: float = 0.0,
+    robust=None,
 ) -> TrackGroup:
     """One track group run by the GRU-Kalman filter ``net`` for the labels ``members`` (n_labels,) bool (default:
     every label); ``class_index`` (n_labels,) int maps a dataset label to the tracking class the network's
-    per-class gain uses (default: identity); ``correct``, ``ss_model``, ``velocity_check``, ``nis_limit``: see
+    per-class gain uses (default: identity); ``correct``, ``ss_model``, ``velocity_check``, ``robust``: see
     :class:`GRUKFBackend`."""
     from grutrack.tracking.grukf_backend import GRUKFBackend
 
@@ -125,7 +125,7 @@ def grukf_group(
         correct=correct,
         ss_model=ss_model,
         velocity_check=velocity_check,
-        nis_limit=nis_limit,
+        robust=robust,
     )
     return TrackGroup(backend, members)
 
@@ -172,7 +172,7 @@ def network_groups(net, cfg: TrackerConfig, index: np.ndarray, device: str = "au
                 members=m,
                 ss_model=name,
                 velocity_check=velocity_check(cfg),
-                nis_limit=cfg.nis_limit,
+                robust=robust_update(cfg),
             )
             for name, m in models
         ),
@@ -271,7 +271,7 @@ def ekf_groups(
             tables["P0"],
             yaw_flip=cfg.yaw_flip,
             velocity_check=velocity_check(cfg),
-            nis_limit=cfg.nis_limit,
+            robust=robust_update(cfg),
         )
         backend = with_geometry_filter(backend, cfg)
         speed = np.array([np.inf if m is None else m["speed"] for m in moving])
@@ -289,6 +289,16 @@ def velocity_check(cfg: TrackerConfig):
     return VelocityCheck(
         cfg.velocity_check_updates, cfg.velocity_check_difference, cfg.velocity_check_ratio, cfg.velocity_check_window
     )
+
+
+def robust_update(cfg: TrackerConfig):
+    """The preset's robust update (``motion.nis_limit``, ``motion.nis_min_hits``): a
+    :class:`~grutrack.motion.kalman.RobustUpdate`, or None when ``nis_limit`` is 0."""
+    if cfg.nis_limit <= 0:
+        return None
+    from grutrack.motion.kalman import RobustUpdate
+
+    return RobustUpdate(cfg.nis_limit, cfg.nis_min_hits)
 
 
 def with_geometry_filter(backend, cfg: TrackerConfig):

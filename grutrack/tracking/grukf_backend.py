@@ -125,8 +125,8 @@ class GRUKFBackend:
     (``network_classes: own_model``: e.g. the Bicycle classes of a CTRA network; same state layout, the weights
     shared). ``velocity_check``: the check of the detector's velocity (:mod:`grutrack.tracking.velocity_check`; a
     track whose velocity failed gets its predicted velocity as the measured one, zero innovation, and the EKF gain
-    prior leaves the velocity out), or None. ``nis_limit``: the EKF gain prior's robust update
-    (:class:`~grutrack.motion.kalman.BatchKalmanFilter`; 0: off).
+    prior leaves the velocity out), or None. ``robust``: the EKF gain prior's robust update
+    (:class:`~grutrack.motion.kalman.RobustUpdate`), or None.
     """
 
     def __init__(
@@ -138,7 +138,7 @@ class GRUKFBackend:
         correct=None,
         ss_model: str | None = None,
         velocity_check: VelocityCheck | None = None,
-        nis_limit: float = 0.0,
+        robust=None,
     ):
         self.net = net
         self.velocity_check = velocity_check
@@ -162,7 +162,7 @@ class GRUKFBackend:
             params = dict(net.cfg.ss_params if own else net.cfg.model_params.get(ss_model.upper(), {}))
             form = params.pop("form", "arc")  # the torch model's form (:meth:`GRUKFConfig.torch_model`)
             model = make_model(name, form, **params)
-            self.kf = BatchKalmanFilter(model, yaw_flip=net.cfg.yaw_flip, nis_limit=nis_limit)
+            self.kf = BatchKalmanFilter(model, yaw_flip=net.cfg.yaw_flip, robust=robust)
             self.Q, self.R, self.P0 = (
                 getattr(net, k).detach().cpu().numpy().astype(np.float64) for k in ("ekf_Q", "ekf_R", "ekf_P0")
             )
@@ -258,7 +258,7 @@ class GRUKFBackend:
         if self.kf is None:
             return None, None
         P = np.ascontiguousarray(s.P, dtype=np.float64).copy()
-        K = self.kf.correct(self._np(s.x), P, rows, z, R, R_index).K
+        K = self.kf.correct(self._np(s.x), P, rows, z, R, R_index, s.n_updates[rows]).K
         if not np.isfinite(K).all():
             raise np.linalg.LinAlgError("Singular matrix")
         return torch.as_tensor(K, device=self.device), P

@@ -20,7 +20,7 @@ from grutrack.motion.grukf import GRUKalmanNet
 from grutrack.motion.torch_models import wrap_angle_t
 from grutrack.tracking.config import TrackerConfig
 from grutrack.tracking.ekf_backend import KalmanBackend
-from grutrack.tracking.factory import grukf_group, network_models, velocity_check
+from grutrack.tracking.factory import grukf_group, network_models, robust_update, velocity_check
 from grutrack.tracking.grukf_backend import GRUKFBackend
 from grutrack.tracking.tracker import GroupUpdate, Tracker
 from grutrack.training.config import TrainConfig
@@ -212,9 +212,9 @@ def run_scene(
                 correct=None if lockstep is None else lockstep.bind(slot, model.upper()),
                 ss_model=model,
                 velocity_check=velocity_check(tracker_cfg),
-                nis_limit=tracker_cfg.nis_limit,
+                robust=robust_update(tracker_cfg),
             ).backend,
-            ekf_backend(cfg, index, model, velocity_check(tracker_cfg), tracker_cfg.nis_limit),
+            ekf_backend(cfg, index, model, velocity_check(tracker_cfg), robust_update(tracker_cfg)),
         )
         for model, _ in network_models(arch, tracker_cfg, index)
     ]

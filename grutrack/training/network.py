@@ -59,26 +59,21 @@ def _model_forms(cfg: TrainConfig) -> dict[str, str]:
 
 
 def ekf_backend(
-    cfg: TrainConfig, index: np.ndarray, model: str | None = None, velocity_check=None, nis_limit: float = 0.0
+    cfg: TrainConfig, index: np.ndarray, model: str | None = None, velocity_check=None, robust=None
 ) -> KalmanBackend:
     """The parallel EKF: the training SS model (or ``model``, a network group's own, ``network_classes:
     own_model``) for every label, with the motion config's Q, R, P0 of the tracking class each label takes its
     parameters from (``index`` (n_labels,), :func:`~grutrack.tracking.factory.param_index`) under that model, and
     the tracker preset's velocity check (``velocity_check``, :func:`~grutrack.tracking.factory.velocity_check`) and
-    robust update (``nis_limit``, ``motion.nis_limit``)."""
+    robust update (``robust``, :func:`~grutrack.tracking.factory.robust_update`)."""
     form = "arc" if model is None else _model_forms(cfg).get(model.upper(), "arc")
     index = tuple(int(c) for c in index)
-    return _ekf_backend(cfg.motion_config, model or ss_model(cfg), index, form, velocity_check, nis_limit)
+    return _ekf_backend(cfg.motion_config, model or ss_model(cfg), index, form, velocity_check, robust)
 
 
 @functools.lru_cache(maxsize=16)
 def _ekf_backend(
-    motion_config: str,
-    ss_model: str,
-    index: tuple[int, ...],
-    form: str = "arc",
-    velocity_check=None,
-    nis_limit: float = 0.0,
+    motion_config: str, ss_model: str, index: tuple[int, ...], form: str = "arc", velocity_check=None, robust=None
 ) -> KalmanBackend:
     """:func:`ekf_backend`, made once per process and settings (run once per training scene; the backend keeps
     no state of its own)."""
@@ -90,9 +85,7 @@ def _ekf_backend(
     first = motion[TRACKING_CLASSES[0]]
     tables = {k: np.stack([motion[TRACKING_CLASSES[c]][k] for c in index]) for k in ("Q", "R", "P0")}
     model = make_model(first["model"], form, **first["params"])
-    return KalmanBackend(
-        model, tables["Q"], tables["R"], tables["P0"], velocity_check=velocity_check, nis_limit=nis_limit
-    )
+    return KalmanBackend(model, tables["Q"], tables["R"], tables["P0"], velocity_check=velocity_check, robust=robust)
 
 
 def ekf_noise(cfg: TrainConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
