@@ -368,6 +368,13 @@ def _nis(limit: float):  # the robust update's limit, on every track (nis_min_hi
     return change
 
 
+def _nis_hits(hits: int):  # the robust update only for tracks with this many matched detections before
+    def change(raw):
+        raw["motion"]["nis_min_hits"] = hits
+
+    return change
+
+
 def _combine(*changes):
     def change(raw):
         for c in changes:
@@ -525,7 +532,7 @@ CANDIDATES = {
     "ekf_prev7": _nis(0.0),
     **{f"+nis{g}": _nis(g) for g in (1.5, 2.0, 3.0)},
     # the robust update only for tracks with at least h matched detections before the update (motion.nis_min_hits)
-    **{f"+nis_hits{h}": (lambda h: lambda raw: raw["motion"].update(nis_min_hits=h))(h) for h in (3, 4, 6)},
+    **{f"+nis_hits{h}": _nis_hits(h) for h in (3, 4, 6)},
 }
 
 

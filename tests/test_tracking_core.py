@@ -267,3 +267,35 @@ def test_warm_up_leaves_no_trace(name):
         a, b = cold[f.token], run.results[f.token]
         assert np.array_equal(a.boxes, b.boxes) and np.array_equal(a.ids, b.ids) and len(a) == 2
     assert t.next_id == plain.next_id == 2
+
+
+def test_kalman_backend_counts_updates_and_tests_only_established_tracks():
+    """The EKF backend counts each track's corrections through update, select and concat, and passes them to the
+    robust update (``motion.nis_min_hits``): a far-off detection of a track with fewer matched detections than
+    min_hits is the plain update, bit for bit; with enough, it pulls the track less."""
+    from grutrack.motion.kalman import RobustUpdate
+    from grutrack.motion.models import make_model
+    from grutrack.tracking.ekf_backend import KalmanBackend
+
+    m = make_model("CV")
+    d = m.dim_x
+    tables = (np.tile(np.eye(d) * 0.1, (7, 1, 1)), np.tile(np.eye(9) * 0.1, (7, 1, 1)), np.tile(np.eye(d), (7, 1, 1)))
+    robust = KalmanBackend(m, *tables, robust=RobustUpdate(2.0, min_hits=3))
+    plain = KalmanBackend(m, *tables)
+    z0 = np.array([_box(0, 0), _box(20, 0), _box(40, 0)])
+    labels = np.array([1, 1, 1])
+
+    def run(backend):
+        s = backend.initiate(z0, labels)
+        s = backend.update(backend.predict(s, 0.5), np.array([0, 1]), z0[:2])  # tracks 0, 1: 2 hits; track 2: 1
+        s = backend.concat(backend.select(s, np.array([2, 0])), backend.initiate(z0[:1], labels[:1]))
+        assert s.counts().tolist() == [0, 1, 0]
+        s = backend.update(backend.predict(s, 0.5), np.array([1]), z0[:1])  # track 0 of before: 3 hits
+        assert s.counts().tolist() == [0, 2, 0]
+        far = np.array([_box(45, 0), _box(5, 0)])  # 5 m off: tracks with 1 and 3 hits
+        return backend.update(backend.predict(s, 0.5), np.array([0, 1]), far)
+
+    r, p = run(robust), run(plain)
+    assert r.counts().tolist() == [1, 3, 0]
+    np.testing.assert_array_equal(r.x[0], p.x[0])  # 1 hit before: not tested
+    assert abs(r.x[1, 0]) < abs(p.x[1, 0]) - 0.1  # 3 hits before: its pull bounded

@@ -219,3 +219,25 @@ def test_the_shipped_gru_kf_follows_a_failed_velocity_less_with_the_check():
         backend = GRUKFBackend(net, "cpu", velocity_check=check)
         speed[name] = float(np.hypot(*backend.boxes(_gru_run(backend, z))[0, 7:9]))
     assert abs(speed["checked"] - 8.0) < abs(speed["plain"] - 8.0) - 1.0, speed
+
+
+def test_the_gru_kf_prior_tests_a_track_only_after_min_hits():
+    """The GRU-KF's EKF gain prior reads each track's update count for the robust update (``nis_min_hits``): a bus
+    whose last detection jumps 6 m sideways (5 hits before it) is filtered as without the robust update when
+    min_hits is above its hits, and differently when it is not."""
+    import torch
+
+    from grutrack.motion.checkpoint import load_network
+    from grutrack.motion.kalman import RobustUpdate
+    from grutrack.tracking.grukf_backend import GRUKFBackend
+    from grutrack.training.pretrained import pretrained_dir
+
+    net = load_network(pretrained_dir("grukf_default") / "model.pt")
+    z = _detections(8.0, 1.0, 6)
+    z[5, 0, 1] += 6.0  # 5 hits before it (birth and 4 updates)
+    rows = {
+        name: _gru_run(GRUKFBackend(net, "cpu", robust=robust), z).rows
+        for name, robust in (("plain", None), ("late", RobustUpdate(2.0, 6)), ("early", RobustUpdate(2.0, 5)))
+    }
+    assert torch.equal(rows["late"], rows["plain"])
+    assert not torch.equal(rows["early"], rows["plain"])
