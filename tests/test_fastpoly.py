@@ -352,9 +352,9 @@ def test_gated_costs_never_pass_a_track_kilometres_away():
     assert c2[0, 1] == 1.0 - _dense_similarity("giou_bev", det, near)[0, 0]
 
 
-def test_a_gate_on_some_classes_is_stage_one_of_the_compiled_path(nusc_mini, pointpillars_mini_val):
-    """The default's trailer gate runs in the compiled (sparse) association, not Fast-Poly's dense one; on the real
-    PointPillars file both give the same tracks, box for box, and so does a gate on every class but one."""
+def test_a_gate_on_some_classes_gates_both_stages_of_the_compiled_path(nusc_mini, pointpillars_mini_val):
+    """The default's trailer gate (both stages) runs in the compiled (sparse) association, not Fast-Poly's dense one;
+    on the real PointPillars file both give the same tracks, box for box, and so does a gate on every class but one."""
     from dataclasses import replace
 
     from grutrack.data.nusc_detections import load_detections

@@ -105,6 +105,19 @@ def test_second_stage_rescues_vertical_offset():
     assert len(m1.dets) == 0 and m2.dets.tolist() == [0]
 
 
+def test_distance_gate_holds_in_both_stages():
+    # a 12 m trailer 6 m ahead of its track along its length: the footprints overlap (BEV GIoU > 0, stage 2 would
+    # match), the 3D GIoU is too low for stage 1; a 5 m gate keeps the pair out of both stages
+    trl = CLASS_INDEX["trailer"]
+    det, trk = [_box(6.0, 0, w=2.5, l=12.0, h=3.8)], [_box(0, 0, w=2.5, l=12.0, h=3.8)]
+    tight = np.full(7, 0.3)  # stage 1 needs a 3D GIoU above 0.7
+    assert _assoc(det, [trl], trk, [trl], first_threshold=tight).dets.tolist() == [0]  # stage 2, no gate
+    gate = np.where(np.arange(7) == trl, 5.0, 0.0)
+    m = _assoc(det, [trl], trk, [trl], first_threshold=tight, distance_gate=gate)
+    assert len(m.dets) == 0 and m.unmatched_tracks.tolist() == [0]
+    assert _assoc(det, [trl], trk, [trl], distance_gate=np.where(gate > 0, 7.0, 0.0)).dets.tolist() == [0]
+
+
 def _scene(dets_per_frame):
     frames = [
         Frame(f"s{i}", 1_000_000 + 500_000 * i, np.zeros(3), np.array([1.0, 0, 0, 0]))

@@ -2,7 +2,8 @@
 
 Stage 1 scores every same-class (detection, track) pair with its class's similarity (3D or BEV GIoU/IoU),
 cost = 1 - similarity, and accepts assignments whose cost is below the class threshold. Stage 2 repeats
-this with one similarity (BEV GIoU by default) on what stage 1 left unmatched. Different classes never match.
+this with one similarity (BEV GIoU by default) on what stage 1 left unmatched. Different classes never match,
+nor, in either stage, a pair farther apart than its class's distance gate (``association.distance_gate``).
 
 Two assignment rules (tracker preset key ``association.assignment``), both over the admissible pairs
 (cost < threshold):
@@ -218,8 +219,9 @@ def associate(
 
     det_boxes (D, 9), trk_boxes (T, 9): canonical boxes; labels (D,), (T,) class indices;
     first_metric: similarity name per class; thresholds: cost thresholds per class;
-    assignment: the rule of both stages, a key of :data:`ASSIGNMENT`; distance_gate (C,) metres, 0 = none: stage 1
-    scores a pair only when its 3D centre distance is below its class's gate (stage 2 is not gated).
+    assignment: the rule of both stages, a key of :data:`ASSIGNMENT`; distance_gate (C,) metres, 0 = none: a pair
+    is scored, in either stage, only when its 3D centre distance is below its class's gate (a long box such as a
+    trailer's still overlaps a track some metres off, so an ungated stage 2 would match it).
     """
     solve = ASSIGNMENT[assignment]
     stages = [(tuple(first_metric), first_threshold)]
@@ -228,8 +230,8 @@ def associate(
     costs = _candidate_costs(det_boxes, det_labels, trk_boxes, trk_labels, stages)
     if distance_gate is not None and np.any(distance_gate > 0) and costs[0].size:
         radii = np.where(distance_gate > 0, distance_gate, np.inf)[det_labels]
-        dist = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2)
-        costs[0] = np.where(dist < radii[:, None], costs[0], _INVALID)
+        inside = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2) < radii[:, None]  # (D, T)
+        costs = [np.where(inside, c, _INVALID) for c in costs]
     return _solve_stages(solve, costs, det_labels, first_threshold, second_threshold)
 
 
@@ -413,11 +415,12 @@ def gated_costs(
 
     Stage 1: a pair is scored when its classes agree and its 3D centre distance is below ``gate[class]``
     metres (``gate`` (C,), 0 = no gate for that class); other pairs cost ``invalid``.
-    Stage 2: as Fast-Poly, the gate only selects rows and columns: every same-class pair between a detection
-    and a track that each have a same-class partner closer than the largest gate radius is scored with
-    ``second_metric``, even when that pair itself lies outside the gate (Fast-Poly's rows and columns come
-    from the union of its per-class distance masks). ``det_quaternion`` (D, 4): the detections' own rotations,
-    for their A-GIoU footprints (tracks are yaw-only boxes).
+    Stage 2 with a gate on every class: as Fast-Poly, the gate only selects rows and columns: every same-class
+    pair between a detection and a track that each have a same-class partner closer than the largest gate radius
+    is scored with ``second_metric``, even when that pair itself lies outside the gate (Fast-Poly's rows and
+    columns come from the union of its per-class distance masks). With some classes ungated: the stage-1 pairs,
+    as :func:`associate`. ``det_quaternion`` (D, 4): the detections' own rotations, for their A-GIoU footprints
+    (tracks are yaw-only boxes).
     """
     D, T = len(det_boxes), len(trk_boxes)
     c1, c2 = np.full((D, T), invalid), np.full((D, T), invalid)
@@ -425,7 +428,8 @@ def gated_costs(
     radii = np.where(gate > 0, gate, np.inf)
     dist = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2)
     valid = same & (dist < radii[det_labels][:, None])  # stage-1 pairs
-    near = same & (dist < radii.max())  # Fast-Poly's union of the class masks
+    near = same & (dist < radii.max())  # Fast-Poly's union of the class masks (every pair when a class is ungated)
+    second = same if np.isfinite(radii.max()) else valid  # stage-2 pairs within the rows and columns
     rows, cols = np.flatnonzero(near.any(axis=1)), np.flatnonzero(near.any(axis=0))
     if len(rows) == 0:
         return c1, c2
@@ -441,14 +445,14 @@ def gated_costs(
         r = det_labels[rows] == c
         first[r] = sims[first_metric[c]][r]
     c1[sub] = np.where(valid[sub], 1.0 - first, invalid)
-    c2[sub] = np.where(same[sub], 1.0 - sims[second_metric], invalid)
+    c2[sub] = np.where(second[sub], 1.0 - sims[second_metric], invalid)
     return c1, c2
 
 
 def gated_association_needed(cfg) -> bool:
     """Whether a preset needs :func:`gated_association`: alignment-GIoU metrics, or a distance gate on every class
     (then Fast-Poly's stage 2 takes only the rows and columns within the largest gate). A gate on some classes
-    only is stage 1's alone, which :func:`associate` applies."""
+    only gates each pair of both stages, which :func:`associate` applies."""
     metrics = set(cfg.first_metric) | {cfg.second_metric}
     return bool(np.all(cfg.distance_gate > 0)) or any(m.startswith("a_") for m in metrics)
 
