@@ -498,6 +498,8 @@ CANDIDATES = {
     ),
     "+bic_moving_cv": _moving_motion("bicycle", "bicmovcv", 2.0, "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
     "+bic_moving_mct": _moving_motion("bicycle", "bicmovmct", 2.0, "CV", **_cv_mct(0.3, 1.0, 0.1, 1.0)),
+    "+bic_all_mct": _moving_motion("bicycle", "bicallmct", 0.01, "CV", **_cv_mct(0.3, 1.0, 0.1, 1.0)),
+    "+bic_moving1_mct": _moving_motion("bicycle", "bicmov1mct", 1.0, "CV", **_cv_mct(0.3, 1.0, 0.1, 1.0)),
     "+moto_bic_qyaw01": _class_motion("motorcycle", "motobicqyaw01", Q=[1, 1, 1, 1, 1, 1, 1, 1, 0.1, 0.1]),
     "+ped_R2": _class_motion("pedestrian", "pedr2", scale={"R": 2.0}),
     "+ped_Q05": _class_motion("pedestrian", "pedq05", scale={"Q": 0.5}),
