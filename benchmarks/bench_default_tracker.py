@@ -503,6 +503,8 @@ CANDIDATES = {
     "+bic_age14": _age({"bicycle": 14}),
     "+bic_punish1": _punish({"bicycle": 1}),
     "+bic_thr18": lambda raw: raw["association"]["first_threshold"].update(bicycle=1.8),
+    "+bus_punish1": _punish({"bus": 1}),
+    "+bus_age15": _age({"bus": 15}),
     "+moto_bic_qyaw01": _class_motion("motorcycle", "motobicqyaw01", Q=[1, 1, 1, 1, 1, 1, 1, 1, 0.1, 0.1]),
     "+ped_R2": _class_motion("pedestrian", "pedr2", scale={"R": 2.0}),
     "+ped_Q05": _class_motion("pedestrian", "pedq05", scale={"Q": 0.5}),
