@@ -375,6 +375,20 @@ def _nis_hits(hits: int):  # the robust update only for tracks with this many ma
     return change
 
 
+def _ro_gdiou_class(classes: dict[str, tuple[float, list[float]]]):
+    """Stage 1 of ``classes`` (name -> MCTrack's threshold and weights) on Ro_GDIoU, the track's predicted box
+    against the detection; the other classes and stage 2 as they are."""
+
+    def change(raw):
+        a = raw["association"]
+        a["ro_gdiou_weights"] = _per_class([1.0, 1.0])
+        for cls, (threshold, weights) in classes.items():
+            a["first_metric"][cls], a["first_threshold"][cls] = "ro_gdiou_bev", threshold
+            a["ro_gdiou_weights"][cls] = weights
+
+    return change
+
+
 def _combine(*changes):
     def change(raw):
         for c in changes:
@@ -503,6 +517,19 @@ CANDIDATES = {
     "+bic_age14": _age({"bicycle": 14}),
     "+bic_punish1": _punish({"bicycle": 1}),
     "+bic_thr18": lambda raw: raw["association"]["first_threshold"].update(bicycle=1.8),
+    # MCTrack's stage 1 (Ro_GDIoU, its thresholds and weights) for some classes, stage 2 kept
+    "+ped_ro_gdiou": _ro_gdiou_class({"pedestrian": (2.06, [1.0, 1.0])}),
+    "+car_ro_gdiou": _ro_gdiou_class({"car": (1.1, [0.5, 1.5])}),
+    "+car_ped_ro_gdiou": _ro_gdiou_class({"pedestrian": (2.06, [1.0, 1.0]), "car": (1.1, [0.5, 1.5])}),
+    "+vehicle_ped_ro_gdiou": _ro_gdiou_class(
+        {
+            "pedestrian": (2.06, [1.0, 1.0]),
+            "car": (1.1, [0.5, 1.5]),
+            "bus": (1.6, [1.0, 1.0]),
+            "truck": (1.16, [1.0, 1.0]),
+        }
+    ),
+    "+car_punish0": _punish({"car": 0}),
     "+bus_punish1": _punish({"bus": 1}),
     "+bus_age15": _age({"bus": 15}),
     "+moto_bic_qyaw01": _class_motion("motorcycle", "motobicqyaw01", Q=[1, 1, 1, 1, 1, 1, 1, 1, 0.1, 0.1]),

@@ -138,8 +138,20 @@ def test_every_preset_key_has_a_comment(preset):
             "'motion.nis_limit' must be 0 with 'motion.filter: decoupled_cv'",
         ),
         (
-            lambda r: r["association"]["first_metric"].__setitem__("motorcycle", "ro_gdiou_bev"),
-            "'association.first_metric' must be ro_gdiou_bev for every class or for none .*got it for motorcycle only",
+            lambda r: (
+                r["association"]["first_metric"].__setitem__("motorcycle", "ro_gdiou_bev"),
+                r["association"].__setitem__("track_pose", dict.fromkeys(TRACKING_CLASSES, "last_update")),
+            ),
+            "'association.track_pose' is read only with 'association.first_metric: ro_gdiou_bev' for every class "
+            r"\(with some classes, stage 1 compares the track's predicted box\)",
+        ),
+        (
+            lambda r: r["association"].update(
+                first_metric={**r["association"]["first_metric"], "motorcycle": "ro_gdiou_bev"},
+                distance_gate=dict.fromkeys(TRACKING_CLASSES, 2.0),
+            ),
+            "'association.first_metric: ro_gdiou_bev' for some classes needs 'association.algorithm: hungarian', "
+            "no alignment GIoU metric and no distance gate on every class",
         ),
         (
             lambda r: r["association"].__setitem__("first_metric", dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev")),

@@ -312,3 +312,44 @@ def test_kalman_backend_counts_updates_and_tests_only_established_tracks():
     assert r.counts().tolist() == [1, 3, 0]
     np.testing.assert_array_equal(r.x[0], p.x[0])  # 1 hit before: not tested
     assert abs(r.x[1, 0]) < abs(p.x[1, 0]) - 0.1  # 3 hits before: its pull bounded
+
+
+def _ro_preset(tmp_path, threshold: float):
+    """The ekf preset with stage 1 of pedestrians on Ro_GDIoU (weights [1, 1]) at ``threshold``."""
+    raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
+    raw["association"]["first_metric"]["pedestrian"] = "ro_gdiou_bev"
+    raw["association"]["first_threshold"]["pedestrian"] = threshold
+    path = tmp_path / f"ro_{threshold}.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    return path
+
+
+def test_ro_gdiou_for_some_classes_is_stage_one_of_the_two_stage_association(tmp_path):
+    from grutrack.tracking.ro_gdiou import ro_gdiou_pair
+
+    ped, car = CLASS_INDEX["pedestrian"], CLASS_INDEX["car"]
+    person = {"w": 0.6, "l": 0.6, "h": 1.7, "z": 0.85}
+    trk = np.array([_box(0, 0, **person), _box(20, 0)])
+    labels = np.array([ped, car])
+
+    def matched(preset, dx):  # pedestrian detection dx metres from its track, car 1 m from its own
+        dets = BoxSet(np.array([_box(dx, 0, **person), _box(21, 0)]), np.full(2, 0.9), labels)
+        m = build_tracker("ekf", preset).associate(dets, trk, labels, 0.5)
+        return sorted(zip(m.dets.tolist(), m.tracks.tolist()))
+
+    # 3 m apart, no overlap: the 3D GIoU cost (1.67) is below the pedestrians' 1.69, Ro_GDIoU's (2.34) above 2.06,
+    # and stage 2 (BEV GIoU, cost below 1: an overlap) takes neither; the car is matched either way
+    assert matched(None, 3.0) == [(0, 0), (1, 1)]
+    assert matched(_ro_preset(tmp_path, 2.06), 3.0) == [(1, 1)]
+    # a Tracker built without an association (GRU-KF training) runs the same stage 1
+    from grutrack.tracking.tracker import two_stage_association
+
+    dets = BoxSet(np.array([_box(3.0, 0, **person), _box(21, 0)]), np.full(2, 0.9), labels)
+    m = two_stage_association(load_tracker_config(_ro_preset(tmp_path, 2.06)))(dets, trk, labels, 0.5)
+    assert m.dets.tolist() == [1] and m.tracks.tolist() == [1]
+    # 1 m apart: stage 1 takes the pair exactly when 1 - Ro_GDIoU (the predicted box against the detection) is
+    # below the threshold
+    cost = 1.0 - ro_gdiou_pair(trk[0], np.array(_box(1.0, 0, **person)), 1.0, 1.0, False, np.empty((40, 2)))
+    assert 1.5 < cost < 1.7
+    assert matched(_ro_preset(tmp_path, cost + 1e-9), 1.0) == [(0, 0), (1, 1)]
+    assert matched(_ro_preset(tmp_path, cost - 1e-9), 1.0) == [(1, 1)]

@@ -214,6 +214,7 @@ def associate(
     second_threshold: np.ndarray,
     assignment: str = "most_pairs",
     distance_gate: np.ndarray | None = None,
+    first_override: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Matches:
     """Two-stage association of D detections with T (predicted) tracks.
 
@@ -221,13 +222,18 @@ def associate(
     first_metric: similarity name per class; thresholds: cost thresholds per class;
     assignment: the rule of both stages, a key of :data:`ASSIGNMENT`; distance_gate (C,) metres, 0 = none: a pair
     is scored, in either stage, only when its 3D centre distance is below its class's gate (a long box such as a
-    trailer's still overlaps a track some metres off, so an ungated stage 2 would match it).
+    trailer's still overlaps a track some metres off, so an ungated stage 2 would match it);
+    first_override: (classes (C,) bool, costs (D, T)): stage 1 takes these costs for the detections of those
+    classes instead of their ``first_metric``'s (a similarity the compiled kernel does not hold, e.g. Ro_GDIoU).
     """
     solve = ASSIGNMENT[assignment]
     stages = [(tuple(first_metric), first_threshold)]
     if two_stage:
         stages.append(((second_metric,) * len(first_metric), second_threshold))
     costs = _candidate_costs(det_boxes, det_labels, trk_boxes, trk_labels, stages)
+    if first_override is not None and costs[0].size:
+        classes, override = first_override
+        costs[0] = np.where(classes[det_labels][:, None], override, costs[0])
     if distance_gate is not None and np.any(distance_gate > 0) and costs[0].size:
         radii = np.where(distance_gate > 0, distance_gate, np.inf)[det_labels]
         inside = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2) < radii[:, None]  # (D, T)

@@ -237,10 +237,8 @@ def _check_ro_gdiou(v: dict, given: dict, source: str) -> None:
                 )
         return
     if len(ro) < len(TRACKING_CLASSES):
-        raise ConfigError(
-            f"{source}: 'association.first_metric' must be ro_gdiou_bev for every class or for none (MCTrack's "
-            f"association scores all pairs with it in one stage), got it for {', '.join(ro)} only"
-        )
+        _check_ro_gdiou_some(v, given, source)
+        return
     refused = {
         "association.algorithm": (v["association.algorithm"] != "hungarian", "hungarian"),
         "association.two_stage": (v["association.two_stage"], "false"),
@@ -252,6 +250,26 @@ def _check_ro_gdiou(v: dict, given: dict, source: str) -> None:
                 f"{source}: '{key}' must be {expected} with 'association.first_metric: ro_gdiou_bev' (MCTrack's "
                 f"association is one Hungarian stage without a centre gate)"
             )
+
+
+def _check_ro_gdiou_some(v: dict, given: dict, source: str) -> None:
+    """Ro_GDIoU for some classes only is stage 1 of the two-stage Hungarian association, the track's predicted box
+    against the detection: refuse the keys of MCTrack's pose choice (read with every class only), greedy matching,
+    and Fast-Poly's dense association (alignment GIoU, or a gate on every class)."""
+    for key in ("association.track_pose", "association.track_pose_blend", "association.track_pose_rule"):
+        if key in given:
+            raise ConfigError(
+                f"{source}: '{key}' is read only with 'association.first_metric: ro_gdiou_bev' for every class "
+                f"(with some classes, stage 1 compares the track's predicted box); remove it"
+            )
+    metrics = set(v["association.first_metric"]) | {v["association.second_metric"]}
+    dense = bool(np.all(v["association.distance_gate"] > 0)) or any(m.startswith("a_") for m in metrics)
+    if v["association.algorithm"] != "hungarian" or dense:
+        raise ConfigError(
+            f"{source}: 'association.first_metric: ro_gdiou_bev' for some classes needs 'association.algorithm: "
+            f"hungarian', no alignment GIoU metric and no distance gate on every class (it is stage 1 of the "
+            f"two-stage association)"
+        )
 
 
 def _check_model_names(override: dict[str, str], source: str) -> None:

@@ -86,8 +86,9 @@ def decoupled_group(cfg: TrackerConfig, n_labels: int) -> TrackGroup:
 
 
 def _association(cfg: TrackerConfig):
-    """The association the preset asks for: None (the tracker's two-stage Hungarian), greedy, or Ro_GDIoU."""
-    if "ro_gdiou_bev" in cfg.first_metric:
+    """The association the preset asks for: None (the tracker's two-stage Hungarian, Ro_GDIoU for some classes
+    included), greedy, or MCTrack's Ro_GDIoU for every class."""
+    if all(m == "ro_gdiou_bev" for m in cfg.first_metric):
         from grutrack.tracking.ro_gdiou import ro_gdiou_association
 
         return ro_gdiou_association(cfg)

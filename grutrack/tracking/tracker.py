@@ -126,9 +126,14 @@ AssociateFn = Callable[[BoxSet, np.ndarray, np.ndarray, float], Matches]
 
 def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
     """The default association: per-class similarity, Hungarian, optional second stage (ARCHITECTURE.md, "The
-    method")."""
+    method"); with Ro_GDIoU as the stage-1 metric of some classes,
+    :func:`~grutrack.tracking.ro_gdiou.ro_gdiou_first_stage`."""
     if gated_association_needed(cfg):
         return gated_association(cfg)
+    if "ro_gdiou_bev" in cfg.first_metric:
+        from grutrack.tracking.ro_gdiou import ro_gdiou_first_stage
+
+        return ro_gdiou_first_stage(cfg)
 
     def run(dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
         return associate(
