@@ -15,7 +15,9 @@ the candidates were compared on while choosing) and ``heldout`` ... ``heldout4``
 500-502, 700-702, 900-902, mini_val and mini_train, all four profiles: each first looked at once a decision was
 frozen; docs/results/default_tracker.md says which decision each group checked); ``variants`` (SYNTHETIC, seeds
 1001-1003, four detector profiles Decisions 1-3 never saw, :data:`PROFILE_VARIANTS`: noisier velocities, three times
-the false positives, noisier poses, a weaker recall); ``worlds`` and ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds
+the false positives, noisier poses, a weaker recall); ``fresh`` / ``fresh_train`` (SYNTHETIC, seeds 2000-2049
+on mini_val / 2000-2009 on mini_train, the four profiles: made after Decision 8 to count how often the preset falls
+below on sets no decision saw); ``worlds`` and ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds
 of 20 scenes, every scene tracked, the four profiles; ``towed`` with a third of the trailers towed;
 ``worlds_variants`` with the variant profiles). Candidates:
 :data:`CANDIDATES` (names; ``--candidates`` a comma list). ``--class NAME`` prints one class's AMOTA instead (sets
@@ -117,6 +119,8 @@ GROUPS = {
     "trailer": ((110, 111, 300, 301, 302), ("mini_train",)),
     "trailer_pp": ((110, 111, 300, 301, 302, 500, 501, 502, 700, 701, 702), ("mini_train",)),
     "variants": ((1001, 1002, 1003), ("mini_val", "mini_train"), tuple(PROFILE_VARIANTS)),
+    "fresh": (tuple(range(2000, 2050)), ("mini_val",)),
+    "fresh_train": (tuple(range(2000, 2010)), ("mini_train",)),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
