@@ -224,9 +224,10 @@ RO_GDIOU_KEYS = (
 
 
 def _check_ro_gdiou(v: dict, given: dict, source: str) -> None:
-    """MCTrack's association (``first_metric: ro_gdiou_bev``) is one Hungarian stage that scores every class with
-    Ro_GDIoU: refuse a preset that names it for some classes only, asks it for two stages, a centre gate or greedy
-    matching, or sets a key only it reads without it (each would be silently ignored)."""
+    """MCTrack's association (``first_metric: ro_gdiou_bev`` for every class) is one Hungarian stage that scores
+    every class with Ro_GDIoU: refuse a preset that asks it for two stages, a centre gate or greedy matching, or sets
+    a key only it reads without it (each would be silently ignored); for some classes only,
+    :func:`_check_ro_gdiou_some`."""
     ro = [c for c, m in zip(TRACKING_CLASSES, v["association.first_metric"]) if m == "ro_gdiou_bev"]
     if not ro:
         for key in RO_GDIOU_KEYS:
