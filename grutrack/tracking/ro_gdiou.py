@@ -32,7 +32,7 @@ import math
 import numpy as np
 from numba import njit
 
-from grutrack.tracking.association import Matches, _solve_stages, associate
+from grutrack.tracking.association import Matches, _solve_stages
 
 #: track poses by preset name -> code
 POSES = {"predicted": 0, "last_update": 1, "blend": 2}
@@ -414,50 +414,37 @@ def ro_gdiou_association(cfg):
 
 
 def ro_gdiou_first_stage(cfg):
-    """The two-stage association (:func:`grutrack.tracking.association.associate`) with stage 1 scored by
-    Ro_GDIoU for the classes whose ``first_metric`` is ``ro_gdiou_bev`` (their thresholds and weights, the track's
-    predicted box against the detection) and by their own metric for the others; stage 2 and the distance gate as
-    the preset says. A preset with Ro_GDIoU for some classes only runs this; for every class,
-    :func:`ro_gdiou_association` (MCTrack's one stage)."""
+    """Stage 1 of the two-stage association (:func:`grutrack.tracking.tracker.two_stage_association`) scored by
+    Ro_GDIoU for the classes whose ``first_metric`` is ``ro_gdiou_bev`` (their weights, the track's predicted box
+    against the detection); a preset with Ro_GDIoU for every class runs :func:`ro_gdiou_association` (MCTrack's
+    one stage) instead. -> (``first_metric`` with ``giou_bev`` standing in for those classes, a function
+    ``(dets, trk_boxes (T, 9), trk_labels (T,)) -> (classes (C,) bool, costs (D, T))`` giving
+    :func:`~grutrack.tracking.association.associate` its ``first_override``)."""
     classes = np.array([m == "ro_gdiou_bev" for m in cfg.first_metric])
     placeholder = tuple("giou_bev" if ro else m for ro, m in zip(classes, cfg.first_metric))
     w1 = np.ascontiguousarray(cfg.ro_gdiou_weights[:, 0], dtype=np.float64)
     w2 = np.ascontiguousarray(cfg.ro_gdiou_weights[:, 1], dtype=np.float64)
 
-    def run(dets, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
+    def costs(dets, trk_boxes: np.ndarray, trk_labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         D, T = len(dets.boxes), len(trk_boxes)
-        override = np.full((D, T), 1e6)
+        out = np.full((D, T), 1e6)
         if D and T:
             boxes = np.ascontiguousarray(dets.boxes, dtype=np.float64)
             trk = np.ascontiguousarray(trk_boxes, dtype=np.float64)
-            labels = trk_labels.astype(np.int64)
             _ro_cost_kernel(
                 boxes,
                 boxes,
                 np.where(classes[dets.labels], dets.labels, -1).astype(np.int64),  # only these classes' rows
                 trk,
                 trk,
-                labels,
-                np.zeros(T, dtype=np.int64),
+                trk_labels.astype(np.int64),
+                np.zeros(T, dtype=np.int64),  # pose code 0: predicted
                 np.ones(T),
                 w1,
                 w2,
                 cfg.geometry_precision == "float32",
-                override,
+                out,
             )
-        return associate(
-            dets.boxes,
-            dets.labels,
-            trk_boxes,
-            trk_labels,
-            placeholder,
-            cfg.first_threshold,
-            cfg.two_stage,
-            cfg.second_metric,
-            cfg.second_threshold,
-            cfg.assignment,
-            cfg.distance_gate,
-            (classes, override),
-        )
+        return classes, out
 
-    return run
+    return placeholder, costs

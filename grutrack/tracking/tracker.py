@@ -126,14 +126,15 @@ AssociateFn = Callable[[BoxSet, np.ndarray, np.ndarray, float], Matches]
 
 def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
     """The default association: per-class similarity, Hungarian, optional second stage (ARCHITECTURE.md, "The
-    method"); with Ro_GDIoU as the stage-1 metric of some classes,
+    method"); with Ro_GDIoU as the stage-1 metric of some classes, their stage-1 costs from
     :func:`~grutrack.tracking.ro_gdiou.ro_gdiou_first_stage`."""
     if gated_association_needed(cfg):
         return gated_association(cfg)
+    first_metric, first_override = cfg.first_metric, None
     if "ro_gdiou_bev" in cfg.first_metric:
         from grutrack.tracking.ro_gdiou import ro_gdiou_first_stage
 
-        return ro_gdiou_first_stage(cfg)
+        first_metric, first_override = ro_gdiou_first_stage(cfg)
 
     def run(dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
         return associate(
@@ -141,13 +142,14 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
             dets.labels,
             trk_boxes,
             trk_labels,
-            cfg.first_metric,
+            first_metric,
             cfg.first_threshold,
             cfg.two_stage,
             cfg.second_metric,
             cfg.second_threshold,
             cfg.assignment,
             cfg.distance_gate,
+            None if first_override is None else first_override(dets, trk_boxes, trk_labels),
         )
 
     return run
