@@ -520,6 +520,9 @@ CANDIDATES = {
     ),
     "+bic_moving_cv": _moving_motion("bicycle", "bicmovcv", 2.0, "CV", **_cv_mct(1.5, 1.5, 2.0, 3.5)),
     "+bic_moving_mct": _moving_motion("bicycle", "bicmovmct", 2.0, "CV", **_cv_mct(0.3, 1.0, 0.1, 1.0)),
+    # riding bicycles' CV with a position R of 1 or 0.5 m^2 instead of MCTrack's 0.1 (one off detection pulls less)
+    "+bic_moving_r1": _moving_motion("bicycle", "bicmovr1", 2.0, "CV", **_cv_mct(0.3, 1.0, 1.0, 1.0)),
+    "+bic_moving_r05": _moving_motion("bicycle", "bicmovr05", 2.0, "CV", **_cv_mct(0.3, 1.0, 0.5, 1.0)),
     "+bic_all_mct": _moving_motion("bicycle", "bicallmct", 0.01, "CV", **_cv_mct(0.3, 1.0, 0.1, 1.0)),
     "+bic_moving1_mct": _moving_motion("bicycle", "bicmov1mct", 1.0, "CV", **_cv_mct(0.3, 1.0, 0.1, 1.0)),
     "+bic_age14": _age({"bicycle": 14}),
