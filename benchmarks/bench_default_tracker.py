@@ -19,7 +19,8 @@ the false positives, noisier poses, a weaker recall); ``fresh`` / ``fresh_train`
 on mini_val / 2000-2009 on mini_train, the four profiles: made after Decision 8 to count how often the preset falls
 below on sets no decision saw; the bus score threshold of default_tracker.md#bus-score was then chosen on them too);
 ``fresh2`` / ``fresh2_train`` (the same with seeds 3000-3049 / 3000-3009: made after that choice, the count on
-unseen sets again); ``worlds`` and
+unseen sets again); ``fresh3`` / ``fresh3_train`` (seeds 4000-4049 / 4000-4009: made after the confidence-weighted
+noise was chosen on ``fresh``, its check on unseen sets); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles). Candidates:
 :data:`CANDIDATES` (names; ``--candidates`` a comma list). ``--class NAME`` prints one class's AMOTA instead (sets
@@ -125,6 +126,8 @@ GROUPS = {
     "fresh_train": (tuple(range(2000, 2010)), ("mini_train",)),
     "fresh2": (tuple(range(3000, 3050)), ("mini_val",)),
     "fresh2_train": (tuple(range(3000, 3010)), ("mini_train",)),
+    "fresh3": (tuple(range(4000, 4050)), ("mini_val",)),
+    "fresh3_train": (tuple(range(4000, 4010)), ("mini_train",)),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
@@ -551,6 +554,15 @@ CANDIDATES = {
     ),
     "+bic_score02": lambda raw: raw["preprocessing"]["score_threshold"].update(bicycle=0.2),
     "+bic_score017": lambda raw: raw["preprocessing"]["score_threshold"].update(bicycle=0.17),
+    # confidence-weighted noise, R / score^e (motion.r_score_exponent)
+    "+r_score": lambda raw: raw["motion"].update(r_score_exponent=1.0),
+    "-r_score": lambda raw: raw["motion"].update(r_score_exponent=0.0),
+    "+r_score05": lambda raw: raw["motion"].update(r_score_exponent=0.5),
+    "+r_score2": lambda raw: raw["motion"].update(r_score_exponent=2.0),
+    "+r_score_bus016": _combine(
+        lambda raw: raw["motion"].update(r_score_exponent=1.0),
+        lambda raw: raw["preprocessing"]["score_threshold"].update(bus=0.16),
+    ),
     "+car_punish0": _punish({"car": 0}),
     "+bus_punish1": _punish({"bus": 1}),
     "+bus_age15": _age({"bus": 15}),

@@ -89,7 +89,7 @@ def test_untrained_ekf_prior_grukf_is_the_ekf(scenes_and_dets, tmp_path):
 
 def test_training_moves_the_ekf_prior_grukf_from_the_ekf_and_the_checkpoint_keeps_the_option(scenes_and_dets, tmp_path):
     from grutrack.motion.checkpoint import load_network
-    from grutrack.tracking.factory import build_tracker, grukf_group
+    from grutrack.tracking.factory import build_tracker, network_groups
     from grutrack.tracking.tracker import Tracker, track_scenes
 
     scenes, dets = scenes_and_dets
@@ -106,9 +106,7 @@ def test_training_moves_the_ekf_prior_grukf_from_the_ekf_and_the_checkpoint_keep
     # the tracker built from the checkpoint gives the boxes of the network trained in-process
     a = track_scenes(build_tracker("grukf", checkpoint=final, device="cpu"), scenes[:1], dets).results
     cfg = replace(t.tracker_cfg, matched_box=t.cfg.matched_box)
-    b = track_scenes(
-        Tracker(cfg, [grukf_group(t.net, len(t.index), "cpu", class_index=t.index)]), scenes[:1], dets
-    ).results
+    b = track_scenes(Tracker(cfg, network_groups(t.net, cfg, t.index, "cpu")), scenes[:1], dets).results
     assert sum(len(r) for r in a.values()) > 0
     for tok in a:
         np.testing.assert_allclose(a[tok].boxes, b[tok].boxes, atol=1e-12)

@@ -584,3 +584,43 @@ def test_nis_limit_scales_R_of_outlying_detections_only(model):
     old = updates + 1 >= 3
     np.testing.assert_allclose(x_h[old], x_w[old], rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(x_h[~old], x_p[~old])
+
+
+@pytest.mark.parametrize("model", [CTRA(), CV()], ids=["CTRA", "CV"])
+def test_score_exponent_takes_each_detection_with_R_over_its_score(model):
+    """``score_exponent`` e: a detection scored c is the textbook update with R / max(c, 0.01)^e (computed here by
+    hand); no scores, or e = 0,
+    is the plain update bit for bit; with a ``nis_limit`` the outlier test reads the scaled R."""
+    n = 16
+    x, P, R, z = random_update(model, n, 41, 0.1)
+    scores = np.linspace(0.0, 1.0, n)  # 0 floored at 0.01
+    plain = BatchKalmanFilter(model)
+    x_p, _ = plain.update(x, P, z, R)
+    scaled = R / np.maximum(scores, 0.01)[:, None, None]
+    x_w, P_w = plain.update(x, P, z, scaled)
+
+    def corrected(robust, s):
+        x_c, P_c = x.copy(), P.copy()
+        BatchKalmanFilter(model, robust=robust).correct(x_c, P_c, np.arange(n), z, R, np.arange(n), None, s)
+        return x_c, P_c
+
+    x_s, P_s = corrected(RobustUpdate(0.0, score_exponent=1.0), scores)
+    np.testing.assert_allclose(x_s, x_w, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(P_s, P_w, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(x_s[-1], x_p[-1])  # score 1: R itself
+    np.testing.assert_array_equal(corrected(RobustUpdate(0.0, score_exponent=1.0), None)[0], x_p)
+    np.testing.assert_array_equal(corrected(RobustUpdate(0.0, score_exponent=0.0), scores)[0], x_p)
+    x_sq, _ = corrected(RobustUpdate(0.0, score_exponent=2.0), scores)
+    np.testing.assert_allclose(x_sq, plain.update(x, P, z, R / np.maximum(scores, 0.01)[:, None, None] ** 2)[0])
+    # with the robust update: NIS under the scaled R, then R scaled by max(1, d2 / g)
+    z_far = z.copy()
+    z_far[::2, :2] += 30.0
+    H = model.H(x)
+    S = H[:, :2] @ P @ np.swapaxes(H[:, :2], 1, 2) + scaled[:, :2, :2]
+    r = z_far[:, :2] - model.h(x)[:, :2]
+    d2 = np.einsum("ni,nij,nj->n", r, np.linalg.inv(S), r)
+    x_b, P_b = x.copy(), P.copy()
+    robust = BatchKalmanFilter(model, robust=RobustUpdate(2.0, score_exponent=1.0))
+    robust.correct(x_b, P_b, np.arange(n), z_far, R, np.arange(n), None, scores)
+    want = plain.update(x, P, z_far, scaled * np.maximum(1.0, d2 / 2.0)[:, None, None])[0]
+    np.testing.assert_allclose(x_b, want, rtol=1e-12, atol=1e-12)

@@ -115,10 +115,10 @@ def test_compare_tracks_cli(nusc_root, nusc_reference, tmp_path, capsys):
 #: the default preset's AMOTA on the reference sets (docs/results/default_tracker.md gives the evidence for its
 #: choices against the three trackers); the trackers' own AMOTA is read from the reference metrics
 EKF_AMOTA = {
-    "mini_val_centerpoint_sim_s7": 0.8841,
-    "mini_val_pointpillars_sim_s7": 0.6532,
+    "mini_val_centerpoint_sim_s7": 0.8838,
+    "mini_val_pointpillars_sim_s7": 0.6550,
     "pointpillars_mini_val": 0.2020,
-    "mini_train_centerpoint_sim_s7": 0.8826,
+    "mini_train_centerpoint_sim_s7": 0.8889,
 }
 
 

@@ -120,6 +120,10 @@ def test_every_preset_key_has_a_comment(preset):
         (lambda r: r["motion"].__setitem__("nis_limit", -1.0), "'motion.nis_limit' must be a number >= 0"),
         (lambda r: r["motion"].__setitem__("nis_min_hits", 2.5), "'motion.nis_min_hits' must be an integer >= 0"),
         (
+            lambda r: r["motion"].__setitem__("r_score_exponent", -1.0),
+            "'motion.r_score_exponent' must be a number >= 0",
+        ),
+        (
             lambda r: r["motion"].update(
                 filter="decoupled_cv",
                 position_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["position_noise"],
@@ -136,6 +140,17 @@ def test_every_preset_key_has_a_comment(preset):
                 nis_limit=2.0,
             ),
             "'motion.nis_limit' must be 0 with 'motion.filter: decoupled_cv'",
+        ),
+        (
+            lambda r: r["motion"].update(
+                filter="decoupled_cv",
+                position_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["position_noise"],
+                size_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["size_noise"],
+                velocity_check_updates=0,
+                nis_limit=0.0,
+                r_score_exponent=1.0,
+            ),
+            "'motion.r_score_exponent' must be 0 with 'motion.filter: decoupled_cv'",
         ),
         (
             lambda r: (
@@ -251,18 +266,18 @@ def test_presets_carry_only_what_their_algorithm_reads():
 
 
 def test_nis_limit_reaches_every_kalman_filter_of_the_ekf_and_the_gru_kf(tmp_path):
-    """``motion.nis_limit`` and ``nis_min_hits`` are the robust update of every joint filter the preset builds: the
-    EKF groups and the GRU-KF's EKF gain prior."""
+    """``motion.nis_limit``, ``nis_min_hits`` and ``r_score_exponent`` are the robust update and confidence-weighted
+    noise of every joint filter the preset builds: the EKF groups and the GRU-KF's EKF gain prior."""
     from grutrack.motion.kalman import RobustUpdate
     from grutrack.tracking.factory import build_tracker
     from grutrack.training.pretrained import pretrained_dir
 
     raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
-    raw["motion"].update(nis_limit=2.5, nis_min_hits=4)
+    raw["motion"].update(nis_limit=2.5, nis_min_hits=4, r_score_exponent=0.5)
     path = tmp_path / "robust.yaml"
     path.write_text(yaml.safe_dump(raw))
     ckpt = pretrained_dir("grukf_default") / "model.pt"
     for name, kw in (("ekf", {}), ("grukf", {"checkpoint": ckpt, "device": "cpu"})):
         groups = build_tracker(name, path, **kw).groups
         filters = [getattr(g.backend, "inner", g.backend).kf for g in groups]
-        assert filters and [f.robust for f in filters] == [RobustUpdate(2.5, 4)] * len(filters), name
+        assert filters and [f.robust for f in filters] == [RobustUpdate(2.5, 4, 0.5)] * len(filters), name

@@ -314,6 +314,29 @@ def test_kalman_backend_counts_updates_and_tests_only_established_tracks():
     assert abs(r.x[1, 0]) < abs(p.x[1, 0]) - 0.1  # 3 hits before: its pull bounded
 
 
+def test_tracker_passes_detection_scores_to_confidence_weighted_noise(tmp_path):
+    """``motion.r_score_exponent`` through the tracker: the scores of the matched detections reach the filter, so a
+    car's track moves less toward a detection scored 0.2 than toward the same detection scored 0.9 (R / score);
+    with the exponent 0 both moves are equal."""
+    from grutrack.tracking.factory import build_tracker
+
+    def moved(exponent, score):
+        raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
+        raw["motion"]["r_score_exponent"] = exponent
+        path = tmp_path / f"e{exponent}.yaml"
+        path.write_text(yaml.safe_dump(raw))
+        t = build_tracker("ekf", path)
+        for i in range(3):  # a parked car seen three times at x = 0, then 1 m off
+            t.step(BoxSet(np.array([_box(0, 0)]), np.array([0.9]), np.array([CAR])), 1_000_000 + 500_000 * i)
+        out = t.step(BoxSet(np.array([_box(1.0, 0)]), np.array([score]), np.array([CAR])), 2_500_000)
+        assert len(out) == 1
+        return out.boxes[0, 0]
+
+    low, high = moved(1.0, 0.2), moved(1.0, 0.9)
+    assert 0.05 < low < high - 0.1 < 1.0
+    assert moved(0.0, 0.2) == moved(0.0, 0.9)
+
+
 def _ro_preset(tmp_path, threshold: float):
     """The ekf preset with stage 1 of pedestrians on Ro_GDIoU (weights [1, 1]) at ``threshold``."""
     raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())

@@ -32,6 +32,13 @@ Chang 2014, "Robust Kalman filtering based on Mahalanobis distance as outlier ju
 88:391-401). The test needs a prior worth trusting: with ``min_hits`` h (:class:`RobustUpdate`) a track is tested
 only once it has h matched detections (birth included) before the update; a newborn track's prior carries its
 first detections' errors (a failed detected velocity among them), and its large innovations are its own lag.
+
+Confidence-weighted noise (``score_exponent`` e, default 0: off): a detection scored c in (0, 1] is taken with
+``R / c^e`` (c floored at :data:`SCORE_FLOOR`), so a detection its detector doubts moves the track less than a
+confident one; with e = 1 the noise variance is inversely proportional to the score. Detectors' scores track their
+boxes' localisation quality (e.g. IoU-aware scoring, Wu et al. 2020; the confidence-scaled R of GIAOTracker's NSA
+Kalman filter, Du et al. 2021, which takes ``(1 - c) R``). It is applied before the outlier test above, which then
+tests the innovation under the scaled R.
 """
 
 from __future__ import annotations
@@ -45,6 +52,7 @@ from grutrack.boxes import BOX_DIM, wrap_angle
 from grutrack.motion.models import MotionModel, _wrap
 
 YAW_Z = 6  # yaw column of the canonical measurement / box
+SCORE_FLOOR = 0.01  # the least score confidence-weighted noise takes (a score of 0 would give an infinite R)
 
 
 def _batch(M: np.ndarray, n: int, d: int, name: str) -> np.ndarray:
@@ -196,11 +204,22 @@ def _lu_solve(S, B, X, perm) -> None:
 
 @dataclass(frozen=True)
 class RobustUpdate:
-    """The robust update's settings (module docstring): ``nis_limit`` g > 0, ``min_hits`` the matched detections a
-    track needs before the update for its detection to be tested (0 or 1: from its first update)."""
+    """How an update adapts each detection's R (module docstring): the robust update, ``nis_limit`` g (0: off) and
+    ``min_hits`` the matched detections a track needs before the update for its detection to be tested (0 or 1: from
+    its first update); confidence-weighted noise, ``score_exponent`` e (0: off)."""
 
     nis_limit: float
     min_hits: int = 0
+    score_exponent: float = 0.0
+
+    @property
+    def active(self) -> bool:
+        """Whether either adaptation is on."""
+        return self.nis_limit > 0 or self.score_exponent > 0
+
+    def score_scale(self, scores: np.ndarray) -> np.ndarray:
+        """(K,) float64 factors of R for detections scored ``scores`` (K,): ``max(c, SCORE_FLOOR)^-e``."""
+        return np.maximum(np.asarray(scores, dtype=np.float64), SCORE_FLOOR) ** -self.score_exponent
 
     def tested(self, updates: np.ndarray | None, k: int) -> np.ndarray:
         """(k,) bool: which of k updates are tested, ``updates`` (k,) int64 the corrections each track has had
@@ -232,7 +251,7 @@ class BatchKalmanFilter:
     def __init__(self, model: MotionModel, yaw_flip: bool = True, robust: RobustUpdate | None = None) -> None:
         self.model = model
         self.yaw_flip = bool(yaw_flip)
-        self.robust = robust if robust is not None and robust.nis_limit > 0 else None
+        self.robust = robust if robust is not None and robust.active else None
 
     def __repr__(self) -> str:
         return f"BatchKalmanFilter({self.model!r}, yaw_flip={self.yaw_flip}, robust={self.robust})"
@@ -285,12 +304,14 @@ class BatchKalmanFilter:
         R: np.ndarray,
         R_index: np.ndarray,
         updates: np.ndarray | None = None,
+        scores: np.ndarray | None = None,
     ) -> Correction:
         """Correct the tracks ``rows (K,)`` of ``x (N, dim_x)``, ``P (N, dim_x, dim_x)`` (C-contiguous float64,
         changed in place) with ``z (K, 9)``; ``R (C, 9, 9)`` a table indexed by ``R_index (K,)`` (e.g. the
         per-class noise and the tracks' labels); ``updates`` (K,) int64 the corrections each of those tracks has had
-        (the robust update's ``min_hits``; None: every track tested). Row k of the result equals :meth:`update` of
-        that track.
+        (the robust update's ``min_hits``; None: every track tested); ``scores`` (K,) the detections' scores in
+        [0, 1] (confidence-weighted noise; None: R as given). Row k of the result equals :meth:`update` of that
+        track.
         Returns the update's innovation, its covariance and the gain (:class:`Correction`)."""
         d, k = self.model.dim_x, len(rows)
         if k == 0:
@@ -298,8 +319,12 @@ class BatchKalmanFilter:
         h, H = self.model.measurement(x[rows])
         z = np.ascontiguousarray(z, dtype=np.float64).reshape(-1, BOX_DIM)
         if self.robust is not None:
-            tested = self.robust.tested(updates, k)
-            R, R_index = self._inflated(P[rows], z, h, H, np.asarray(R, dtype=np.float64)[R_index], tested)
+            R = np.asarray(R, dtype=np.float64)[R_index]  # (K, 9, 9): each update's own noise from here on
+            R_index = np.arange(k, dtype=np.int64)
+            if self.robust.score_exponent > 0 and scores is not None:
+                R = R * self.robust.score_scale(scores)[:, None, None]  # R / c^e
+            if self.robust.nis_limit > 0:
+                R = self._inflated(P[rows], z, h, H, R, self.robust.tested(updates, k))
         out = Correction(np.empty((k, BOX_DIM)), np.empty((k, BOX_DIM, BOX_DIM)), np.empty((k, d, BOX_DIM)))
         _correct_kernel(
             x,
@@ -320,14 +345,14 @@ class BatchKalmanFilter:
 
     def _inflated(
         self, P: np.ndarray, z: np.ndarray, h: np.ndarray, H: np.ndarray, R: np.ndarray, tested: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
+    ) -> np.ndarray:
         """Robust R of K updates (module docstring, ``nis_limit`` g): ``P (K, d, d)`` the priors, ``z``, ``h``
-        (K, 9), ``H (K, 9, d)``, ``R (K, 9, 9)`` each update's noise, ``tested`` (K,) bool -> ``(R * max(1, d2 /
-        g), arange(K))`` with ``d2 = r^T (H P H^T + R)^-1 r`` over x, y (metres^2 normalised, 2 dof) for the tested
+        (K, 9), ``H (K, 9, d)``, ``R (K, 9, 9)`` each update's noise, ``tested`` (K,) bool -> ``R * max(1, d2 /
+        g)`` (K, 9, 9) with ``d2 = r^T (H P H^T + R)^-1 r`` over x, y (metres^2 normalised, 2 dof) for the tested
         updates, R itself for the others."""
         Hp = H[:, :2, :]  # (K, 2, d)
         S = Hp @ P @ np.swapaxes(Hp, 1, 2) + R[:, :2, :2]  # (K, 2, 2)
         r = (z[:, :2] - h[:, :2])[:, :, None]  # (K, 2, 1)
         d2 = (np.swapaxes(r, 1, 2) @ np.linalg.solve(S, r))[:, 0, 0]  # (K,)
         scale = np.where(tested, np.maximum(1.0, d2 / self.robust.nis_limit), 1.0)
-        return R * scale[:, None, None], np.arange(len(R), dtype=np.int64)
+        return R * scale[:, None, None]

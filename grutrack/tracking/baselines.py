@@ -35,8 +35,10 @@ class DetectionBackend:
         out[:, 0:2] += dt * state[:, 7:9]
         return out
 
-    def update(self, state: np.ndarray, rows: np.ndarray, z: np.ndarray) -> np.ndarray:
-        """Tracks ``rows (K,)`` replaced by their matched detections ``z (K, 9)``."""
+    def update(
+        self, state: np.ndarray, rows: np.ndarray, z: np.ndarray, scores: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Tracks ``rows (K,)`` replaced by their matched detections ``z (K, 9)`` (``scores`` unused)."""
         out = state.copy()
         out[rows] = z
         return out

@@ -108,6 +108,7 @@ class TrackerConfig:
     velocity_check_window: float = 0.25  # s
     nis_limit: float = 0.0  # robust update: R * max(1, NIS / nis_limit); 0: off (motion/kalman.py)
     nis_min_hits: int = 0  # ... for tracks with at least this many matched detections before the update
+    r_score_exponent: float = 0.0  # confidence-weighted noise: R / score ** r_score_exponent; 0: off
 
 
 def preset_path(name_or_path: str | Path) -> Path:
@@ -141,11 +142,13 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
             f"{source}: 'motion.velocity_check_updates' must be 0 with 'motion.filter: decoupled_cv' (the velocity "
             f"check runs in the joint EKF and the GRU-KF; MCTrack's decoupled filters always take the velocity)"
         )
-    if v["motion.nis_limit"] > 0 and v["motion.filter"] == "decoupled_cv":
-        raise ConfigError(
-            f"{source}: 'motion.nis_limit' must be 0 with 'motion.filter: decoupled_cv' (the robust update runs in "
-            f"the joint EKF and the GRU-KF's EKF gain prior, not in MCTrack's decoupled filters)"
-        )
+    for key in ("motion.nis_limit", "motion.r_score_exponent"):
+        if v[key] > 0 and v["motion.filter"] == "decoupled_cv":
+            raise ConfigError(
+                f"{source}: '{key}' must be 0 with 'motion.filter: decoupled_cv' (the robust update and "
+                f"confidence-weighted noise run in the joint EKF and the GRU-KF's EKF gain prior, not in MCTrack's "
+                f"decoupled filters)"
+            )
     _check_ro_gdiou(v, given, source)
     if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
         raise ConfigError(
@@ -210,6 +213,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         velocity_check_window=v["motion.velocity_check_window"],
         nis_limit=v["motion.nis_limit"],
         nis_min_hits=v["motion.nis_min_hits"],
+        r_score_exponent=v["motion.r_score_exponent"],
     )
 
 

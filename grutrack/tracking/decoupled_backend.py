@@ -122,8 +122,10 @@ class DecoupledCVBackend:
         self._F = F
         return out
 
-    def update(self, st: DecoupledState, rows: np.ndarray, z: np.ndarray) -> DecoupledState:
-        """Correct tracks ``rows`` with detections ``z (K, 9)``."""
+    def update(
+        self, st: DecoupledState, rows: np.ndarray, z: np.ndarray, scores: np.ndarray | None = None
+    ) -> DecoupledState:
+        """Correct tracks ``rows`` with detections ``z (K, 9)`` (MCTrack's filters do not read ``scores``)."""
         st = DecoupledState(*(getattr(st, f).copy() for f in _FIELDS))
         lab = st.labels[rows]
         P = st.P[rows]

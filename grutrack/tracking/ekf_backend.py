@@ -37,7 +37,7 @@ class KalmanBackend:
     Q, R, P0: per-class tables (7, d, d) indexed by label; classes this backend never sees may be zeros.
     velocity_check: the check of the detector's velocity (:mod:`grutrack.tracking.velocity_check`), or None
     (every update takes the detector's velocity with R).
-    robust: the robust update (:class:`~grutrack.motion.kalman.RobustUpdate`), or None.
+    robust: the robust update and confidence-weighted noise (:class:`~grutrack.motion.kalman.RobustUpdate`), or None.
     """
 
     def __init__(
@@ -66,16 +66,17 @@ class KalmanBackend:
         x, P = self.kf.predict(s.x, s.P, self.Q[s.labels], dt)
         return KFState(x, P, s.labels, None, None if s.check is None else s.check.predicted(dt), s.updates)
 
-    def update(self, s: KFState, rows: np.ndarray, z: np.ndarray) -> KFState:
-        """Correct tracks ``rows`` with measurements z (K, 9); with a velocity check, the tracks whose velocity
-        failed take none from z (:func:`~grutrack.tracking.velocity_check.without_velocity`)."""
+    def update(self, s: KFState, rows: np.ndarray, z: np.ndarray, scores: np.ndarray | None = None) -> KFState:
+        """Correct tracks ``rows`` with measurements z (K, 9) scored ``scores`` (K,) (confidence-weighted noise;
+        None: R as given); with a velocity check, the tracks whose velocity failed take none from z
+        (:func:`~grutrack.tracking.velocity_check.without_velocity`)."""
         x, P = s.x.copy(), s.P.copy()
         R, R_index, check = self.R, s.labels[rows], None
         if self.velocity_check is not None:
             prior = self.model.measurement
             z, R, R_index, check = self.velocity_check.apply(s.check, rows, z, lambda: prior(x[rows])[0], R, R_index)
         counts = s.counts()
-        corrected = self.kf.correct(x, P, rows, z, R, R_index, counts[rows])
+        corrected = self.kf.correct(x, P, rows, z, R, R_index, counts[rows], scores)
         updates = counts.copy()
         updates[rows] += 1
         return KFState(x, P, s.labels, corrected, check, updates)

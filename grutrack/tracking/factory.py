@@ -293,13 +293,13 @@ def velocity_check(cfg: TrackerConfig):
 
 
 def robust_update(cfg: TrackerConfig):
-    """The preset's robust update (``motion.nis_limit``, ``motion.nis_min_hits``): a
-    :class:`~grutrack.motion.kalman.RobustUpdate`, or None when ``nis_limit`` is 0."""
-    if cfg.nis_limit <= 0:
+    """The preset's robust update (``motion.nis_limit``, ``motion.nis_min_hits``) and confidence-weighted noise
+    (``motion.r_score_exponent``): a :class:`~grutrack.motion.kalman.RobustUpdate`, or None when both are off."""
+    if cfg.nis_limit <= 0 and cfg.r_score_exponent <= 0:
         return None
     from grutrack.motion.kalman import RobustUpdate
 
-    return RobustUpdate(cfg.nis_limit, cfg.nis_min_hits)
+    return RobustUpdate(cfg.nis_limit, cfg.nis_min_hits, cfg.r_score_exponent)
 
 
 def with_geometry_filter(backend, cfg: TrackerConfig):

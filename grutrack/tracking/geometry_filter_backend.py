@@ -111,11 +111,13 @@ class GeometryFilterBackend:
         """Motion predicted ``dt`` seconds ahead; the geometry is constant."""
         return GeometryState(self.inner.predict(s.motion, dt), s.geometry, s.labels)
 
-    def update(self, s: GeometryState, rows: np.ndarray, z: np.ndarray) -> GeometryState:
-        """Tracks ``rows (K,)`` corrected by z (K, 9); their windows take ``z[:, 2:6]``."""
+    def update(
+        self, s: GeometryState, rows: np.ndarray, z: np.ndarray, scores: np.ndarray | None = None
+    ) -> GeometryState:
+        """Tracks ``rows (K,)`` corrected by z (K, 9) scored ``scores`` (K,); their windows take ``z[:, 2:6]``."""
         g = GeometryWindow(s.geometry.hist.copy(), s.geometry.mean)
         g.push(rows, z[:, 2:6], np.maximum(self.window[s.labels[rows]], 1))
-        return GeometryState(self.inner.update(s.motion, rows, z), g, s.labels)
+        return GeometryState(self.inner.update(s.motion, rows, z, scores), g, s.labels)
 
     def boxes(self, s: GeometryState) -> np.ndarray:
         """(N, 9) boxes: the motion filter's, with z, w, l, h from the windows where the class uses them."""

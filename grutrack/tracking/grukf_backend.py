@@ -249,16 +249,23 @@ class GRUKFBackend:
         return t.detach().cpu().numpy().astype(np.float64)
 
     def _ekf_gain(
-        self, s: GRUState, rows: np.ndarray, z: np.ndarray, R: np.ndarray | None, R_index: np.ndarray | None
+        self,
+        s: GRUState,
+        rows: np.ndarray,
+        z: np.ndarray,
+        R: np.ndarray | None,
+        R_index: np.ndarray | None,
+        scores: np.ndarray | None = None,
     ) -> tuple[torch.Tensor | None, np.ndarray | None]:
-        """The EKF's Joseph-form update of tracks ``rows`` with z (K, 9) and noise ``R[R_index]`` at the GRU-KF's
+        """The EKF's Joseph-form update of tracks ``rows`` with z (K, 9) scored ``scores`` (K,) and noise
+        ``R[R_index]`` (confidence-weighted with the preset's ``motion.r_score_exponent``) at the GRU-KF's
         (detached) prior: the gain ``K_ekf = P^- H^T S^-1`` (K, m, 9) tensor it applied and the covariance of all
         tracks after it ((N, m, m)); (None, None) without an EKF gain prior. A singular S (a state driven far off)
         raises LinAlgError."""
         if self.kf is None:
             return None, None
         P = np.ascontiguousarray(s.P, dtype=np.float64).copy()
-        K = self.kf.correct(self._np(s.x), P, rows, z, R, R_index, s.n_updates[rows]).K
+        K = self.kf.correct(self._np(s.x), P, rows, z, R, R_index, s.n_updates[rows], scores).K
         if not np.isfinite(K).all():
             raise np.linalg.LinAlgError("Singular matrix")
         return torch.as_tensor(K, device=self.device), P
@@ -272,14 +279,15 @@ class GRUKFBackend:
             return z, R, R_index, None
         return self.velocity_check.apply(s.check, rows, z, lambda: self._np(self.ss.h(prior)), R, R_index)
 
-    def update(self, s: GRUState, rows: np.ndarray, z: np.ndarray) -> GRUState:
-        """Correct tracks ``rows`` (K,) with measurements z (K, 9) through the learned gain."""
+    def update(self, s: GRUState, rows: np.ndarray, z: np.ndarray, scores: np.ndarray | None = None) -> GRUState:
+        """Correct tracks ``rows`` (K,) with measurements z (K, 9) scored ``scores`` (K,) through the learned gain
+        (the scores reach the EKF gain prior only)."""
         with self._ctx():
             r = torch.as_tensor(rows, device=self.device, dtype=torch.long)
             prior, y_prev, post1, post2, prior1, hid = s.take(r)
             z, R, R_index, check = self._checked(s, rows, z, prior)
             y = self._t(z)
-            K_ekf, P = self._ekf_gain(s, rows, z, R, R_index)
+            K_ekf, P = self._ekf_gain(s, rows, z, R, R_index, scores)
             post, new_hidden, K = self.correct(
                 prior,
                 y,

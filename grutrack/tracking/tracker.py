@@ -33,8 +33,9 @@ class MotionBackend(Protocol):
     def predict(self, state: Any, dt: float) -> Any:
         """State predicted ``dt`` seconds ahead."""
 
-    def update(self, state: Any, rows: np.ndarray, z: np.ndarray) -> Any:
-        """State with tracks ``rows (K,)`` corrected by measurements ``z (K, 9)``."""
+    def update(self, state: Any, rows: np.ndarray, z: np.ndarray, scores: np.ndarray | None = None) -> Any:
+        """State with tracks ``rows (K,)`` corrected by measurements ``z (K, 9)`` scored ``scores`` (K,) (a filter
+        with confidence-weighted noise reads them; None: unknown)."""
 
     def boxes(self, state: Any) -> np.ndarray:
         """Boxes ``(N, 9)`` of the current state (global frame)."""
@@ -296,7 +297,7 @@ class Tracker:
                 continue
             prior = g.state
             if len(rows):
-                g.state = g.backend.update(g.state, rows, dets.boxes[drows])
+                g.state = g.backend.update(g.state, rows, dets.boxes[drows], dets.scores[drows])
             if hasattr(g.backend, "miss") and len(rows) < n:  # a backend that treats missed tracks itself
                 missed = np.ones(n, dtype=bool)
                 missed[rows] = False

@@ -44,8 +44,8 @@ class PairedBackend:
     def predict(self, s, dt):
         return (self.gru.predict(s[0], dt), self.ekf.predict(s[1], dt))
 
-    def update(self, s, rows, z):
-        return (self.gru.update(s[0], rows, z), self.ekf.update(s[1], rows, z))
+    def update(self, s, rows, z, scores=None):
+        return (self.gru.update(s[0], rows, z, scores), self.ekf.update(s[1], rows, z, scores))
 
     def boxes(self, s):
         return self.gru.boxes(s[0])
