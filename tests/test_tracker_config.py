@@ -47,6 +47,18 @@ def test_every_preset_key_has_a_comment(preset):
             assert text[i - 1].strip().startswith("#"), f"key without a comment above it: {s}"
 
 
+def _decoupled_cv(**motion):
+    """A preset edit: MCTrack's decoupled filters (its position and size noise) with ``motion`` keys set too."""
+
+    def edit(r):
+        mct = yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]
+        r["motion"].update(
+            filter="decoupled_cv", position_noise=mct["position_noise"], size_noise=mct["size_noise"], **motion
+        )
+
+    return edit
+
+
 @pytest.mark.parametrize(
     "mutate, message",
     [
@@ -123,33 +135,13 @@ def test_every_preset_key_has_a_comment(preset):
             lambda r: r["motion"].__setitem__("r_score_exponent", -1.0),
             "'motion.r_score_exponent' must be a number >= 0",
         ),
+        (_decoupled_cv(), "'motion.velocity_check_updates' must be 0 with 'motion.filter: decoupled_cv'"),
         (
-            lambda r: r["motion"].update(
-                filter="decoupled_cv",
-                position_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["position_noise"],
-                size_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["size_noise"],
-            ),
-            "'motion.velocity_check_updates' must be 0 with 'motion.filter: decoupled_cv'",
-        ),
-        (
-            lambda r: r["motion"].update(
-                filter="decoupled_cv",
-                position_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["position_noise"],
-                size_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["size_noise"],
-                velocity_check_updates=0,
-                nis_limit=2.0,
-            ),
+            _decoupled_cv(velocity_check_updates=0, nis_limit=2.0),
             "'motion.nis_limit' must be 0 with 'motion.filter: decoupled_cv'",
         ),
         (
-            lambda r: r["motion"].update(
-                filter="decoupled_cv",
-                position_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["position_noise"],
-                size_noise=yaml.safe_load((PRESET_DIR / "mctrack.yaml").read_text())["motion"]["size_noise"],
-                velocity_check_updates=0,
-                nis_limit=0.0,
-                r_score_exponent=1.0,
-            ),
+            _decoupled_cv(velocity_check_updates=0, nis_limit=0.0, r_score_exponent=1.0),
             "'motion.r_score_exponent' must be 0 with 'motion.filter: decoupled_cv'",
         ),
         (
