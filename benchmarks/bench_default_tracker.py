@@ -31,9 +31,11 @@ docs/results/default_tracker.md records the table and the decision.
 from __future__ import annotations
 
 import argparse
+import atexit
 import copy
 import dataclasses
 import json
+import shutil
 import sys
 import tempfile
 import time
@@ -263,7 +265,8 @@ def _motion_file(name: str) -> str:
     return str(p) if p.suffix else str(Path(preset_path("ekf")).parents[1] / "motion" / f"{name}.yaml")
 
 
-_TMP = Path(tempfile.mkdtemp(prefix="bench_default_tracker_"))
+_TMP = Path(tempfile.mkdtemp(prefix="bench_default_tracker_"))  # candidate presets; removed at exit
+atexit.register(shutil.rmtree, _TMP, True)
 
 
 def _write_motion(cfg: dict, name: str) -> str:
@@ -437,6 +440,9 @@ CANDIDATES = {
     "+R_vel_bus10": _velocity_r({"bus": 10.0}, "rbus10"),
     "+R_vel_mct": _velocity_r(MCT_VEL_RATIO, "rmct"),
     "+R_vel_bic10": _velocity_r({"bicycle": 10.0}, "rbic10"),
+    "+R_vel_bic5": _velocity_r({"bicycle": 5.0}, "rbic5"),
+    "+R_vel_bic30": _velocity_r({"bicycle": 30.0}, "rbic30"),
+    "+R_vel_bic100": _velocity_r({"bicycle": 100.0}, "rbic100"),
     "+R_vel_bic10_bus30": _velocity_r({"bicycle": 10.0, "bus": 30.0}, "rbic10bus30"),
     "+R_vel_bic10_bus100": _velocity_r({"bicycle": 10.0, "bus": 100.0}, "rbic10bus100"),
     "+R_vel_mct_nocar": _velocity_r({k: v for k, v in MCT_VEL_RATIO.items() if k != "car"}, "rmctnocar"),
@@ -563,11 +569,20 @@ CANDIDATES = {
         lambda raw: raw["motion"].update(r_score_exponent=1.0),
         lambda raw: raw["preprocessing"]["score_threshold"].update(bus=0.16),
     ),
+    # stage 2 (BEV GIoU on what stage 1 left) with a looser threshold
+    "+bic_s2_13": lambda raw: raw["association"]["second_threshold"].update(bicycle=1.3),
+    "+bic_s2_15": lambda raw: raw["association"]["second_threshold"].update(bicycle=1.5),
+    "+all_s2_12": lambda raw: raw["association"]["second_threshold"].update(dict.fromkeys(CLASSES, 1.2)),
     "+car_punish0": _punish({"car": 0}),
     "+bus_punish1": _punish({"bus": 1}),
     "+bus_age15": _age({"bus": 15}),
     "+moto_bic_qyaw01": _class_motion("motorcycle", "motobicqyaw01", Q=[1, 1, 1, 1, 1, 1, 1, 1, 0.1, 0.1]),
+    "+ped_R05": _class_motion("pedestrian", "pedr05", scale={"R": 0.5}),
     "+ped_R2": _class_motion("pedestrian", "pedr2", scale={"R": 2.0}),
+    "+ped_R3": _class_motion("pedestrian", "pedr3", scale={"R": 3.0}),
+    "+ped_R4": _class_motion("pedestrian", "pedr4", scale={"R": 4.0}),
+    "+ped_R2Q05": _class_motion("pedestrian", "pedr2q05", scale={"R": 2.0, "Q": 0.5}),
+    "+ped_Q025": _class_motion("pedestrian", "pedq025", scale={"Q": 0.25}),
     "+ped_Q05": _class_motion("pedestrian", "pedq05", scale={"Q": 0.5}),
     "+ped_Q2": _class_motion("pedestrian", "pedq2", scale={"Q": 2.0}),
     "+trailer_cv_mct": _class_motion("trailer", "trlcv", "CV", **_cv_mct(0.3, 0.1, 2.0, 2.5)),
@@ -719,9 +734,23 @@ def main(argv=None) -> int:
             f"  {c:<28} mean {mean:+.4f}  below on {len(below)}/{len(margins)}"
             + (f"  worst {margins[worst]:+.4f} ({worst})" if below else "")
         )
+    _print_three_against_the_rest(table, names[:1])
     if args.json:
         args.json.write_text(json.dumps(table, indent=1))
     return 0
+
+
+def _print_three_against_the_rest(table: dict[str, dict[str, float]], first: list[str]) -> None:
+    """How often each of the three trackers is below the best of the other two (and of those and the first
+    candidate): the same test as a candidate's "below best3", so its rate has a yardstick."""
+    print()
+    others = " and ".join(["the other two"] + first)
+    print(f"each of the three: sets below the best of the other two / of {others}")
+    for t in THREE:
+        rest = [u for u in THREE if u != t]
+        below2 = sum(row[t] < max(row[u] for u in rest) for row in table.values())
+        below3 = sum(row[t] < max(row[u] for u in rest + first) for row in table.values())
+        print(f"  {t:<28} {below2}/{len(table)}  {below3}/{len(table)}")
 
 
 if __name__ == "__main__":
