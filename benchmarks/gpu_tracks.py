@@ -51,12 +51,19 @@ def main() -> None:
     nusc = open_nuscenes(args.dataroot, "v1.0-mini")
     scenes = load_scenes(nusc, "mini_val")
     tokens = [f.token for s in scenes for f in s.frames]
-    sim = Path(tempfile.mkdtemp()) / "centerpoint_s11.json"
-    sim.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_val", "centerpoint", 11, nusc=nusc)))
-    sets = {
-        "real PointPillars": args.dataroot / "detections" / "pointpillars_mini_val.json",
-        "SYNTHETIC CenterPoint-like s11": sim,
-    }
+    with tempfile.TemporaryDirectory(prefix="grutrack-gpu-tracks-") as tmp:
+        sim = Path(tmp) / "centerpoint_s11.json"
+        sim.write_text(json.dumps(simulate_nuscenes(None, "v1.0-mini", "mini_val", "centerpoint", 11, nusc=nusc)))
+        sets = {
+            "real PointPillars": args.dataroot / "detections" / "pointpillars_mini_val.json",
+            "SYNTHETIC CenterPoint-like s11": sim,
+        }
+        track_on_devices(sets, devices, scenes, tokens)
+
+
+def track_on_devices(sets: dict[str, Path], devices: list[str], scenes: list, tokens: list[str]) -> None:
+    """Track each detection file of ``sets`` with the shipped GRU-KF on every device; print frames/s and the
+    box-for-box comparison of the first and the last device."""
     checkpoint = pretrained_dir("grukf_default") / "model.pt"
     for name, path in sets.items():
         runs = []
