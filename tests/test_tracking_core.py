@@ -376,3 +376,60 @@ def test_ro_gdiou_for_some_classes_is_stage_one_of_the_two_stage_association(tmp
     assert 1.5 < cost < 1.7
     assert matched(_ro_preset(tmp_path, cost + 1e-9), 1.0) == [(0, 0), (1, 1)]
     assert matched(_ro_preset(tmp_path, cost - 1e-9), 1.0) == [(1, 1)]
+
+
+def test_one_classs_settings_leave_another_classs_tracks_unchanged(tmp_path):
+    # Each class is tracked on its own (class-aware NMS, per-class association, motion and lifecycle), so a preset's
+    # AMOTA is the mean of per-class figures each of which depends on its class's settings only: what
+    # benchmarks/bench_default_tracker.py --compose rests on. Cars and trucks side by side, overlapping in
+    # bird's-eye view, some detections missed; every car setting changed must leave the trucks' boxes, scores
+    # and track partition as they were (track ids are numbered across classes, so only their partition is compared).
+    TRUCK = CLASS_INDEX["truck"]
+    rng = np.random.default_rng(3)
+    frames, labels = [], []
+    for i in range(12):
+        boxes, lab = [], []
+        for k in range(3):
+            if rng.random() < 0.8:
+                boxes.append(_box(4.0 * i + rng.normal(0, 0.3), 3.0 * k + rng.normal(0, 0.2), vx=8.0))
+                lab.append(CAR)
+            if rng.random() < 0.8:
+                boxes.append(_box(1.5 * i + 4.0 * k, 3.0 * k + 0.8 + rng.normal(0, 0.2), w=2.5, l=7.0, h=3.0, vx=3.0))
+                lab.append(TRUCK)
+        frames.append(boxes)
+        labels.append(lab)
+    scene, dets = _scene(frames)
+    for f, lab in zip(scene.frames, labels):
+        d = dets[f.token]
+        dets[f.token] = BoxSet(d.boxes, rng.uniform(0.2, 0.95, len(lab)), np.array(lab, dtype=np.int64))
+    raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
+    base = tmp_path / "base.yaml"
+    base.write_text(yaml.safe_dump(raw))
+    raw["preprocessing"]["score_threshold"]["car"] = 0.8
+    raw["association"]["first_metric"]["car"] = "ro_gdiou_bev"
+    raw["association"]["first_threshold"]["car"] = 1.1
+    raw["association"]["second_threshold"]["car"] = 1.4
+    raw["lifecycle"]["max_age"]["car"] = 2
+    raw["lifecycle"]["punish_num"]["car"] = 0
+    raw["lifecycle"]["decay_rate"]["car"] = 0.9
+    raw["motion"]["model_override"] = {"car": "CV"}
+    changed = tmp_path / "car.yaml"
+    changed.write_text(yaml.safe_dump(raw))
+
+    def trucks(preset):
+        run = track_scenes(build_tracker("ekf", preset), [scene], dets)
+        out, first_seen = [], {}
+        for f in scene.frames:
+            r = run.results[f.token]
+            keep = r.labels == TRUCK
+            ids = [first_seen.setdefault(int(t), len(first_seen)) for t in r.ids[keep]]
+            out.append((r.boxes[keep], r.scores[keep], ids))
+        return out, run
+
+    (a, run_a), (b, run_b) = trucks(base), trucks(changed)
+    cars = [int((run_a.results[f.token].labels == CAR).sum()) for f in scene.frames]
+    cars_b = [int((run_b.results[f.token].labels == CAR).sum()) for f in scene.frames]
+    assert cars != cars_b  # the car settings did change the cars
+    assert sum(len(ids) for _, _, ids in a) > 20
+    for (boxes_a, scores_a, ids_a), (boxes_b, scores_b, ids_b) in zip(a, b):
+        assert np.array_equal(boxes_a, boxes_b) and np.array_equal(scores_a, scores_b) and ids_a == ids_b
