@@ -394,6 +394,20 @@ def _nis_hits(hits: int):  # the robust update only for tracks with this many ma
     return change
 
 
+def _crowded(classes: dict[str, tuple[float, list[float]]]):
+    """``association.crowded_threshold`` of ``classes`` (name -> MCTrack's threshold and weights): Ro_GDIoU for
+    their stage-1 rows and columns with more than one candidate."""
+
+    def change(raw):
+        a = raw["association"]
+        a.setdefault("crowded_threshold", _per_class(0.0))
+        a.setdefault("ro_gdiou_weights", _per_class([1.0, 1.0]))
+        for cls, (threshold, weights) in classes.items():
+            a["crowded_threshold"][cls], a["ro_gdiou_weights"][cls] = threshold, weights
+
+    return change
+
+
 def _ro_gdiou_class(classes: dict[str, tuple[float, list[float]]]):
     """Stage 1 of ``classes`` (name -> MCTrack's threshold and weights) on Ro_GDIoU, the track's predicted box
     against the detection; the other classes and stage 2 as they are."""
@@ -554,6 +568,10 @@ CANDIDATES = {
             "truck": (1.16, [1.0, 1.0]),
         }
     ),
+    # Ro_GDIoU (MCTrack's threshold and weights) only for the crowded rows and columns of stage 1
+    "+car_ped_crowded": _crowded({"car": (1.1, [0.5, 1.5]), "pedestrian": (2.06, [1.0, 1.0])}),
+    "+car_crowded": _crowded({"car": (1.1, [0.5, 1.5])}),
+    "+ped_crowded": _crowded({"pedestrian": (2.06, [1.0, 1.0])}),
     "+bus_ro_gdiou": _ro_gdiou_class({"bus": (1.6, [1.0, 1.0])}),
     "+bic_ro_gdiou": _ro_gdiou_class({"bicycle": (2.0, [1.0, 1.0])}),
     "+bus_bic_ro_gdiou": _ro_gdiou_class({"bus": (1.6, [1.0, 1.0]), "bicycle": (2.0, [1.0, 1.0])}),

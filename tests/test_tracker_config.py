@@ -187,8 +187,34 @@ def _decoupled_cv(**motion):
             "'association.track_pose' is read only with 'association.first_metric: ro_gdiou_bev'",
         ),
         (
-            lambda r: r["association"].__setitem__("geometry_precision", "float32"),
+            lambda r: r["association"].update(
+                geometry_precision="float32", crowded_threshold=dict.fromkeys(TRACKING_CLASSES, 0.0)
+            ),
             "'association.geometry_precision' is read only with 'association.first_metric: ro_gdiou_bev'",
+        ),
+        (
+            lambda r: r["association"].update(
+                first_metric={**r["association"]["first_metric"], "pedestrian": "ro_gdiou_bev"},
+                crowded_threshold={**dict.fromkeys(TRACKING_CLASSES, 0.0), "pedestrian": 2.0},
+            ),
+            r"'association.crowded_threshold.pedestrian' must be 0 when its 'association.first_metric' is "
+            r"ro_gdiou_bev \(stage 1 is Ro_GDIoU already\)",
+        ),
+        (
+            lambda r: r["association"].update(
+                crowded_threshold={**dict.fromkeys(TRACKING_CLASSES, 0.0), "car": 1.1},
+                distance_gate=dict.fromkeys(TRACKING_CLASSES, 2.0),
+            ),
+            "'association.crowded_threshold' needs 'association.algorithm: hungarian', no alignment GIoU metric and "
+            "no distance gate on every class",
+        ),
+        (
+            lambda r: r["association"].update(
+                crowded_threshold={**dict.fromkeys(TRACKING_CLASSES, 0.0), "car": 1.1},
+                track_pose=dict.fromkeys(TRACKING_CLASSES, "last_update"),
+            ),
+            r"'association.track_pose' is read only with 'association.first_metric: ro_gdiou_bev' for every class "
+            r"\(crowded pairs compare the track's predicted box\)",
         ),
     ],
 )
@@ -197,6 +223,18 @@ def test_bad_preset_keys(mutate, message):
     mutate(raw)
     with pytest.raises(ConfigError, match=message):
         config_from_dict(raw, "preset.yaml")
+
+
+def test_crowded_threshold_reads_the_ro_gdiou_keys_it_uses():
+    raw = copy.deepcopy(_raw())
+    a = raw["association"]
+    a["crowded_threshold"] = {**dict.fromkeys(TRACKING_CLASSES, 0.0), "car": 1.1, "pedestrian": 2.06}
+    a["ro_gdiou_weights"] = {**dict.fromkeys(TRACKING_CLASSES, [1.0, 1.0]), "car": [0.5, 1.5]}
+    a["geometry_precision"] = "float32"
+    cfg = config_from_dict(raw, "preset.yaml")
+    car = TRACKING_CLASSES.index("car")
+    assert cfg.crowded_threshold[car] == 1.1 and cfg.ro_gdiou_weights[car].tolist() == [0.5, 1.5]
+    assert cfg.geometry_precision == "float32"
 
 
 def test_punish_num_one_integer_or_per_class():

@@ -378,6 +378,49 @@ def test_ro_gdiou_for_some_classes_is_stage_one_of_the_two_stage_association(tmp
     assert matched(_ro_preset(tmp_path, cost - 1e-9), 1.0) == [(1, 1)]
 
 
+def test_crowded_stage_one_takes_the_strict_cost_in_crowded_rows_and_columns():
+    from grutrack.tracking.association import crowded_stage_one
+
+    # one class, threshold 1.0, crowded limit 0.8: detection 0 has two tracks below 1.0 (a crowded row), detection 1
+    # none, and each column one (no crowded column)
+    cost = np.array([[0.5, 0.6], [2.0, 1e6]])
+    strict = np.array([[0.7, 0.9], [0.1, 0.1]])
+    out = crowded_stage_one(cost, np.zeros(2, dtype=np.int64), np.array([1.0]), np.array([0.8]), strict)
+    assert np.allclose(out, [[0.9, 1.1], [2.0, 1e6]])  # strict + (1.0 - 0.8) in row 0; forbidden pair kept
+    # a crowded column: two detections below 1.0 against track 0
+    cost = np.array([[0.5, 3.0], [0.6, 3.0]])
+    out = crowded_stage_one(cost, np.zeros(2, dtype=np.int64), np.array([1.0]), np.array([0.8]), strict)
+    assert np.allclose(out, [[0.9, 3.0], [0.3, 3.0]])
+    # limit 0: off
+    off = crowded_stage_one(cost, np.zeros(2, dtype=np.int64), np.array([1.0]), np.array([0.0]), strict)
+    assert np.array_equal(off, cost)
+
+
+def test_crowded_threshold_judges_a_lone_pair_by_the_first_metric_and_a_crowded_one_by_ro_gdiou(tmp_path):
+    person = {"w": 0.6, "l": 0.6, "h": 1.7, "z": 0.85}
+    raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
+    raw["association"]["crowded_threshold"] = {**dict.fromkeys(raw["association"]["first_threshold"], 0.0)}
+    plain = tmp_path / "plain.yaml"
+    plain.write_text(yaml.safe_dump(raw))
+    raw["association"]["crowded_threshold"]["pedestrian"] = 2.06
+    crowded = tmp_path / "crowded.yaml"
+    crowded.write_text(yaml.safe_dump(raw))
+
+    def matched(preset, tracks_x):  # one pedestrian detection at x = 3 m, pedestrian tracks at tracks_x
+        trk = np.array([_box(x, 0, **person) for x in tracks_x])
+        labels = np.full(len(trk), PED)
+        dets = BoxSet(np.array([_box(3.0, 0, **person)]), np.full(1, 0.9), np.array([PED]))
+        m = build_tracker("ekf", preset).associate(dets, trk, labels, 0.5)
+        return sorted(zip(m.dets.tolist(), m.tracks.tolist()))
+
+    # 3 m from a lone track: 3D GIoU cost 1.67 < 1.69 admits it, Ro_GDIoU's 2.34 would not; alone, it is matched
+    assert matched(plain, [0.0]) == matched(crowded, [0.0]) == [(0, 0)]
+    # a second track 3.2 m on the other side (3D GIoU cost 1.68, also below 1.69): the row is crowded, Ro_GDIoU
+    # decides and admits neither (2.34 and more, above 2.06); without the option the nearer track takes it
+    assert matched(plain, [0.0, 6.2]) == [(0, 0)]
+    assert matched(crowded, [0.0, 6.2]) == []
+
+
 def test_one_classs_settings_leave_another_classs_tracks_unchanged(tmp_path):
     # Each class is tracked on its own (class-aware NMS, per-class association, motion and lifecycle), so a preset's
     # AMOTA is the mean of per-class figures each of which depends on its class's settings only: what

@@ -215,6 +215,7 @@ def associate(
     assignment: str = "most_pairs",
     distance_gate: np.ndarray | None = None,
     first_override: tuple[np.ndarray, np.ndarray] | None = None,
+    crowded: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Matches:
     """Two-stage association of D detections with T (predicted) tracks.
 
@@ -224,7 +225,9 @@ def associate(
     is scored, in either stage, only when its 3D centre distance is below its class's gate (a long box such as a
     trailer's still overlaps a track some metres off, so an ungated stage 2 would match it);
     first_override: (classes (C,) bool, costs (D, T)): stage 1 takes these costs for the detections of those
-    classes instead of their ``first_metric``'s (a similarity the compiled kernel does not hold, e.g. Ro_GDIoU).
+    classes instead of their ``first_metric``'s (a similarity the compiled kernel does not hold, e.g. Ro_GDIoU);
+    crowded: (limit (C,), costs (D, T)): for a class with limit > 0, a stage-1 row or column with more than one
+    pair below ``first_threshold`` takes these costs, admitted below ``limit`` (:func:`crowded_stage_one`).
     """
     solve = ASSIGNMENT[assignment]
     stages = [(tuple(first_metric), first_threshold)]
@@ -238,7 +241,27 @@ def associate(
         radii = np.where(distance_gate > 0, distance_gate, np.inf)[det_labels]
         inside = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2) < radii[:, None]  # (D, T)
         costs = [np.where(inside, c, _INVALID) for c in costs]
+    if crowded is not None and costs[0].size:
+        costs[0] = crowded_stage_one(costs[0], det_labels, first_threshold, *crowded)
     return _solve_stages(solve, costs, det_labels, first_threshold, second_threshold)
+
+
+def crowded_stage_one(
+    cost: np.ndarray, det_labels: np.ndarray, threshold: np.ndarray, limit: np.ndarray, strict: np.ndarray
+) -> np.ndarray:
+    """Stage-1 costs (D, T) with a stricter measure where the first one is ambiguous.
+
+    A detection of a class with ``limit > 0`` (per class, (C,)) that has more than one track below its class's
+    ``threshold`` (C,) in ``cost``, or a track with more than one such detection, is crowded: every admissible
+    pair (cost below the forbidden value) of that row or column takes its ``strict`` cost (D, T) instead, shifted
+    by ``threshold - limit`` so that it is admitted exactly when ``strict < limit``, with margin ``limit -
+    strict`` (:func:`threshold_margin`). Elsewhere ``cost`` is kept: a lone pair is judged by the looser first
+    measure. ``det_labels`` (D,) int64."""
+    on = (limit > 0)[det_labels]
+    near = (cost < threshold[det_labels][:, None]) & on[:, None]
+    busy = on[:, None] & ((near.sum(axis=1) > 1)[:, None] | (near.sum(axis=0) > 1)[None, :]) & (cost < _INVALID)
+    shifted = strict + (threshold - limit)[det_labels][:, None]
+    return np.where(busy, shifted, cost)
 
 
 def _solve_stages(

@@ -88,6 +88,7 @@ class TrackerConfig:
     # MCTrack options (defaults: the textbook choices, the pipeline above unchanged)
     nms_order: str = "input"
     ro_gdiou_weights: np.ndarray = field(default_factory=lambda: np.ones((7, 2)))
+    crowded_threshold: np.ndarray = field(default_factory=lambda: np.zeros(7))  # 0: off (stage 1 as it is)
     track_pose: tuple[str, ...] = ("predicted",) * 7
     track_pose_blend: np.ndarray = field(default_factory=lambda: np.ones(7))
     track_pose_rule: str = "own_class"
@@ -194,6 +195,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         geometry_window=v["motion.geometry_window"],
         nms_order=v["preprocessing.nms_order"],
         ro_gdiou_weights=v["association.ro_gdiou_weights"],
+        crowded_threshold=v["association.crowded_threshold"],
         track_pose=v["association.track_pose"],
         track_pose_blend=v["association.track_pose_blend"],
         track_pose_rule=v["association.track_pose_rule"],
@@ -233,6 +235,9 @@ def _check_ro_gdiou(v: dict, given: dict, source: str) -> None:
     a key only it reads without it (each would be silently ignored); for some classes only,
     :func:`_check_ro_gdiou_some`."""
     ro = [c for c, m in zip(TRACKING_CLASSES, v["association.first_metric"]) if m == "ro_gdiou_bev"]
+    if np.any(v["association.crowded_threshold"] > 0):
+        _check_crowded(v, given, source, ro)
+        return
     if not ro:
         for key in RO_GDIOU_KEYS:
             if key in given:
@@ -255,6 +260,34 @@ def _check_ro_gdiou(v: dict, given: dict, source: str) -> None:
                 f"{source}: '{key}' must be {expected} with 'association.first_metric: ro_gdiou_bev' (MCTrack's "
                 f"association is one Hungarian stage without a centre gate)"
             )
+
+
+def _check_crowded(v: dict, given: dict, source: str, ro: list[str]) -> None:
+    """``association.crowded_threshold`` (Ro_GDIoU for the crowded pairs of stage 1) is part of the two-stage
+    Hungarian association of classes scored by another stage-1 metric: refuse it on a class whose stage 1 is
+    Ro_GDIoU already, with greedy matching or Fast-Poly's dense association, and MCTrack's pose keys."""
+    both = [c for c, t in zip(TRACKING_CLASSES, v["association.crowded_threshold"]) if t > 0 and c in ro]
+    if both:
+        raise ConfigError(
+            f"{source}: 'association.crowded_threshold.{both[0]}' must be 0 when its 'association.first_metric' is "
+            f"ro_gdiou_bev (stage 1 is Ro_GDIoU already)"
+        )
+    if ro:
+        _check_ro_gdiou_some(v, given, source)
+        return
+    for key in ("association.track_pose", "association.track_pose_blend", "association.track_pose_rule"):
+        if key in given:
+            raise ConfigError(
+                f"{source}: '{key}' is read only with 'association.first_metric: ro_gdiou_bev' for every class "
+                f"(crowded pairs compare the track's predicted box); remove it"
+            )
+    metrics = set(v["association.first_metric"]) | {v["association.second_metric"]}
+    dense = bool(np.all(v["association.distance_gate"] > 0)) or any(m.startswith("a_") for m in metrics)
+    if v["association.algorithm"] != "hungarian" or dense:
+        raise ConfigError(
+            f"{source}: 'association.crowded_threshold' needs 'association.algorithm: hungarian', no alignment GIoU "
+            f"metric and no distance gate on every class (it acts in stage 1 of the two-stage association)"
+        )
 
 
 def _check_ro_gdiou_some(v: dict, given: dict, source: str) -> None:

@@ -128,14 +128,19 @@ AssociateFn = Callable[[BoxSet, np.ndarray, np.ndarray, float], Matches]
 def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
     """The default association: per-class similarity, Hungarian, optional second stage (ARCHITECTURE.md, "The
     method"); with Ro_GDIoU as the stage-1 metric of some classes, their stage-1 costs from
-    :func:`~grutrack.tracking.ro_gdiou.ro_gdiou_first_stage`."""
+    :func:`~grutrack.tracking.ro_gdiou.ro_gdiou_first_stage`; with ``crowded_threshold``, Ro_GDIoU for the
+    crowded rows and columns of stage 1 (:func:`~grutrack.tracking.association.crowded_stage_one`)."""
     if gated_association_needed(cfg):
         return gated_association(cfg)
-    first_metric, first_override = cfg.first_metric, None
+    first_metric, first_override, strict = cfg.first_metric, None, None
     if "ro_gdiou_bev" in cfg.first_metric:
         from grutrack.tracking.ro_gdiou import ro_gdiou_first_stage
 
         first_metric, first_override = ro_gdiou_first_stage(cfg)
+    if np.any(cfg.crowded_threshold > 0):
+        from grutrack.tracking.ro_gdiou import predicted_pose_costs
+
+        strict = predicted_pose_costs(cfg.crowded_threshold > 0, cfg)
 
     def run(dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
         return associate(
@@ -151,6 +156,7 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
             cfg.assignment,
             cfg.distance_gate,
             None if first_override is None else first_override(dets, trk_boxes, trk_labels),
+            None if strict is None else (cfg.crowded_threshold, strict(dets, trk_boxes, trk_labels)),
         )
 
     return run
