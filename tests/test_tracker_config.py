@@ -12,6 +12,9 @@ from grutrack.classes import TRACKING_CLASSES
 from grutrack.errors import ConfigError
 from grutrack.tracking.config import PRESET_DIR, config_from_dict, load_tracker_config
 
+#: association.crowded_threshold off (the preset's crowded stage 1 taken out where a case tests another rule)
+NO_CROWD = dict.fromkeys(TRACKING_CLASSES, 0.0)
+
 
 def _raw():
     return yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
@@ -84,7 +87,12 @@ def _decoupled_cv(**motion):
             "'association.max_distance' is required with 'association.algorithm: greedy'",
         ),
         (
-            lambda r: r["association"].update(algorithm="greedy", max_distance=dict.fromkeys(TRACKING_CLASSES, 2.0)),
+            lambda r: (
+                r["association"].update(
+                    algorithm="greedy", max_distance=dict.fromkeys(TRACKING_CLASSES, 2.0), crowded_threshold=NO_CROWD
+                ),
+                r["association"].pop("ro_gdiou_weights", None),
+            ),
             "'association.two_stage' must be false",
         ),
         (
@@ -161,7 +169,9 @@ def _decoupled_cv(**motion):
             "no alignment GIoU metric and no distance gate on every class",
         ),
         (
-            lambda r: r["association"].__setitem__("first_metric", dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev")),
+            lambda r: r["association"].update(
+                first_metric=dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev"), crowded_threshold=NO_CROWD
+            ),
             "'association.two_stage' must be false with 'association.first_metric: ro_gdiou_bev'",
         ),
         (
@@ -169,6 +179,7 @@ def _decoupled_cv(**motion):
                 first_metric=dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev"),
                 two_stage=False,
                 distance_gate={**dict.fromkeys(TRACKING_CLASSES, 0.0), "trailer": 5.0},
+                crowded_threshold=NO_CROWD,
             ),
             "'association.distance_gate' must be 0 for every class with 'association.first_metric: ro_gdiou_bev'",
         ),
@@ -179,6 +190,7 @@ def _decoupled_cv(**motion):
                 distance_gate=dict.fromkeys(TRACKING_CLASSES, 0.0),
                 algorithm="greedy",
                 max_distance=dict.fromkeys(TRACKING_CLASSES, 2.0),
+                crowded_threshold=NO_CROWD,
             ),
             "'association.algorithm' must be hungarian with 'association.first_metric: ro_gdiou_bev'",
         ),
@@ -187,8 +199,9 @@ def _decoupled_cv(**motion):
             "'association.track_pose' is read only with 'association.first_metric: ro_gdiou_bev'",
         ),
         (
-            lambda r: r["association"].update(
-                geometry_precision="float32", crowded_threshold=dict.fromkeys(TRACKING_CLASSES, 0.0)
+            lambda r: (
+                r["association"].update(geometry_precision="float32", crowded_threshold=NO_CROWD),
+                r["association"].pop("ro_gdiou_weights", None),
             ),
             "'association.geometry_precision' is read only with 'association.first_metric: ro_gdiou_bev'",
         ),

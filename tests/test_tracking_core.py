@@ -342,6 +342,8 @@ def _ro_preset(tmp_path, threshold: float):
     raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
     raw["association"]["first_metric"]["pedestrian"] = "ro_gdiou_bev"
     raw["association"]["first_threshold"]["pedestrian"] = threshold
+    crowded = raw["association"].setdefault("crowded_threshold", dict.fromkeys(raw["association"]["first_metric"], 0.0))
+    crowded["pedestrian"] = 0.0  # stage 1 Ro_GDIoU for every pair instead
     path = tmp_path / f"ro_{threshold}.yaml"
     path.write_text(yaml.safe_dump(raw))
     return path
@@ -400,9 +402,11 @@ def test_crowded_threshold_judges_a_lone_pair_by_the_first_metric_and_a_crowded_
     person = {"w": 0.6, "l": 0.6, "h": 1.7, "z": 0.85}
     raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
     raw["association"]["crowded_threshold"] = {**dict.fromkeys(raw["association"]["first_threshold"], 0.0)}
+    weights = raw["association"].pop("ro_gdiou_weights", None)
     plain = tmp_path / "plain.yaml"
     plain.write_text(yaml.safe_dump(raw))
     raw["association"]["crowded_threshold"]["pedestrian"] = 2.06
+    raw["association"]["ro_gdiou_weights"] = weights or dict.fromkeys(raw["association"]["first_threshold"], [1.0, 1.0])
     crowded = tmp_path / "crowded.yaml"
     crowded.write_text(yaml.safe_dump(raw))
 
@@ -451,6 +455,9 @@ def test_one_classs_settings_leave_another_classs_tracks_unchanged(tmp_path):
     raw["preprocessing"]["score_threshold"]["car"] = 0.8
     raw["association"]["first_metric"]["car"] = "ro_gdiou_bev"
     raw["association"]["first_threshold"]["car"] = 1.1
+    raw["association"].setdefault("crowded_threshold", dict.fromkeys(raw["association"]["first_metric"], 0.0))[
+        "car"
+    ] = 0
     raw["association"]["second_threshold"]["car"] = 1.4
     raw["lifecycle"]["max_age"]["car"] = 2
     raw["lifecycle"]["punish_num"]["car"] = 0

@@ -227,6 +227,8 @@ RO_GDIOU_KEYS = (
     "association.track_pose_rule",
     "association.geometry_precision",
 )
+#: of those, the keys the crowded pairs of stage 1 read too (``association.crowded_threshold``)
+CROWDED_KEYS = ("association.ro_gdiou_weights", "association.geometry_precision")
 
 
 def _check_ro_gdiou(v: dict, given: dict, source: str) -> None:
@@ -242,8 +244,9 @@ def _check_ro_gdiou(v: dict, given: dict, source: str) -> None:
         for key in RO_GDIOU_KEYS:
             if key in given:
                 raise ConfigError(
-                    f"{source}: '{key}' is read only with 'association.first_metric: ro_gdiou_bev' for every class "
-                    f"(MCTrack's association); remove it"
+                    f"{source}: '{key}' is read only with 'association.first_metric: ro_gdiou_bev' (MCTrack's "
+                    f"association{', or association.crowded_threshold above 0' if key in CROWDED_KEYS else ''}); "
+                    f"remove it"
                 )
         return
     if len(ro) < len(TRACKING_CLASSES):
