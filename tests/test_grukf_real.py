@@ -123,6 +123,38 @@ def test_pipeline_differences_name_a_changed_preset_field_and_motion_class(monke
     assert pipeline_differences(recorded, train_config) == ["motion_config.pedestrian", "tracker_preset.max_age"]
 
 
+def test_pipeline_differences_leave_out_an_option_added_later_at_its_default(monkeypatch):
+    """A preset field the provenance predates is no difference while it holds its default (the option off), and
+    is one once the preset turns it on."""
+    import dataclasses
+
+    import numpy as np
+
+    import grutrack.tracking.config as tracker_config
+    from grutrack.documents import Checkpoint
+    from grutrack.training.pretrained import pipeline_differences, pipeline_digest, pretrained_dir
+
+    train_config = Checkpoint.read(pretrained_dir("grukf_default") / "model.pt").train_config
+    recorded = pipeline_digest(train_config)
+    older = {**recorded, "tracker_preset": {k: v for k, v in recorded["tracker_preset"].items() if k != "nis_limit"}}
+    load_preset = tracker_config.load_tracker_config
+    monkeypatch.setattr(
+        tracker_config, "load_tracker_config", lambda name: dataclasses.replace(load_preset(name), nis_limit=0.0)
+    )
+    assert pipeline_differences(older, train_config) == []  # nis_limit 0.0: the default, off
+    monkeypatch.setattr(
+        tracker_config,
+        "load_tracker_config",
+        lambda name: dataclasses.replace(load_preset(name), crowded_threshold=np.full(7, 1.5)),
+    )
+    assert pipeline_differences(recorded, train_config) == ["tracker_preset.crowded_threshold"]
+    older = {
+        **recorded,
+        "tracker_preset": {k: v for k, v in recorded["tracker_preset"].items() if k != "crowded_threshold"},
+    }
+    assert pipeline_differences(older, train_config) == ["tracker_preset.crowded_threshold"]
+
+
 def test_recipe_differences_name_a_changed_key():
     from grutrack.documents import Checkpoint
     from grutrack.training.pretrained import pretrained_dir, recipe_differences

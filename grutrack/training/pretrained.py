@@ -99,12 +99,37 @@ def pipeline_digest(train_config: dict) -> dict[str, dict[str, str]]:
 def pipeline_differences(recorded: dict, train_config: dict) -> list[str]:
     """Sections (``tracker_preset.<field>``, ``motion_config.<class>``) whose digest in ``recorded`` (a
     provenance's ``trained_with``) differs from :func:`pipeline_digest` of ``train_config`` today; empty when the
-    network was trained on the tracker as it is."""
+    network was trained on the tracker as it is. A preset field the record predates counts only when its value
+    today is not the field's default: an option added later and left at its default (off) leaves the tracker the
+    network was trained on as it was."""
     today = pipeline_digest(train_config)
+    unset = _default_digests()
     out = []
     for part in sorted(set(today) | set(recorded)):
         a, b = today.get(part, {}), recorded.get(part, {})
-        out += [f"{part}.{k}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+        for k in sorted(set(a) | set(b)):
+            added_off = part == "tracker_preset" and k not in b and a.get(k) == unset.get(k)
+            if a.get(k) != b.get(k) and not added_off:
+                out.append(f"{part}.{k}")
+    return out
+
+
+def _default_digests() -> dict[str, str]:
+    """SHA-256 (as :func:`pipeline_digest`) of the default of each tracker-preset field that has one."""
+    import dataclasses
+    import hashlib
+
+    from grutrack.tracking.config import TrackerConfig
+
+    out = {}
+    for f in dataclasses.fields(TrackerConfig):
+        if f.default is not dataclasses.MISSING:
+            value = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            value = f.default_factory()
+        else:
+            continue
+        out[f.name] = hashlib.sha256(json.dumps(_canonical(value), sort_keys=True).encode()).hexdigest()
     return out
 
 
