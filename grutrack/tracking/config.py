@@ -278,38 +278,46 @@ def _check_crowded(v: dict, given: dict, source: str, ro: list[str]) -> None:
     if ro:
         _check_ro_gdiou_some(v, given, source)
         return
-    for key in ("association.track_pose", "association.track_pose_blend", "association.track_pose_rule"):
-        if key in given:
-            raise ConfigError(
-                f"{source}: '{key}' is read only with 'association.first_metric: ro_gdiou_bev' for every class "
-                f"(crowded pairs compare the track's predicted box); remove it"
-            )
-    metrics = set(v["association.first_metric"]) | {v["association.second_metric"]}
-    dense = bool(np.all(v["association.distance_gate"] > 0)) or any(m.startswith("a_") for m in metrics)
-    if v["association.algorithm"] != "hungarian" or dense:
-        raise ConfigError(
-            f"{source}: 'association.crowded_threshold' needs 'association.algorithm: hungarian', no alignment GIoU "
-            f"metric and no distance gate on every class (it acts in stage 1 of the two-stage association)"
-        )
+    _check_stage_one(
+        v,
+        given,
+        source,
+        "crowded pairs compare the track's predicted box",
+        "'association.crowded_threshold' needs",
+        "it acts in stage 1 of the two-stage association",
+    )
 
 
 def _check_ro_gdiou_some(v: dict, given: dict, source: str) -> None:
     """Ro_GDIoU for some classes only is stage 1 of the two-stage Hungarian association, the track's predicted box
     against the detection: refuse the keys of MCTrack's pose choice (read with every class only), greedy matching,
     and Fast-Poly's dense association (alignment GIoU, or a gate on every class)."""
+    _check_stage_one(
+        v,
+        given,
+        source,
+        "with some classes, stage 1 compares the track's predicted box",
+        "'association.first_metric: ro_gdiou_bev' for some classes needs",
+        "it is stage 1 of the two-stage association",
+    )
+
+
+def _check_stage_one(v: dict, given: dict, source: str, pose_why: str, what: str, why: str) -> None:
+    """A Ro_GDIoU option inside stage 1 of the two-stage Hungarian association (``what`` names it in the message):
+    refuse MCTrack's pose keys (``pose_why``: why they are not read), greedy matching and Fast-Poly's dense
+    association (alignment GIoU, or a gate on every class; ``why``)."""
     for key in ("association.track_pose", "association.track_pose_blend", "association.track_pose_rule"):
         if key in given:
             raise ConfigError(
                 f"{source}: '{key}' is read only with 'association.first_metric: ro_gdiou_bev' for every class "
-                f"(with some classes, stage 1 compares the track's predicted box); remove it"
+                f"({pose_why}); remove it"
             )
     metrics = set(v["association.first_metric"]) | {v["association.second_metric"]}
     dense = bool(np.all(v["association.distance_gate"] > 0)) or any(m.startswith("a_") for m in metrics)
     if v["association.algorithm"] != "hungarian" or dense:
         raise ConfigError(
-            f"{source}: 'association.first_metric: ro_gdiou_bev' for some classes needs 'association.algorithm: "
-            f"hungarian', no alignment GIoU metric and no distance gate on every class (it is stage 1 of the "
-            f"two-stage association)"
+            f"{source}: {what} 'association.algorithm: hungarian', no alignment GIoU metric and no distance gate on "
+            f"every class ({why})"
         )
 
 
