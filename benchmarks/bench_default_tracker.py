@@ -39,7 +39,6 @@ import argparse
 import atexit
 import copy
 import dataclasses
-import json
 import shutil
 import sys
 import tempfile
@@ -54,6 +53,7 @@ from grutrack.data.nusc_detections import load_detections
 from grutrack.data.nuscenes import load_scenes, open_nuscenes
 from grutrack.evaluation.nuscenes_fast.amota import fast_tracking_eval
 from grutrack.export.nuscenes_json import build_submission
+from grutrack.io import write_json_atomic
 from grutrack.tracking.config import preset_path
 from grutrack.tracking.factory import build_tracker
 from grutrack.tracking.tracker import track_scenes
@@ -806,7 +806,7 @@ def main(argv=None) -> int:
         )
     _print_three_against_the_rest(table, names[:1])
     if args.json:
-        args.json.write_text(json.dumps({"table": table, "per_class": classes}, indent=1))
+        write_json_atomic(args.json, {"table": table, "per_class": classes}, indent=1)
     return 0
 
 
