@@ -572,6 +572,8 @@ CANDIDATES = {
     "+car_ped_crowded": _crowded({"car": (1.1, [0.5, 1.5]), "pedestrian": (2.06, [1.0, 1.0])}),
     "+car_crowded": _crowded({"car": (1.1, [0.5, 1.5])}),
     "+ped_crowded": _crowded({"pedestrian": (2.06, [1.0, 1.0])}),
+    # the preset before Decision 10 (crowded pedestrians judged by the first metric, as every pair)
+    "ekf_prev10": lambda raw: raw["association"].pop("crowded_threshold"),
     "+bus_ro_gdiou": _ro_gdiou_class({"bus": (1.6, [1.0, 1.0])}),
     "+bic_ro_gdiou": _ro_gdiou_class({"bicycle": (2.0, [1.0, 1.0])}),
     "+bus_bic_ro_gdiou": _ro_gdiou_class({"bus": (1.6, [1.0, 1.0]), "bicycle": (2.0, [1.0, 1.0])}),

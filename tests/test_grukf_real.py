@@ -227,6 +227,34 @@ def test_grukf_at_least_the_ekf_on_real_pointpillars(nusc_mini, pointpillars_min
     assert gru["amota"] >= ekf["amota"] - 0.002, (gru["amota"], ekf["amota"])
 
 
+def test_the_shipped_network_writes_the_ekf_presets_boxes_for_the_classes_it_does_not_filter(
+    nusc_mini, pointpillars_mini_val, trained
+):
+    """The network filters the CTRA classes (car, bus, truck); the other classes run the preset's EKF in both
+    trackers, so a preset change of those classes alone leaves every GRU-KF - EKF difference as it was (Decision 10,
+    docs/results/default_tracker.md#crowded-pedestrians)."""
+    import numpy as np
+
+    from grutrack.classes import TRACKING_CLASSES
+
+    checkpoint, _ = trained
+    scenes = load_scenes(nusc_mini, "mini_val")
+    dets = load_detections(pointpillars_mini_val, [f.token for s in scenes for f in s.frames])
+    runs = [
+        track_scenes(t, scenes, dets).results
+        for t in (build_tracker("ekf"), build_tracker("grukf", checkpoint=checkpoint, device="cpu"))
+    ]
+    for c, name in enumerate(TRACKING_CLASSES):
+        ekf, gru = ([r.boxes[r.labels == c] for r in run.values()] for run in runs)
+        ekf, gru = np.concatenate(list(ekf)), np.concatenate(list(gru))
+        if name in ("bus", "car", "truck"):
+            assert name != "car" or ekf.shape != gru.shape or np.abs(ekf - gru).max() > 1e-3
+        else:
+            assert ekf.shape == gru.shape, name
+            np.testing.assert_allclose(gru, ekf, atol=1e-8, err_msg=name)
+    assert sum(int((r.labels == TRACKING_CLASSES.index("pedestrian")).sum()) for r in runs[0].values()) >= 40
+
+
 def test_package_records_the_tracker_the_network_was_trained_on(tmp_path):
     """``package`` (rule package_pretrained) writes the digests that the staleness check above compares."""
     from grutrack.documents import Checkpoint
