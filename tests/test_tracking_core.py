@@ -386,9 +386,16 @@ def test_crowded_stage_one_takes_the_strict_cost_in_crowded_rows_and_columns():
     # one class, threshold 1.0, crowded limit 0.8: detection 0 has two tracks below 1.0 (a crowded row), detection 1
     # none, and each column one (no crowded column)
     cost = np.array([[0.5, 0.6], [2.0, 1e6]])
-    strict = np.array([[0.7, 0.9], [0.1, 0.1]])
+    table = np.array([[0.7, 0.9], [0.1, 0.1]])
+    asked = []
+
+    def strict(rows, cols):  # the strict costs of those rows and columns, as the tracker's Ro_GDIoU gives them
+        asked.append((rows.tolist(), cols.tolist()))
+        return table[np.ix_(rows, cols)]
+
     out = crowded_stage_one(cost, np.zeros(2, dtype=np.int64), np.array([1.0]), np.array([0.8]), strict)
     assert np.allclose(out, [[0.9, 1.1], [2.0, 1e6]])  # strict + (1.0 - 0.8) in row 0; forbidden pair kept
+    assert asked == [([0], [0, 1])]  # only the crowded row's pairs are scored strictly
     # a crowded column: two detections below 1.0 against track 0
     cost = np.array([[0.5, 3.0], [0.6, 3.0]])
     out = crowded_stage_one(cost, np.zeros(2, dtype=np.int64), np.array([1.0]), np.array([0.8]), strict)
@@ -396,6 +403,13 @@ def test_crowded_stage_one_takes_the_strict_cost_in_crowded_rows_and_columns():
     # limit 0: off
     off = crowded_stage_one(cost, np.zeros(2, dtype=np.int64), np.array([1.0]), np.array([0.0]), strict)
     assert np.array_equal(off, cost)
+    # nothing crowded: the strict measure is not asked for
+    asked.clear()
+    lone = np.array([[0.5, 3.0], [3.0, 0.6]])
+    assert np.array_equal(
+        crowded_stage_one(lone, np.zeros(2, dtype=np.int64), np.array([1.0]), np.array([0.8]), strict), lone
+    )
+    assert asked == []
 
 
 def test_crowded_threshold_judges_a_lone_pair_by_the_first_metric_and_a_crowded_one_by_ro_gdiou(tmp_path):

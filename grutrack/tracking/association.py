@@ -25,6 +25,7 @@ it are never scored). Scale NMS (:func:`grutrack.tracking.preprocess.scale_nms_k
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -215,7 +216,7 @@ def associate(
     assignment: str = "most_pairs",
     distance_gate: np.ndarray | None = None,
     first_override: tuple[np.ndarray, np.ndarray] | None = None,
-    crowded: tuple[np.ndarray, np.ndarray] | None = None,
+    crowded: tuple[np.ndarray, Callable[[np.ndarray, np.ndarray], np.ndarray]] | None = None,
 ) -> Matches:
     """Two-stage association of D detections with T (predicted) tracks.
 
@@ -226,8 +227,9 @@ def associate(
     trailer's still overlaps a track some metres off, so an ungated stage 2 would match it);
     first_override: (classes (C,) bool, costs (D, T)): stage 1 takes these costs for the detections of those
     classes instead of their ``first_metric``'s (a similarity the compiled kernel does not hold, e.g. Ro_GDIoU);
-    crowded: (limit (C,), costs (D, T)): for a class with limit > 0, a stage-1 row or column with more than one
-    pair below ``first_threshold`` takes these costs, admitted below ``limit`` (:func:`crowded_stage_one`).
+    crowded: (limit (C,), strict costs ``(rows (R,), cols (K,)) -> (R, K)``): for a class with limit > 0, a stage-1
+    row or column with more than one pair below ``first_threshold`` takes the strict costs, admitted below ``limit``
+    (:func:`crowded_stage_one`).
     """
     solve = ASSIGNMENT[assignment]
     stages = [(tuple(first_metric), first_threshold)]
@@ -247,21 +249,37 @@ def associate(
 
 
 def crowded_stage_one(
-    cost: np.ndarray, det_labels: np.ndarray, threshold: np.ndarray, limit: np.ndarray, strict: np.ndarray
+    cost: np.ndarray,
+    det_labels: np.ndarray,
+    threshold: np.ndarray,
+    limit: np.ndarray,
+    strict: Callable[[np.ndarray, np.ndarray], np.ndarray],
 ) -> np.ndarray:
     """Stage-1 costs (D, T) with a stricter measure where the first one is ambiguous.
 
     A detection of a class with ``limit > 0`` (per class, (C,)) that has more than one track below its class's
     ``threshold`` (C,) in ``cost``, or a track with more than one such detection, is crowded: every admissible
-    pair (cost below the forbidden value) of that row or column takes its ``strict`` cost (D, T) instead, shifted
-    by ``threshold - limit`` so that it is admitted exactly when ``strict < limit``, with margin ``limit -
-    strict`` (:func:`threshold_margin`). Elsewhere ``cost`` is kept: a lone pair is judged by the looser first
-    measure. ``det_labels`` (D,) int64."""
-    on = (limit > 0)[det_labels]
-    near = (cost < threshold[det_labels][:, None]) & on[:, None]
-    busy = on[:, None] & ((near.sum(axis=1) > 1)[:, None] | (near.sum(axis=0) > 1)[None, :]) & (cost < _INVALID)
-    shifted = strict + (threshold - limit)[det_labels][:, None]
-    return np.where(busy, shifted, cost)
+    pair (cost below the forbidden value) of that row or column takes its strict cost instead, shifted by
+    ``threshold - limit`` so that it is admitted exactly when ``strict < limit``, with margin ``limit - strict``
+    (:func:`threshold_margin`). Elsewhere ``cost`` is kept: a lone pair is judged by the looser first measure.
+    ``det_labels`` (D,) int64; ``strict(rows (R,), cols (K,)) -> (R, K)``: the strict costs of those detections
+    against those tracks, asked once, for the rows and columns that hold a crowded pair (not at all when none
+    does: the strict measure costs more than the first)."""
+    on = np.flatnonzero((limit > 0)[det_labels])  # the rows of those classes
+    if not len(on):
+        return cost
+    sub = cost[on]
+    near = sub < threshold[det_labels[on]][:, None]
+    busy = ((near.sum(axis=1) > 1)[:, None] | (near.sum(axis=0) > 1)[None, :]) & (sub < _INVALID)
+    if not busy.any():
+        return cost
+    keep_rows, cols = np.flatnonzero(busy.any(axis=1)), np.flatnonzero(busy.any(axis=0))
+    rows = on[keep_rows]
+    block = np.ix_(rows, cols)
+    shifted = strict(rows, cols) + (threshold - limit)[det_labels[rows]][:, None]
+    out = cost.copy()
+    out[block] = np.where(busy[np.ix_(keep_rows, cols)], shifted, cost[block])
+    return out
 
 
 def _solve_stages(

@@ -423,27 +423,31 @@ def ro_gdiou_first_stage(cfg):
     classes = np.array([m == "ro_gdiou_bev" for m in cfg.first_metric])
     placeholder = tuple("giou_bev" if ro else m for ro, m in zip(classes, cfg.first_metric))
     costs = predicted_pose_costs(classes, cfg)
-    return placeholder, lambda dets, trk_boxes, trk_labels: (classes, costs(dets, trk_boxes, trk_labels))
+    return placeholder, lambda dets, trk_boxes, trk_labels: (
+        classes,
+        costs(dets.boxes, dets.labels, trk_boxes, trk_labels),
+    )
 
 
 def predicted_pose_costs(classes: np.ndarray, cfg):
-    """A function ``(dets, trk_boxes (T, 9), trk_labels (T,)) -> (D, T)``: 1 - Ro_GDIoU of each detection of the
+    """A function ``(det_boxes (D, 9), det_labels (D,), trk_boxes (T, 9), trk_labels (T,)) -> (D, T)``: 1 - Ro_GDIoU
+    of each detection of the
     ``classes`` ((C,) bool) against each track of its class at the track's predicted box (the preset's
     ``ro_gdiou_weights`` and ``geometry_precision``); 1e6 for the other pairs. Stage 1 of some classes
     (:func:`ro_gdiou_first_stage`) and the crowded pairs of ``association.crowded_threshold``."""
     w1 = np.ascontiguousarray(cfg.ro_gdiou_weights[:, 0], dtype=np.float64)
     w2 = np.ascontiguousarray(cfg.ro_gdiou_weights[:, 1], dtype=np.float64)
 
-    def costs(dets, trk_boxes: np.ndarray, trk_labels: np.ndarray) -> np.ndarray:
-        D, T = len(dets.boxes), len(trk_boxes)
+    def costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray, trk_labels: np.ndarray):
+        D, T = len(det_boxes), len(trk_boxes)
         out = np.full((D, T), 1e6)
         if D and T:
-            boxes = np.ascontiguousarray(dets.boxes, dtype=np.float64)
+            boxes = np.ascontiguousarray(det_boxes, dtype=np.float64)
             trk = np.ascontiguousarray(trk_boxes, dtype=np.float64)
             _ro_cost_kernel(
                 boxes,
                 boxes,
-                np.where(classes[dets.labels], dets.labels, -1).astype(np.int64),  # only these classes' rows
+                np.where(classes[det_labels], det_labels, -1).astype(np.int64),  # only these classes' rows
                 trk,
                 trk,
                 trk_labels.astype(np.int64),

@@ -156,7 +156,12 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
             cfg.assignment,
             cfg.distance_gate,
             None if first_override is None else first_override(dets, trk_boxes, trk_labels),
-            None if strict is None else (cfg.crowded_threshold, strict(dets, trk_boxes, trk_labels)),
+            None
+            if strict is None
+            else (
+                cfg.crowded_threshold,
+                lambda r, c: strict(dets.boxes[r], dets.labels[r], trk_boxes[c], trk_labels[c]),
+            ),
         )
 
     return run
