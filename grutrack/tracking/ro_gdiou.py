@@ -298,8 +298,12 @@ def _min_area_rect(pts, n, hull, f32) -> tuple[float, float]:
 def ro_gdiou_pair(pa, pb, w1, w2, f32, work) -> float:
     """Ro_GDIoU of the track pose ``pa`` and the detection pose ``pb`` (canonical boxes, >= 7 values: x, y, z, w,
     l, h, yaw); ``work``: scratch (40, 2)."""
-    # both footprints relative to the track's centre
-    if f32:
+    # both footprints relative to the track's centre; footprints whose circumscribed circles lie apart (by more
+    # than a rounding margin) do not overlap, and their intersection is 0 without clipping
+    reach = 0.5 * (math.sqrt(pa[3] * pa[3] + pa[4] * pa[4]) + math.sqrt(pb[3] * pb[3] + pb[4] * pb[4]))
+    if (pb[0] - pa[0]) ** 2 + (pb[1] - pa[1]) ** 2 > (1.001 * reach) ** 2 + 1e-6:
+        inter = 0.0
+    elif f32:
         inter = _f32_intersection_area(pb[0] - pa[0], pb[1] - pa[1], pa[4], pa[3], pa[6], pb[4], pb[3], pb[6], work)
     else:
         ca, cb = work[0:4], work[4:8]
