@@ -41,6 +41,37 @@ def test_float32_geometry_close_to_float64():
         assert abs(ro_gdiou_pair(a, b, 1, 1, True, work) - ro_gdiou_pair(a, b, 1, 1, False, work)) < 1e-5
 
 
+def test_footprints_apart_have_no_intersection_so_the_clipping_is_skipped():
+    """ro_gdiou_pair takes the intersection as 0, without clipping, for footprints_apart pairs: both clippings
+    (float64 and OpenCV's float32) give 0 for every such pair, and the rule is tight (a pair just inside overlaps)."""
+    from grutrack.tracking.ro_gdiou import _corners, _f32_intersection_area, _intersection_area, footprints_apart
+
+    rng = np.random.default_rng(5)
+    work, ca, cb = np.empty((40, 2)), np.empty((4, 2)), np.empty((4, 2))
+    apart = 0
+    for _ in range(3000):
+        la, wa, lb, wb = rng.uniform(0.3, 12.0, 4)
+        reach = 0.5 * (np.hypot(la, wa) + np.hypot(lb, wb))
+        d, ang = reach * rng.uniform(0.99, 1.05), rng.uniform(-np.pi, np.pi)
+        x, y, ya, yb = d * np.cos(ang), d * np.sin(ang), *rng.uniform(-np.pi, np.pi, 2)
+        if not footprints_apart(_box(0.0, 0.0, wa, la, ya), _box(x, y, wb, lb, yb)):
+            continue
+        apart += 1
+        _corners(0.0, 0.0, la, wa, ya, False, ca)
+        _corners(x, y, lb, wb, yb, False, cb)
+        assert _intersection_area(ca, cb, work[8:24], work[24:40]) == 0.0
+        assert _f32_intersection_area(x, y, la, wa, ya, lb, wb, yb, work) == 0.0
+    assert 1500 < apart < 3000  # the draw straddles the rule's distance
+    # tight: two 4 x 3 boxes with their diagonals on the line of centres overlap at 0.999 of 5 m, not apart
+    yaw = -np.arctan2(3.0, 4.0)
+    a, b = _box(0.0, 0.0, 3.0, 4.0, yaw), _box(0.999 * 5.0, 0.0, 3.0, 4.0, yaw)
+    assert not footprints_apart(a, b)
+    _corners(0.0, 0.0, 4.0, 3.0, yaw, False, ca)
+    _corners(0.999 * 5.0, 0.0, 4.0, 3.0, yaw, False, cb)
+    assert _intersection_area(ca, cb, work[8:24], work[24:40]) > 0.0
+    assert footprints_apart(a, _box(1.002 * 5.0, 0.0, 3.0, 4.0, yaw))
+
+
 def test_track_pose_rule_oldest_track():
     """MCTrack compares every pair at the pose of its oldest live track's class; own_class at each track's."""
     cfg = load_tracker_config("mctrack")

@@ -295,13 +295,19 @@ def _min_area_rect(pts, n, hull, f32) -> tuple[float, float]:
 
 
 @njit(cache=True)
+def footprints_apart(pa, pb) -> bool:
+    """Whether the BEV footprints of boxes ``pa`` and ``pb`` (x, y, z, w, l, ...) cannot overlap: their
+    circumscribed circles lie apart by more than a rounding margin (0.1 % of the radii and 1e-6 m^2)."""
+    reach = 0.5 * (math.sqrt(pa[3] * pa[3] + pa[4] * pa[4]) + math.sqrt(pb[3] * pb[3] + pb[4] * pb[4]))
+    return (pb[0] - pa[0]) ** 2 + (pb[1] - pa[1]) ** 2 > (1.001 * reach) ** 2 + 1e-6
+
+
+@njit(cache=True)
 def ro_gdiou_pair(pa, pb, w1, w2, f32, work) -> float:
     """Ro_GDIoU of the track pose ``pa`` and the detection pose ``pb`` (canonical boxes, >= 7 values: x, y, z, w,
     l, h, yaw); ``work``: scratch (40, 2)."""
-    # both footprints relative to the track's centre; footprints whose circumscribed circles lie apart (by more
-    # than a rounding margin) do not overlap, and their intersection is 0 without clipping
-    reach = 0.5 * (math.sqrt(pa[3] * pa[3] + pa[4] * pa[4]) + math.sqrt(pb[3] * pb[3] + pb[4] * pb[4]))
-    if (pb[0] - pa[0]) ** 2 + (pb[1] - pa[1]) ** 2 > (1.001 * reach) ** 2 + 1e-6:
+    # both footprints relative to the track's centre; footprints apart intersect in 0, without clipping
+    if footprints_apart(pa, pb):
         inter = 0.0
     elif f32:
         inter = _f32_intersection_area(pb[0] - pa[0], pb[1] - pa[1], pa[4], pa[3], pa[6], pb[4], pb[3], pb[6], work)
@@ -435,10 +441,9 @@ def ro_gdiou_first_stage(cfg):
 
 def predicted_pose_costs(classes: np.ndarray, cfg):
     """A function ``(det_boxes (D, 9), det_labels (D,), trk_boxes (T, 9), trk_labels (T,)) -> (D, T)``: 1 - Ro_GDIoU
-    of each detection of the
-    ``classes`` ((C,) bool) against each track of its class at the track's predicted box (the preset's
-    ``ro_gdiou_weights`` and ``geometry_precision``); 1e6 for the other pairs. Stage 1 of some classes
-    (:func:`ro_gdiou_first_stage`) and the crowded pairs of ``association.crowded_threshold``."""
+    of each detection of the ``classes`` ((C,) bool) against each track of its class at the track's predicted box
+    (the preset's ``ro_gdiou_weights`` and ``geometry_precision``); 1e6 for the other pairs. Stage 1 of some
+    classes (:func:`ro_gdiou_first_stage`) and the crowded pairs of ``association.crowded_threshold``."""
     w1 = np.ascontiguousarray(cfg.ro_gdiou_weights[:, 0], dtype=np.float64)
     w2 = np.ascontiguousarray(cfg.ro_gdiou_weights[:, 1], dtype=np.float64)
 
