@@ -20,7 +20,8 @@ on mini_val / 2000-2009 on mini_train, the four profiles: made after Decision 8 
 below on sets no decision saw; the bus score threshold of default_tracker.md#bus-score was then chosen on them too);
 ``fresh2`` / ``fresh2_train`` (the same with seeds 3000-3049 / 3000-3009: made after that choice, the count on
 unseen sets again); ``fresh3`` / ``fresh3_train`` (seeds 4000-4049 / 4000-4009: made after the confidence-weighted
-noise was chosen on ``fresh``, its check on unseen sets); ``worlds`` and
+noise was chosen on ``fresh``, its check on unseen sets); ``fresh4`` / ``fresh4_train`` (seeds 5000-5049 /
+5000-5009: made after Decision 10, the check of its pedestrian Q candidate on sets no decision saw); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles). Candidates:
 :data:`CANDIDATES` (names; ``--candidates`` a comma list). ``--class NAME`` prints one class's AMOTA instead (sets
@@ -135,6 +136,8 @@ GROUPS = {
     "fresh2_train": (tuple(range(3000, 3010)), ("mini_train",)),
     "fresh3": (tuple(range(4000, 4050)), ("mini_val",)),
     "fresh3_train": (tuple(range(4000, 4010)), ("mini_train",)),
+    "fresh4": (tuple(range(5000, 5050)), ("mini_val",)),
+    "fresh4_train": (tuple(range(5000, 5010)), ("mini_train",)),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
