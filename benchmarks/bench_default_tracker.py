@@ -14,14 +14,16 @@ Groups: ``reference`` (the four reference sets), ``dev`` / ``dev2`` (SYNTHETIC, 
 the candidates were compared on while choosing) and ``heldout`` ... ``heldout4`` (SYNTHETIC, seeds 300-302,
 500-502, 700-702, 900-902, mini_val and mini_train, all four profiles: each first looked at once a decision was
 frozen; docs/results/default_tracker.md says which decision each group checked); ``variants`` (SYNTHETIC, seeds
-1001-1003, four detector profiles Decisions 1-3 never saw, :data:`PROFILE_VARIANTS`: noisier velocities, three times
+1001-1003, four detector profiles Decisions 1-3 never saw, :data:`VARIANTS`: noisier velocities, three times
 the false positives, noisier poses, a weaker recall); ``fresh`` / ``fresh_train`` (SYNTHETIC, seeds 2000-2049
 on mini_val / 2000-2009 on mini_train, the four profiles: made after Decision 8 to count how often the preset falls
 below on sets no decision saw; the bus score threshold of default_tracker.md#bus-score was then chosen on them too);
 ``fresh2`` / ``fresh2_train`` (the same with seeds 3000-3049 / 3000-3009: made after that choice, the count on
 unseen sets again); ``fresh3`` / ``fresh3_train`` (seeds 4000-4049 / 4000-4009: made after the confidence-weighted
 noise was chosen on ``fresh``, its check on unseen sets); ``fresh4`` / ``fresh4_train`` (seeds 5000-5049 /
-5000-5009: made after Decision 10, the check of its pedestrian Q candidate on sets no decision saw); ``worlds`` and
+5000-5009: made after Decision 10, the check of its pedestrian Q candidate on sets no decision saw); ``strong`` /
+``strong_train`` (seeds 6000-6049 / 6000-6009, the profile ``cp_strong`` of :data:`PROFILE_VARIANTS`: a stronger
+detector than any the decisions saw, made after Decision 10); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles). Candidates:
 :data:`CANDIDATES` (names; ``--candidates`` a comma list). ``--class NAME`` prints one class's AMOTA instead (sets
@@ -85,13 +87,37 @@ def _scaled(**factors):
     return edit
 
 
-#: detector profiles Decisions 1-3 never saw (group ``variants``): name -> (shipped profile, edit of it)
+#: edited detector profiles (groups ``variants``, ``worlds_variants``, ``strong``): name -> (shipped profile, edit)
 PROFILE_VARIANTS = {
     "cp_noisyvel": ("centerpoint", _scaled(vel_sigma_mps=2.5, vel_sigma_rel=2.0, vel_tail_prob=2.0)),
     "cp_highfp": ("centerpoint", _scaled(free_fp_per_frame=3.0, near_fp_rate=3.0, fp_score_logit_mean=0.5)),
     "cp_noisypose": ("centerpoint", _scaled(yaw_sigma_rad=2.5, yaw_flip_prob=3.0, pos_sigma_m=1.8)),
     "pp_lowrecall": ("pointpillars", _scaled(recall_max=0.9, score_logit_sigma=1.5)),
+    # a stronger detector than any profile the decisions saw: half the pose, size and velocity noise and half the
+    # false positives of the CenterPoint-like profile
+    "cp_strong": (
+        "centerpoint",
+        _scaled(
+            pos_sigma_m=0.5,
+            pos_sigma_per_m=0.5,
+            pos_tail_prob=0.5,
+            z_sigma_m=0.5,
+            size_sigma_rel=0.5,
+            yaw_sigma_rad=0.5,
+            yaw_flip_prob=0.5,
+            vel_sigma_mps=0.5,
+            vel_sigma_rel=0.5,
+            vel_tail_prob=0.5,
+            free_fp_per_frame=0.5,
+            near_fp_rate=0.5,
+            duplicate_prob=0.5,
+        ),
+    ),
 }
+
+
+#: the four variants Decisions 1-3 never saw (groups ``variants`` and ``worlds_variants``)
+VARIANTS = ("cp_noisyvel", "cp_highfp", "cp_noisypose", "pp_lowrecall")
 
 
 def profile_arg(profile: str, folder: Path) -> str:
@@ -129,7 +155,7 @@ GROUPS = {
     "heldout4": ((900, 901, 902), ("mini_val", "mini_train")),
     "trailer": ((110, 111, 300, 301, 302), ("mini_train",)),
     "trailer_pp": ((110, 111, 300, 301, 302, 500, 501, 502, 700, 701, 702), ("mini_train",)),
-    "variants": ((1001, 1002, 1003), ("mini_val", "mini_train"), tuple(PROFILE_VARIANTS)),
+    "variants": ((1001, 1002, 1003), ("mini_val", "mini_train"), VARIANTS),
     "fresh": (tuple(range(2000, 2050)), ("mini_val",)),
     "fresh_train": (tuple(range(2000, 2010)), ("mini_train",)),
     "fresh2": (tuple(range(3000, 3050)), ("mini_val",)),
@@ -138,17 +164,19 @@ GROUPS = {
     "fresh3_train": (tuple(range(4000, 4010)), ("mini_train",)),
     "fresh4": (tuple(range(5000, 5050)), ("mini_val",)),
     "fresh4_train": (tuple(range(5000, 5010)), ("mini_train",)),
+    "strong": (tuple(range(6000, 6050)), ("mini_val",), ("cp_strong",)),
+    "strong_train": (tuple(range(6000, 6010)), ("mini_train",), ("cp_strong",)),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
 #: tracked (split demo_all): group -> (world seeds, edit of the demo's class specs or None, detector profiles).
 #: ``worlds``: the demo as shipped (trailers parked, as in mini); ``towed``: a third of the trailers towed at truck
-#: speeds, which mini lacks; ``worlds_variants``: the ``worlds`` with the profiles of :data:`PROFILE_VARIANTS`.
+#: speeds, which mini lacks; ``worlds_variants``: the ``worlds`` with the profiles of :data:`VARIANTS`.
 WORLD_SCENES = 20
 WORLDS = {
     "worlds": ((1, 2, 3), None, PROFILES),
     "towed": ((4, 5), "towed", PROFILES),
-    "worlds_variants": ((1, 2, 3), None, tuple(PROFILE_VARIANTS)),
+    "worlds_variants": ((1, 2, 3), None, VARIANTS),
 }
 
 
@@ -194,12 +222,20 @@ def _nms_order(raw):  # detections numbered in NMS's score order
     raw["preprocessing"]["nms_order"] = "score"
 
 
+def _stage_one_ro_gdiou(a: dict, classes) -> None:
+    """``association`` ``a`` with Ro_GDIoU as the first metric of ``classes``: their crowded rule off (stage 1 is
+    Ro_GDIoU already; the config refuses both)."""
+    if "crowded_threshold" in a:
+        a["crowded_threshold"] = {**a["crowded_threshold"], **dict.fromkeys(classes, 0.0)}
+
+
 def _ro_gdiou(raw):  # Ro_GDIoU one stage, MCTrack's weights and thresholds, predicted pose
     m = _mctrack()["association"]
     a = raw["association"]
     a.update(
         first_metric=m["first_metric"], first_threshold=m["first_threshold"], ro_gdiou_weights=m["ro_gdiou_weights"]
     )
+    _stage_one_ro_gdiou(a, CLASSES)
     a["two_stage"] = False
     a["distance_gate"] = dict.fromkeys(CLASSES, 0.0)  # MCTrack's association has no centre gate
 
@@ -421,6 +457,7 @@ def _ro_gdiou_class(classes: dict[str, tuple[float, list[float]]]):
         for cls, (threshold, weights) in classes.items():
             a["first_metric"][cls], a["first_threshold"][cls] = "ro_gdiou_bev", threshold
             a["ro_gdiou_weights"][cls] = weights
+        _stage_one_ro_gdiou(a, classes)
 
     return change
 
@@ -450,8 +487,13 @@ CANDIDATES = {
     "+nms_order": _nms_order,
     "+ro_gdiou": _ro_gdiou,
     "+first_frames": _first_frames,
-    "+ro_gdiou_own_thr": lambda raw: raw["association"].update(
-        first_metric=dict.fromkeys(CLASSES, "ro_gdiou_bev"), two_stage=False, distance_gate=dict.fromkeys(CLASSES, 0.0)
+    "+ro_gdiou_own_thr": lambda raw: (
+        raw["association"].update(
+            first_metric=dict.fromkeys(CLASSES, "ro_gdiou_bev"),
+            two_stage=False,
+            distance_gate=dict.fromkeys(CLASSES, 0.0),
+        ),
+        _stage_one_ro_gdiou(raw["association"], CLASSES),
     ),
     "+mct_max_age": _lifetimes,
     "+decoupled_cv": _decoupled,
@@ -467,6 +509,8 @@ CANDIDATES = {
     "+R_vel_bic100": _velocity_r({"bicycle": 100.0}, "rbic100"),
     "+R_vel_bic10_bus30": _velocity_r({"bicycle": 10.0, "bus": 30.0}, "rbic10bus30"),
     "+R_vel_bic10_bus100": _velocity_r({"bicycle": 10.0, "bus": 100.0}, "rbic10bus100"),
+    "+R_vel_car07": _velocity_r({"car": 0.714}, "rcar07"),
+    "+R_vel_car1": _velocity_r({"car": 1.0}, "rcar1"),
     "+R_vel_mct_nocar": _velocity_r({k: v for k, v in MCT_VEL_RATIO.items() if k != "car"}, "rmctnocar"),
     "+R_vel_bic10+Q_bus4": _process_q({"bus": 4.0}, "bic10qbus4", _velocity_r({"bicycle": 10.0}, "rbic10")),
     "+R_vel_bic10+Q_bus10": _process_q({"bus": 10.0}, "bic10qbus10", _velocity_r({"bicycle": 10.0}, "rbic10")),
@@ -574,6 +618,7 @@ CANDIDATES = {
     # Ro_GDIoU (MCTrack's threshold and weights) only for the crowded rows and columns of stage 1
     "+car_ped_crowded": _crowded({"car": (1.1, [0.5, 1.5]), "pedestrian": (2.06, [1.0, 1.0])}),
     "+car_crowded": _crowded({"car": (1.1, [0.5, 1.5])}),
+    "+car_crowded_punish0": _combine(_crowded({"car": (1.1, [0.5, 1.5])}), _punish({"car": 0})),
     "+ped_crowded": _crowded({"pedestrian": (2.06, [1.0, 1.0])}),
     # the preset before Decision 10 (crowded pedestrians judged by the first metric, as every pair)
     "ekf_prev10": lambda raw: raw["association"].pop("crowded_threshold"),
@@ -632,11 +677,15 @@ CANDIDATES = {
     "+nms+ro_gdiou+first_frames": _combine(_nms, _ro_gdiou, _first_frames),
     # a young track's box written at a lower score: s (1 - d^hits); ekf_prev6 the preset before Decision 6 (off)
     "ekf_prev6": _combine(_young(0.0), _nis(0.0)),
-    **{f"+young{d}": _young(d) for d in (0.3, 0.4, 0.5, 0.6)},
+    **{f"+young{d}": _young(d) for d in (0.0, 0.3, 0.4, 0.5, 0.6)},
     # a 5 m centre gate (stage 1) beyond trailers: a far-off detection starts a track instead of pulling one
     "+bus_gate5": lambda raw: raw["association"]["distance_gate"].update(bus=5.0),
     "+bus_truck_gate5": lambda raw: raw["association"]["distance_gate"].update(bus=5.0, truck=5.0),
-    "+all_gate5": lambda raw: raw["association"]["distance_gate"].update(dict.fromkeys(CLASSES, 5.0)),
+    # a gate on every class is Fast-Poly's gated association, which has no crowded rule (measured before Decision 10)
+    "+all_gate5": lambda raw: (
+        raw["association"]["distance_gate"].update(dict.fromkeys(CLASSES, 5.0)),
+        raw["association"].pop("crowded_threshold", None),
+    ),
     "+young0.4+score_detection": _combine(_young(0.4), lambda raw: raw["lifecycle"].update(score_update="detection")),
     # robust update: a detection's R scaled by NIS / g when its position NIS exceeds g (motion.nis_limit); ekf_prev7
     # the preset before Decision 7 (off)

@@ -1,0 +1,39 @@
+"""benchmarks/bench_default_tracker.py: every candidate is a valid preset, every edited profile a valid profile, and
+the groups the decisions were measured on keep their sets (docs/results/default_tracker.md quotes them)."""
+
+import importlib.util
+from pathlib import Path
+
+from grutrack.data.detection_sim import load_profile
+from grutrack.tracking.config import load_tracker_config
+
+_SPEC = importlib.util.spec_from_file_location(
+    "bench_default_tracker", Path(__file__).parents[1] / "benchmarks/bench_default_tracker.py"
+)
+bench = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(bench)
+
+
+def test_every_candidate_writes_a_preset_that_loads_and_differs_from_the_preset():
+    preset = load_tracker_config("ekf")
+    for name in bench.CANDIDATES:
+        cfg = load_tracker_config(bench.candidate_path(name))
+        if name != "ekf":
+            assert cfg != preset, name
+
+
+def test_every_edited_profile_is_a_valid_profile_with_its_changed_noise(tmp_path):
+    for name, (base, _) in bench.PROFILE_VARIANTS.items():
+        prof, shipped = load_profile(bench.profile_arg(name, tmp_path)), load_profile(base)
+        assert prof.name == name and prof.classes != shipped.classes, name
+    strong, cp = load_profile(bench.profile_arg("cp_strong", tmp_path)), load_profile("centerpoint")
+    for cls in ("car", "pedestrian", "bus"):  # the defaults and a class override (bus) halved alike
+        assert strong.classes[cls].pos_sigma_m == 0.5 * cp.classes[cls].pos_sigma_m, cls
+
+
+def test_the_groups_keep_their_sets():
+    sets = bench.generated(*bench.GROUPS["variants"])
+    assert len(sets) == 3 * 2 * 4 and {p for _, p, _ in sets.values()} == set(bench.VARIANTS)
+    assert len(bench.generated(*bench.GROUPS["fresh4"])) == 200
+    strong = bench.generated(*bench.GROUPS["strong"])
+    assert len(strong) == 50 and {p for _, p, _ in strong.values()} == {"cp_strong"}
