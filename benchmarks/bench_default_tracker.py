@@ -87,6 +87,12 @@ def _scaled(**factors):
     return edit
 
 
+#: the noise and false-positive settings the profile ``cp_strong`` halves
+STRONG_HALVED = (
+    "pos_sigma_m", "pos_sigma_per_m", "pos_tail_prob", "z_sigma_m", "size_sigma_rel", "yaw_sigma_rad", "yaw_flip_prob",
+    "vel_sigma_mps", "vel_sigma_rel", "vel_tail_prob", "free_fp_per_frame", "near_fp_rate", "duplicate_prob",
+)  # fmt: skip
+
 #: edited detector profiles (groups ``variants``, ``worlds_variants``, ``strong``): name -> (shipped profile, edit)
 PROFILE_VARIANTS = {
     "cp_noisyvel": ("centerpoint", _scaled(vel_sigma_mps=2.5, vel_sigma_rel=2.0, vel_tail_prob=2.0)),
@@ -95,24 +101,7 @@ PROFILE_VARIANTS = {
     "pp_lowrecall": ("pointpillars", _scaled(recall_max=0.9, score_logit_sigma=1.5)),
     # a stronger detector than any profile the decisions saw: half the pose, size and velocity noise and half the
     # false positives of the CenterPoint-like profile
-    "cp_strong": (
-        "centerpoint",
-        _scaled(
-            pos_sigma_m=0.5,
-            pos_sigma_per_m=0.5,
-            pos_tail_prob=0.5,
-            z_sigma_m=0.5,
-            size_sigma_rel=0.5,
-            yaw_sigma_rad=0.5,
-            yaw_flip_prob=0.5,
-            vel_sigma_mps=0.5,
-            vel_sigma_rel=0.5,
-            vel_tail_prob=0.5,
-            free_fp_per_frame=0.5,
-            near_fp_rate=0.5,
-            duplicate_prob=0.5,
-        ),
-    ),
+    "cp_strong": ("centerpoint", _scaled(**dict.fromkeys(STRONG_HALVED, 0.5))),
 }
 
 
@@ -487,13 +476,13 @@ CANDIDATES = {
     "+nms_order": _nms_order,
     "+ro_gdiou": _ro_gdiou,
     "+first_frames": _first_frames,
-    "+ro_gdiou_own_thr": lambda raw: (
-        raw["association"].update(
+    "+ro_gdiou_own_thr": _combine(
+        lambda raw: raw["association"].update(
             first_metric=dict.fromkeys(CLASSES, "ro_gdiou_bev"),
             two_stage=False,
             distance_gate=dict.fromkeys(CLASSES, 0.0),
         ),
-        _stage_one_ro_gdiou(raw["association"], CLASSES),
+        lambda raw: _stage_one_ro_gdiou(raw["association"], CLASSES),
     ),
     "+mct_max_age": _lifetimes,
     "+decoupled_cv": _decoupled,
@@ -682,9 +671,9 @@ CANDIDATES = {
     "+bus_gate5": lambda raw: raw["association"]["distance_gate"].update(bus=5.0),
     "+bus_truck_gate5": lambda raw: raw["association"]["distance_gate"].update(bus=5.0, truck=5.0),
     # a gate on every class is Fast-Poly's gated association, which has no crowded rule (measured before Decision 10)
-    "+all_gate5": lambda raw: (
-        raw["association"]["distance_gate"].update(dict.fromkeys(CLASSES, 5.0)),
-        raw["association"].pop("crowded_threshold", None),
+    "+all_gate5": _combine(
+        lambda raw: raw["association"]["distance_gate"].update(dict.fromkeys(CLASSES, 5.0)),
+        lambda raw: raw["association"].pop("crowded_threshold", None),
     ),
     "+young0.4+score_detection": _combine(_young(0.4), lambda raw: raw["lifecycle"].update(score_update="detection")),
     # robust update: a detection's R scaled by NIS / g when its position NIS exceeds g (motion.nis_limit); ekf_prev7
