@@ -18,6 +18,9 @@ suite.md (a markdown table) into --out; trained checkpoints go to --out/<name>/.
 association event in a row of parked motorcycles or one bus ID switch moves a set's 6-class AMOTP by 0.03 m.
 suite.md then also gives, for every model, the mean difference to the ``ekf`` row over all CenterPoint-like sets
 with its standard error (differences taken set by set, so the detection draw cancels) and per class.
+``--cp-seed-list 2-10,21-30``: these CenterPoint-like seeds on mini_val (a comma list of seeds and inclusive
+ranges; seeds the suite already has are not repeated), with the same difference table. The twenty draws of issue
+14's bars (docs/results/pretrained.md#twenty-draws) are ``--cp-seed-list 2-11,21-30``.
 ``--drift-seeds N``: N sets of the drift profile (docs/results/grukf_eval/drift.yaml: centerpoint plus a centre
 error correlated over time) on mini_val (seeds 41 .. 40 + N), with the same difference table over them.
 
@@ -60,6 +63,18 @@ HOLDOUT_SETS = (
     ("centerpoint_s34", "centerpoint", 34),
     ("pointpillars_s35", "pointpillars", 35),
 )
+
+
+def seed_list(text: str) -> list[int]:
+    """``2-4,21`` -> [2, 3, 4, 21]: a comma list of seeds (>= 0) and inclusive ranges, in order, each once."""
+    seeds: list[int] = []
+    for part in text.split(","):
+        lo, dash, hi = part.strip().partition("-")
+        hi = hi if dash else lo
+        if not lo.isdigit() or not hi.isdigit() or int(hi) < int(lo):
+            raise ValueError(f"expected seeds and ranges like 2-11,21-30, got {part.strip()!r}")
+        seeds += [s for s in range(int(lo), int(hi) + 1) if s not in seeds]
+    return seeds
 
 
 def _overrides(text: str) -> dict:
@@ -185,6 +200,13 @@ def main() -> None:
         "mean difference to the ekf row with its standard error (needs the ekf row)",
     )
     ap.add_argument(
+        "--cp-seed-list",
+        default="",
+        metavar="SEEDS",
+        help="also CenterPoint-like sets on mini_val at these seeds (e.g. 2-11,21-30; those the suite has are "
+        "not repeated), and the difference table (needs the ekf row)",
+    )
+    ap.add_argument(
         "--drift-seeds",
         type=int,
         default=0,
@@ -193,6 +215,12 @@ def main() -> None:
         "and the mean difference to the ekf row over them (needs the ekf row)",
     )
     args = ap.parse_args()
+    try:
+        extra_cp = seed_list(args.cp_seed_list) if args.cp_seed_list else []
+    except ValueError as e:
+        ap.error(f"--cp-seed-list: {e}")
+    if extra_cp and (args.holdout or args.no_ekf):
+        ap.error("--cp-seed-list: expected without --holdout and --no-ekf (it compares with the ekf row on mini_val)")
     for flag, n in (("--cp-seeds", args.cp_seeds), ("--drift-seeds", args.drift_seeds)):
         if n < 0 or (n and (args.holdout or args.no_ekf)):
             ap.error(
@@ -238,6 +266,8 @@ def main() -> None:
             )
             + tuple((f"drift_s{DRIFT_BASE + i}", DRIFT_PROFILE, DRIFT_BASE + i) for i in range(1, args.drift_seeds + 1))
         )
+        have = {name for name, _, _ in eval_sets}
+        eval_sets += tuple((f"centerpoint_s{s}", "centerpoint", s) for s in extra_cp if f"centerpoint_s{s}" not in have)
         sets = {
             name: _dets(nusc, "mini_val", prof, seed, va_tokens, out / "detections") for name, prof, seed in eval_sets
         }
@@ -307,7 +337,7 @@ def main() -> None:
             f"{mean(r, sim, 'amotp'):.3f} | {mean(r, cp_like, 'amota'):.4f} / "
             f"{mean(r, cp_like, 'amotp'):.3f} |"
         )
-    if args.cp_seeds:
+    if args.cp_seeds or extra_cp:
         lines += ["", *_difference_table(rows, classes, cp_like)]
     if args.drift_seeds:
         lines += [

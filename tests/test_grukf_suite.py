@@ -60,3 +60,12 @@ def test_drift_sets_use_the_evaluation_profile_of_the_results():
 
     assert Path(suite.DRIFT_PROFILE).is_file()
     assert load_profile(suite.DRIFT_PROFILE).classes["car"].pos_drift_sigma_m > 0
+
+
+def test_seed_list_takes_seeds_and_inclusive_ranges_each_once():
+    """--cp-seed-list 2-11,21-30 is the twenty draws of issue 14's bars (docs/results/pretrained.md#twenty-draws)."""
+    assert suite.seed_list("2-11,21-30") == [*range(2, 12), *range(21, 31)]
+    assert suite.seed_list("5, 3-4,4") == [5, 3, 4]
+    for bad in ("", "a", "4-2", "-3", "2-", "1.5"):
+        with pytest.raises(ValueError, match="expected seeds and ranges"):
+            suite.seed_list(bad)
