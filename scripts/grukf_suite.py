@@ -21,6 +21,9 @@ with its standard error (differences taken set by set, so the detection draw can
 ``--cp-seed-list 2-10,21-30``: these CenterPoint-like seeds on mini_val (a comma list of seeds and inclusive
 ranges; seeds the suite already has are not repeated), with the same difference table. The twenty draws of issue
 14's bars (docs/results/pretrained.md#twenty-draws) are ``--cp-seed-list 2-11,21-30``.
+``--profile-seeds PROFILE:SEEDS`` (repeatable): sets of another profile on mini_val (a built-in profile name such as
+pointpillars, centerpoint_velfail, centerpoint_drift, or a profile file; SEEDS as above), named
+``<profile>_s<seed>``, with a difference table per profile.
 ``--drift-seeds N``: N sets of the drift profile (docs/results/grukf_eval/drift.yaml: centerpoint plus a centre
 error correlated over time) on mini_val (seeds 41 .. 40 + N), with the same difference table over them.
 
@@ -207,6 +210,14 @@ def main() -> None:
         "not repeated), and the difference table (needs the ekf row)",
     )
     ap.add_argument(
+        "--profile-seeds",
+        action="append",
+        default=[],
+        metavar="PROFILE:SEEDS",
+        help="also sets of this detector profile on mini_val at these seeds (e.g. pointpillars:2-11), and a "
+        "difference table for them (needs the ekf row); repeatable",
+    )
+    ap.add_argument(
         "--drift-seeds",
         type=int,
         default=0,
@@ -221,6 +232,15 @@ def main() -> None:
         ap.error(f"--cp-seed-list: {e}")
     if extra_cp and (args.holdout or args.no_ekf):
         ap.error("--cp-seed-list: expected without --holdout and --no-ekf (it compares with the ekf row on mini_val)")
+    profile_sets: dict[str, list[int]] = {}
+    for spec in args.profile_seeds:
+        prof, _, seeds = spec.rpartition(":")
+        try:
+            profile_sets[prof] = seed_list(seeds)
+        except ValueError as e:
+            ap.error(f"--profile-seeds {spec}: {e}")
+        if not prof or args.holdout or args.no_ekf:
+            ap.error(f"--profile-seeds {spec}: expected PROFILE:SEEDS, without --holdout and --no-ekf")
     for flag, n in (("--cp-seeds", args.cp_seeds), ("--drift-seeds", args.drift_seeds)):
         if n < 0 or (n and (args.holdout or args.no_ekf)):
             ap.error(
@@ -268,6 +288,7 @@ def main() -> None:
         )
         have = {name for name, _, _ in eval_sets}
         eval_sets += tuple((f"centerpoint_s{s}", "centerpoint", s) for s in extra_cp if f"centerpoint_s{s}" not in have)
+        eval_sets += tuple((f"{Path(prof).stem}_s{s}", prof, s) for prof, seeds in profile_sets.items() for s in seeds)
         sets = {
             name: _dets(nusc, "mini_val", prof, seed, va_tokens, out / "detections") for name, prof, seed in eval_sets
         }
@@ -326,6 +347,7 @@ def main() -> None:
     ]
     sim = [n for n, _, _ in eval_sets]
     cp_like = [n for n, prof, _ in eval_sets if prof == "centerpoint"]  # the acceptance's held-out kind
+    sim = [n for n in sim if n not in {f"{Path(p).stem}_s{s}" for p, seeds in profile_sets.items() for s in seeds}]
 
     def mean(r, names, what):
         return np.mean([r[f"{s}_{what}"] for s in names])
@@ -339,6 +361,9 @@ def main() -> None:
         )
     if args.cp_seeds or extra_cp:
         lines += ["", *_difference_table(rows, classes, cp_like)]
+    for prof, seeds in profile_sets.items():
+        names = [f"{Path(prof).stem}_s{s}" for s in seeds]
+        lines += ["", *_difference_table(rows, classes, names, Path(prof).stem)]
     if args.drift_seeds:
         lines += [
             "",

@@ -69,14 +69,17 @@ def _loss_and_grads(t, scenes, together: bool):
 
 #: every ``training_classes`` value, the default recipe as it ships among them; (overrides, the network's SS models)
 SETTINGS = {
-    "default_recipe": ({}, ("CTRA", "BICYCLE")),  # training_classes own_model, network_classes ss_model, EKF prior
-    "own_model-network_classes_own_model": ({"network_classes": "own_model"}, ("CTRA", "BICYCLE")),
-    "tracked": ({"training_classes": "tracked"}, ("CTRA",)),
+    "default_recipe": ({}, ("CTRA", "BICYCLE")),  # training_classes own_model, network_classes own_model, EKF prior
+    "own_model-network_classes_ss_model": ({"network_classes": "ss_model"}, ("CTRA", "BICYCLE")),
+    "tracked": ({"training_classes": "tracked", "network_classes": "ss_model"}, ("CTRA",)),
     "tracked-all-constant_prior": (
         {"training_classes": "tracked", "network_classes": "all", "gain_prior": "constant"},
         ("CTRA",),
     ),
-    "tracked-four_gru-aux": ({"training_classes": "tracked", "four_gru": True, "aux_inputs": True}, ("CTRA",)),
+    "tracked-four_gru-aux": (
+        {"training_classes": "tracked", "network_classes": "ss_model", "four_gru": True, "aux_inputs": True},
+        ("CTRA",),
+    ),
 }
 
 

@@ -114,7 +114,7 @@ def test_network_classes_is_a_named_option():
     from grutrack.training.config import load_train_config
 
     assert load_train_config("paper").network["network_classes"] == "all"  # the paper: one network for all
-    assert load_train_config("grukf").network["network_classes"] == "ss_model"  # the default recipe
+    assert load_train_config("grukf").network["network_classes"] == "own_model"  # the default recipe
     assert GRUKFConfig().network_classes == "all"  # checkpoints written before the key: every class
     with pytest.raises(ConfigError, match="'network.network_classes' must be 'all', 'ss_model' or 'own_model'"):
         load_train_config("grukf", {"network_classes": "ctra"})
