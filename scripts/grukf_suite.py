@@ -18,7 +18,7 @@ suite.md (a markdown table) into --out; trained checkpoints go to --out/<name>/.
 association event in a row of parked motorcycles or one bus ID switch moves a set's 6-class AMOTP by 0.03 m.
 suite.md then also gives, for every model, the mean difference to the ``ekf`` row over all CenterPoint-like sets
 with its standard error (differences taken set by set, so the detection draw cancels) and per class.
-``--cp-seed-list 2-10,21-30``: these CenterPoint-like seeds on mini_val (a comma list of seeds and inclusive
+``--cp-seed-list 2-11,21-30``: these CenterPoint-like seeds on mini_val (a comma list of seeds and inclusive
 ranges; seeds the suite already has are not repeated), with the same difference table. The twenty draws of issue
 14's bars (docs/results/pretrained.md#twenty-draws) are ``--cp-seed-list 2-11,21-30``.
 ``--profile-seeds PROFILE:SEEDS`` (repeatable): sets of another profile on mini_val (a built-in profile name such as
@@ -78,6 +78,26 @@ def seed_list(text: str) -> list[int]:
             raise ValueError(f"expected seeds and ranges like 2-11,21-30, got {part.strip()!r}")
         seeds += [s for s in range(int(lo), int(hi) + 1) if s not in seeds]
     return seeds
+
+
+def profile_sets(specs: list[str]) -> dict[str, tuple[str, int]]:
+    """``["pointpillars:2-3"]`` -> {"pointpillars_s2": ("pointpillars", 2), "pointpillars_s3": (...)}: the sets of
+    ``--profile-seeds`` by name (``<profile stem>_s<seed>``). Raises ValueError naming the spec for a malformed one,
+    an unknown profile, or ``centerpoint`` (whose sets are ``--cp-seed-list``'s)."""
+    from grutrack.data.detection_sim import load_profile
+    from grutrack.errors import ConfigError
+
+    sets: dict[str, tuple[str, int]] = {}
+    for spec in specs:
+        prof, _, seeds = spec.rpartition(":")
+        if not prof or Path(prof).stem == "centerpoint":
+            raise ValueError(f"{spec!r}: expected PROFILE:SEEDS with a profile other than centerpoint (--cp-seed-list)")
+        try:
+            load_profile(prof)
+            sets.update({f"{Path(prof).stem}_s{seed}": (prof, seed) for seed in seed_list(seeds)})
+        except (ValueError, ConfigError) as e:
+            raise ValueError(f"{spec!r}: {e}") from None
+    return sets
 
 
 def _overrides(text: str) -> dict:
@@ -232,15 +252,12 @@ def main() -> None:
         ap.error(f"--cp-seed-list: {e}")
     if extra_cp and (args.holdout or args.no_ekf):
         ap.error("--cp-seed-list: expected without --holdout and --no-ekf (it compares with the ekf row on mini_val)")
-    profile_sets: dict[str, list[int]] = {}
-    for spec in args.profile_seeds:
-        prof, _, seeds = spec.rpartition(":")
-        try:
-            profile_sets[prof] = seed_list(seeds)
-        except ValueError as e:
-            ap.error(f"--profile-seeds {spec}: {e}")
-        if not prof or args.holdout or args.no_ekf:
-            ap.error(f"--profile-seeds {spec}: expected PROFILE:SEEDS, without --holdout and --no-ekf")
+    try:
+        by_profile = profile_sets(args.profile_seeds)
+    except ValueError as e:
+        ap.error(f"--profile-seeds {e}")
+    if by_profile and (args.holdout or args.no_ekf):
+        ap.error("--profile-seeds: expected without --holdout and --no-ekf (it compares with the ekf row on mini_val)")
     for flag, n in (("--cp-seeds", args.cp_seeds), ("--drift-seeds", args.drift_seeds)):
         if n < 0 or (n and (args.holdout or args.no_ekf)):
             ap.error(
@@ -288,7 +305,7 @@ def main() -> None:
         )
         have = {name for name, _, _ in eval_sets}
         eval_sets += tuple((f"centerpoint_s{s}", "centerpoint", s) for s in extra_cp if f"centerpoint_s{s}" not in have)
-        eval_sets += tuple((f"{Path(prof).stem}_s{s}", prof, s) for prof, seeds in profile_sets.items() for s in seeds)
+        eval_sets += tuple((name, prof, seed) for name, (prof, seed) in by_profile.items())
         sets = {
             name: _dets(nusc, "mini_val", prof, seed, va_tokens, out / "detections") for name, prof, seed in eval_sets
         }
@@ -345,9 +362,8 @@ def main() -> None:
         "| model | " + " | ".join(sets) + " | mean simulated AMOTA / AMOTP | mean CenterPoint-like |",
         "|---" * (len(sets) + 3) + "|",
     ]
-    sim = [n for n, _, _ in eval_sets]
+    sim = [n for n, _, _ in eval_sets if n not in by_profile]  # the suite's own sets
     cp_like = [n for n, prof, _ in eval_sets if prof == "centerpoint"]  # the acceptance's held-out kind
-    sim = [n for n in sim if n not in {f"{Path(p).stem}_s{s}" for p, seeds in profile_sets.items() for s in seeds}]
 
     def mean(r, names, what):
         return np.mean([r[f"{s}_{what}"] for s in names])
@@ -361,8 +377,8 @@ def main() -> None:
         )
     if args.cp_seeds or extra_cp:
         lines += ["", *_difference_table(rows, classes, cp_like)]
-    for prof, seeds in profile_sets.items():
-        names = [f"{Path(prof).stem}_s{s}" for s in seeds]
+    for prof in dict.fromkeys(prof for prof, _ in by_profile.values()):
+        names = [name for name, (p, _) in by_profile.items() if p == prof]
         lines += ["", *_difference_table(rows, classes, names, Path(prof).stem)]
     if args.drift_seeds:
         lines += [

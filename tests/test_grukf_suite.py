@@ -69,3 +69,20 @@ def test_seed_list_takes_seeds_and_inclusive_ranges_each_once():
     for bad in ("", "a", "4-2", "-3", "2-", "1.5"):
         with pytest.raises(ValueError, match="expected seeds and ranges"):
             suite.seed_list(bad)
+
+
+def test_profile_sets_name_each_set_and_refuse_a_bad_spec():
+    sets = suite.profile_sets(["pointpillars:2-3", "centerpoint_velfail:5"])
+    assert sets == {
+        "pointpillars_s2": ("pointpillars", 2),
+        "pointpillars_s3": ("pointpillars", 3),
+        "centerpoint_velfail_s5": ("centerpoint_velfail", 5),
+    }
+    for bad, why in (
+        ("pointpillars", "expected PROFILE:SEEDS"),
+        ("centerpoint:2", "other than centerpoint"),
+        ("nosuch:2", "unknown detector profile 'nosuch'"),
+        ("pointpillars:4-2", "expected seeds and ranges"),
+    ):
+        with pytest.raises(ValueError, match=why):
+            suite.profile_sets([bad])
