@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import os
 import shutil
 import subprocess
 from dataclasses import asdict, replace
@@ -31,6 +32,9 @@ FILES = ("model.pt", "training.yaml", "train_log.csv", "validation.json")
 IGNORED_KEYS = ("device", "checkpoint_every")
 #: tracker-config fields that say where the preset was read from, not how it tracks
 IGNORED_TRACKER_FIELDS = ("source",)
+#: the keys of a training's data record (a checkpoint's ``data_source``, training.yaml's ``# data`` line) that hold
+#: paths: written relative to the workflow's folder in a package, so the record names no machine's folders
+PATH_KEYS = ("dataroot", "detections")
 
 
 def pretrained_dir(name: str) -> Path:
@@ -142,18 +146,47 @@ def _git_commit() -> str | None:
         return None
 
 
-def package(src: Path, detections: Path, out: Path, command: str) -> dict:
-    """Copy :data:`FILES` of the training folder ``src`` into ``out`` and write ``provenance.json``; returns it."""
+def portable_source(source: dict | None, root: Path) -> dict | None:
+    """``source`` (a training's data record) with each absolute path of :data:`PATH_KEYS` written relative to
+    ``root``; for root ``/home/me/grutrack``: ``/home/me/grutrack/detections/x.json`` -> ``detections/x.json``,
+    ``/home/me/shared/data/nuscenes`` -> ``../shared/data/nuscenes``. Relative paths and other keys are kept."""
+    if source is None:
+        return None
+    out = dict(source)
+    for key in PATH_KEYS:
+        value = out.get(key)
+        if isinstance(value, str) and Path(value).is_absolute():
+            out[key] = Path(os.path.relpath(value, root)).as_posix()
+    return out
+
+
+def portable_training_yaml(text: str, root: Path) -> str:
+    """training.yaml's ``text`` with its ``# data {...}`` line's paths made relative to ``root``
+    (:func:`portable_source`); the rest byte for byte."""
+    lines = text.split("\n")
+    for i, line in enumerate(lines):
+        if line.startswith("# data "):
+            record = portable_source(json.loads(line[len("# data ") :]), root)
+            lines[i] = f"# data {json.dumps(record, sort_keys=True)}"
+    return "\n".join(lines)
+
+
+def package(src: Path, detections: Path, out: Path, command: str, root: Path | None = None) -> dict:
+    """Copy :data:`FILES` of the training folder ``src`` into ``out`` and write ``provenance.json``; returns it.
+    Paths of the data record are written relative to ``root`` (default: the working folder, the workflow's)."""
     from grutrack import __version__
     from grutrack.documents import Checkpoint
-    from grutrack.io import atomic_path, write_json_atomic
+    from grutrack.io import atomic_path, write_json_atomic, write_text_atomic
     from grutrack.provenance import sha256_file
 
+    root = Path.cwd() if root is None else root
     ck = Checkpoint.read(src / "model.pt")
+    source = portable_source(ck.data_source, root)
     out.mkdir(parents=True, exist_ok=True)
     # the network, its config, the selected step and provenance; not the optimizer and log a resume needs
-    replace(ck, training=None).write(out / "model.pt")
-    for name in FILES[1:]:
+    replace(ck, training=None, data_source=source).write(out / "model.pt")
+    write_text_atomic(out / "training.yaml", portable_training_yaml((src / "training.yaml").read_text(), root))
+    for name in FILES[2:]:
         with atomic_path(out / name) as tmp:
             shutil.copyfile(src / name, tmp)
     prov = {
@@ -165,7 +198,7 @@ def package(src: Path, detections: Path, out: Path, command: str) -> dict:
         "selected_step": ck.selected.step if ck.selected else None,
         "detections": {"file": Path(detections).name, "sha256": sha256_file(detections)},
         "data_fingerprint": ck.data_fingerprint,
-        "data_source": ck.data_source,
+        "data_source": source,
         "trained_with": pipeline_digest(ck.train_config),
     }
     write_json_atomic(out / "provenance.json", prov, indent=2)
