@@ -385,6 +385,16 @@ def _cv_mct(q_xy, q_v, r_xy, r_v):
     )
 
 
+def _coast(turn, accel):
+    """The classes ``turn`` hold their turn rate, the classes ``accel`` their acceleration at 0 while coasting."""
+
+    def change(raw):
+        raw["motion"]["coast_yaw_rate"] = {c: "zero" if c in turn else "keep" for c in CLASSES}
+        raw["motion"]["coast_acceleration"] = {c: "zero" if c in accel else "keep" for c in CLASSES}
+
+    return change
+
+
 def _nms_class(raw, cls: str, threshold: float):
     """One class's NMS threshold (the others keep the preset's)."""
     t = raw["preprocessing"]["nms_threshold"]
@@ -632,6 +642,11 @@ CANDIDATES = {
         lambda raw: raw["preprocessing"]["score_threshold"].update(bus=0.16),
     ),
     # stage 2 (BEV GIoU on what stage 1 left) with a looser threshold
+    # a coasting track goes straight on at constant speed (turn rate and acceleration held at 0)
+    "+coast_zero": _coast(CLASSES, CLASSES),
+    "+coast_turn0": _coast(CLASSES, ()),
+    "+coast_accel0": _coast((), CLASSES),
+    "+coast_zero_but_bus": _coast([c for c in CLASSES if c != "bus"], [c for c in CLASSES if c != "bus"]),
     "+bic_s2_13": lambda raw: raw["association"]["second_threshold"].update(bicycle=1.3),
     "+bic_s2_15": lambda raw: raw["association"]["second_threshold"].update(bicycle=1.5),
     "+all_s2_12": lambda raw: raw["association"]["second_threshold"].update(dict.fromkeys(CLASSES, 1.2)),

@@ -37,7 +37,13 @@ NEEDED_WITH = {
     "motion.size_noise": ("motion.filter", "decoupled_cv"),
 }
 #: per-class settings that are names (kept as tuples; the numeric ones become (7,) arrays)
-_NAMED_PER_CLASS = ("per_class_metric", "per_class_nms_metric", "per_class_geometry_filter", "per_class_track_pose")
+_NAMED_PER_CLASS = (
+    "per_class_metric",
+    "per_class_nms_metric",
+    "per_class_geometry_filter",
+    "per_class_track_pose",
+    "per_class_coast",
+)
 #: per-class noise diagonals of the decoupled filters (``motion.position_noise``, ``motion.size_noise``)
 _NOISE_PER_CLASS = ("per_class_position_noise", "per_class_size_noise")
 
@@ -89,6 +95,9 @@ class TrackerConfig:
     nms_order: str = "input"
     ro_gdiou_weights: np.ndarray = field(default_factory=lambda: np.ones((7, 2)))
     crowded_threshold: np.ndarray = field(default_factory=lambda: np.zeros(7))  # 0: off (stage 1 as it is)
+    # per class keep or zero: the turn rate / acceleration of a coasting track (motion.coast_yaw_rate, ...)
+    coast_yaw_rate: tuple[str, ...] = ("keep",) * 7
+    coast_acceleration: tuple[str, ...] = ("keep",) * 7
     track_pose: tuple[str, ...] = ("predicted",) * 7
     track_pose_blend: np.ndarray = field(default_factory=lambda: np.ones(7))
     track_pose_rule: str = "own_class"
@@ -150,6 +159,12 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
                 f"confidence-weighted noise run in the joint EKF and the GRU-KF's EKF gain prior, not in MCTrack's "
                 f"decoupled filters)"
             )
+    for key in ("motion.coast_yaw_rate", "motion.coast_acceleration"):
+        if any(c != "keep" for c in v[key]) and v["motion.filter"] == "decoupled_cv":
+            raise ConfigError(
+                f"{source}: '{key}' must be keep with 'motion.filter: decoupled_cv' (MCTrack's decoupled CV "
+                f"filters have no turn rate or acceleration to hold)"
+            )
     _check_ro_gdiou(v, given, source)
     if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
         raise ConfigError(
@@ -196,6 +211,8 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         nms_order=v["preprocessing.nms_order"],
         ro_gdiou_weights=v["association.ro_gdiou_weights"],
         crowded_threshold=v["association.crowded_threshold"],
+        coast_yaw_rate=v["motion.coast_yaw_rate"],
+        coast_acceleration=v["motion.coast_acceleration"],
         track_pose=v["association.track_pose"],
         track_pose_blend=v["association.track_pose_blend"],
         track_pose_rule=v["association.track_pose_rule"],

@@ -61,9 +61,19 @@ class KalmanBackend:
         check = None if self.velocity_check is None else self.velocity_check.start(np.asarray(z).reshape(-1, 9))
         return KFState(x, P, labels.copy(), None, check, np.zeros(len(x), dtype=np.int64))
 
-    def predict(self, s: KFState, dt: float) -> KFState:
-        """Predict every track dt seconds ahead."""
-        x, P = self.kf.predict(s.x, s.P, self.Q[s.labels], dt)
+    #: (n_labels, dim_x) bool: the state slots (turn rate, acceleration) a coasting track of each label holds
+    #: at 0 (tracker preset ``motion.coast_*``); None: none
+    coast_held: np.ndarray | None = None
+
+    def predict(self, s: KFState, dt: float, coasting: np.ndarray | None = None) -> KFState:
+        """Predict every track dt seconds ahead: x <- f(x, dt), P <- F P F^T + Q. The tracks ``coasting`` (N,)
+        bool (already predicted once since their last update) have the slots :attr:`coast_held` names for their
+        label set to 0 first, so that a track seen no more goes straight on at constant speed (F is taken at that
+        state)."""
+        x0 = s.x
+        if coasting is not None and self.coast_held is not None and coasting.any():
+            x0 = np.where(coasting[:, None] & self.coast_held[s.labels], 0.0, s.x)
+        x, P = self.kf.predict(x0, s.P, self.Q[s.labels], dt)
         return KFState(x, P, s.labels, None, None if s.check is None else s.check.predicted(dt), s.updates)
 
     def update(self, s: KFState, rows: np.ndarray, z: np.ndarray, scores: np.ndarray | None = None) -> KFState:

@@ -210,6 +210,8 @@ def remap_config(cfg: TrackerConfig, index: np.ndarray) -> TrackerConfig:
         distance_gate=cfg.distance_gate[index],
         delete_threshold=cfg.delete_threshold[index],
         geometry_filter=tuple(cfg.geometry_filter[i] for i in index),
+        coast_yaw_rate=tuple(cfg.coast_yaw_rate[i] for i in index),
+        coast_acceleration=tuple(cfg.coast_acceleration[i] for i in index),
         geometry_window=cfg.geometry_window[index],
         nms_threshold=cfg.nms_threshold[index] if isinstance(cfg.nms_threshold, np.ndarray) else cfg.nms_threshold,
         ro_gdiou_weights=cfg.ro_gdiou_weights[index],
@@ -275,10 +277,27 @@ def ekf_groups(
             velocity_check=velocity_check(cfg),
             robust=robust_update(cfg),
         )
+        backend.coast_held = coast_held(model, cfg)
         backend = with_geometry_filter(backend, cfg)
         speed = np.array([np.inf if m is None else m["speed"] for m in moving])
         groups.append(TrackGroup(backend, members, None if np.isinf(speed).all() else speed))
     return groups
+
+
+def coast_held(model, cfg: TrackerConfig) -> np.ndarray | None:
+    """(n_labels, dim_x) bool: the state slots of ``model`` a coasting track of each label holds at 0, its turn
+    rate (CTRA omega, Bicycle delta) where ``motion.coast_yaw_rate`` is zero, its acceleration (CTRA and Bicycle
+    a, CA ax and ay) where ``motion.coast_acceleration`` is zero; None when no label holds any (e.g. CV)."""
+    names = model.state_names
+    turn = np.isin(names, ("omega", "delta"))
+    accel = np.isin(names, ("a", "ax", "ay"))
+    held = np.array(
+        [
+            (turn & (t == "zero")) | (accel & (a == "zero"))
+            for t, a in zip(cfg.coast_yaw_rate, cfg.coast_acceleration, strict=True)
+        ]
+    )
+    return held if held.any() else None
 
 
 def velocity_check(cfg: TrackerConfig):

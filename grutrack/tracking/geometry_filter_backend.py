@@ -107,9 +107,16 @@ class GeometryFilterBackend:
             self.inner.initiate(z, labels), GeometryWindow.start(z[:, 2:6], win, self.mean[labels]), labels.copy()
         )
 
-    def predict(self, s: GeometryState, dt: float) -> GeometryState:
-        """Motion predicted ``dt`` seconds ahead; the geometry is constant."""
-        return GeometryState(self.inner.predict(s.motion, dt), s.geometry, s.labels)
+    @property
+    def coast_held(self) -> np.ndarray | None:
+        """The wrapped backend's slots a coasting track holds at 0 (per label)."""
+        return getattr(self.inner, "coast_held", None)
+
+    def predict(self, s: GeometryState, dt: float, coasting: np.ndarray | None = None) -> GeometryState:
+        """Motion predicted ``dt`` seconds ahead (``coasting``: as the wrapped backend's); the geometry is
+        constant."""
+        motion = self.inner.predict(s.motion, dt) if coasting is None else self.inner.predict(s.motion, dt, coasting)
+        return GeometryState(motion, s.geometry, s.labels)
 
     def update(
         self, s: GeometryState, rows: np.ndarray, z: np.ndarray, scores: np.ndarray | None = None

@@ -285,7 +285,10 @@ class Tracker:
     def _predict(self, dt: float) -> None:
         for g in self.groups:
             if len(g):
-                g.state = g.backend.predict(g.state, dt)
+                if getattr(g.backend, "coast_held", None) is not None:  # predicted before without an update: coasting
+                    g.state = g.backend.predict(g.state, dt, g.misses >= 1)
+                else:
+                    g.state = g.backend.predict(g.state, dt)
                 g.misses += 1
 
     def _update_groups(
