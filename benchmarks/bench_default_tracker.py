@@ -620,7 +620,9 @@ CANDIDATES = {
     "+car_crowded_punish0": _combine(_crowded({"car": (1.1, [0.5, 1.5])}), _punish({"car": 0})),
     "+ped_crowded": _crowded({"pedestrian": (2.06, [1.0, 1.0])}),
     # the preset before Decision 10 (crowded pedestrians judged by the first metric, as every pair)
-    "ekf_prev10": lambda raw: raw["association"].pop("crowded_threshold"),
+    "ekf_prev10": _combine(lambda raw: raw["association"].pop("crowded_threshold"), _coast((), ())),
+    # the preset before Decision 11 (every coasting track predicted by its model, Poly-MOT's)
+    "ekf_prev11": _coast((), ()),
     "+bus_ro_gdiou": _ro_gdiou_class({"bus": (1.6, [1.0, 1.0])}),
     "+bic_ro_gdiou": _ro_gdiou_class({"bicycle": (2.0, [1.0, 1.0])}),
     "+bus_bic_ro_gdiou": _ro_gdiou_class({"bus": (1.6, [1.0, 1.0]), "bicycle": (2.0, [1.0, 1.0])}),
@@ -646,7 +648,6 @@ CANDIDATES = {
     "+coast_zero": _coast(CLASSES, CLASSES),
     "+coast_turn0": _coast(CLASSES, ()),
     "+coast_accel0": _coast((), CLASSES),
-    "+coast_zero_but_bus": _coast([c for c in CLASSES if c != "bus"], [c for c in CLASSES if c != "bus"]),
     "+bic_s2_13": lambda raw: raw["association"]["second_threshold"].update(bicycle=1.3),
     "+bic_s2_15": lambda raw: raw["association"]["second_threshold"].update(bicycle=1.5),
     "+all_s2_12": lambda raw: raw["association"]["second_threshold"].update(dict.fromkeys(CLASSES, 1.2)),
