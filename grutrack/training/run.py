@@ -7,6 +7,7 @@ Only light imports at module level: the command line imports this module to buil
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,10 +72,11 @@ def train(
     resume_from = _resume_from(out) if resume else None  # before training.yaml is written
     source = {
         "dataset": dataset.name,
-        "dataroot": str(Path(dataset.options.dataroot).resolve()),
+        # absolute as given, links not followed: a package writes them relative to the workflow's folder
+        "dataroot": os.path.abspath(dataset.options.dataroot),
         "version": dataset.options.version,
         "split": split,
-        "detections": str(Path(detections).resolve()),
+        "detections": os.path.abspath(detections),
     }
     if resume_from is None:  # a resumed run's training.yaml stays until its last.pt has accepted these settings
         out.mkdir(parents=True, exist_ok=True)
