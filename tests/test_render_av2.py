@@ -2,8 +2,9 @@
 
 There are no real AV2 detections in the fixture: the detections are SIMULATED from the annotations
 (grutrack.data.detection_sim, centerpoint profile, seed 0, as in test_av2.py) and tracked by the EKF with the
-``ekf`` preset. The counts drawn must be the official AV2 evaluator's CLEAR counts (CLR_TP, CLR_FP, CLR_FN, IDSW)
-for every category, and the marks must be where the boxes are.
+``ekf`` preset, its coasting Poly-MOT's (so that the id switches drawn stay as the default preset changes). The
+counts drawn must be the official AV2 evaluator's CLEAR counts (CLR_TP, CLR_FP, CLR_FN, IDSW) for every category,
+and the marks must be where the boxes are.
 """
 
 from __future__ import annotations
@@ -13,10 +14,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from test_av2 import LOG_A, LOG_B, lt3d_table, simulated_boxsets  # the simulated-detection helpers
 
+from grutrack.classes import TRACKING_CLASSES
 from grutrack.cli import main
 from grutrack.data import av2
+from grutrack.tracking.config import PRESET_DIR
 
 FP_RGB = np.array([0xE6, 0x19, 0x4B])
 FP_FILL_RGB = np.round(0.9 * FP_RGB + 0.1 * 255)  # the fill: alpha 0.9 over the white background
@@ -34,6 +38,13 @@ def rendered(av2_root, tmp_path_factory):
     lt3d_table(scenes, simulated_boxsets(scenes, vocab, seed=0)).to_feather(dets)
     common = ["--dataset", "av2", "--dataroot", str(av2_root), "--split", "val"]
     sub, metrics, out = tmp / "ekf.pkl", tmp / "metrics.json", tmp / "render"
+    # the ekf preset with Poly-MOT's coasting (motion.coast_*: keep, the preset before 2026-11-28): the tracks, and
+    # so the errors drawn (id switches in both logs), stay put as the default preset's coasting improves
+    preset = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
+    for key in ("coast_yaw_rate", "coast_acceleration"):
+        preset["motion"][key] = dict.fromkeys(TRACKING_CLASSES, "keep")
+    config = tmp / "ekf_keep.yaml"
+    config.write_text(yaml.safe_dump(preset))
     assert (
         main(
             [
@@ -44,7 +55,7 @@ def rendered(av2_root, tmp_path_factory):
                 "--tracker",
                 "ekf",
                 "--config",
-                "ekf",
+                str(config),
                 "--out",
                 str(sub),
                 "--no-progress",
