@@ -23,7 +23,9 @@ unseen sets again); ``fresh3`` / ``fresh3_train`` (seeds 4000-4049 / 4000-4009: 
 noise was chosen on ``fresh``, its check on unseen sets); ``fresh4`` / ``fresh4_train`` (seeds 5000-5049 /
 5000-5009: made after Decision 10, the check of its pedestrian Q candidate on sets no decision saw); ``strong`` /
 ``strong_train`` (seeds 6000-6049 / 6000-6009, the profile ``cp_strong`` of :data:`PROFILE_VARIANTS`: a stronger
-detector than any the decisions saw, made after Decision 10); ``worlds`` and
+detector than any the decisions saw, made after Decision 10); ``variants_val`` / ``variants_train`` (seeds
+7000-7024 on mini_val / 7000-7009 on mini_train, the profiles of :data:`VARIANTS`: made after Decision 11, the
+count on other detectors than the four the decisions were taken on); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles). Candidates:
 :data:`CANDIDATES` (names; ``--candidates`` a comma list). ``--class NAME`` prints one class's AMOTA instead (sets
@@ -32,7 +34,8 @@ the first candidate with some classes' AMOTA taken from other candidates (``car=
 the mean over the classes the set has. Each class is tracked on its own (class-aware NMS, association, motion and
 lifecycle per class), so this is the AMOTA of the preset that takes those candidates' settings for those classes,
 provided each candidate changes per-class settings only and the 500-box limit of a sample does not bind (checked
-in the summary: the composed column of a candidate with itself equals its own).
+in the summary: the composed column of a candidate with itself equals its own). For the sets below, the summary
+also names the class that decides each (:func:`deciding_class`).
 docs/results/default_tracker.md records the table and the decision.
 """
 
@@ -155,6 +158,8 @@ GROUPS = {
     "fresh4_train": (tuple(range(5000, 5010)), ("mini_train",)),
     "strong": (tuple(range(6000, 6050)), ("mini_val",), ("cp_strong",)),
     "strong_train": (tuple(range(6000, 6010)), ("mini_train",), ("cp_strong",)),
+    "variants_val": (tuple(range(7000, 7025)), ("mini_val",), VARIANTS),
+    "variants_train": (tuple(range(7000, 7010)), ("mini_train",), VARIANTS),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
@@ -864,6 +869,8 @@ def main(argv=None) -> int:
             + (f"  worst {margins[worst]:+.4f} ({worst})" if below else "")
         )
     _print_three_against_the_rest(table, names[:1])
+    if not args.cls:
+        _print_deciding_classes(classes, [n for n in names if not n.startswith("mix:")])
     if args.json:
         write_json_atomic(args.json, {"table": table, "per_class": classes}, indent=1)
     return 0
@@ -880,6 +887,31 @@ def _print_three_against_the_rest(table: dict[str, dict[str, float]], first: lis
         below2 = sum(row[t] < max(row[u] for u in rest) for row in table.values())
         below3 = sum(row[t] < max(row[u] for u in rest + first) for row in table.values())
         print(f"  {t:<28} {below2}/{len(table)}  {below3}/{len(table)}")
+
+
+def deciding_class(row: dict[str, dict[str, float]], cand: str) -> str | None:
+    """The class that decides a set where ``cand`` is below the best of the three: the one whose AMOTA falls
+    furthest below that of the set's best tracker (``row``: {preset: {"all", class: AMOTA}}); None where it is not
+    below."""
+    best = max(THREE, key=lambda t: row[t]["all"])
+    if row[cand]["all"] >= row[best]["all"]:
+        return None
+    present = [c for c in CLASSES if row[cand].get(c, float("nan")) == row[cand].get(c)]
+    return min(present, key=lambda c: row[cand][c] - row[best][c])
+
+
+def _print_deciding_classes(classes: dict[str, dict[str, dict[str, float]]], names: list[str]) -> None:
+    """Per candidate, how many of the sets below the best of the three each class decides (:func:`deciding_class`)."""
+    print()
+    print("sets below best3 by the class that decides them (largest class loss against the set's best tracker)")
+    for c in names:
+        counts: dict[str, int] = {}
+        for row in classes.values():
+            cls = deciding_class(row, c)
+            if cls:
+                counts[cls] = counts.get(cls, 0) + 1
+        ranked = sorted(counts.items(), key=lambda kv: -kv[1])
+        print(f"  {c:<28} " + (", ".join(f"{k} {v}" for k, v in ranked) or "none below"))
 
 
 if __name__ == "__main__":
