@@ -45,6 +45,7 @@ import argparse
 import atexit
 import copy
 import dataclasses
+import math
 import shutil
 import sys
 import tempfile
@@ -896,7 +897,7 @@ def deciding_class(row: dict[str, dict[str, float]], cand: str) -> str | None:
     best = max(THREE, key=lambda t: row[t]["all"])
     if row[cand]["all"] >= row[best]["all"]:
         return None
-    present = [c for c in CLASSES if row[cand].get(c, float("nan")) == row[cand].get(c)]
+    present = [c for c in CLASSES if not math.isnan(row[cand].get(c, math.nan))]  # classes the set has
     return min(present, key=lambda c: row[cand][c] - row[best][c])
 
 

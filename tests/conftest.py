@@ -69,6 +69,25 @@ def nusc_mini():
     return NuScenes(version="v1.0-mini", dataroot=str(root), verbose=False)
 
 
+@pytest.fixture(scope="session")
+def ekf_coasting_keep(tmp_path_factory) -> Path:
+    """The ekf preset with every class coasting as its motion model predicts (``motion.coast_yaw_rate`` and
+    ``motion.coast_acceleration`` keep, Poly-MOT's, the preset before 2026-11-28): the preset an untrained network
+    (training config's coasting keep) writes the boxes of, and one whose tracks stay put as the default's coasting
+    changes."""
+    import yaml
+
+    from grutrack.classes import TRACKING_CLASSES
+    from grutrack.tracking.config import PRESET_DIR
+
+    preset = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
+    for key in ("coast_yaw_rate", "coast_acceleration"):
+        preset["motion"][key] = dict.fromkeys(TRACKING_CLASSES, "keep")
+    path = tmp_path_factory.mktemp("presets") / "ekf_coasting_keep.yaml"
+    path.write_text(yaml.safe_dump(preset))
+    return path
+
+
 #: fixtures that run a workflow target for real: every test that uses one is in the slow tier
 SLOW_FIXTURES = frozenset({"demo_run", "mini_run"})
 

@@ -6,12 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import yaml
 
 from grutrack.classes import TRACKING_CLASSES
 from grutrack.errors import ConfigError
 from grutrack.motion.grukf import GRUKalmanNet, GRUKFConfig
-from grutrack.tracking.config import PRESET_DIR
 
 #: the ekf preset's classes run with CTRA (grutrack/configs/motion/grutrack_nusc.yaml)
 CTRA_CLASSES = ("bus", "car", "truck")
@@ -23,19 +21,6 @@ def scenes_and_dets(nusc_mini, tmp_path_factory):
     from support.grukf_data import mini_train_scenes_and_dets
 
     return mini_train_scenes_and_dets(nusc_mini, tmp_path_factory.mktemp("dets"), 3, 15)
-
-
-def _keep_preset(folder):
-    """The ekf preset with every class coasting as the motion model predicts (``motion.coast_*: keep``), as the
-    networks trained here do (their training config's coast_yaw_rate and coast_acceleration, default keep): the
-    preset an untrained network's boxes equal."""
-    path = folder / "ekf_keep.yaml"
-    if not path.is_file():
-        preset = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
-        for key in ("coast_yaw_rate", "coast_acceleration"):
-            preset["motion"][key] = dict.fromkeys(TRACKING_CLASSES, "keep")
-        path.write_text(yaml.safe_dump(preset))
-    return path
 
 
 def _trainer(scenes, dets, out, **over):
@@ -66,7 +51,9 @@ def _boxes_by_label(results) -> dict[str, np.ndarray]:
     return out
 
 
-def test_untrained_ekf_prior_with_network_classes_ss_model_is_the_ekf_preset(scenes_and_dets, tmp_path):
+def test_untrained_ekf_prior_with_network_classes_ss_model_is_the_ekf_preset(
+    scenes_and_dets, tmp_path, ekf_coasting_keep
+):
     from grutrack.tracking.factory import build_tracker
     from grutrack.tracking.tracker import track_scenes
 
@@ -74,7 +61,7 @@ def test_untrained_ekf_prior_with_network_classes_ss_model_is_the_ekf_preset(sce
     over = {"gain_prior": "ekf", "yaw_flip": True, "motion_config": "grutrack_nusc"}
     ck = _trainer(scenes, dets, tmp_path / "hyb", network_classes="ss_model", **over).save("model.pt")
     ck_all = _trainer(scenes, dets, tmp_path / "all", **over).save("model.pt")
-    keep = _keep_preset(tmp_path)
+    keep = ekf_coasting_keep
     hyb = build_tracker("grukf", keep, checkpoint=ck, device="cpu")
     # the network's group takes the CTRA classes, the preset's Bicycle, CV and CA groups the others: (classes born
     # slow, classes born moving) per model, as the motion config's `moving` blocks say
@@ -95,7 +82,7 @@ def test_untrained_ekf_prior_with_network_classes_ss_model_is_the_ekf_preset(sce
         "CV": (["pedestrian", "trailer"], ["bicycle", "motorcycle"]),
         "CA": ([], ["trailer"]),
     }
-    assert len(build_tracker("grukf", _keep_preset(tmp_path), checkpoint=ck_all, device="cpu").groups) == 1
+    assert len(build_tracker("grukf", ekf_coasting_keep, checkpoint=ck_all, device="cpu").groups) == 1
 
     ekf = _boxes_by_label(track_scenes(build_tracker("ekf", keep), scenes, dets).results)
     got = _boxes_by_label(track_scenes(hyb, scenes, dets).results)
@@ -140,7 +127,7 @@ def test_network_classes_is_a_named_option():
 
 
 def test_untrained_ekf_prior_with_network_classes_own_model_runs_each_class_with_its_own_model(
-    scenes_and_dets, tmp_path
+    scenes_and_dets, tmp_path, ekf_coasting_keep
 ):
     """own_model: one network group per SS model (CTRA, Bicycle in the preset's piecewise form), the weights
     shared; untrained, each is the EKF of its classes' own model and noise, so the boxes are the preset's."""
@@ -150,13 +137,13 @@ def test_untrained_ekf_prior_with_network_classes_own_model_runs_each_class_with
     scenes, dets = scenes_and_dets
     over = {"gain_prior": "ekf", "yaw_flip": True, "motion_config": "grutrack_nusc"}
     ck = _trainer(scenes, dets, tmp_path / "own", network_classes="own_model", **over).save("model.pt")
-    own = build_tracker("grukf", _keep_preset(tmp_path), checkpoint=ck, device="cpu")
+    own = build_tracker("grukf", ekf_coasting_keep, checkpoint=ck, device="cpu")
     nets = [(g.backend.ss.name, [TRACKING_CLASSES[i] for i in np.flatnonzero(g.classes)]) for g in own.groups[:2]]
     assert nets == [("CTRA", list(CTRA_CLASSES)), ("Bicycle", ["bicycle", "motorcycle"])]
     assert own.groups[0].backend.net is own.groups[1].backend.net  # one network, two SS models
     assert sorted(type(g.backend.model).__name__ for g in own.groups[2:]) == ["CA", "CV"]
 
-    ekf = _boxes_by_label(track_scenes(build_tracker("ekf", _keep_preset(tmp_path)), scenes, dets).results)
+    ekf = _boxes_by_label(track_scenes(build_tracker("ekf", ekf_coasting_keep), scenes, dets).results)
     got = _boxes_by_label(track_scenes(own, scenes, dets).results)
     for name in TRACKING_CLASSES:
         assert got[name].shape == ekf[name].shape
@@ -193,7 +180,7 @@ def test_network_classes_own_model_takes_several_scenes_per_step():
 
 
 def test_training_classes_own_model_trains_on_the_two_wheelers_and_tracks_with_network_classes(
-    scenes_and_dets, tmp_path
+    scenes_and_dets, tmp_path, ekf_coasting_keep
 ):
     """training_classes own_model with network_classes ss_model: training runs the Bicycle classes through the
     network too (their loss terms), while validation and the checkpoint track them with the preset's EKF."""
@@ -208,8 +195,8 @@ def test_training_classes_own_model_trains_on_the_two_wheelers_and_tracks_with_n
     own = _trainer(scenes, dets, tmp_path / "own", **{**over, "network_classes": "own_model"})
     assert _loss_terms(both, scenes, dets) == _loss_terms(own, scenes, dets) > _loss_terms(hyb, scenes, dets)
 
-    untrained = build_tracker("grukf", _keep_preset(tmp_path), checkpoint=both.save("untrained.pt"), device="cpu")
-    ekf = _boxes_by_label(track_scenes(build_tracker("ekf", _keep_preset(tmp_path)), scenes, dets).results)
+    untrained = build_tracker("grukf", ekf_coasting_keep, checkpoint=both.save("untrained.pt"), device="cpu")
+    ekf = _boxes_by_label(track_scenes(build_tracker("ekf", ekf_coasting_keep), scenes, dets).results)
     got = _boxes_by_label(track_scenes(untrained, scenes, dets).results)
     for name in TRACKING_CLASSES:  # untrained it is the preset, as ss_model is
         np.testing.assert_allclose(got[name], ekf[name], atol=1e-8, err_msg=name)
@@ -218,7 +205,7 @@ def test_training_classes_own_model_trains_on_the_two_wheelers_and_tracks_with_n
     net = load_network(tmp_path / "both" / "model.pt")
     assert net.cfg.network_classes == "ss_model"
     assert net.cfg.model_params["BICYCLE"]["form"] == "piecewise"
-    tracker = build_tracker("grukf", _keep_preset(tmp_path), checkpoint=tmp_path / "both" / "model.pt", device="cpu")
+    tracker = build_tracker("grukf", ekf_coasting_keep, checkpoint=tmp_path / "both" / "model.pt", device="cpu")
     members = network_members(net.cfg, tracker.cfg, np.arange(len(TRACKING_CLASSES)))
     assert [TRACKING_CLASSES[i] for i in np.flatnonzero(members)] == list(CTRA_CLASSES)
     # trained on the two-wheelers: its weights differ from the ss_model-only training of the same steps

@@ -252,10 +252,11 @@ def test_held_out_scenes_are_evenly_spaced_in_name_order():
 
 
 @pytest.mark.slow
-def test_cli_holds_scenes_out_of_training_and_validates_on_them(nusc_mini, nusc_root, tmp_path, capsys):
+def test_cli_holds_scenes_out_of_training_and_validates_on_them(
+    nusc_mini, nusc_root, tmp_path, capsys, ekf_coasting_keep
+):
     import yaml
 
-    from grutrack.classes import TRACKING_CLASSES
     from grutrack.cli import main
     from grutrack.config_loader import read_config
     from grutrack.data.detection_sim import simulate_nuscenes
@@ -281,11 +282,7 @@ def test_cli_holds_scenes_out_of_training_and_validates_on_them(nusc_mini, nusc_
     # two frames (bus, trailer, truck)
     cfg["network"] = {**cfg["network"], "coast_yaw_rate": "keep", "coast_acceleration": "keep"}
     # ... and the preset trained with and compared against coasts so too for every class (motion.coast_*: keep)
-    preset, _ = read_config("tracker", "ekf")
-    for key in ("coast_yaw_rate", "coast_acceleration"):
-        preset["motion"][key] = dict.fromkeys(TRACKING_CLASSES, "keep")
-    (tmp_path / "ekf_keep.yaml").write_text(yaml.safe_dump(preset))
-    cfg["tracker_preset"] = str(tmp_path / "ekf_keep.yaml")
+    cfg["tracker_preset"] = str(ekf_coasting_keep)
     (tmp_path / "t.yaml").write_text(yaml.safe_dump(cfg))
     argv = [
         "train",

@@ -14,13 +14,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 from test_av2 import LOG_A, LOG_B, lt3d_table, simulated_boxsets  # the simulated-detection helpers
 
-from grutrack.classes import TRACKING_CLASSES
 from grutrack.cli import main
 from grutrack.data import av2
-from grutrack.tracking.config import PRESET_DIR
 
 FP_RGB = np.array([0xE6, 0x19, 0x4B])
 FP_FILL_RGB = np.round(0.9 * FP_RGB + 0.1 * 255)  # the fill: alpha 0.9 over the white background
@@ -28,7 +25,7 @@ IDS_RGB = np.array([0xC0, 0x00, 0xC0])
 
 
 @pytest.fixture(scope="module")
-def rendered(av2_root, tmp_path_factory):
+def rendered(av2_root, tmp_path_factory, ekf_coasting_keep):
     """(render folder, metrics JSON, submission pickle, detections) of the EKF on simulated detections, both
     logs rendered."""
     tmp = tmp_path_factory.mktemp("render_av2")
@@ -40,11 +37,6 @@ def rendered(av2_root, tmp_path_factory):
     sub, metrics, out = tmp / "ekf.pkl", tmp / "metrics.json", tmp / "render"
     # the ekf preset with Poly-MOT's coasting (motion.coast_*: keep, the preset before 2026-11-28): the tracks, and
     # so the errors drawn (id switches in both logs), stay put as the default preset's coasting improves
-    preset = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
-    for key in ("coast_yaw_rate", "coast_acceleration"):
-        preset["motion"][key] = dict.fromkeys(TRACKING_CLASSES, "keep")
-    config = tmp / "ekf_keep.yaml"
-    config.write_text(yaml.safe_dump(preset))
     assert (
         main(
             [
@@ -55,7 +47,7 @@ def rendered(av2_root, tmp_path_factory):
                 "--tracker",
                 "ekf",
                 "--config",
-                str(config),
+                str(ekf_coasting_keep),
                 "--out",
                 str(sub),
                 "--no-progress",
