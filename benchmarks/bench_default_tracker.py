@@ -777,7 +777,7 @@ def _world_sets(group: str, cache: Path, data: dict) -> dict[str, tuple[str, Pat
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="nuScenes data root (holds v1.0-mini)")
-    ap.add_argument("--groups", default="reference,heldout", help="comma list of: " + ", ".join(GROUPS))
+    ap.add_argument("--groups", default="reference,heldout", help="comma list of: " + ", ".join([*GROUPS, *WORLDS]))
     ap.add_argument("--candidates", default=",".join(CANDIDATES), help="comma list of: " + ", ".join(CANDIDATES))
     ap.add_argument(
         "--base",
@@ -803,6 +803,14 @@ def main(argv=None) -> int:
     unknown = [c for c in names if c not in CANDIDATES]
     if unknown:
         print(f"unknown candidate(s): {', '.join(unknown)}", file=sys.stderr)
+        return 2
+    known_groups = (*GROUPS, *WORLDS)
+    bad_groups = [g for g in args.groups.split(",") if g not in known_groups]
+    if bad_groups:
+        print(
+            f"--groups: unknown group(s) {', '.join(bad_groups)}; expected of: {', '.join(known_groups)}",
+            file=sys.stderr,
+        )
         return 2
     try:
         mixes = {spec: parse_compose(spec, names) for spec in args.compose}

@@ -56,3 +56,12 @@ def test_the_deciding_class_is_the_largest_class_loss_against_the_sets_best_trac
     assert bench.deciding_class(row, "ekf") == "bus"
     row["ekf"]["all"] = 0.70  # at the best of the three: not below, nothing decides
     assert bench.deciding_class(row, "ekf") is None
+
+
+def test_an_unknown_group_or_candidate_exits_2_with_one_line_naming_it(capsys):
+    assert bench.main(["--groups", "fresh,fresh9", "--candidates", "ekf"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "fresh9" in err and "--groups" in err and "variants_val" in err
+    assert bench.main(["--groups", "fresh", "--candidates", "ekf,+nope"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "+nope" in err
