@@ -2,6 +2,7 @@
 the groups the decisions were measured on keep their sets (docs/results/default_tracker.md quotes them)."""
 
 import importlib.util
+import json
 from pathlib import Path
 
 from grutrack.data.detection_sim import load_profile
@@ -65,3 +66,39 @@ def test_an_unknown_group_or_candidate_exits_2_with_one_line_naming_it(capsys):
     assert bench.main(["--groups", "fresh", "--candidates", "ekf,+nope"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "+nope" in err
+
+
+def _row(ekf: float, best: float, **classes) -> dict:
+    """A set's row: Poly-MOT at ``best`` (Fast-Poly and MCTrack below it), the candidate ``ekf`` at ``ekf``; the
+    classes' AMOTA as given, the three's best in class 0.5."""
+    three = {t: {"all": best - 0.01 * i, "car": 0.5, "bus": float("nan")} for i, t in enumerate(bench.THREE)}
+    return {**three, "ekf": {"all": ekf, "car": classes.get("car", 0.5), "bus": float("nan")}}
+
+
+def test_the_spread_per_kind_of_set_counts_margins_and_the_uniform_gain_that_closes_them():
+    classes = {f"mini_val centerpoint s{i}": _row(0.80 + 0.01 * (i - 2), 0.80, car=0.6) for i in range(200)}
+    classes["worlds s1 pointpillars"] = _row(0.50, 0.52)
+    out = bench.spread(classes, "ekf")
+    assert set(out) == {"mini_val centerpoint", "worlds pointpillars"}
+    cp = out["mini_val centerpoint"]
+    # margins -0.02, -0.01, 0.00, ... 1.97: two below; 1 % of 200 sets may stay below, so the gain lifts the third
+    # lowest (0.00) to 0 and needs nothing; none below needs +0.02
+    assert cp["n"] == 200 and cp["below"] == 2 and cp["gain_1pct"] == 0.0
+    assert abs(cp["gain_none"] - 0.02) < 1e-12 and abs(cp["mean"] - 0.975) < 1e-9
+    assert abs(cp["per_class"]["car"] - 0.1) < 1e-12 and "bus" not in cp["per_class"]  # a class no set has
+    one = out["worlds pointpillars"]
+    assert one["below"] == 1 and one["sd"] == 0.0 and abs(one["gain_1pct"] - 0.02) < 1e-12
+
+
+def test_the_summary_reports_saved_runs_and_refuses_a_file_that_is_not_one(tmp_path, capsys):
+    classes = {"mini_val centerpoint s1": _row(0.79, 0.80), "mini_val centerpoint s2": _row(0.85, 0.80)}
+    saved = tmp_path / "run.json"
+    saved.write_text(json.dumps({"table": {}, "per_class": classes}))
+    assert bench.main(["--summary", str(saved)]) == 0
+    out = capsys.readouterr().out
+    assert "below on 1/2" in out and "mini_val centerpoint" in out and "1/2" in out
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"table": {}}')
+    assert bench.main(["--summary", str(saved), "--summary", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and str(bad) in err and "--json" in err

@@ -497,3 +497,66 @@ def test_one_classs_settings_leave_another_classs_tracks_unchanged(tmp_path):
     assert sum(len(ids) for _, _, ids in a) > 20
     for (boxes_a, scores_a, ids_a), (boxes_b, scores_b, ids_b) in zip(a, b):
         assert np.array_equal(boxes_a, boxes_b) and np.array_equal(scores_a, scores_b) and ids_a == ids_b
+
+
+def test_the_lost_newborn_penalty_loses_a_near_tie_but_never_refuses_a_pair():
+    from grutrack.tracking.association import penalized
+    from grutrack.tracking.tracker import lost_newborn_costs
+
+    # tracks: confirmed (3 hits), newborn matched in the frame before (misses 1), lost newborn (1 hit, missed since),
+    # an old track missed since (4 hits)
+    extra = lost_newborn_costs(np.array([3, 1, 1, 4]), np.array([2, 1, 3, 5]), np.full(4, 0.1))
+    assert extra.tolist() == [0.0, 0.0, 0.1, 0.0]
+    # detection 0 lies between the confirmed track 0 (cost 0.52) and the lost newborn 2 (cost 0.50); detection 1
+    # has the lost newborn alone, 0.05 below its threshold; the second row's class has threshold 1.0
+    cost = np.array([[0.52, 9.0, 0.50, 9.0], [9.0, 9.0, 0.95, 9.0]])
+    thr = np.array([1.2, 1.0])
+    out = penalized(cost, thr, extra)
+    assert np.allclose(out[0], [0.52, 9.0, 0.60, 9.0])  # the tie now goes to the confirmed track
+    assert out[1, 2] < 1.0 and out[1, 2] > 0.999  # capped just below the threshold: still admitted
+    assert out[1, 0] == 9.0  # inadmissible pairs unchanged
+    m = associate(
+        np.array([_box(0.0, 0), _box(30.0, 0)]),
+        np.zeros(2, dtype=np.int64),
+        np.array([_box(0.3, 0), _box(60.0, 0), _box(-0.25, 0), _box(90.0, 0)]),
+        np.zeros(4, dtype=np.int64),
+        ("giou_3d",) * 7,
+        np.full(7, 1.5),
+        False,
+        "giou_bev",
+        np.full(7, 1.0),
+        "threshold_margin",
+        track_penalty=extra,
+    )
+    assert sorted(zip(m.dets.tolist(), m.tracks.tolist())) == [(0, 0)]  # without the penalty: (0, 2)
+    m0 = associate(
+        np.array([_box(0.0, 0), _box(30.0, 0)]),
+        np.zeros(2, dtype=np.int64),
+        np.array([_box(0.3, 0), _box(60.0, 0), _box(-0.25, 0), _box(90.0, 0)]),
+        np.zeros(4, dtype=np.int64),
+        ("giou_3d",) * 7,
+        np.full(7, 1.5),
+        False,
+        "giou_bev",
+        np.full(7, 1.0),
+        "threshold_margin",
+    )
+    assert sorted(zip(m0.dets.tolist(), m0.tracks.tolist())) == [(0, 2)]
+
+
+def test_the_lost_newborn_penalty_is_refused_where_stage_one_is_not_the_two_stage_hungarian(tmp_path):
+    from grutrack.errors import ConfigError
+
+    raw = yaml.safe_load((PRESET_DIR / "fastpoly.yaml").read_text())
+    raw["association"]["lost_newborn_penalty"] = dict.fromkeys(raw["association"]["first_threshold"], 0.1)
+    path = tmp_path / "fastpoly_penalty.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    with pytest.raises(ConfigError, match=r"'association.lost_newborn_penalty' above 0 needs"):
+        load_tracker_config(path)
+    raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
+    raw["association"]["lost_newborn_penalty"] = dict.fromkeys(raw["association"]["first_threshold"], 0.1)
+    path.write_text(yaml.safe_dump(raw))
+    cfg = load_tracker_config(path)
+    assert cfg.lost_newborn_penalty.tolist() == [0.1] * 7
+    assert build_tracker("ekf", path).associate.wants_tracks
+    assert not build_tracker("ekf", "ekf").associate.wants_tracks  # off in the preset: no tracks asked for

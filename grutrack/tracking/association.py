@@ -217,6 +217,7 @@ def associate(
     distance_gate: np.ndarray | None = None,
     first_override: tuple[np.ndarray, np.ndarray] | None = None,
     crowded: tuple[np.ndarray, Callable[[np.ndarray, np.ndarray], np.ndarray]] | None = None,
+    track_penalty: np.ndarray | None = None,
 ) -> Matches:
     """Two-stage association of D detections with T (predicted) tracks.
 
@@ -229,7 +230,8 @@ def associate(
     classes instead of their ``first_metric``'s (a similarity the compiled kernel does not hold, e.g. Ro_GDIoU);
     crowded: (limit (C,), strict costs ``(rows (R,), cols (K,)) -> (R, K)``): for a class with limit > 0, a stage-1
     row or column with more than one pair below ``first_threshold`` takes the strict costs, admitted below ``limit``
-    (:func:`crowded_stage_one`).
+    (:func:`crowded_stage_one`); track_penalty (T,): added to the stage-1 cost of each track's admissible pairs, up to
+    just below the threshold (:func:`penalized`).
     """
     solve = ASSIGNMENT[assignment]
     stages = [(tuple(first_metric), first_threshold)]
@@ -245,7 +247,18 @@ def associate(
         costs = [np.where(inside, c, _INVALID) for c in costs]
     if crowded is not None and costs[0].size:
         costs[0] = crowded_stage_one(costs[0], det_labels, first_threshold, *crowded)
+    if track_penalty is not None and costs[0].size and np.any(track_penalty > 0):
+        costs[0] = penalized(costs[0], first_threshold[det_labels], track_penalty)
     return _solve_stages(solve, costs, det_labels, first_threshold, second_threshold)
+
+
+def penalized(cost: np.ndarray, threshold: np.ndarray, penalty: np.ndarray) -> np.ndarray:
+    """Stage-1 costs (D, T) with ``penalty`` (T,) added to each admissible pair (``cost < threshold``, the row's
+    threshold (D,)), capped at the largest value below the threshold: the pair's margin shrinks, so it loses a near
+    tie, but it is never refused for the penalty alone."""
+    thr = threshold[:, None]
+    cap = np.nextafter(thr, -np.inf)
+    return np.where(cost < thr, np.minimum(cost + penalty[None, :], cap), cost)
 
 
 def crowded_stage_one(

@@ -216,6 +216,7 @@ def remap_config(cfg: TrackerConfig, index: np.ndarray) -> TrackerConfig:
         nms_threshold=cfg.nms_threshold[index] if isinstance(cfg.nms_threshold, np.ndarray) else cfg.nms_threshold,
         ro_gdiou_weights=cfg.ro_gdiou_weights[index],
         crowded_threshold=cfg.crowded_threshold[index],
+        lost_newborn_penalty=cfg.lost_newborn_penalty[index],
         track_pose=tuple(cfg.track_pose[i] for i in index),
         track_pose_blend=cfg.track_pose_blend[index],
         position_noise=None if cfg.position_noise is None else {k: v[index] for k, v in cfg.position_noise.items()},

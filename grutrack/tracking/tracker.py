@@ -114,10 +114,14 @@ class GroupUpdate:
 @dataclass(frozen=True)
 class TrackView:
     """What an association that asks for it (``wants_tracks``) sees of the tracks besides their predicted boxes:
-    ids (T,) and the boxes before this frame's prediction (T, 9), in the order of the predicted boxes."""
+    ids (T,), the boxes before this frame's prediction (T, 9), and hits (T,) int64 (matched frames since birth)
+    and misses (T,) int64 (frames since the last match, this one included: 1 for a track matched in the frame
+    before), in the order of the predicted boxes."""
 
     ids: np.ndarray
     last_boxes: np.ndarray
+    hits: np.ndarray
+    misses: np.ndarray
 
 
 #: association of one frame: (detections after pre-processing, predicted track boxes (T, 9), track labels (T,),
@@ -129,7 +133,9 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
     """The default association: per-class similarity, Hungarian, optional second stage (ARCHITECTURE.md, "The
     method"); with Ro_GDIoU as the stage-1 metric of some classes, their stage-1 costs from
     :func:`~grutrack.tracking.ro_gdiou.ro_gdiou_first_stage`; with ``crowded_threshold``, Ro_GDIoU for the
-    crowded rows and columns of stage 1 (:func:`~grutrack.tracking.association.crowded_stage_one`)."""
+    crowded rows and columns of stage 1 (:func:`~grutrack.tracking.association.crowded_stage_one`); with
+    ``lost_newborn_penalty``, the stage-1 costs of lost newborn tracks raised (it then asks for the tracks'
+    hits and misses, ``wants_tracks``)."""
     if gated_association_needed(cfg):
         return gated_association(cfg)
     first_metric, first_override, strict = cfg.first_metric, None, None
@@ -141,8 +147,11 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
         from grutrack.tracking.ro_gdiou import predicted_pose_costs
 
         strict = predicted_pose_costs(cfg.crowded_threshold > 0, cfg)
+    penalty = cfg.lost_newborn_penalty
 
-    def run(dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float) -> Matches:
+    def run(
+        dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float, tracks: TrackView | None = None
+    ) -> Matches:
         return associate(
             dets.boxes,
             dets.labels,
@@ -162,9 +171,18 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
                 cfg.crowded_threshold,
                 lambda r, c: strict(dets.boxes[r], dets.labels[r], trk_boxes[c], trk_labels[c]),
             ),
+            None if tracks is None else lost_newborn_costs(tracks.hits, tracks.misses, penalty[trk_labels]),
         )
 
+    run.wants_tracks = bool(np.any(penalty > 0))
     return run
+
+
+def lost_newborn_costs(hits: np.ndarray, misses: np.ndarray, penalty: np.ndarray) -> np.ndarray:
+    """(T,) float64 stage-1 cost added to each track's pairs: its class's ``penalty`` (T,) for a lost newborn, a
+    track matched at its birth only (``hits`` (T,) == 1) and missed since (``misses`` (T,) >= 2: at association
+    time a track matched in the frame before has 1), else 0."""
+    return np.where((hits == 1) & (misses >= 2), penalty, 0.0)
 
 
 class Tracker:
@@ -279,8 +297,8 @@ class Tracker:
             else empty_boxes()
             for g in self.groups
         ]
-        ids = np.concatenate([g.ids for g in self.groups])
-        return TrackView(ids, np.concatenate(last) if last else trk_boxes)
+        ids, hits, misses = (np.concatenate([getattr(g, k) for g in self.groups]) for k in ("ids", "hits", "misses"))
+        return TrackView(ids, np.concatenate(last) if last else trk_boxes, hits, misses)
 
     def _predict(self, dt: float) -> None:
         for g in self.groups:
