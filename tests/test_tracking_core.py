@@ -515,33 +515,25 @@ def test_the_lost_newborn_penalty_loses_a_near_tie_but_never_refuses_a_pair():
     assert np.allclose(out[0], [0.52, 9.0, 0.60, 9.0])  # the tie now goes to the confirmed track
     assert out[1, 2] < 1.0 and out[1, 2] > 0.999  # capped just below the threshold: still admitted
     assert out[1, 0] == 9.0  # inadmissible pairs unchanged
-    m = associate(
-        np.array([_box(0.0, 0), _box(30.0, 0)]),
-        np.zeros(2, dtype=np.int64),
-        np.array([_box(0.3, 0), _box(60.0, 0), _box(-0.25, 0), _box(90.0, 0)]),
-        np.zeros(4, dtype=np.int64),
-        ("giou_3d",) * 7,
-        np.full(7, 1.5),
-        False,
-        "giou_bev",
-        np.full(7, 1.0),
-        "threshold_margin",
-        track_penalty=extra,
-    )
-    assert sorted(zip(m.dets.tolist(), m.tracks.tolist())) == [(0, 0)]  # without the penalty: (0, 2)
-    m0 = associate(
-        np.array([_box(0.0, 0), _box(30.0, 0)]),
-        np.zeros(2, dtype=np.int64),
-        np.array([_box(0.3, 0), _box(60.0, 0), _box(-0.25, 0), _box(90.0, 0)]),
-        np.zeros(4, dtype=np.int64),
-        ("giou_3d",) * 7,
-        np.full(7, 1.5),
-        False,
-        "giou_bev",
-        np.full(7, 1.0),
-        "threshold_margin",
-    )
-    assert sorted(zip(m0.dets.tolist(), m0.tracks.tolist())) == [(0, 2)]
+
+    def pairs(penalty):  # detection 0 at x = 0 between track 0 (x = 0.3) and the lost newborn 2 (x = -0.25)
+        m = associate(
+            np.array([_box(0.0, 0), _box(30.0, 0)]),
+            np.zeros(2, dtype=np.int64),
+            np.array([_box(0.3, 0), _box(60.0, 0), _box(-0.25, 0), _box(90.0, 0)]),
+            np.zeros(4, dtype=np.int64),
+            ("giou_3d",) * 7,
+            np.full(7, 1.5),
+            False,
+            "giou_bev",
+            np.full(7, 1.0),
+            "threshold_margin",
+            track_penalty=penalty,
+        )
+        return sorted(zip(m.dets.tolist(), m.tracks.tolist()))
+
+    assert pairs(None) == [(0, 2)]  # the nearer lost newborn wins without the penalty
+    assert pairs(extra) == [(0, 0)]  # the confirmed track with it
 
 
 def test_the_lost_newborn_penalty_is_refused_where_stage_one_is_not_the_two_stage_hungarian(tmp_path):
