@@ -637,6 +637,11 @@ CANDIDATES = {
     # a lost newborn track (matched at birth only, missed since) yields a near tie in stage 1
     "+lost_newborn": _lost_newborn(0.1),
     "+car_crowded+lost_newborn": _combine(_crowded({"car": (1.1, [0.5, 1.5])}), _lost_newborn(0.1)),
+    # lost newborns left out of the crowded test (they make no row crowded, their pairs keep the first metric)
+    "+skip_lost": lambda raw: raw["association"].update(crowded_skips_lost_newborns=True),
+    "+car_crowded+skip_lost": _combine(
+        _crowded({"car": (1.1, [0.5, 1.5])}), lambda raw: raw["association"].update(crowded_skips_lost_newborns=True)
+    ),
     "+ped_crowded": _crowded({"pedestrian": (2.06, [1.0, 1.0])}),
     # the preset before Decision 10 (crowded pedestrians judged by the first metric, as every pair)
     "ekf_prev10": _combine(lambda raw: raw["association"].pop("crowded_threshold"), _coast((), ())),

@@ -552,3 +552,60 @@ def test_the_lost_newborn_penalty_is_refused_where_stage_one_is_not_the_two_stag
     assert cfg.lost_newborn_penalty.tolist() == [0.1] * 7
     assert build_tracker("ekf", path).associate.wants_tracks
     assert not build_tracker("ekf", "ekf").associate.wants_tracks  # off in the preset: no tracks asked for
+
+
+def test_crowded_stage_one_leaves_skipped_tracks_out_of_the_crowded_test():
+    from grutrack.tracking.association import crowded_stage_one
+
+    # detection 0 near track 0 (confirmed) and track 1 (skipped: a lost newborn); detection 1 near tracks 0 and 2
+    cost = np.array([[0.5, 0.6, 1e6], [0.7, 1e6, 0.8]])  # 1e6: a forbidden pair
+    table = np.full((2, 3), 0.1)
+
+    def strict(rows, cols):
+        return table[np.ix_(rows, cols)]
+
+    args = (np.zeros(2, dtype=np.int64), np.array([1.0]), np.array([0.8]), strict)
+    every = crowded_stage_one(cost, *args)
+    assert np.allclose(every, [[0.3, 0.3, 1e6], [0.3, 1e6, 0.3]])  # both rows and column 0 crowded
+    skipped = crowded_stage_one(cost, *args, skip=np.array([False, True, False]))
+    # row 0 alone is no longer crowded by track 1, but column 0 still is (detections 0 and 1); track 1's pair keeps
+    # its first cost all the same
+    assert np.allclose(skipped, [[0.3, 0.6, 1e6], [0.3, 1e6, 0.3]])
+    lone = crowded_stage_one(cost[:1], args[0][:1], *args[1:], skip=np.array([False, True, False]))
+    assert np.array_equal(lone, cost[:1])  # only the skipped track makes row 0 crowded: nothing changes
+
+
+def test_crowded_skips_lost_newborns_judges_a_row_by_the_first_metric_when_a_lost_newborn_crowds_it(tmp_path):
+    from grutrack.errors import ConfigError
+    from grutrack.tracking.tracker import TrackView
+
+    person = {"w": 0.6, "l": 0.6, "h": 1.7, "z": 0.85}
+    raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
+    assert raw["association"]["crowded_threshold"]["pedestrian"] == 2.06  # the preset's crowded pedestrians
+    raw["association"]["crowded_skips_lost_newborns"] = True
+    path = tmp_path / "skip.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    trk = np.array([_box(0.0, 0, **person), _box(6.2, 0, **person)])
+    dets = BoxSet(np.array([_box(3.0, 0, **person)]), np.full(1, 0.9), np.array([PED]))
+
+    def matched(preset, hits, misses):  # the crowded row of the test above: both tracks' 3D GIoU costs admit it
+        run = build_tracker("ekf", preset).associate
+        view = TrackView(np.arange(2), trk, np.array(hits), np.array(misses))
+        extra = {"tracks": view} if run.wants_tracks else {}
+        m = run(dets, trk, np.full(2, PED), 0.5, **extra)
+        return sorted(zip(m.dets.tolist(), m.tracks.tolist()))
+
+    assert matched("ekf", [5, 1], [1, 3]) == []  # the preset: a crowded row, Ro_GDIoU admits neither
+    assert matched(path, [5, 4], [1, 3]) == []  # two tracks with evidence: still crowded
+    assert matched(path, [5, 1], [1, 3]) == [(0, 0)]  # track 1 a lost newborn: a lone pair, first metric
+    # refused without a crowded class, and outside the two-stage Hungarian association
+    raw["association"]["crowded_threshold"] = dict.fromkeys(raw["association"]["first_threshold"], 0.0)
+    path.write_text(yaml.safe_dump(raw))
+    key = r"'association.crowded_skips_lost_newborns: true' needs"
+    with pytest.raises(ConfigError, match=key + r" 'association.crowded_threshold'"):
+        load_tracker_config(path)
+    raw = yaml.safe_load((PRESET_DIR / "fastpoly.yaml").read_text())
+    raw["association"]["crowded_skips_lost_newborns"] = True
+    path.write_text(yaml.safe_dump(raw))
+    with pytest.raises(ConfigError, match=key + r" 'association.algorithm"):
+        load_tracker_config(path)

@@ -218,6 +218,7 @@ def associate(
     first_override: tuple[np.ndarray, np.ndarray] | None = None,
     crowded: tuple[np.ndarray, Callable[[np.ndarray, np.ndarray], np.ndarray]] | None = None,
     track_penalty: np.ndarray | None = None,
+    crowded_skip: np.ndarray | None = None,
 ) -> Matches:
     """Two-stage association of D detections with T (predicted) tracks.
 
@@ -231,7 +232,8 @@ def associate(
     crowded: (limit (C,), strict costs ``(rows (R,), cols (K,)) -> (R, K)``): for a class with limit > 0, a stage-1
     row or column with more than one pair below ``first_threshold`` takes the strict costs, admitted below ``limit``
     (:func:`crowded_stage_one`); track_penalty (T,): added to the stage-1 cost of each track's admissible pairs, up to
-    just below the threshold (:func:`penalized`).
+    just below the threshold (:func:`penalized`); crowded_skip (T,) bool: tracks that neither make a row crowded nor
+    take the strict cost there (``skip`` of :func:`crowded_stage_one`).
     """
     solve = ASSIGNMENT[assignment]
     stages = [(tuple(first_metric), first_threshold)]
@@ -246,7 +248,7 @@ def associate(
         inside = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2) < radii[:, None]  # (D, T)
         costs = [np.where(inside, c, _INVALID) for c in costs]
     if crowded is not None and costs[0].size:
-        costs[0] = crowded_stage_one(costs[0], det_labels, first_threshold, *crowded)
+        costs[0] = crowded_stage_one(costs[0], det_labels, first_threshold, *crowded, skip=crowded_skip)
     if track_penalty is not None and costs[0].size and np.any(track_penalty > 0):
         costs[0] = penalized(costs[0], first_threshold[det_labels], track_penalty)
     return _solve_stages(solve, costs, det_labels, first_threshold, second_threshold)
@@ -267,6 +269,7 @@ def crowded_stage_one(
     threshold: np.ndarray,
     limit: np.ndarray,
     strict: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    skip: np.ndarray | None = None,
 ) -> np.ndarray:
     """Stage-1 costs (D, T) with a stricter measure where the first one is ambiguous.
 
@@ -277,13 +280,16 @@ def crowded_stage_one(
     (:func:`threshold_margin`). Elsewhere ``cost`` is kept: a lone pair is judged by the looser first measure.
     ``det_labels`` (D,) int64; ``strict(rows (R,), cols (K,)) -> (R, K)``: the strict costs of those detections
     against those tracks, asked once, for the rows and columns that hold a crowded pair (not at all when none
-    does: the strict measure costs more than the first)."""
+    does: the strict measure costs more than the first). ``skip`` (T,) bool, optional: tracks left out of the
+    test, as if absent: they make no row crowded and their pairs keep ``cost`` (the tracker's lost newborns,
+    ``association.crowded_skips_lost_newborns``)."""
     on = np.flatnonzero((limit > 0)[det_labels])  # the rows of those classes
     if not len(on):
         return cost
     sub = cost[on]
-    near = sub < threshold[det_labels[on]][:, None]
-    busy = ((near.sum(axis=1) > 1)[:, None] | (near.sum(axis=0) > 1)[None, :]) & (sub < _INVALID)
+    counted = np.ones(cost.shape[1], dtype=bool) if skip is None else ~skip  # (T,)
+    near = (sub < threshold[det_labels[on]][:, None]) & counted[None, :]
+    busy = ((near.sum(axis=1) > 1)[:, None] | (near.sum(axis=0) > 1)[None, :]) & (sub < _INVALID) & counted[None, :]
     if not busy.any():
         return cost
     keep_rows, cols = np.flatnonzero(busy.any(axis=1)), np.flatnonzero(busy.any(axis=0))

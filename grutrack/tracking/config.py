@@ -96,6 +96,7 @@ class TrackerConfig:
     ro_gdiou_weights: np.ndarray = field(default_factory=lambda: np.ones((7, 2)))
     crowded_threshold: np.ndarray = field(default_factory=lambda: np.zeros(7))  # 0: off (stage 1 as it is)
     lost_newborn_penalty: np.ndarray = field(default_factory=lambda: np.zeros(7))  # stage-1 cost added; 0: off
+    crowded_skips_lost_newborns: bool = False  # lost newborns left out of crowded_threshold's test
     # per class keep or zero: the turn rate / acceleration of a coasting track (motion.coast_yaw_rate, ...)
     coast_yaw_rate: tuple[str, ...] = ("keep",) * 7
     coast_acceleration: tuple[str, ...] = ("keep",) * 7
@@ -168,7 +169,14 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
             )
     _check_ro_gdiou(v, given, source)
     if np.any(v["association.lost_newborn_penalty"] > 0):
-        _check_lost_newborn(v, source)
+        _check_lost_newborn(v, source, "'association.lost_newborn_penalty' above 0")
+    if v["association.crowded_skips_lost_newborns"]:
+        _check_lost_newborn(v, source, "'association.crowded_skips_lost_newborns: true'")
+        if not np.any(v["association.crowded_threshold"] > 0):
+            raise ConfigError(
+                f"{source}: 'association.crowded_skips_lost_newborns: true' needs 'association.crowded_threshold' "
+                f"above 0 for some class (it changes which stage-1 rows are crowded)"
+            )
     if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
         raise ConfigError(
             f"{source}: 'association.two_stage' must be false with 'association.algorithm' greedy "
@@ -215,6 +223,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         ro_gdiou_weights=v["association.ro_gdiou_weights"],
         crowded_threshold=v["association.crowded_threshold"],
         lost_newborn_penalty=v["association.lost_newborn_penalty"],
+        crowded_skips_lost_newborns=v["association.crowded_skips_lost_newborns"],
         coast_yaw_rate=v["motion.coast_yaw_rate"],
         coast_acceleration=v["motion.coast_acceleration"],
         track_pose=v["association.track_pose"],
@@ -342,16 +351,17 @@ def _check_stage_one(v: dict, given: dict, source: str, pose_why: str, what: str
         )
 
 
-def _check_lost_newborn(v: dict, source: str) -> None:
-    """``association.lost_newborn_penalty`` acts in stage 1 of the two-stage Hungarian association
-    (:func:`~grutrack.tracking.association.associate`): refuse it with greedy matching, Fast-Poly's dense
-    association (alignment GIoU, or a gate on every class) and MCTrack's one-stage Ro_GDIoU association."""
+def _check_lost_newborn(v: dict, source: str, what: str) -> None:
+    """The lost-newborn keys (``what``: the key and its value as the message names them) act in stage 1 of the
+    two-stage Hungarian association (:func:`~grutrack.tracking.association.associate`): refuse them with greedy
+    matching, Fast-Poly's dense association (alignment GIoU, or a gate on every class) and MCTrack's one-stage
+    Ro_GDIoU association."""
     metrics = set(v["association.first_metric"]) | {v["association.second_metric"]}
     dense = bool(np.all(v["association.distance_gate"] > 0)) or any(m.startswith("a_") for m in metrics)
     one_stage = all(m == "ro_gdiou_bev" for m in v["association.first_metric"])
     if v["association.algorithm"] != "hungarian" or dense or one_stage:
         raise ConfigError(
-            f"{source}: 'association.lost_newborn_penalty' above 0 needs 'association.algorithm: hungarian', no "
+            f"{source}: {what} needs 'association.algorithm: hungarian', no "
             f"alignment GIoU metric, no distance gate on every class and a first_metric other than ro_gdiou_bev "
             f"for some class (it acts in stage 1 of the two-stage association)"
         )

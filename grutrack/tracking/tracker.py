@@ -134,8 +134,9 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
     method"); with Ro_GDIoU as the stage-1 metric of some classes, their stage-1 costs from
     :func:`~grutrack.tracking.ro_gdiou.ro_gdiou_first_stage`; with ``crowded_threshold``, Ro_GDIoU for the
     crowded rows and columns of stage 1 (:func:`~grutrack.tracking.association.crowded_stage_one`); with
-    ``lost_newborn_penalty``, the stage-1 costs of lost newborn tracks raised (it then asks for the tracks'
-    hits and misses, ``wants_tracks``)."""
+    ``lost_newborn_penalty``, the stage-1 costs of lost newborn tracks raised, and with
+    ``crowded_skips_lost_newborns``, those tracks left out of the crowded test (both ask for the tracks' hits and
+    misses, ``wants_tracks``)."""
     if gated_association_needed(cfg):
         return gated_association(cfg)
     first_metric, first_override, strict = cfg.first_metric, None, None
@@ -147,7 +148,7 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
         from grutrack.tracking.ro_gdiou import predicted_pose_costs
 
         strict = predicted_pose_costs(cfg.crowded_threshold > 0, cfg)
-    penalty = cfg.lost_newborn_penalty
+    penalty, skip_lost = cfg.lost_newborn_penalty, cfg.crowded_skips_lost_newborns and strict is not None
 
     def run(
         dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float, tracks: TrackView | None = None
@@ -172,17 +173,23 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
                 lambda r, c: strict(dets.boxes[r], dets.labels[r], trk_boxes[c], trk_labels[c]),
             ),
             None if tracks is None else lost_newborn_costs(tracks.hits, tracks.misses, penalty[trk_labels]),
+            None if tracks is None or not skip_lost else lost_newborns(tracks.hits, tracks.misses),
         )
 
-    run.wants_tracks = bool(np.any(penalty > 0))
+    run.wants_tracks = bool(np.any(penalty > 0)) or skip_lost
     return run
 
 
+def lost_newborns(hits: np.ndarray, misses: np.ndarray) -> np.ndarray:
+    """(T,) bool: the lost newborns, tracks matched at their birth only (``hits`` (T,) == 1) and missed since
+    (``misses`` (T,) >= 2: at association time a track matched in the frame before has 1)."""
+    return (hits == 1) & (misses >= 2)
+
+
 def lost_newborn_costs(hits: np.ndarray, misses: np.ndarray, penalty: np.ndarray) -> np.ndarray:
-    """(T,) float64 stage-1 cost added to each track's pairs: its class's ``penalty`` (T,) for a lost newborn, a
-    track matched at its birth only (``hits`` (T,) == 1) and missed since (``misses`` (T,) >= 2: at association
-    time a track matched in the frame before has 1), else 0."""
-    return np.where((hits == 1) & (misses >= 2), penalty, 0.0)
+    """(T,) float64 stage-1 cost added to each track's pairs: its class's ``penalty`` (T,) for a lost newborn
+    (:func:`lost_newborns`), else 0."""
+    return np.where(lost_newborns(hits, misses), penalty, 0.0)
 
 
 class Tracker:
