@@ -220,9 +220,12 @@ def _nms_order(raw):  # detections numbered in NMS's score order
 
 def _stage_one_ro_gdiou(a: dict, classes) -> None:
     """``association`` ``a`` with Ro_GDIoU as the first metric of ``classes``: their crowded rule off (stage 1 is
-    Ro_GDIoU already; the config refuses both)."""
+    Ro_GDIoU already; the config refuses both), and with it the lost newborns' skip when no class keeps the rule
+    or every class is on Ro_GDIoU (MCTrack's one-stage association)."""
     if "crowded_threshold" in a:
         a["crowded_threshold"] = {**a["crowded_threshold"], **dict.fromkeys(classes, 0.0)}
+    if not any(v > 0 for v in a.get("crowded_threshold", {}).values()) or set(classes) == set(CLASSES):
+        a.pop("crowded_skips_lost_newborns", None)
 
 
 def _ro_gdiou(raw):  # Ro_GDIoU one stage, MCTrack's weights and thresholds, predicted pose
@@ -453,6 +456,18 @@ def _crowded(classes: dict[str, tuple[float, list[float]]]):
     return change
 
 
+def _prev12(raw):
+    """The preset before Decision 12: cars' crowded stage-1 rows judged by the first metric (car threshold 0, the
+    default Ro_GDIoU weights), and no lost newborn left out of the crowded test."""
+    a = raw["association"]
+    a["crowded_threshold"]["car"] = 0.0
+    a.pop("ro_gdiou_weights", None)
+    a.pop("crowded_skips_lost_newborns", None)
+
+
+_PREV12 = _prev12
+
+
 def _lost_newborn(penalty: float):
     """``association.lost_newborn_penalty`` ``penalty`` for every class."""
 
@@ -644,9 +659,13 @@ CANDIDATES = {
     ),
     "+ped_crowded": _crowded({"pedestrian": (2.06, [1.0, 1.0])}),
     # the preset before Decision 10 (crowded pedestrians judged by the first metric, as every pair)
-    "ekf_prev10": _combine(lambda raw: raw["association"].pop("crowded_threshold"), _coast((), ())),
+    "ekf_prev10": _combine(_PREV12, lambda raw: raw["association"].pop("crowded_threshold"), _coast((), ())),
     # the preset before Decision 11 (every coasting track predicted by its model, Poly-MOT's)
-    "ekf_prev11": _coast((), ()),
+    "ekf_prev11": _combine(_PREV12, _coast((), ())),
+    # the preset before Decision 12 (cars' crowded rows judged by the first metric; no lost newborn skipped)
+    "ekf_prev12": _PREV12,
+    # Decision 12 without its skip: lost newborns make rows crowded as any track
+    "-skip_lost": lambda raw: raw["association"].update(crowded_skips_lost_newborns=False),
     "+bus_ro_gdiou": _ro_gdiou_class({"bus": (1.6, [1.0, 1.0])}),
     "+bic_ro_gdiou": _ro_gdiou_class({"bicycle": (2.0, [1.0, 1.0])}),
     "+bus_bic_ro_gdiou": _ro_gdiou_class({"bus": (1.6, [1.0, 1.0]), "bicycle": (2.0, [1.0, 1.0])}),
@@ -714,6 +733,8 @@ CANDIDATES = {
     "+all_gate5": _combine(
         lambda raw: raw["association"]["distance_gate"].update(dict.fromkeys(CLASSES, 5.0)),
         lambda raw: raw["association"].pop("crowded_threshold", None),
+        lambda raw: raw["association"].pop("ro_gdiou_weights", None),
+        lambda raw: raw["association"].pop("crowded_skips_lost_newborns", None),
     ),
     "+young0.4+score_detection": _combine(_young(0.4), lambda raw: raw["lifecycle"].update(score_update="detection")),
     # robust update: a detection's R scaled by NIS / g when its position NIS exceeds g (motion.nis_limit); ekf_prev7

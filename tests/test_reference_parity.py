@@ -115,10 +115,10 @@ def test_compare_tracks_cli(nusc_root, nusc_reference, tmp_path, capsys):
 #: the default preset's AMOTA on the reference sets (docs/results/default_tracker.md gives the evidence for its
 #: choices against the three trackers); the trackers' own AMOTA is read from the reference metrics
 EKF_AMOTA = {
-    "mini_val_centerpoint_sim_s7": 0.8890,
-    "mini_val_pointpillars_sim_s7": 0.6584,
+    "mini_val_centerpoint_sim_s7": 0.8893,
+    "mini_val_pointpillars_sim_s7": 0.6585,
     "pointpillars_mini_val": 0.2020,
-    "mini_train_centerpoint_sim_s7": 0.8858,
+    "mini_train_centerpoint_sim_s7": 0.8859,
 }
 
 
