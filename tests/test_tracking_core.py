@@ -417,6 +417,7 @@ def test_crowded_threshold_judges_a_lone_pair_by_the_first_metric_and_a_crowded_
     raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
     raw["association"]["crowded_threshold"] = {**dict.fromkeys(raw["association"]["first_threshold"], 0.0)}
     weights = raw["association"].pop("ro_gdiou_weights", None)
+    raw["association"].pop("crowded_skips_lost_newborns", None)
     plain = tmp_path / "plain.yaml"
     plain.write_text(yaml.safe_dump(raw))
     raw["association"]["crowded_threshold"]["pedestrian"] = 2.06
@@ -551,7 +552,7 @@ def test_the_lost_newborn_penalty_is_refused_where_stage_one_is_not_the_two_stag
     cfg = load_tracker_config(path)
     assert cfg.lost_newborn_penalty.tolist() == [0.1] * 7
     assert build_tracker("ekf", path).associate.wants_tracks
-    assert not build_tracker("ekf", "ekf").associate.wants_tracks  # off in the preset: no tracks asked for
+    assert not build_tracker("ekf", "polymot").associate.wants_tracks  # off: no tracks asked for
 
 
 def test_crowded_stage_one_leaves_skipped_tracks_out_of_the_crowded_test():
@@ -582,6 +583,9 @@ def test_crowded_skips_lost_newborns_judges_a_row_by_the_first_metric_when_a_los
     person = {"w": 0.6, "l": 0.6, "h": 1.7, "z": 0.85}
     raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
     assert raw["association"]["crowded_threshold"]["pedestrian"] == 2.06  # the preset's crowded pedestrians
+    raw["association"]["crowded_skips_lost_newborns"] = False
+    off = tmp_path / "off.yaml"
+    off.write_text(yaml.safe_dump(raw))
     raw["association"]["crowded_skips_lost_newborns"] = True
     path = tmp_path / "skip.yaml"
     path.write_text(yaml.safe_dump(raw))
@@ -595,11 +599,12 @@ def test_crowded_skips_lost_newborns_judges_a_row_by_the_first_metric_when_a_los
         m = run(dets, trk, np.full(2, PED), 0.5, **extra)
         return sorted(zip(m.dets.tolist(), m.tracks.tolist()))
 
-    assert matched("ekf", [5, 1], [1, 3]) == []  # the preset: a crowded row, Ro_GDIoU admits neither
+    assert matched(off, [5, 1], [1, 3]) == []  # without the skip: a crowded row, Ro_GDIoU admits neither
     assert matched(path, [5, 4], [1, 3]) == []  # two tracks with evidence: still crowded
     assert matched(path, [5, 1], [1, 3]) == [(0, 0)]  # track 1 a lost newborn: a lone pair, first metric
     # refused without a crowded class, and outside the two-stage Hungarian association
     raw["association"]["crowded_threshold"] = dict.fromkeys(raw["association"]["first_threshold"], 0.0)
+    raw["association"].pop("ro_gdiou_weights")
     path.write_text(yaml.safe_dump(raw))
     key = r"'association.crowded_skips_lost_newborns: true' needs"
     with pytest.raises(ConfigError, match=key + r" 'association.crowded_threshold'"):

@@ -168,6 +168,11 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
                 f"filters have no turn rate or acceleration to hold)"
             )
     _check_ro_gdiou(v, given, source)
+    if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
+        raise ConfigError(
+            f"{source}: 'association.two_stage' must be false with 'association.algorithm' greedy "
+            f"(greedy matching is one stage)"
+        )
     if np.any(v["association.lost_newborn_penalty"] > 0):
         _check_lost_newborn(v, source, "'association.lost_newborn_penalty' above 0")
     if v["association.crowded_skips_lost_newborns"]:
@@ -177,11 +182,6 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
                 f"{source}: 'association.crowded_skips_lost_newborns: true' needs 'association.crowded_threshold' "
                 f"above 0 for some class (it changes which stage-1 rows are crowded)"
             )
-    if v["association.algorithm"] == "greedy" and v["association.two_stage"]:
-        raise ConfigError(
-            f"{source}: 'association.two_stage' must be false with 'association.algorithm' greedy "
-            f"(greedy matching is one stage)"
-        )
     return TrackerConfig(
         source=source,
         score_threshold=v["preprocessing.score_threshold"],
