@@ -172,24 +172,30 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
                 cfg.crowded_threshold,
                 lambda r, c: strict(dets.boxes[r], dets.labels[r], trk_boxes[c], trk_labels[c]),
             ),
-            None if tracks is None else lost_newborn_costs(tracks.hits, tracks.misses, penalty[trk_labels]),
-            None if tracks is None or not skip_lost else lost_newborns(tracks.hits, tracks.misses),
+            None if tracks is None else lost_newborn_costs(tracks.hits, tracks.misses, dt, penalty[trk_labels]),
+            None if tracks is None or not skip_lost else lost_newborns(tracks.hits, tracks.misses, dt),
         )
 
     run.wants_tracks = bool(np.any(penalty > 0)) or skip_lost
     return run
 
 
-def lost_newborns(hits: np.ndarray, misses: np.ndarray) -> np.ndarray:
-    """(T,) bool: the lost newborns, tracks matched at their birth only (``hits`` (T,) == 1) and missed since
-    (``misses`` (T,) >= 2: at association time a track matched in the frame before has 1)."""
-    return (hits == 1) & (misses >= 2)
+#: seconds a newborn track must have been missed to count as lost: every missed nuScenes keyframe (2 Hz), the
+#: third missed sweep at Argoverse 2's 10 Hz (the rate-independent test of ``motion.velocity_check_window``)
+LOST_NEWBORN_MISSED_S = 0.25
 
 
-def lost_newborn_costs(hits: np.ndarray, misses: np.ndarray, penalty: np.ndarray) -> np.ndarray:
+def lost_newborns(hits: np.ndarray, misses: np.ndarray, dt: float) -> np.ndarray:
+    """(T,) bool: the lost newborns, tracks matched at their birth only (``hits`` (T,) == 1) and missed since for
+    at least :data:`LOST_NEWBORN_MISSED_S`: ``misses`` (T,) counts this frame (1 for a track matched in the frame
+    before), so ``(misses - 1) * dt`` seconds (``dt``: this frame's interval) have passed without a match."""
+    return (hits == 1) & ((misses - 1) * dt >= LOST_NEWBORN_MISSED_S)
+
+
+def lost_newborn_costs(hits: np.ndarray, misses: np.ndarray, dt: float, penalty: np.ndarray) -> np.ndarray:
     """(T,) float64 stage-1 cost added to each track's pairs: its class's ``penalty`` (T,) for a lost newborn
-    (:func:`lost_newborns`), else 0."""
-    return np.where(lost_newborns(hits, misses), penalty, 0.0)
+    (:func:`lost_newborns`, ``dt`` seconds), else 0."""
+    return np.where(lost_newborns(hits, misses, dt), penalty, 0.0)
 
 
 class Tracker:
