@@ -303,14 +303,17 @@ class Tracker:
         return _concat_boxsets(out) if output else None
 
     def _track_view(self, trk_boxes: np.ndarray) -> TrackView:
-        """The tracks' ids and last-update boxes (a backend's ``last_boxes``, else its current boxes)."""
+        """The tracks' ids and last-update boxes (a backend's ``last_boxes``, else its current boxes: ``trk_boxes``
+        (T, 9) itself when no backend keeps last-update boxes)."""
+        ids, hits, misses = (np.concatenate([getattr(g, k) for g in self.groups]) for k in ("ids", "hits", "misses"))
+        if not any(hasattr(g.backend, "last_boxes") for g in self.groups):
+            return TrackView(ids, trk_boxes, hits, misses)
         last = [
             (g.backend.last_boxes(g.state) if hasattr(g.backend, "last_boxes") else g.backend.boxes(g.state))
             if len(g)
             else empty_boxes()
             for g in self.groups
         ]
-        ids, hits, misses = (np.concatenate([getattr(g, k) for g in self.groups]) for k in ("ids", "hits", "misses"))
         return TrackView(ids, np.concatenate(last) if last else trk_boxes, hits, misses)
 
     def _predict(self, dt: float) -> None:
