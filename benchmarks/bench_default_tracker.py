@@ -465,9 +465,6 @@ def _prev12(raw):
     a.pop("crowded_skips_lost_newborns", None)
 
 
-_PREV12 = _prev12
-
-
 def _lost_newborn(penalty: float):
     """``association.lost_newborn_penalty`` ``penalty`` for every class."""
 
@@ -659,11 +656,11 @@ CANDIDATES = {
     ),
     "+ped_crowded": _crowded({"pedestrian": (2.06, [1.0, 1.0])}),
     # the preset before Decision 10 (crowded pedestrians judged by the first metric, as every pair)
-    "ekf_prev10": _combine(_PREV12, lambda raw: raw["association"].pop("crowded_threshold"), _coast((), ())),
+    "ekf_prev10": _combine(_prev12, lambda raw: raw["association"].pop("crowded_threshold"), _coast((), ())),
     # the preset before Decision 11 (every coasting track predicted by its model, Poly-MOT's)
-    "ekf_prev11": _combine(_PREV12, _coast((), ())),
+    "ekf_prev11": _combine(_prev12, _coast((), ())),
     # the preset before Decision 12 (cars' crowded rows judged by the first metric; no lost newborn skipped)
-    "ekf_prev12": _PREV12,
+    "ekf_prev12": _prev12,
     # Decision 12 without its skip: lost newborns make rows crowded as any track
     "-skip_lost": lambda raw: raw["association"].update(crowded_skips_lost_newborns=False),
     "+bus_ro_gdiou": _ro_gdiou_class({"bus": (1.6, [1.0, 1.0])}),

@@ -502,15 +502,16 @@ def test_one_classs_settings_leave_another_classs_tracks_unchanged(tmp_path):
 
 def test_the_lost_newborn_penalty_loses_a_near_tie_but_never_refuses_a_pair():
     from grutrack.tracking.association import penalized
-    from grutrack.tracking.tracker import lost_newborn_costs
+    from grutrack.tracking.tracker import lost_newborns
 
     # tracks: confirmed (3 hits), newborn matched in the frame before (misses 1), lost newborn (1 hit, missed since),
     # an old track missed since (4 hits)
-    extra = lost_newborn_costs(np.array([3, 1, 1, 4]), np.array([2, 1, 3, 5]), 0.5, np.full(4, 0.1))
-    assert extra.tolist() == [0.0, 0.0, 0.1, 0.0]
+    lost = lost_newborns(np.array([3, 1, 1, 4]), np.array([2, 1, 3, 5]), 0.5)
+    assert lost.tolist() == [False, False, True, False]
+    extra = np.where(lost, 0.1, 0.0)  # the penalty of each track's class, as the association adds it
     # lost after 0.25 s without a match at any rate: at 10 Hz a newborn missed for two sweeps is not yet lost
-    ten_hz = lost_newborn_costs(np.ones(3, dtype=np.int64), np.array([2, 3, 4]), 0.1, np.full(3, 0.1))
-    assert ten_hz.tolist() == [0.0, 0.0, 0.1]
+    ten_hz = lost_newborns(np.ones(3, dtype=np.int64), np.array([2, 3, 4]), 0.1)
+    assert ten_hz.tolist() == [False, False, True]
     # detection 0 lies between the confirmed track 0 (cost 0.52) and the lost newborn 2 (cost 0.50); detection 1
     # has the lost newborn alone, 0.05 below its threshold; the second row's class has threshold 1.0
     cost = np.array([[0.52, 9.0, 0.50, 9.0], [9.0, 9.0, 0.95, 9.0]])

@@ -134,7 +134,7 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
     method"); with Ro_GDIoU as the stage-1 metric of some classes, their stage-1 costs from
     :func:`~grutrack.tracking.ro_gdiou.ro_gdiou_first_stage`; with ``crowded_threshold``, Ro_GDIoU for the
     crowded rows and columns of stage 1 (:func:`~grutrack.tracking.association.crowded_stage_one`); with
-    ``lost_newborn_penalty``, the stage-1 costs of lost newborn tracks raised, and with
+    ``lost_newborn_penalty``, the stage-1 costs of lost newborn tracks (:func:`lost_newborns`) raised, and with
     ``crowded_skips_lost_newborns``, those tracks left out of the crowded test (both ask for the tracks' hits and
     misses, ``wants_tracks``)."""
     if gated_association_needed(cfg):
@@ -153,6 +153,7 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
     def run(
         dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float, tracks: TrackView | None = None
     ) -> Matches:
+        lost = None if tracks is None else lost_newborns(tracks.hits, tracks.misses, dt)  # (T,) bool
         return associate(
             dets.boxes,
             dets.labels,
@@ -172,8 +173,8 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
                 cfg.crowded_threshold,
                 lambda r, c: strict(dets.boxes[r], dets.labels[r], trk_boxes[c], trk_labels[c]),
             ),
-            None if tracks is None else lost_newborn_costs(tracks.hits, tracks.misses, dt, penalty[trk_labels]),
-            None if tracks is None or not skip_lost else lost_newborns(tracks.hits, tracks.misses, dt),
+            None if lost is None else np.where(lost, penalty[trk_labels], 0.0),
+            lost if skip_lost else None,
         )
 
     run.wants_tracks = bool(np.any(penalty > 0)) or skip_lost
@@ -190,12 +191,6 @@ def lost_newborns(hits: np.ndarray, misses: np.ndarray, dt: float) -> np.ndarray
     at least :data:`LOST_NEWBORN_MISSED_S`: ``misses`` (T,) counts this frame (1 for a track matched in the frame
     before), so ``(misses - 1) * dt`` seconds (``dt``: this frame's interval) have passed without a match."""
     return (hits == 1) & ((misses - 1) * dt >= LOST_NEWBORN_MISSED_S)
-
-
-def lost_newborn_costs(hits: np.ndarray, misses: np.ndarray, dt: float, penalty: np.ndarray) -> np.ndarray:
-    """(T,) float64 stage-1 cost added to each track's pairs: its class's ``penalty`` (T,) for a lost newborn
-    (:func:`lost_newborns`, ``dt`` seconds), else 0."""
-    return np.where(lost_newborns(hits, misses, dt), penalty, 0.0)
 
 
 class Tracker:
