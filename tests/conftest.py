@@ -14,6 +14,15 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
+def pytest_configure(config):
+    """Every test process (each pytest-xdist worker too) runs under the toolkit's thread policy, as the commands do:
+    a test that calls the tracker or the trainer directly must not start torch's one-thread-per-core pool, which
+    beside the other worker oversubscribes the cores (a GRU-KF training test then takes 20 times as long)."""
+    from grutrack.threads import apply_thread_policy
+
+    apply_thread_policy()
+
+
 def _data_root() -> Path:
     return Path(os.environ.get("GRUTRACK_TEST_DATA", REPO_ROOT.parent / "shared" / "data")).resolve()
 

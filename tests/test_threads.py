@@ -42,3 +42,11 @@ def test_training_and_tracking_rules_ask_for_one_core():
     assert re.search(r"^\s*threads:\s*1\b", train, re.M)
     track = (REPO / "workflow/rules/track.smk").read_text()
     assert not re.search(r"^\s*threads:", track, re.M)  # Snakemake's default: one
+
+
+def test_the_suites_own_processes_run_under_the_policy():
+    """Every pytest process (each worker of `bash scripts/test.sh`) runs under the policy (tests/conftest.py), so a
+    test that trains or tracks in-process does not start torch's per-core pool beside the other worker."""
+    import torch
+
+    assert torch.get_num_threads() == thread_count()
