@@ -325,10 +325,23 @@ def test_config_overrides_on_the_command_line_are_typed(tmp_path):
 
 
 def test_missing_dataroot_names_the_config_key(tmp_path):
+    """A real dataset's dataroot unset (or not holding the version) stops the DAG with exit status 2 and one line
+    naming the config key, no traceback, and nothing run."""
     proc = snakemake(tmp_path, "reports/nusc_val.md", options=("-n",))
-    assert proc.returncode != 0
-    assert "config key datasets.nuscenes.dataroot is not set" in proc.stderr + proc.stdout
+    out = proc.stderr + proc.stdout
+    assert proc.returncode == 2, out[-2000:]
+    lines = [line for line in out.splitlines() if "config key" in line]
+    assert len(lines) == 1 and lines[0].startswith("config key datasets.nuscenes.dataroot is not set"), lines
+    assert "Traceback" not in out and "Exception" not in out
     proc = snakemake(
         tmp_path, "reports/av2_val.md", options=("-n", "--config", f"datasets={{nuscenes: {{dataroot: {tmp_path}}}}}")
     )
+    assert proc.returncode == 2
     assert "datasets.av2.dataroot is not set" in proc.stderr + proc.stdout
+    proc = snakemake(
+        tmp_path, "reports/nusc_val.md", options=("--config", f"datasets={{nuscenes: {{dataroot: {tmp_path}}}}}")
+    )
+    out = proc.stderr + proc.stdout
+    assert proc.returncode == 2 and "Traceback" not in out
+    assert f"config key datasets.nuscenes.dataroot = {tmp_path}: " in out
+    assert not (tmp_path / "results").exists() and not (tmp_path / "reports").exists()

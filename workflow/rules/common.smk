@@ -45,12 +45,14 @@ wildcard_constraints:
 
 def dataset_input(dataset, split=None):
     """Input of a rule that reads a dataset: the demo's folder (built by demo_data), nothing for a real dataset,
-    whose dataroot is checked here, while the DAG is built and before any rule runs (the error names the
-    config key and what to put there)."""
+    whose dataroot is checked here, while the DAG is built and before any rule runs: a missing one stops
+    Snakemake with exit status 2 and one line naming the config key and what to put there (an exception raised
+    here would reach the user inside Snakemake's InputFunctionException, with a traceback)."""
     try:
         S.require_dataroot(config, dataset, split)
     except ConfigError as exc:
-        raise WorkflowError(str(exc))
+        print(exc, file=sys.stderr)
+        raise SystemExit(2)
     if S.dataset_kind(config, dataset) == "demo":
         return [S.demo_sentinel(config, dataset)]
     return []
