@@ -274,3 +274,25 @@ def test_dataroot_layout_comes_from_the_dataset(tmp_path):
     cfg["datasets"]["nuscenes"]["dataroot"] = str(tmp_path)
     with pytest.raises(ConfigError, match=r"v1.0-trainval does not exist; it must be the nuScenes dataroot"):
         spec.require_dataroot(cfg, "nuscenes", "val")
+
+
+@pytest.mark.parametrize(
+    "entry, key, message",
+    [
+        ({"overides": {"epochs": 12}}, "trainings.demo_grukf.overides", "'overides' was unexpected"),
+        ({"split": 3}, "trainings.demo_grukf.split", "3 is not of type 'string'"),
+        ({"pretrained": 3}, "trainings.demo_grukf.pretrained", "3 is not of type 'string'"),
+    ],
+)
+def test_a_bad_key_of_a_training_is_named(cfg, entry, key, message):
+    """A training entry is one of two shapes (``{pretrained: ...}`` or a training): an error in one is named by
+    its key inside the shape it was meant to be, not reported as the whole entry matching neither."""
+    bad = copy.deepcopy(cfg)
+    if "pretrained" in entry:
+        bad["trainings"]["demo_grukf"] = entry
+    else:
+        bad["trainings"]["demo_grukf"].update(entry)
+    with pytest.raises(ConfigError) as exc:
+        spec.validate_config(bad, REPO / "workflow/schemas/config.schema.yaml", files=[], cli=None)
+    assert str(exc.value).startswith(f"config key {key} (from workflow/config/config.yaml): "), exc.value
+    assert message in str(exc.value)

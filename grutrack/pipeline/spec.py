@@ -72,7 +72,7 @@ def validate_config(cfg: dict, schema_path: str | Path, files: list, cli: dict |
     errors = list(jsonschema.validators.validator_for(schema)(schema).iter_errors(cfg))
     if not errors:
         return
-    err = jsonschema.exceptions.best_match(errors)
+    err = _meant_branch(jsonschema.exceptions.best_match(errors))
     path = list(err.absolute_path)
     if err.validator == "additionalProperties" and isinstance(err.instance, dict):
         extra = sorted(set(err.instance) - set(err.schema.get("properties", {})))
@@ -87,6 +87,22 @@ def validate_config(cfg: dict, schema_path: str | Path, files: list, cli: dict |
                 origin = f"--configfile {fname}"
                 break
     raise ConfigError(f"config key {key} (from {origin}): {err.message}")
+
+
+def _meant_branch(err):
+    """For a value that matches none of a ``oneOf`` / ``anyOf`` (e.g. a training entry, which is either
+    ``{pretrained: ...}`` or a training), the error inside the branch the value was meant for: the branch with
+    the fewest missing required keys, then the fewest errors; so a misspelt key of a training is named, not the
+    whole entry."""
+    import jsonschema
+
+    while err.validator in ("oneOf", "anyOf") and err.context:
+        branches: dict = {}
+        for sub in err.context:
+            branches.setdefault(sub.relative_schema_path[0], []).append(sub)
+        meant = min(branches.values(), key=lambda es: (sum(e.validator == "required" for e in es), len(es)))
+        err = jsonschema.exceptions.best_match(meant)
+    return err
 
 
 def with_registered_kinds(schema: dict) -> dict:
