@@ -90,7 +90,11 @@ def test_demo_report_tables_match_metrics_json(demo_run):
             f"{100 * o['recall']:.1f}",
             f"{o['ids']:.0f}",
         ]
-    assert re.search(r"^\| Ours \| 73\.2 \| 51\.1 \| 267 \|$", text, re.M)  # paper numbers, labelled
+    assert re.search(r"^\| Ours \(GRUTrack\) \| 73\.2 \| 51\.1 \| 267 \|$", text, re.M)  # paper numbers, labelled
+    assert "| method | AMOTA | AMOTP (cm) | IDS |" in text
+    assert "within the spread from one detection draw to another" in text  # the runs' differences put in scale
+    # a validation AMOTA of a training on SYNTHETIC data says so where it is printed
+    assert re.search(r"last validation AMOTA 0\.\d{3} \(SYNTHETIC data\)\.", text)
     # the constant-gain ablation: a training of no step, shown beside the EKF and the trained GRU-KF
     assert (
         "## Training 'demo_constant_gain'\n\nNo training step: the network as initialised, whose gain is one "
