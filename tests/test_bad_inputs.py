@@ -467,3 +467,17 @@ def test_a_closed_stdout_is_not_a_traceback(nusc_root, tmp_path):
     os.close(w)
     assert proc.returncode == 141 and "Traceback" not in proc.stderr and proc.stderr.strip() == "", proc.stderr
     assert out.stat().st_size > 10_000
+
+
+def test_a_flag_that_is_a_prefix_of_another_is_not_taken_for_it(tmp_path, capsys):
+    """argparse takes an unambiguous prefix for the whole flag by default: `--detection` (a typo) would run as
+    `--detections`. grutrack's parsers refuse it: exit status 2 naming the flag the command still lacks."""
+    argv = ["track", "--dataroot", str(tmp_path), "--split", "mini_val", "--out", str(tmp_path / "t.json")]
+    with pytest.raises(SystemExit) as exc:
+        main([*argv, "--detection", str(tmp_path / "d.json")])
+    assert exc.value.code == 2
+    assert "the following arguments are required: --detections" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["evaluate", "--datar", str(tmp_path), "--split", "mini_val", "--submission", "s.json"])
+    assert exc.value.code == 2
+    assert "--datar" in capsys.readouterr().err

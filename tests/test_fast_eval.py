@@ -535,7 +535,7 @@ def test_ekf_on_pointpillars_mini_val(nusc_mini, pointpillars_mini_val):
     assert_parity(nusc_mini, sub, "mini_val")
 
 
-def test_ekf_on_simulated_demo_val(tmp_path):
+def test_ekf_on_simulated_demo_val(tmp_path, capsys):
     from grutrack.cli import main
     from grutrack.data.nuscenes import open_nuscenes
 
@@ -562,7 +562,15 @@ def test_ekf_on_simulated_demo_val(tmp_path):
         == 0
     )
     nusc = open_nuscenes(data, "v1.0-demo")
-    assert_parity(nusc, _tracked_submission(nusc, "demo_val", dets), "demo_val")
+    sub = _tracked_submission(nusc, "demo_val", dets)
+    assert_parity(nusc, sub, "demo_val")
+    # what `grutrack evaluate` prints of the demo says it is SYNTHETIC
+    common = ["--dataroot", str(data), "--version", "v1.0-demo", "--split", "demo_val"]
+    (tmp_path / "sub.json").write_text(json.dumps(sub))
+    capsys.readouterr()
+    argv = ["evaluate", *common, "--submission", str(tmp_path / "sub.json"), "--out", str(tmp_path / "m.json")]
+    assert main([*argv, "--evaluator", "fast"]) == 0
+    assert capsys.readouterr().out.startswith("SYNTHETIC data: the scenes and ground truth of ")
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
 import os
 import sys
@@ -29,13 +30,21 @@ COMMANDS: tuple[str, ...] = (
 
 def build_parser() -> argparse.ArgumentParser:
     """The top-level parser with every sub-command registered."""
+    # allow_abbrev=False: a misspelt flag that happens to be a prefix of another (--detection) is refused, not
+    # silently taken for it
     parser = argparse.ArgumentParser(
         prog="grutrack",
+        allow_abbrev=False,
         description="3D multi-object tracking with a semi-supervised GRU-Kalman filter: "
         "tracking, official submissions and evaluation for nuScenes and Argoverse 2.",
     )
     parser.add_argument("--version", action="version", version=f"grutrack {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = parser.add_subparsers(
+        dest="command",
+        metavar="COMMAND",
+        required=True,
+        parser_class=functools.partial(argparse.ArgumentParser, allow_abbrev=False),
+    )
     for name in COMMANDS:
         importlib.import_module(name).add_parser(sub)
     return parser

@@ -120,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
         trackeval_dir=args.trackeval_dir,
     )
     doc.write(args.out)
+    if ds.is_synthetic():
+        print(f"SYNTHETIC data: the scenes and ground truth of {args.dataroot} are grutrack's demo dataset")
     print(ds.format_summary(doc))
     how = f"{doc.evaluator} evaluator"
     if doc.settings:
