@@ -75,6 +75,22 @@ def test_check_within_tolerance_exits_zero(tmp_path, capsys):
     for name in ("amota", "amotp", "ids"):
         assert re.search(rf"^{name}\s+.*\bok$", out, re.M), out
     assert "3 of 3 within tolerance" in out
+    assert "note:" not in out
+
+
+def test_check_on_the_demo_says_synthetic_and_not_comparable(tmp_path, capsys):
+    """Metrics of the demo dataset checked against a paper table: the comparison is printed, with a note naming
+    the metrics' version and split, SYNTHETIC, not comparable."""
+    m = nusc_metrics(tmp_path / "m.json", 0.887, 0.271, 7)
+    doc = MetricsDocument.read(m)
+    doc.version, doc.split = "v1.0-demo", "demo_val"
+    doc.write(m)
+    main(["check", str(m), "--table", "III", "--paper", str(PAPER)])
+    out = capsys.readouterr().out
+    assert (
+        "note: the paper's table is nuscenes val; the metrics are of v1.0-demo demo_val (SYNTHETIC: grutrack's "
+        "demo dataset), not comparable" in out
+    )
 
 
 def test_check_out_of_tolerance_exits_non_zero(tmp_path, capsys):

@@ -71,7 +71,11 @@ def run(args: argparse.Namespace) -> int:
         f"reproduced: {args.metrics} ({doc.dataset or '?'} {doc.version or ''} {doc.split or '?'})".replace("  ", " ")
     )
     if (doc.dataset, doc.split) != (table.get("dataset"), table.get("split")):
-        print(f"note: the paper's table is {table.get('dataset')} {table.get('split')}; the metrics are not")
+        demo = " (SYNTHETIC: grutrack's demo dataset)" if "demo" in (doc.version or "") else ""
+        print(
+            f"note: the paper's table is {table.get('dataset')} {table.get('split')}; the metrics are of "
+            f"{doc.version or doc.dataset} {doc.split}{demo}, not comparable"
+        )
     print(format_comparisons(table, comps))
     bad = [c.metric for c in comps if c.failed]
     absent = [c.metric for c in comps if c.absent]

@@ -36,7 +36,7 @@ import numpy as np
 from scipy.signal import lfilter
 from scipy.spatial import cKDTree
 
-from grutrack.data.demo_defaults import DEFAULT_SCENES, FRAMES_PER_SCENE, VERSION
+from grutrack.data.demo_defaults import DEFAULT_SCENES, FRAMES_PER_SCENE, MARKER, VERSION
 from grutrack.errors import ConfigError
 
 DT = 0.5  # s between keyframes: nuScenes keyframes are at 2 Hz (mini: 0.40-0.60 s, mean 0.50)
@@ -46,7 +46,6 @@ VAL_EVERY = 5  # every 5th scene is demo_val: 80/20 like nuScenes train/val (700
 TIME_ORIGIN_US = 1_533_000_000_000_000  # 2018-07-31, the nuScenes recording period (2018-07 .. 2018-11)
 LIDAR_TRANSLATION = [0.943713, 0.0, 1.84023]  # nuScenes n015 LIDAR_TOP extrinsics (mini calibrated_sensor)
 LIDAR_ROTATION = [0.7071067812, 0.0, 0.0, -0.7071067812]  # LIDAR_TOP is yawed -90 deg on nuScenes cars
-MARKER = "SYNTHETIC grutrack demo dataset"
 
 #: the 23 nuScenes categories (v1.0 category.json), so the devkit's class mappings apply unchanged
 CATEGORIES = (
@@ -1017,12 +1016,6 @@ def build_tables(scenes: int, frames: int, seed: int, version: str) -> tuple[dic
 # ----------------------------------------------------------------------------------------------------------------
 # writing
 # ----------------------------------------------------------------------------------------------------------------
-
-
-def is_demo_tables(nusc) -> bool:
-    """Whether nuScenes-format tables (anything with a ``scene`` list of records) are a grutrack demo dataset:
-    its scene descriptions start with :data:`MARKER`."""
-    return any(str(rec.get("description", "")).startswith(MARKER) for rec in nusc.scene)
 
 
 def placeholder_png() -> bytes:

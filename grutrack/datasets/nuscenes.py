@@ -79,7 +79,7 @@ class NuScenesDataset:
 
     def is_synthetic(self) -> bool:
         """Whether the tables are the grutrack demo's (SYNTHETIC)."""
-        from grutrack.data.demo import is_demo_tables
+        from grutrack.data.demo_defaults import is_demo_tables
 
         return is_demo_tables(self.tables)
 
