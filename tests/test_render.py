@@ -113,6 +113,7 @@ def test_frames_and_animations_written(rendered):
 
     out, _, _ = rendered
     doc = json.loads((out / "counts.json").read_text())
+    assert doc["synthetic"] is False  # real mini scenes: no SYNTHETIC in the titles
     for s, n in zip(doc["scenes"], (40, 41)):
         assert [f["index"] for f in s["frames"]] == list(range(n))
         assert all((out / f["png"]).is_file() for f in s["frames"])

@@ -126,7 +126,13 @@ def track_color(track_id) -> str:
 class BevCanvas:
     """One reusable figure: static parts (rings, ego, legend) drawn once, the frame's artists replaced per frame."""
 
-    def __init__(self, layout: Layout = LAYOUT, thresholds: dict | None = None, notes: tuple[str, ...] = NUSC_NOTES):
+    def __init__(
+        self,
+        layout: Layout = LAYOUT,
+        thresholds: dict | None = None,
+        notes: tuple[str, ...] = NUSC_NOTES,
+        banner: str = "",
+    ):
         import matplotlib
 
         matplotlib.use("Agg", force=False)
@@ -182,6 +188,7 @@ class BevCanvas:
         )
         self.thresholds = thresholds or {}
         self.notes = tuple(notes)
+        self.banner = banner  # the first line under every title, e.g. that the scenes are SYNTHETIC
         self._dynamic: list = []
         # Static parts are drawn once; each frame restores them and draws only its own artists (blitting). The
         # frame's text panel is drawn with Pillow (matplotlib's text rendering would dominate the frame time).
@@ -317,7 +324,8 @@ class BevCanvas:
         tot = v.totals()
         shown = [(c, k) for c, k in v.counts.items() if any(k[x] for x in k)]
         w = max([11] + [min(len(c), CLASS_CHARS) + 1 for c, _ in shown])
-        lines = [
+        lines = [self.banner, ""] if self.banner else []
+        lines += [
             f"t = {(v.timestamp - t0) / 1e6:5.1f} s   {v.caption or 'sample ' + v.sample_token[:8]}",
             "",
             "this frame (evaluator's decisions)",

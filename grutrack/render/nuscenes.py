@@ -101,7 +101,11 @@ def render_nuscenes(
         det = load_detections(detections, [f.token for s in chosen for f in s.frames])
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    canvas = BevCanvas(thresholds=decisions.thresholds)
+    from grutrack.data.demo_defaults import is_demo_tables
+
+    synthetic = is_demo_tables(nusc)
+    banner = "SYNTHETIC: grutrack's demo dataset" if synthetic else ""
+    canvas = BevCanvas(thresholds=decisions.thresholds, banner=banner)
     errors = scene_errors(decisions)
     all_views, scene_docs = [], []
     for scene in chosen:
@@ -113,6 +117,7 @@ def render_nuscenes(
     doc = {
         "dataset": "nuscenes",
         "version": version,
+        "synthetic": synthetic,  # the grutrack demo's scenes: every frame says SYNTHETIC under its title
         "split": split,
         "submission": str(submission),
         "detections": str(detections) if detections else None,
