@@ -25,7 +25,8 @@ noise was chosen on ``fresh``, its check on unseen sets); ``fresh4`` / ``fresh4_
 ``strong_train`` (seeds 6000-6049 / 6000-6009, the profile ``cp_strong`` of :data:`PROFILE_VARIANTS`: a stronger
 detector than any the decisions saw, made after Decision 10); ``variants_val`` / ``variants_train`` (seeds
 7000-7024 on mini_val / 7000-7009 on mini_train, the profiles of :data:`VARIANTS`: made after Decision 11, the
-count on other detectors than the four the decisions were taken on); ``worlds`` and
+count on other detectors than the four the decisions were taken on); ``fresh5`` (seeds 8000-8049 on mini_val, the
+four profiles: made after Decision 12, the count on sets no decision saw); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles). Candidates:
 :data:`CANDIDATES` (names; ``--candidates`` a comma list). ``--class NAME`` prints one class's AMOTA instead (sets
@@ -162,6 +163,7 @@ GROUPS = {
     "strong_train": (tuple(range(6000, 6010)), ("mini_train",), ("cp_strong",)),
     "variants_val": (tuple(range(7000, 7025)), ("mini_val",), VARIANTS),
     "variants_train": (tuple(range(7000, 7010)), ("mini_train",), VARIANTS),
+    "fresh5": (tuple(range(8000, 8050)), ("mini_val",)),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
