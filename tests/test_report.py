@@ -456,3 +456,15 @@ def test_semi_supervised_summary_counts_step_0_as_a_step():
     assert "| a | 2 | 1 | 0.875 | 0.875 (step 2) | 0 |" in _summary({"a": rows})
     rows[0].val_amota = 0.80
     assert first_step_within(rows) == 2
+
+
+def test_report_paths_are_relative_below_the_working_directory(tmp_path, monkeypatch):
+    """A report shows a path below the working directory (the workflow's outputs, the package in a checkout)
+    relative to it, so that the same run gives the same report in any checkout; a path elsewhere stays as given."""
+    from grutrack.report.markdown import shown_path
+
+    monkeypatch.chdir(tmp_path)
+    assert shown_path(tmp_path / "checkpoints" / "m" / "model.pt") == "checkpoints/m/model.pt"
+    assert shown_path("checkpoints/m/model.pt") == "checkpoints/m/model.pt"
+    assert shown_path("/elsewhere/data/nuscenes") == "/elsewhere/data/nuscenes"
+    assert shown_path("../shared/data/nuscenes") == "../shared/data/nuscenes"

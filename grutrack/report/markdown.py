@@ -124,11 +124,24 @@ def short(h: str | None) -> str:
     return h[:SHORT] if h else DASH
 
 
+def shown_path(path) -> str:
+    """A path as a report shows it: relative to the working directory when it lies below it (the workflow's
+    outputs, the package in a checkout), else as given (an installed package, data elsewhere)."""
+    import os
+
+    text = str(path)
+    if os.path.isabs(text):
+        rel = os.path.relpath(text)
+        if not rel.startswith(".."):
+            return rel
+    return text
+
+
 def file_cell(rec: FileRecord | None) -> str:
     """``path`` (sha256 abbreviated) of a file record, a dash for none."""
     if rec is None:
         return DASH
-    return f"`{rec.path}` (sha256 {short(rec.sha256)})"
+    return f"`{shown_path(rec.path)}` (sha256 {short(rec.sha256)})"
 
 
 def provenance(runs: dict[str, str], docs: dict[str, MetricsDocument]) -> str:
@@ -264,7 +277,7 @@ def training_provenance(train_logs: dict[str, Path]) -> str:
         folder = Path(log).parent
         cfg_path, model = folder / "training.yaml", folder / "model.pt"
         cfg_hash = config_hash(yaml.safe_load(cfg_path.read_text())) if cfg_path.is_file() else DASH
-        model_txt = f"`{model}` (sha256 {short(sha256_file(model))})" if model.is_file() else DASH
+        model_txt = f"`{shown_path(model)}` (sha256 {short(sha256_file(model))})" if model.is_file() else DASH
         steps = TrainingLog.read(log).steps if Path(log).is_file() else None
         done = (
             f"{steps[-1].step} steps, {steps[-1].epoch + 1} epochs"
@@ -280,8 +293,8 @@ def training_provenance(train_logs: dict[str, Path]) -> str:
                 training_data(cfg_path),
                 "SYNTHETIC: " + ", ".join(synthetic) if synthetic else "none",
                 done,
-                f"`{log}`",
-                f"`{cfg_path}` (config hash {cfg_hash})",
+                f"`{shown_path(log)}`",
+                f"`{shown_path(cfg_path)}` (config hash {cfg_hash})",
                 model_txt,
             ]
         )
@@ -366,8 +379,8 @@ def training_data(cfg_path: Path) -> str:
             except ValueError:
                 return DASH
             return (
-                f"split {d.get('split', '?')} of {d.get('version', '?')} at `{d.get('dataroot', '?')}`; "
-                f"detections `{d.get('detections', '?')}`"
+                f"split {d.get('split', '?')} of {d.get('version', '?')} at `{shown_path(d.get('dataroot', '?'))}`; "
+                f"detections `{shown_path(d.get('detections', '?'))}`"
             )
     return DASH
 
