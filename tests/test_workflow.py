@@ -93,7 +93,7 @@ def test_demo_report_tables_match_metrics_json(demo_run):
     assert re.search(r"^\| Ours \(GRUTrack\) \| 73\.2 \| 51\.1 \| 267 \|$", text, re.M)  # paper numbers, labelled
     assert "| method | AMOTA | AMOTP (cm) | IDS |" in text
     assert "within the spread from one detection draw to another" in text  # the runs' differences put in scale
-    # every rendered frame of the demo says SYNTHETIC in its title
+    # every rendered frame of the demo says SYNTHETIC under its title
     counts = json.loads((demo_run / "reports/renders/demo_val/centerpoint_sim/ekf/counts.json").read_text())
     assert counts["synthetic"] is True
     # a validation AMOTA of a training on SYNTHETIC data says so where it is printed
