@@ -26,7 +26,9 @@ noise was chosen on ``fresh``, its check on unseen sets); ``fresh4`` / ``fresh4_
 detector than any the decisions saw, made after Decision 10); ``variants_val`` / ``variants_train`` (seeds
 7000-7024 on mini_val / 7000-7009 on mini_train, the profiles of :data:`VARIANTS`: made after Decision 11, the
 count on other detectors than the four the decisions were taken on); ``fresh5`` (seeds 8000-8049 on mini_val, the
-four profiles: made after Decision 12, the count on sets no decision saw); ``worlds`` and
+four profiles: made after Decision 12, the count on sets no decision saw; Decision 13 was then taken on it);
+``fresh6`` (seeds 9000-9049 on mini_val, the four profiles: made after Decision 13, its count on unseen sets);
+``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles). Candidates:
 :data:`CANDIDATES` (names; ``--candidates`` a comma list). ``--class NAME`` prints one class's AMOTA instead (sets
@@ -164,6 +166,7 @@ GROUPS = {
     "variants_val": (tuple(range(7000, 7025)), ("mini_val",), VARIANTS),
     "variants_train": (tuple(range(7000, 7010)), ("mini_train",), VARIANTS),
     "fresh5": (tuple(range(8000, 8050)), ("mini_val",)),
+    "fresh6": (tuple(range(9000, 9050)), ("mini_val",)),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
@@ -315,6 +318,7 @@ atexit.register(shutil.rmtree, _TMP, True)
 
 
 def _write_motion(cfg: dict, name: str) -> str:
+    """The motion config ``cfg`` written as ``motion_<name>.yaml`` (a name is one candidate's: each writes its own)."""
     path = _TMP / f"motion_{name}.yaml"
     path.write_text(yaml.safe_dump(cfg))
     return str(path)
@@ -509,6 +513,14 @@ _TRAILER_CA = _combine(
 #: it is) starts from it, so ``+punish_large2`` is the preset now
 BEFORE = {"bus": 1, "trailer": 1, "truck": 1}
 
+
+def _heading_r(r_yaw: float) -> list[float]:
+    """The CTRA classes' R of grutrack_nusc with the detected heading's variance (rad^2) ``r_yaw``."""
+    return [1, 1, 1, 1, 1, 1, r_yaw, 2, 2]
+
+
+_CTRA_R = _heading_r(1.0)  # Poly-MOT's heading R, the preset's before Decision 13
+
 CANDIDATES = {
     "ekf": lambda raw: None,
     "ekf_before": lambda raw: None,
@@ -663,6 +675,15 @@ CANDIDATES = {
     "ekf_prev11": _combine(_prev12, _coast((), ())),
     # the preset before Decision 12 (cars' crowded rows judged by the first metric; no lost newborn skipped)
     "ekf_prev12": _prev12,
+    # the preset before Decision 13 (buses' and trucks' detected heading measured with Poly-MOT's R 1)
+    "ekf_prev13": _combine(_class_motion("bus", "prev13bus", R=_CTRA_R), _class_motion("truck", "prev13", R=_CTRA_R)),
+    "-bus_heading": _class_motion("bus", "busyaw1", R=_CTRA_R),  # Decision 13 for trucks only
+    "-truck_heading": _class_motion("truck", "truckyaw1", R=_CTRA_R),  # Decision 13 for buses only
+    "+long_heading001": _combine(
+        _class_motion("bus", "busyaw001", R=_heading_r(0.01)), _class_motion("truck", "truckyaw001", R=_heading_r(0.01))
+    ),
+    "+car_heading": _class_motion("car", "caryaw01", R=_heading_r(0.1)),  # cars' heading R 0.1 as well
+    "+bus_bicycle": _model({"bus": "Bicycle"}),  # buses on Poly-MOT's Bicycle model (slip angle at the centre)
     # Decision 12 without its skip: lost newborns make rows crowded as any track
     "-skip_lost": lambda raw: raw["association"].update(crowded_skips_lost_newborns=False),
     "+bus_ro_gdiou": _ro_gdiou_class({"bus": (1.6, [1.0, 1.0])}),
