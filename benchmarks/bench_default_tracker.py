@@ -317,10 +317,17 @@ _TMP = Path(tempfile.mkdtemp(prefix="bench_default_tracker_"))  # candidate pres
 atexit.register(shutil.rmtree, _TMP, True)
 
 
+_WRITTEN: dict[str, str] = {}  # motion file name -> its text, so two candidates never share a name
+
+
 def _write_motion(cfg: dict, name: str) -> str:
-    """The motion config ``cfg`` written as ``motion_<name>.yaml`` (a name is one candidate's: each writes its own)."""
+    """The motion config ``cfg`` written as ``motion_<name>.yaml``; a name written before with other contents is a
+    ValueError (the later candidate would change the file the earlier one's preset points to)."""
+    text = yaml.safe_dump(cfg)
+    if _WRITTEN.setdefault(name, text) != text:
+        raise ValueError(f"motion file name {name!r} is used by two candidates with different configs")
     path = _TMP / f"motion_{name}.yaml"
-    path.write_text(yaml.safe_dump(cfg))
+    path.write_text(text)
     return str(path)
 
 

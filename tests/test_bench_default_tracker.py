@@ -23,6 +23,30 @@ def test_every_candidate_writes_a_preset_that_loads_and_differs_from_the_preset(
             assert cfg != preset, name
 
 
+def test_two_candidates_cannot_share_a_motion_file_name():
+    """A name written twice with other contents is refused: the later candidate would otherwise change the motion
+    file the earlier one's preset points to (as ekf_prev13 and -truck_heading once did)."""
+    raw = {"motion": {"config": "grutrack_nusc"}}
+    bench._class_motion("truck", "shared_name_test", R=bench._heading_r(1.0))(dict(raw, motion=dict(raw["motion"])))
+    bench._class_motion("truck", "shared_name_test", R=bench._heading_r(1.0))(dict(raw, motion=dict(raw["motion"])))
+    try:
+        bench._class_motion("truck", "shared_name_test", R=bench._heading_r(0.5))(dict(raw, motion=dict(raw["motion"])))
+    except ValueError as e:
+        assert "shared_name_test" in str(e)
+    else:
+        raise AssertionError("a motion file name reused with other contents was accepted")
+
+
+def test_the_preset_before_decision_13_measures_the_long_vehicles_heading_as_poly_mot():
+    import yaml
+
+    before = yaml.safe_load(Path(load_tracker_config(bench.candidate_path("ekf_prev13")).motion_config).read_text())
+    now = yaml.safe_load(Path(bench._motion_file("grutrack_nusc")).read_text())
+    for cls in ("bus", "truck"):
+        assert before["classes"][cls]["R"][6] == 1.0 and now["classes"][cls]["R"][6] == 0.1, cls
+    assert before["classes"]["car"] == now["classes"]["car"]
+
+
 def test_every_edited_profile_is_a_valid_profile_with_its_changed_noise(tmp_path):
     for name, (base, _) in bench.PROFILE_VARIANTS.items():
         prof, shipped = load_profile(bench.profile_arg(name, tmp_path)), load_profile(base)
@@ -36,6 +60,7 @@ def test_the_groups_keep_their_sets():
     sets = bench.generated(*bench.GROUPS["variants"])
     assert len(sets) == 3 * 2 * 4 and {p for _, p, _ in sets.values()} == set(bench.VARIANTS)
     assert len(bench.generated(*bench.GROUPS["fresh4"])) == 200
+    assert len(bench.generated(*bench.GROUPS["fresh6"])) == 200
     strong = bench.generated(*bench.GROUPS["strong"])
     assert len(strong) == 50 and {p for _, p, _ in strong.values()} == {"cp_strong"}
     val = bench.generated(*bench.GROUPS["variants_val"])
