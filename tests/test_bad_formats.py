@@ -366,6 +366,20 @@ METRICS_CASES = {
 }
 
 
+def test_a_missing_metrics_json_says_what_writes_it(tmp_path, capsys):
+    """check / check-published on a metrics JSON that is not there: one line naming it and what makes it, the
+    workflow's target for a path of the workflow's reports/metrics/{experiment}/{detector}/{run}.json layout."""
+    wf = tmp_path / "reports/metrics/nusc_val/centerpoint/grukf.json"
+    line = fails(capsys, ["check", wf, "--table", "III"], wf, "metrics JSON does not exist")
+    assert f"snakemake --cores 2 {wf}" in line and "experiment nusc_val, detections centerpoint, run grukf" in line
+    other = tmp_path / "m.json"
+    line = fails(capsys, ["check", other, "--table", "III"], other, "does not exist")
+    assert f"grutrack evaluate writes it (--out {other})" in line
+    dets = tmp_path / "d.json"
+    dets.write_text("{}")
+    fails(capsys, ["check-published", other, "--detections", dets], other, "grutrack evaluate writes it")
+
+
 @pytest.mark.parametrize("case", sorted(METRICS_CASES))
 def test_malformed_metrics_json(tmp_path, capsys, case):
     make, field, expect = METRICS_CASES[case]

@@ -10,6 +10,7 @@ one (said so)."""
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -59,12 +60,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print the comparison; 0 when every metric is within tolerance, else 1."""
-    from grutrack.documents import MetricsDocument
     from grutrack.report.check import compare, format_comparisons
     from grutrack.report.paper import get_table, load_paper
 
     table = get_table(load_paper(args.paper), args.table)
-    doc = MetricsDocument.read(args.metrics)
+    doc = _read_metrics(args.metrics)
     row, comps = compare(table, doc, args.row)
     print(f"{table['title']}; paper row '{row}'")
     print(
@@ -91,7 +91,6 @@ def run(args: argparse.Namespace) -> int:
 def run_published(args: argparse.Namespace) -> int:
     """Print the comparison with each published result on the file; 0 when all are equal (or none is known),
     else 1."""
-    from grutrack.documents import MetricsDocument
     from grutrack.evaluation.published import (
         compare,
         detection_sha256,
@@ -102,7 +101,7 @@ def run_published(args: argparse.Namespace) -> int:
     )
 
     published = load_published(args.published, args.registry)
-    doc = MetricsDocument.read(args.metrics)
+    doc = _read_metrics(args.metrics)
     digest = detection_sha256(args.detections)
     chosen = results_for(published, digest, args.tracker)
     print(f"detections: {args.detections} (sha256 {digest})")
@@ -150,3 +149,26 @@ def run_published(args: argparse.Namespace) -> int:
 def _where(dataset: str | None, version: str | None, split: str | None) -> str:
     """``nuscenes v1.0-trainval val``; what is not known is left out (a question mark when nothing is)."""
     return " ".join(x for x in (dataset, version, split) if x) or "?"
+
+
+def _read_metrics(path: str):
+    """The metrics document at ``path``; a missing file is an InputFormatError that says what writes it."""
+    from grutrack.documents import MetricsDocument
+    from grutrack.errors import InputFormatError
+
+    if not Path(path).exists():
+        raise InputFormatError(f"{path}: metrics JSON does not exist; {_who_writes(Path(path))}")
+    return MetricsDocument.read(path)
+
+
+def _who_writes(path: Path) -> str:
+    """How the metrics JSON ``path`` is made: the workflow's target when the path is one of its
+    ``reports/metrics/{experiment}/{detector}/{run}.json``, else ``grutrack evaluate``."""
+    parts = path.parts
+    if path.suffix == ".json" and len(parts) >= 5 and parts[-5:-3] == ("reports", "metrics"):
+        exp, det, run = parts[-3], parts[-2], path.stem
+        return (
+            f"the workflow makes it: snakemake --cores 2 {path} (experiment {exp}, detections {det}, run {run}; "
+            f"a real dataset's experiment needs its dataroot: README, The workflow)"
+        )
+    return f"grutrack evaluate writes it (--out {path})"
