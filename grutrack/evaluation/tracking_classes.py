@@ -176,6 +176,8 @@ class TrackingMetrics:
             return np.nan
         if metric_name in ("mt", "ml", "tp", "fp", "fn", "ids", "frag"):
             return float(np.nansum(data))  # counts are summed over classes, NaN ignored
+        if np.all(np.isnan(np.asarray(data, dtype=np.float64))):
+            return np.nan  # no class has a value: NaN, as the devkit's mean of an empty slice (without its warning)
         return float(np.nanmean(data))
 
     def serialize(self) -> dict[str, Any]:
