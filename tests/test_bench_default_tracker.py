@@ -5,6 +5,9 @@ import importlib.util
 import json
 from pathlib import Path
 
+import pytest
+import yaml
+
 from grutrack.data.detection_sim import load_profile
 from grutrack.tracking.config import load_tracker_config
 
@@ -26,20 +29,19 @@ def test_every_candidate_writes_a_preset_that_loads_and_differs_from_the_preset(
 def test_two_candidates_cannot_share_a_motion_file_name():
     """A name written twice with other contents is refused: the later candidate would otherwise change the motion
     file the earlier one's preset points to (as ekf_prev13 and -truck_heading once did)."""
-    raw = {"motion": {"config": "grutrack_nusc"}}
-    bench._class_motion("truck", "shared_name_test", R=bench._heading_r(1.0))(dict(raw, motion=dict(raw["motion"])))
-    bench._class_motion("truck", "shared_name_test", R=bench._heading_r(1.0))(dict(raw, motion=dict(raw["motion"])))
-    try:
-        bench._class_motion("truck", "shared_name_test", R=bench._heading_r(0.5))(dict(raw, motion=dict(raw["motion"])))
-    except ValueError as e:
-        assert "shared_name_test" in str(e)
-    else:
-        raise AssertionError("a motion file name reused with other contents was accepted")
+
+    def write(r_yaw: float) -> None:
+        bench._class_motion("truck", "shared_name_test", R=bench._heading_r(r_yaw))(
+            {"motion": {"config": "grutrack_nusc"}}
+        )
+
+    write(1.0)
+    write(1.0)  # the same contents again: the same file
+    with pytest.raises(ValueError, match="'shared_name_test' is used by two candidates"):
+        write(0.5)
 
 
 def test_the_preset_before_decision_13_measures_the_long_vehicles_heading_as_poly_mot():
-    import yaml
-
     before = yaml.safe_load(Path(load_tracker_config(bench.candidate_path("ekf_prev13")).motion_config).read_text())
     now = yaml.safe_load(Path(bench._motion_file("grutrack_nusc")).read_text())
     for cls in ("bus", "truck"):
