@@ -28,9 +28,11 @@ detector than any the decisions saw, made after Decision 10); ``variants_val`` /
 count on other detectors than the four the decisions were taken on); ``fresh5`` (seeds 8000-8049 on mini_val, the
 four profiles: made after Decision 12, the count on sets no decision saw; Decision 13 was then taken on it);
 ``fresh6`` (seeds 9000-9049 on mini_val, the four profiles: made after Decision 13, its count on unseen sets);
-``worlds`` and
+``fresh6_train`` (seeds 9000-9024 on mini_train, 8 scenes a set: made after Decision 13, the count on larger unseen
+sets); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
-with a third of the trailers towed; ``worlds_variants`` with the variant profiles). Candidates:
+with a third of the trailers towed; ``worlds_variants`` with the variant profiles; ``worlds_fresh``, worlds 11-20
+made after Decision 13, its count on larger unseen sets). Candidates:
 :data:`CANDIDATES` (names; ``--candidates`` a comma list). ``--class NAME`` prints one class's AMOTA instead (sets
 without that class left out). ``--compose SPEC`` (repeatable) adds a column composed from the runs already made:
 the first candidate with some classes' AMOTA taken from other candidates (``car=+car_ro_gdiou,bus=+bus_punish1``),
@@ -167,6 +169,7 @@ GROUPS = {
     "variants_train": (tuple(range(7000, 7010)), ("mini_train",), VARIANTS),
     "fresh5": (tuple(range(8000, 8050)), ("mini_val",)),
     "fresh6": (tuple(range(9000, 9050)), ("mini_val",)),
+    "fresh6_train": (tuple(range(9000, 9025)), ("mini_train",)),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
@@ -178,6 +181,7 @@ WORLDS = {
     "worlds": ((1, 2, 3), None, PROFILES),
     "towed": ((4, 5), "towed", PROFILES),
     "worlds_variants": ((1, 2, 3), None, VARIANTS),
+    "worlds_fresh": (tuple(range(11, 21)), None, PROFILES),
 }
 
 
@@ -752,7 +756,7 @@ CANDIDATES = {
     "+nms+ro_gdiou+first_frames": _combine(_nms, _ro_gdiou, _first_frames),
     # a young track's box written at a lower score: s (1 - d^hits); ekf_prev6 the preset before Decision 6 (off)
     "ekf_prev6": _combine(_young(0.0), _nis(0.0)),
-    **{f"+young{d}": _young(d) for d in (0.0, 0.3, 0.4, 0.5, 0.6)},
+    **{f"+young{d}": _young(d) for d in (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7)},
     # a 5 m centre gate (stage 1) beyond trailers: a far-off detection starts a track instead of pulling one
     "+bus_gate5": lambda raw: raw["association"]["distance_gate"].update(bus=5.0),
     "+bus_truck_gate5": lambda raw: raw["association"]["distance_gate"].update(bus=5.0, truck=5.0),

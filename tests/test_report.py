@@ -468,3 +468,34 @@ def test_report_paths_are_relative_below_the_working_directory(tmp_path, monkeyp
     assert shown_path("checkpoints/m/model.pt") == "checkpoints/m/model.pt"
     assert shown_path("/elsewhere/data/nuscenes") == "/elsewhere/data/nuscenes"
     assert shown_path("../shared/data/nuscenes") == "../shared/data/nuscenes"
+
+
+@pytest.mark.parametrize(
+    "scanned, split_scenes, words",
+    [
+        (1, 1, "on the split's one scene:"),
+        (2, 2, "on both scenes of the split:"),
+        (150, 150, "on all 150 scenes of the split:"),
+        (10, 150, "on 10 of the split's 150 scenes, evenly spaced (400 samples):"),
+    ],
+)
+def test_the_cross_check_line_names_the_scenes_it_compared(tmp_path, scanned, split_scenes, words):
+    from grutrack.documents import CrossCheckDocument
+    from grutrack.report.markdown import evaluator_line
+
+    cc = CrossCheckDocument(
+        dataset="nuscenes",
+        version="v1.0-trainval",
+        split="val",
+        submission="submissions/x.json",
+        scenes=[f"scene-{i:04d}" for i in range(scanned)],
+        split_scenes=split_scenes,
+        samples=400,
+        entries=185,
+        max_abs_difference=0.0,
+        worst_entry="amota",
+        tolerance=1e-9,
+        equal=True,
+    )
+    docs = {"grukf": MetricsDocument.read(nusc_metrics(tmp_path / "grukf.json", 0.5, 1.0, 3))}
+    assert words in evaluator_line(docs, cc, "grukf")

@@ -173,7 +173,7 @@ def test_mini_val_report_numbers_equal_the_cli_and_metrics(mini_run):
     cc = json.loads((mini_run / "reports/metrics/nusc_val/pointpillars/grukf.crosscheck.json").read_text())
     assert cc["equal"] and cc["scenes"] == ["scene-0103", "scene-0916"]
     assert (
-        "Cross-check: run `grukf` scored by both nuscenes-devkit `TrackingEval` and the fast evaluator on all 2 "
+        "Cross-check: run `grukf` scored by both nuscenes-devkit `TrackingEval` and the fast evaluator on both "
         "scenes of the split"
         in text
         and "**equal** to 1e-09" in text

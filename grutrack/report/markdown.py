@@ -333,6 +333,13 @@ def synthetic_training_banner(train_logs: dict[str, Path]) -> str | None:
     )
 
 
+def _whole_split(n: int) -> str:
+    """'the split's one scene', 'both scenes of the split', 'all N scenes of the split'."""
+    if n == 1:
+        return "the split's one scene"
+    return "both scenes of the split" if n == 2 else f"all {n} scenes of the split"
+
+
 def evaluator_line(
     docs: dict[str, MetricsDocument], cross_check: CrossCheckDocument | None = None, run: str | None = None
 ) -> str:
@@ -352,7 +359,7 @@ def evaluator_line(
     where = (
         f"{len(cc.scenes)} of the split's {cc.split_scenes} scenes, evenly spaced ({cc.samples} samples)"
         if cc.subset
-        else f"all {cc.split_scenes} scenes of the split"
+        else _whole_split(cc.split_scenes)
     )
     diff = "an entry differing in kind" if cc.max_abs_difference is None else f"{cc.max_abs_difference:.2g}"
     verdict = (
