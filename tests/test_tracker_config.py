@@ -324,3 +324,17 @@ def test_nis_limit_reaches_every_kalman_filter_of_the_ekf_and_the_gru_kf(tmp_pat
         groups = build_tracker(name, path, **kw).groups
         filters = [getattr(g.backend, "inner", g.backend).kf for g in groups]
         assert filters and [f.robust for f in filters] == [RobustUpdate(2.5, 4, 0.5)] * len(filters), name
+
+
+def test_the_tracker_name_sets_the_motion_model_and_the_preset_the_rest():
+    """`--tracker greedy --config polymot` (as `grutrack track --help` says): greedy tracks, Poly-MOT's
+    two-stage Hungarian association and lifecycle; `--tracker greedy` alone: the greedy association too."""
+    from grutrack.tracking.baselines import DetectionBackend
+    from grutrack.tracking.factory import build_tracker
+
+    hybrid, greedy = build_tracker("greedy", "polymot"), build_tracker("greedy")
+    assert all(isinstance(g.backend, DetectionBackend) for g in hybrid.groups + greedy.groups)
+    assert hybrid.cfg.algorithm == "hungarian" and hybrid.cfg.two_stage
+    assert hybrid.cfg.max_age.tolist() == load_tracker_config("polymot").max_age.tolist()
+    assert hybrid.associate.__qualname__.startswith("two_stage_association.")
+    assert greedy.cfg.algorithm == "greedy" and greedy.associate.__qualname__.startswith("greedy_association.")

@@ -30,7 +30,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="nuScenes: official detection-submission JSON; av2: LT3D detections (.feather, .csv or a "
         "pickled DataFrame), ego frame",
     )
-    p.add_argument("--tracker", default="ekf", choices=TRACKERS, help="tracker (default: ekf)")
+    p.add_argument(
+        "--tracker",
+        default="ekf",
+        choices=TRACKERS,
+        help="the motion model of a track: ekf (the preset's per-class EKF / KF), grukf (the GRU-KF), greedy (the "
+        "last detection carried at its own velocity), ab3dmot (a KF whose velocity starts at 0); the preset "
+        "(--config) sets pre-processing, association, lifecycle and output, so --tracker greedy --config polymot "
+        "is Poly-MOT's association over greedy tracks (default: ekf)",
+    )
     p.add_argument(
         "--config", default=None, help="tracker preset name or YAML path (default: the preset named like --tracker)"
     )
