@@ -389,13 +389,13 @@ def test_crowded_stage_one_takes_the_strict_cost_in_crowded_rows_and_columns():
     table = np.array([[0.7, 0.9], [0.1, 0.1]])
     asked = []
 
-    def strict(rows, cols):  # the strict costs of those rows and columns, as the tracker's Ro_GDIoU gives them
-        asked.append((rows.tolist(), cols.tolist()))
-        return table[np.ix_(rows, cols)]
+    def strict(rows, cols, need):  # the strict costs of those rows and columns, as the tracker's Ro_GDIoU gives them
+        asked.append((rows.tolist(), cols.tolist(), need.tolist()))
+        return np.where(need, table[np.ix_(rows, cols)], np.nan)  # pairs not needed are not read
 
     out = crowded_stage_one(cost, np.zeros(2, dtype=np.int64), np.array([1.0]), np.array([0.8]), strict)
     assert np.allclose(out, [[0.9, 1.1], [2.0, 1e6]])  # strict + (1.0 - 0.8) in row 0; forbidden pair kept
-    assert asked == [([0], [0, 1])]  # only the crowded row's pairs are scored strictly
+    assert asked == [([0], [0, 1], [[True, True]])]  # only the crowded row's pairs are scored strictly
     # a crowded column: two detections below 1.0 against track 0
     cost = np.array([[0.5, 3.0], [0.6, 3.0]])
     out = crowded_stage_one(cost, np.zeros(2, dtype=np.int64), np.array([1.0]), np.array([0.8]), strict)
@@ -410,6 +410,28 @@ def test_crowded_stage_one_takes_the_strict_cost_in_crowded_rows_and_columns():
         crowded_stage_one(lone, np.zeros(2, dtype=np.int64), np.array([1.0]), np.array([0.8]), strict), lone
     )
     assert asked == []
+
+
+def test_ro_gdiou_costs_of_the_needed_pairs_equal_the_full_matrix():
+    from grutrack.tracking.ro_gdiou import predicted_pose_costs
+
+    rng = np.random.default_rng(3)
+    cfg = load_tracker_config("ekf")
+    classes = cfg.crowded_threshold > 0
+    det, trk = np.zeros((9, 9)), np.zeros((7, 9))
+    for b in (det, trk):
+        b[:, :2] = rng.uniform(0, 6, (len(b), 2))
+        b[:, 3:6] = rng.uniform(0.5, 4.5, (len(b), 3))
+        b[:, 6] = rng.uniform(-np.pi, np.pi, len(b))
+    det_labels, trk_labels = rng.integers(0, 7, 9), rng.integers(0, 7, 7)
+    det_labels[:4] = trk_labels[:3] = CLASS_INDEX["car"]
+    costs = predicted_pose_costs(classes, cfg)
+    full = costs(det, det_labels, trk, trk_labels)
+    need = rng.random((9, 7)) < 0.5
+    part = costs(det, det_labels, trk, trk_labels, need)
+    scored = need & classes[det_labels][:, None] & (det_labels[:, None] == trk_labels)
+    assert scored.sum() >= 2 and (full < 1e6).sum() > scored.sum()
+    assert np.array_equal(part[scored], full[scored]) and (part[~scored] == 1e6).all()
 
 
 def test_crowded_threshold_judges_a_lone_pair_by_the_first_metric_and_a_crowded_one_by_ro_gdiou(tmp_path):
@@ -566,7 +588,7 @@ def test_crowded_stage_one_leaves_skipped_tracks_out_of_the_crowded_test():
     cost = np.array([[0.5, 0.6, 1e6], [0.7, 1e6, 0.8]])  # 1e6: a forbidden pair
     table = np.full((2, 3), 0.1)
 
-    def strict(rows, cols):
+    def strict(rows, cols, need):
         return table[np.ix_(rows, cols)]
 
     args = (np.zeros(2, dtype=np.int64), np.array([1.0]), np.array([0.8]), strict)

@@ -278,11 +278,11 @@ def crowded_stage_one(
     pair (cost below the forbidden value) of that row or column takes its strict cost instead, shifted by
     ``threshold - limit`` so that it is admitted exactly when ``strict < limit``, with margin ``limit - strict``
     (:func:`threshold_margin`). Elsewhere ``cost`` is kept: a lone pair is judged by the looser first measure.
-    ``det_labels`` (D,) int64; ``strict(rows (R,), cols (K,)) -> (R, K)``: the strict costs of those detections
-    against those tracks, asked once, for the rows and columns that hold a crowded pair (not at all when none
-    does: the strict measure costs more than the first). ``skip`` (T,) bool, optional: tracks left out of the
-    test, as if absent: they make no row crowded and their pairs keep ``cost`` (the tracker's lost newborns,
-    ``association.crowded_skips_lost_newborns``)."""
+    ``det_labels`` (D,) int64; ``strict(rows (R,), cols (K,), need (R, K) bool) -> (R, K)``: the strict costs of
+    those detections against those tracks, asked once, for the rows and columns that hold a crowded pair (not at
+    all when none does: the strict measure costs more than the first); only the ``need`` pairs are read.
+    ``skip`` (T,) bool, optional: tracks left out of the test, as if absent: they make no row crowded and their
+    pairs keep ``cost`` (the tracker's lost newborns, ``association.crowded_skips_lost_newborns``)."""
     on = np.flatnonzero((limit > 0)[det_labels])  # the rows of those classes
     if not len(on):
         return cost
@@ -295,9 +295,10 @@ def crowded_stage_one(
     keep_rows, cols = np.flatnonzero(busy.any(axis=1)), np.flatnonzero(busy.any(axis=0))
     rows = on[keep_rows]
     block = np.ix_(rows, cols)
-    shifted = strict(rows, cols) + (threshold - limit)[det_labels[rows]][:, None]
+    need = busy[np.ix_(keep_rows, cols)]
+    shifted = strict(rows, cols, need) + (threshold - limit)[det_labels[rows]][:, None]
     out = cost.copy()
-    out[block] = np.where(busy[np.ix_(keep_rows, cols)], shifted, cost[block])
+    out[block] = np.where(need, shifted, cost[block])
     return out
 
 

@@ -363,6 +363,17 @@ def _ro_cost_kernel(det_p, det_b, det_labels, trk_p, trk_b, trk_labels, modes, r
             costs[i, j] = 1.0 - sim
 
 
+@njit(cache=True)
+def _ro_pair_kernel(det, trk, labels, rows, cols, w1, w2, f32, costs) -> None:
+    """``costs[rows[k], cols[k]] = 1 - Ro_GDIoU`` of detection ``rows[k]`` against track ``cols[k]`` (boxes at
+    the track's predicted pose, ``labels[rows[k]]`` the pair's class for the weights ``w1, w2 (n_labels,)``)."""
+    work = np.empty((40, 2))
+    for k in range(rows.shape[0]):
+        i, j = rows[k], cols[k]
+        lab = labels[i]
+        costs[i, j] = 1.0 - ro_gdiou_pair(trk[j], det[i], w1[lab], w2[lab], f32, work)
+
+
 def ro_gdiou_costs(
     det_boxes: np.ndarray,
     det_labels: np.ndarray,
@@ -443,16 +454,28 @@ def predicted_pose_costs(classes: np.ndarray, cfg):
     """A function ``(det_boxes (D, 9), det_labels (D,), trk_boxes (T, 9), trk_labels (T,)) -> (D, T)``: 1 - Ro_GDIoU
     of each detection of the ``classes`` ((C,) bool) against each track of its class at the track's predicted box
     (the preset's ``ro_gdiou_weights`` and ``geometry_precision``); 1e6 for the other pairs. Stage 1 of some
-    classes (:func:`ro_gdiou_first_stage`) and the crowded pairs of ``association.crowded_threshold``."""
+    classes (:func:`ro_gdiou_first_stage`) and the crowded pairs of ``association.crowded_threshold``, for which
+    an optional fifth argument ``need (D, T) bool`` restricts the scored pairs to those (the others 1e6)."""
     w1 = np.ascontiguousarray(cfg.ro_gdiou_weights[:, 0], dtype=np.float64)
     w2 = np.ascontiguousarray(cfg.ro_gdiou_weights[:, 1], dtype=np.float64)
 
-    def costs(det_boxes: np.ndarray, det_labels: np.ndarray, trk_boxes: np.ndarray, trk_labels: np.ndarray):
+    def costs(
+        det_boxes: np.ndarray,
+        det_labels: np.ndarray,
+        trk_boxes: np.ndarray,
+        trk_labels: np.ndarray,
+        need: np.ndarray | None = None,
+    ):
         D, T = len(det_boxes), len(trk_boxes)
         out = np.full((D, T), 1e6)
         if D and T:
             boxes = np.ascontiguousarray(det_boxes, dtype=np.float64)
             trk = np.ascontiguousarray(trk_boxes, dtype=np.float64)
+            if need is not None:  # only these pairs (D, T) bool, of the classes' same-class pairs
+                rows, cols = np.nonzero(need & classes[det_labels][:, None] & (det_labels[:, None] == trk_labels))
+                f32 = cfg.geometry_precision == "float32"
+                _ro_pair_kernel(boxes, trk, det_labels.astype(np.int64), rows, cols, w1, w2, f32, out)
+                return out
             _ro_cost_kernel(
                 boxes,
                 boxes,

@@ -171,7 +171,7 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
             if strict is None
             else (
                 cfg.crowded_threshold,
-                lambda r, c: strict(dets.boxes[r], dets.labels[r], trk_boxes[c], trk_labels[c]),
+                lambda r, c, need: strict(dets.boxes[r], dets.labels[r], trk_boxes[c], trk_labels[c], need),
             ),
             None if lost is None else np.where(lost, penalty[trk_labels], 0.0),
             lost if skip_lost else None,
