@@ -10,7 +10,7 @@ from grutrack.data.scene import BoxSet
 from grutrack.tracking.config import load_tracker_config
 from grutrack.tracking.decoupled_backend import DecoupledCVBackend
 from grutrack.tracking.factory import build_tracker
-from grutrack.tracking.ro_gdiou import ro_gdiou_costs, ro_gdiou_pair
+from grutrack.tracking.ro_gdiou import WORK_ROWS, ro_gdiou_costs, ro_gdiou_pair
 
 CAR = 2  # label of car among the 7 tracking classes
 
@@ -21,7 +21,7 @@ def _box(x, y, w=2.0, length=4.0, yaw=0.0, vx=0.0, vy=0.0):
 
 @pytest.mark.parametrize("f32", [False, True])
 def test_ro_gdiou_values(f32):
-    work = np.empty((40, 2))
+    work = np.empty((WORK_ROWS, 2))
     a = _box(0.0, 0.0)
     assert ro_gdiou_pair(a, a, 1.0, 1.0, f32, work) == pytest.approx(1.0, abs=1e-6)
     # side by side, touching: IoU 0, enclosing rectangle 4 x 4 = the union, centre distance 2, diagonal^2 32
@@ -34,7 +34,7 @@ def test_ro_gdiou_values(f32):
 
 def test_float32_geometry_close_to_float64():
     rng = np.random.default_rng(3)
-    work = np.empty((40, 2))
+    work = np.empty((WORK_ROWS, 2))
     for _ in range(200):
         a = _box(*rng.normal(0, 2, 2), *rng.uniform(0.5, 5, 2), rng.uniform(-3, 3))
         b = _box(*rng.normal(0, 2, 2), *rng.uniform(0.5, 5, 2), rng.uniform(-3, 3))

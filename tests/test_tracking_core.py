@@ -350,7 +350,7 @@ def _ro_preset(tmp_path, threshold: float):
 
 
 def test_ro_gdiou_for_some_classes_is_stage_one_of_the_two_stage_association(tmp_path):
-    from grutrack.tracking.ro_gdiou import ro_gdiou_pair
+    from grutrack.tracking.ro_gdiou import WORK_ROWS, ro_gdiou_pair
 
     ped, car = CLASS_INDEX["pedestrian"], CLASS_INDEX["car"]
     person = {"w": 0.6, "l": 0.6, "h": 1.7, "z": 0.85}
@@ -374,7 +374,7 @@ def test_ro_gdiou_for_some_classes_is_stage_one_of_the_two_stage_association(tmp
     assert m.dets.tolist() == [1] and m.tracks.tolist() == [1]
     # 1 m apart: stage 1 takes the pair exactly when 1 - Ro_GDIoU (the predicted box against the detection) is
     # below the threshold
-    cost = 1.0 - ro_gdiou_pair(trk[0], np.array(_box(1.0, 0, **person)), 1.0, 1.0, False, np.empty((40, 2)))
+    cost = 1.0 - ro_gdiou_pair(trk[0], np.array(_box(1.0, 0, **person)), 1.0, 1.0, False, np.empty((WORK_ROWS, 2)))
     assert 1.5 < cost < 1.7
     assert matched(_ro_preset(tmp_path, cost + 1e-9), 1.0) == [(0, 0), (1, 1)]
     assert matched(_ro_preset(tmp_path, cost - 1e-9), 1.0) == [(1, 1)]

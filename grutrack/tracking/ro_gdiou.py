@@ -302,10 +302,15 @@ def footprints_apart(pa, pb) -> bool:
     return (pb[0] - pa[0]) ** 2 + (pb[1] - pa[1]) ** 2 > (1.001 * reach) ** 2 + 1e-6
 
 
+#: rows of :func:`ro_gdiou_pair`'s scratch ``work (WORK_ROWS, 2)``: the footprints' intersection (40), the eight
+#: corners (8) and their hull (17)
+WORK_ROWS = 65
+
+
 @njit(cache=True)
 def ro_gdiou_pair(pa, pb, w1, w2, f32, work) -> float:
     """Ro_GDIoU of the track pose ``pa`` and the detection pose ``pb`` (canonical boxes, >= 7 values: x, y, z, w,
-    l, h, yaw); ``work``: scratch (40, 2)."""
+    l, h, yaw); ``work``: scratch (WORK_ROWS, 2)."""
     # both footprints relative to the track's centre; footprints apart intersect in 0, without clipping
     if footprints_apart(pa, pb):
         inter = 0.0
@@ -318,7 +323,7 @@ def ro_gdiou_pair(pa, pb, w1, w2, f32, work) -> float:
         inter = _intersection_area(ca, cb, work[8:24], work[24:40])
     area_a, area_b = pa[4] * pa[3], pb[4] * pb[3]
     iou = inter / (area_a + area_b - inter)
-    pts = np.empty((8, 2))
+    pts = work[40:48]
     ha, hb = math.cos(pa[6]), math.sin(pa[6])
     ga, gb = math.cos(pb[6]), math.sin(pb[6])
     k = 0
@@ -331,7 +336,7 @@ def ro_gdiou_pair(pa, pb, w1, w2, f32, work) -> float:
         pts[k + 4, 0] = _f((ga * u - gb * v + pb[0]) - pa[0], f32)
         pts[k + 4, 1] = _f((gb * u + ga * v + pb[1]) - pa[1], f32)
         k += 1
-    ra, rb = _min_area_rect(pts, 8, np.empty((17, 2)), f32)
+    ra, rb = _min_area_rect(pts, 8, work[48:65], f32)
     universe = ra * rb
     extra = universe - (area_a + area_b - inter)
     dist2 = (pa[0] - pb[0]) ** 2 + (pa[1] - pb[1]) ** 2
@@ -345,7 +350,7 @@ def _ro_cost_kernel(det_p, det_b, det_labels, trk_p, trk_b, trk_labels, modes, r
     ``ratio (T,)``: each track's pose code and blend ratio; ``w1, w2 (n_labels,)`` by the track's class;
     ``det_p / det_b``, ``trk_p / trk_b``: the detections' and tracks' boxes for the predicted and the
     last-update comparisons."""
-    work = np.empty((40, 2))
+    work = np.empty((WORK_ROWS, 2))
     for j in range(trk_labels.shape[0]):
         lab = trk_labels[j]
         for i in range(det_labels.shape[0]):
@@ -367,7 +372,7 @@ def _ro_cost_kernel(det_p, det_b, det_labels, trk_p, trk_b, trk_labels, modes, r
 def _ro_pair_kernel(det, trk, labels, rows, cols, w1, w2, f32, costs) -> None:
     """``costs[rows[k], cols[k]] = 1 - Ro_GDIoU`` of detection ``rows[k]`` against track ``cols[k]`` (boxes at
     the track's predicted pose, ``labels[rows[k]]`` the pair's class for the weights ``w1, w2 (n_labels,)``)."""
-    work = np.empty((40, 2))
+    work = np.empty((WORK_ROWS, 2))
     for k in range(rows.shape[0]):
         i, j = rows[k], cols[k]
         lab = labels[i]
