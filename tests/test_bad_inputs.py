@@ -481,3 +481,32 @@ def test_a_flag_that_is_a_prefix_of_another_is_not_taken_for_it(tmp_path, capsys
         main(["evaluate", "--datar", str(tmp_path), "--split", "mini_val", "--submission", "s.json"])
     assert exc.value.code == 2
     assert "--datar" in capsys.readouterr().err
+
+
+def test_the_shipped_network_on_a_missing_gpu_is_one_line(mini_track, capsys, monkeypatch):
+    """Without --checkpoint the shipped network is named, but only once the run is set up: a refused device
+    stays one line."""
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    monkeypatch.setattr(torch.version, "cuda", None)
+    fails(capsys, [*mini_track, "--tracker", "grukf", "--device", "cuda"], "--device: 'cuda' asked for a GPU")
+
+
+@pytest.mark.parametrize(
+    "argv, fragment",
+    [
+        (["simulate-detections", "--dataroot", "d", "--split", "s", "--out", "o.json", "--seed", "abc"], "--seed"),
+        (["simulate-detections", "--dataroot", "d", "--split", "s", "--out", "o.json", "--seed", "-1"], "got '-1'"),
+        (["demo-data", "--out", "d", "--seed", "4294967296"], "expected an integer in [0, 4294967295]"),
+        (["track", "--dataroot", "d"], "the following arguments are required: --split, --detections, --out"),
+        (["track", "--dataroot", "d", "--split", "s", "--detections", "x", "--out", "o", "--bogus"], "--bogus"),
+        (["tarck"], "invalid choice: 'tarck'"),
+        ([], "the following arguments are required: COMMAND"),
+    ],
+)
+def test_argument_errors_are_one_line_with_exit_2(capsys, argv, fragment):
+    """argparse's refusals (a bad value, a missing or unknown flag or command): one line naming it, exit 2, no
+    usage block."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exc.value.code == 2 and len(err) == 1 and fragment in err[0] and "--help)" in err[0], err

@@ -28,11 +28,19 @@ COMMANDS: tuple[str, ...] = (
 )
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line naming the command and the flag, exit status 2 (argparse's
+    own prints its usage block first)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The top-level parser with every sub-command registered."""
     # allow_abbrev=False: a misspelt flag that happens to be a prefix of another (--detection) is refused, not
     # silently taken for it
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="grutrack",
         allow_abbrev=False,
         description="3D multi-object tracking with a semi-supervised GRU-Kalman filter: "
@@ -40,10 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"grutrack {__version__}")
     sub = parser.add_subparsers(
-        dest="command",
-        metavar="COMMAND",
-        required=True,
-        parser_class=functools.partial(argparse.ArgumentParser, allow_abbrev=False),
+        dest="command", metavar="COMMAND", required=True, parser_class=functools.partial(_Parser, allow_abbrev=False)
     )
     for name in COMMANDS:
         importlib.import_module(name).add_parser(sub)

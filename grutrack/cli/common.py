@@ -1,11 +1,26 @@
-"""Arguments shared by the sub-commands that read a dataset split, and the one place a command turns them into
-a dataset (:func:`dataset_of`)."""
+"""Arguments shared by the sub-commands that read a dataset split, the one place a command turns them into a
+dataset (:func:`dataset_of`), and argument types shared by several commands (:func:`seed`)."""
 
 from __future__ import annotations
 
 import argparse
 
 from grutrack.datasets import DATASETS  # names only: the dataset modules are imported when one is opened
+
+#: the largest seed: the simulators' random streams take a seed as 32 bits, so a larger or negative one would
+#: alias another
+MAX_SEED = 2**32 - 1
+
+
+def seed(text: str) -> int:
+    """``--seed`` values: an integer in [0, MAX_SEED] (argparse ``type``)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"expected an integer in [0, {MAX_SEED}], got {text!r}")
+    return value
 
 
 def add_dataset_args(p: argparse.ArgumentParser, split_help: str, repeat: bool = False) -> None:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from grutrack.cli.common import add_dataset_args, dataset_of
+from grutrack.cli.common import add_dataset_args, dataset_of, seed
 from grutrack.errors import InputFormatError
 from grutrack.io import read_json
 
@@ -30,7 +30,7 @@ def add_parser(subparsers) -> None:
         default=FRAMES_PER_SCENE,
         help=f"keyframes per scene at 2 Hz (default {FRAMES_PER_SCENE})",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
     p.add_argument("--version", default=VERSION, help=f"version folder name (default {VERSION})")
     p.set_defaults(func=run_demo_data)
 
@@ -50,7 +50,7 @@ def add_parser(subparsers) -> None:
         help="detector profile: a shipped name (centerpoint, pointpillars, centerpoint_velfail, "
         "centerpoint_drift) or a YAML path",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
     p.add_argument("--out", required=True, help="detection JSON to write")
     p.set_defaults(func=run_simulate)
 

@@ -80,11 +80,11 @@ def run(args: argparse.Namespace) -> int:
     from grutrack.tracking.factory import build_tracker
 
     apply_thread_policy(torch_too=args.tracker == "grukf")
-    if args.tracker == "grukf" and args.checkpoint is None:
+    shipped = args.tracker == "grukf" and args.checkpoint is None
+    if shipped:
         from grutrack.training.pretrained import pretrained_dir
 
         args.checkpoint = str(pretrained_dir("grukf_default") / "model.pt")
-        print(f"grutrack track: no --checkpoint: the shipped pretrained network {args.checkpoint}", file=sys.stderr)
     ds = dataset_of(args)
     scenes = ds.scenes(args.split)
     tracker = build_tracker(
@@ -94,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
         checkpoint=args.checkpoint,
         device=args.device,
     )
+    if shipped:  # said once the run is set up, so that a refused input stays one line
+        print(f"grutrack track: no --checkpoint: the shipped pretrained network {args.checkpoint}", file=sys.stderr)
     dets = ds.load_detections(args.detections, args.split, scenes, tracker.cfg.measured_yaw)
     for line in dets.warnings:
         print(f"grutrack track: warning: {line}", file=sys.stderr)

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from grutrack.cli.common import add_dataset_args
+from grutrack.cli.common import add_dataset_args, seed
 from grutrack.training.run import synthetic_inputs, write_training_yaml  # noqa: F401  (light; re-exported)
 
 # Only argument definitions at module level: building the parser must not import numpy or torch
@@ -41,7 +41,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mode", choices=("semi_supervised", "supervised"), default=None, help="override the config's mode")
     p.add_argument("--epochs", type=int, default=None, help="override the config's epochs")
     p.add_argument("--val-every", type=int, default=None, help="override the config's val_every")
-    p.add_argument("--seed", type=int, default=None, help="override the config's seed")
+    p.add_argument("--seed", type=seed, default=None, help="override the config's seed")
     p.add_argument(
         "--source",
         action="append",
