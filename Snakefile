@@ -12,7 +12,6 @@ import sys
 from pathlib import Path
 
 import yaml
-from snakemake.exceptions import WorkflowError
 from snakemake.utils import min_version, update_config, validate
 
 from grutrack.errors import ConfigError
@@ -27,8 +26,9 @@ update_config(config, _CLI_CONFIG)
 try:
     S.validate_config(config, os.path.join(workflow.basedir, "workflow/schemas/config.schema.yaml"),
                       [(f, yaml.safe_load(open(f))) for f in workflow.overwrite_configfiles], _CLI_CONFIG)
-except ConfigError as exc:
-    raise WorkflowError(str(exc)) from None
+except ConfigError as exc:  # a user's error: one line naming the key, exit status 2 (as dataset_input's)
+    print(exc, file=sys.stderr)
+    raise SystemExit(2)
 
 include: "workflow/rules/common.smk"
 include: "workflow/rules/data.smk"

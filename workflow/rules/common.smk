@@ -22,10 +22,11 @@ ON_FAIL = "|| {{ tail -n 25 {log} >&2; exit 1; }}"
 PAPER_PATH = str(Path(workflow.basedir) / config["paper"]) if not os.path.isabs(config["paper"]) else config["paper"]
 try:
     PAPER = load_paper(PAPER_PATH)        # the one config loader: schema grutrack/configs/schemas/paper.schema.yaml
-except ConfigError as _exc:
-    raise WorkflowError(str(_exc))
-REGISTRY = load_registry()
-S.check_config(config, PAPER, REGISTRY)
+    REGISTRY = load_registry()
+    S.check_config(config, PAPER, REGISTRY)
+except ConfigError as _exc:  # one line naming the file, key or field, exit status 2, before any rule runs
+    print(_exc, file=sys.stderr)
+    raise SystemExit(2)
 
 
 def _alternation(names):
