@@ -330,6 +330,10 @@ def test_config_overrides_on_the_command_line_are_typed(tmp_path):
     proc = snakemake(tmp_path, "reports/demo_val.md", options=("-n", "--config", "datasets={demo: {scenes: 0}}"))
     assert proc.returncode != 0
     assert "config key datasets.demo.scenes (from --config): 0 is less than the minimum of" in proc.stdout + proc.stderr
+    seeds = "detectors={centerpoint_sim: {seeds: {demo_val: -1}}}"  # a negative seed would alias another
+    proc = snakemake(tmp_path, "reports/demo_val.md", options=("-n", "--config", seeds))
+    assert proc.returncode == 2
+    assert "detectors.centerpoint_sim.seeds.demo_val (from --config): -1 is less than the minimum of 0" in proc.stderr
 
 
 def test_missing_dataroot_names_the_config_key(tmp_path):
