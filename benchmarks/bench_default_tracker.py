@@ -551,6 +551,8 @@ CANDIDATES = {
     "+decoupled_cv": _decoupled,
     "+decoupled_cv_ts": _decoupled_ts,
     "+Q2": _motion_q(2.0, 1.0, "q2"),
+    "+Q05": _motion_q(0.5, 1.0, "q05"),
+    "+Q02": _motion_q(0.2, 1.0, "q02"),
     "+R2": _motion_q(1.0, 2.0, "r2"),
     "+R_vel_bus100": _velocity_r({"bus": 100.0}, "rbus100"),
     "+R_vel_bus10": _velocity_r({"bus": 10.0}, "rbus10"),
