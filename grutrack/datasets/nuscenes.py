@@ -46,7 +46,7 @@ class NuScenesDataset:
             version={"type": "string", "minLength": 1},
             scenes={"type": "integer", "minimum": 2},
             frames_per_scene={"type": "integer", "minimum": 2},
-            seed={"type": "integer"},
+            seed={"type": "integer", "minimum": 0, "maximum": 4294967295},  # as --seed (cli/common.py MAX_SEED)
         ),
     }
 
