@@ -335,7 +335,8 @@ def test_config_overrides_on_the_command_line_are_typed(tmp_path):
     assert proc.returncode == 2
     assert "detectors.centerpoint_sim.seeds.demo_val (from --config): -1 is less than the minimum of 0" in proc.stderr
     proc = snakemake(tmp_path, "reports/demo_val.md", options=("-n", "--config", "datasets={demo: {seed: -1}}"))
-    assert proc.returncode == 2 and "datasets.demo.seed (from --config): -1 is less than the minimum of 0" in proc.stderr
+    assert proc.returncode == 2
+    assert "datasets.demo.seed (from --config): -1 is less than the minimum of 0" in proc.stderr
 
 
 def test_missing_dataroot_names_the_config_key(tmp_path):
