@@ -29,7 +29,9 @@ count on other detectors than the four the decisions were taken on); ``fresh5`` 
 four profiles: made after Decision 12, the count on sets no decision saw; Decision 13 was then taken on it);
 ``fresh6`` (seeds 9000-9049 on mini_val, the four profiles: made after Decision 13, its count on unseen sets);
 ``fresh6_train`` (seeds 9000-9024 on mini_train, 8 scenes a set: made after Decision 13, the count on larger unseen
-sets); ``worlds`` and
+sets); ``fresh7`` (seeds 10000-10049 on mini_val, the four profiles) and ``fresh7_variants`` (seeds 10000-10019
+on mini_val, the profiles of :data:`VARIANTS` and ``cp_strong``): made after the last decision, the count on sets no
+decision or candidate saw; ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles; ``worlds_fresh``, worlds 11-20
 made after Decision 13, its count on larger unseen sets). Candidates:
@@ -170,6 +172,8 @@ GROUPS = {
     "fresh5": (tuple(range(8000, 8050)), ("mini_val",)),
     "fresh6": (tuple(range(9000, 9050)), ("mini_val",)),
     "fresh6_train": (tuple(range(9000, 9025)), ("mini_train",)),
+    "fresh7": (tuple(range(10000, 10050)), ("mini_val",)),
+    "fresh7_variants": (tuple(range(10000, 10020)), ("mini_val",), (*VARIANTS, "cp_strong")),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
