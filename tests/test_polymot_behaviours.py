@@ -1,5 +1,6 @@
 """The preset options behind Poly-MOT's behaviours, one by one: the threshold-margin assignment, the fixed time
-step, the piecewise CTRA and Bicycle forms, the rotation-angle measured yaw, the new schema keys; and the
+step, the piecewise CTRA and Bicycle forms, the rotation-angle measured yaw, the strict score filter, NMS's order
+on tied scores, the new schema keys; and the
 tracking-submission comparison used by the parity tests."""
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import pytest
 import yaml
 
 from grutrack.boxes import quaternion_from_yaw, rotation_angle_about_z, yaw_from_quaternion
+from grutrack.classes import CLASS_INDEX
 from grutrack.data.scene import BoxSet
 from grutrack.errors import ConfigError
 from grutrack.evaluation.track_parity import compare_tracks
@@ -19,6 +21,7 @@ from grutrack.motion.models import CTRA, PIECEWISE_SWITCH, Bicycle, BicyclePiece
 from grutrack.tracking.association import hungarian, threshold_margin
 from grutrack.tracking.config import config_from_dict, preset_path
 from grutrack.tracking.factory import ekf_groups
+from grutrack.tracking.preprocess import preprocess_frame
 from grutrack.tracking.tracker import Tracker
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -219,6 +222,53 @@ def test_polymot_preset_values():
         "rotation_angle",
     )
     assert cfg.first_threshold[1] == 1.34 and cfg.first_threshold[4] == 1.69  # bus, pedestrian (HEAD)
+
+
+def _car(x: float) -> list[float]:
+    return [x, 0.0, 1.0, 1.8, 4.5, 1.6, 0.0, 0.0, 0.0]
+
+
+def test_polymot_drops_a_score_equal_to_its_threshold():
+    # Poly-MOT's nusc_loader keeps det score > SF_thre; a file with scores at 2 decimals has many on a threshold
+    cfg = config_from_dict(_raw())
+    car, ped = CLASS_INDEX["car"], CLASS_INDEX["pedestrian"]
+    thr = cfg.score_threshold
+    dets = BoxSet(
+        [_car(0.0), _car(10.0), _car(20.0), _car(30.0)],
+        [thr[car], np.nextafter(thr[car], 1.0), thr[ped], 0.9],
+        [car, car, ped, ped],
+    )
+    kept = preprocess_frame(dets, cfg)
+    assert sorted(kept.scores.tolist()) == [np.nextafter(thr[car], 1.0), 0.9]
+    at_least = preprocess_frame(
+        dets, config_from_dict({**_raw(), "preprocessing": {**_raw()["preprocessing"], "score_filter": "at_least"}})
+    )
+    assert len(at_least.scores) == 4
+
+
+def test_polymot_nms_visits_tied_scores_as_numpys_default_sort():
+    # Poly-MOT's blend_nms: np.argsort(-score) (not stable). 100 cars of one score, far apart, but for one
+    # overlapping pair (i, j), i < j, that the default sort visits j first: Poly-MOT keeps j, file order keeps i.
+    n = 100
+    scores = np.full(n, 0.5)
+    order = np.argsort(-scores)
+    rank = np.empty(n, dtype=np.int64)
+    rank[order] = np.arange(n)
+    pairs = [(i, j) for i in range(n) for j in range(i + 1, n) if rank[j] < rank[i]]
+    assert pairs, "numpy's default sort left 100 equal scores in input order: no tie to test on"
+    i, j = pairs[0]
+    boxes = np.array([_car(50.0 * k) for k in range(n)])
+    boxes[j, 0] = boxes[i, 0] + 0.5  # IoU well above 0.08
+    labels = np.full(n, CLASS_INDEX["car"])
+    cfg = config_from_dict(_raw())
+    kept = preprocess_frame(BoxSet(boxes, scores, labels), cfg)
+    xs = set(kept.boxes[:, 0].tolist())
+    assert len(xs) == n - 1 and boxes[j, 0] in xs and boxes[i, 0] not in xs
+    assert kept.boxes[:, 0].tolist() == boxes[[k for k in order if k != i], 0].tolist()  # in the order kept
+    raw = _raw()
+    raw["preprocessing"]["nms_order"] = "input"
+    by_file = preprocess_frame(BoxSet(boxes, scores, labels), config_from_dict(raw))
+    assert boxes[i, 0] in by_file.boxes[:, 0] and boxes[j, 0] not in by_file.boxes[:, 0]
 
 
 @pytest.mark.parametrize("time_step, expected", [("timestamps", 0.4), (0.5, 0.5)])
