@@ -151,14 +151,14 @@ def test_false_positive_drawn_in_fp_colour_where_its_box_is(rendered, nusc_root)
 
 
 def test_id_switch_marked_on_its_ground_truth(rendered, nusc_root):
-    """scene-0103, frame 7: the car that track 7 followed is taken over by track 10 (IDS); a magenta ring is
+    """scene-0103, frame 7: the car that track 9 followed is taken over by track 10 (IDS); a magenta ring is
     drawn around that annotation's centre, and a frame without an id switch has no magenta in its view."""
     from grutrack.render.draw import LAYOUT, to_plot
 
     out, _, _ = rendered
     doc = json.loads((out / "counts.json").read_text())
     rec = _frame(doc, "scene-0103", 6)
-    assert [(s["previous_track_id"], s["track_id"]) for s in rec["id_switches"]] == [("7", "10")]
+    assert [(s["previous_track_id"], s["track_id"]) for s in rec["id_switches"]] == [("9", "10")]
     nusc, ego_xy, ego_yaw = _ego(nusc_root, rec["sample_token"])
     ann = next(
         nusc.get("sample_annotation", a)
