@@ -10,7 +10,8 @@ common (sort order on ties), and exact duplicate boxes (NMS on equal boxes). Thi
 
 - every score is rounded to ``--decimals``;
 - each box is repeated, exactly, with probability ``--duplicates``;
-- each sample with boxes gets ``--clutter`` boxes more: a copy of one of its boxes, moved by N(0, 6 m) in x and y,
+- each sample with boxes gets ``--clutter`` boxes more: a copy of one of its boxes (drawn among the first N once
+  the duplicates are in, N its number of boxes), moved by N(0, 6 m) in x and y,
   its velocity by N(0, 1 m/s) per axis, given a class drawn uniformly from the ten and a score U(0.01, 0.3);
 - the boxes of a sample are shuffled; ``synthetic.note`` says the file was densified (the output is SYNTHETIC
   whatever the input: it is labelled so).
@@ -88,9 +89,14 @@ def main(argv=None) -> int:
     ap.add_argument("--duplicates", type=float, default=0.05, help="chance a box is repeated exactly (default 0.05)")
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args(argv)
-    if args.clutter < 0 or args.decimals < 0 or not 0.0 <= args.duplicates <= 1.0:
-        print("--clutter and --decimals: expected >= 0; --duplicates: expected in [0, 1]", file=sys.stderr)
-        return 2
+    for flag, ok, expected in (
+        ("--clutter", args.clutter >= 0, "an integer >= 0"),
+        ("--decimals", args.decimals >= 0, "an integer >= 0"),
+        ("--duplicates", 0.0 <= args.duplicates <= 1.0, "a number in [0, 1]"),
+    ):
+        if not ok:
+            print(f"{flag}: expected {expected}, got {getattr(args, flag[2:])}", file=sys.stderr)
+            return 2
     try:
         sub = json.loads(args.input.read_text())
         results = densify(sub, args.clutter, args.decimals, args.duplicates, np.random.default_rng(args.seed))

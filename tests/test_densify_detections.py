@@ -7,6 +7,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from grutrack.classes import DETECTION_CLASSES
 
@@ -68,3 +69,13 @@ def test_a_file_that_is_not_a_submission_is_one_line_with_exit_2(tmp_path, capsy
     assert densify.main([str(bad), str(tmp_path / "o.json")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(bad) in err[0] and not (tmp_path / "o.json").exists()
+
+
+@pytest.mark.parametrize("flag, value", [("--clutter", "-1"), ("--decimals", "-2"), ("--duplicates", "1.5")])
+def test_a_bad_flag_value_is_one_line_naming_it_with_exit_2(tmp_path, capsys, flag, value):
+    src = tmp_path / "in.json"
+    src.write_text(json.dumps(_submission()))
+    assert densify.main([str(src), str(tmp_path / "o.json"), flag, value]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"{flag}: expected") and value in err[0]
+    assert not (tmp_path / "o.json").exists()

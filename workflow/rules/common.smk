@@ -6,7 +6,6 @@ import re
 import shlex
 
 import yaml
-from snakemake.exceptions import WorkflowError
 
 from grutrack.data.registry import load_registry
 from grutrack.errors import ConfigError
