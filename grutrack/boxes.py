@@ -59,3 +59,17 @@ def quaternion_from_yaw(yaw: np.ndarray) -> np.ndarray:
     q[:, 0] = np.cos(yaw / 2.0)
     q[:, 3] = np.sin(yaw / 2.0)
     return q
+
+
+def rotation_matrices(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) of quaternions ``q (N, 4) [w, x, y, z]`` (normalised first)."""
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=1,
+    )

@@ -11,7 +11,9 @@ Four measures, ``bev_iou``, ``bev_giou``, ``iou_3d`` and ``giou_3d``, each in tw
 * ``pairwise_*(a, b)`` with ``a`` ``(N, >=7)`` and ``b`` ``(M, >=7)``: all pairs, an ``(N, M) float64``
   array (``[i, j]`` = measure of ``(a[i], b[j])``, equal to the paired form on that pair).
 
-Also :func:`bev_corners` ``(N, 4, 2)`` and :func:`pairwise_centre_distance` ``(N, M)`` in metres.
+Also :func:`bev_corners` ``(N, 4, 2)`` and :func:`pairwise_centre_distance` ``(N, M)`` in metres, and the same
+measures of footprints given as convex quadrilaterals (:func:`footprint_similarities`), e.g. a tilted box's bottom
+face on the ground (:func:`bottom_corners`, the nuScenes devkit's and Poly-MOT's footprint).
 
 Definitions (those of Poly-MOT's GIoU): with ``I`` the BEV intersection area, ``U`` the BEV union area
 and ``C`` the area of the convex hull of the 8 BEV corners of both boxes,
@@ -51,6 +53,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from grutrack.boxes import rotation_matrices
 
 TOL = 1e-10
 """Slack in metres of the inside / on-the-edge tests (points this close to a boundary count as on it).
@@ -423,6 +427,202 @@ def _pairwise_measures(a: np.ndarray, b: np.ndarray, names, where: np.ndarray | 
         _measures_kernel(np.ascontiguousarray(ta[:, start:stop]), tb, True, todo, want, buf)
         out[:, start:stop] = buf.reshape(4, -1, m)
     return out
+
+
+# --- Footprints given as convex quadrilaterals (a detection's bottom face turned by its whole rotation, pitch and
+# roll included, and projected to the ground: the nuScenes devkit's ``Box.bottom_corners()``, Poly-MOT's footprint).
+
+
+def bottom_corners(boxes: np.ndarray, quaternion: np.ndarray | None = None) -> np.ndarray:
+    """Ground-plane footprint of ``boxes (N, >=7)``: ``(N, 4, 2) float64`` metres ``[x, y]``, counter-clockwise.
+
+    Without ``quaternion``: the yaw-turned w x l rectangle (:func:`bev_corners`). With ``quaternion (N, 4)
+    [w, x, y, z]`` (the box's own rotation): its bottom face ``c + R(q) [+-l/2, +-w/2, -h/2]`` projected to the
+    ground, a parallelogram (the devkit's ``Box.bottom_corners()[:2]``); pitch and roll shrink it along their axes
+    and shift it by ``h/2`` times their sine. Corners in :func:`bev_corners`'s order, reversed where the rotation
+    turns the face over.
+    """
+    if quaternion is None:
+        return bev_corners(boxes)
+    b = _check_boxes(boxes, "boxes")
+    R = rotation_matrices(quaternion)  # (N, 3, 3)
+    local = np.stack(
+        [
+            _SU * (0.5 * b[:, 4])[:, None],
+            _SV * (0.5 * b[:, 3])[:, None],
+            np.broadcast_to((-0.5 * b[:, 5])[:, None], (len(b), 4)),
+        ],
+        axis=1,
+    )  # (N, 3, 4) box frame: x along l, y along w, z up
+    c = (np.einsum("nij,njk->nik", R[:, :2], local) + b[:, :2, None]).transpose(0, 2, 1)  # (N, 4, 2)
+    x, y = c[..., 0], c[..., 1]
+    twice_area = np.sum(x * np.roll(y, -1, axis=1) - y * np.roll(x, -1, axis=1), axis=1)
+    return np.where((twice_area < 0.0)[:, None, None], c[:, ::-1], c)
+
+
+@njit(cache=True, inline="always")
+def _shoelace(x, y, n: int) -> float:
+    """Signed area (m^2) of the polygon through the first ``n`` points ``x, y`` in order."""
+    twice = 0.0
+    for r in range(n):
+        q = (r + 1) % n
+        twice += x[r] * y[q] - y[r] * x[q]
+    return 0.5 * twice
+
+
+@njit(cache=True, inline="always")
+def _clip_area(ax, ay, bx, by, px, py, qx, qy) -> float:
+    """Intersection area (m^2) of the convex counter-clockwise quadrilaterals ``a`` and ``b`` (``(4,)`` each).
+
+    Sutherland-Hodgman: ``a`` is clipped by the half-plane left of each edge of ``b`` in turn (a convex polygon
+    gains at most one vertex per edge, so at most 8); ``px .. qy (16,)`` are work arrays."""
+    n = 4
+    for r in range(4):
+        px[r], py[r] = ax[r], ay[r]
+    for e in range(4):
+        x0, y0 = bx[e], by[e]
+        ex, ey = bx[(e + 1) % 4] - x0, by[(e + 1) % 4] - y0
+        m = 0
+        for r in range(n):
+            sx, sy, tx, ty = px[r], py[r], px[(r + 1) % n], py[(r + 1) % n]
+            ds, dt = ex * (sy - y0) - ey * (sx - x0), ex * (ty - y0) - ey * (tx - x0)  # > 0: inside
+            if ds >= 0.0:
+                qx[m], qy[m] = sx, sy
+                m += 1
+            if (ds >= 0.0) != (dt >= 0.0):
+                t = ds / (ds - dt)
+                qx[m], qy[m] = sx + t * (tx - sx), sy + t * (ty - sy)
+                m += 1
+        if m < 3:
+            return 0.0
+        n = m
+        for r in range(n):
+            px[r], py[r] = qx[r], qy[r]
+    return max(_shoelace(px, py, n), 0.0)
+
+
+@njit(cache=True, inline="always")
+def _turn(x0, y0, x1, y1, x2, y2) -> float:
+    """Cross product ``(p1 - p0) x (p2 - p0)``: > 0 where ``p0, p1, p2`` turn counter-clockwise."""
+    return (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
+
+
+@njit(cache=True, inline="always")
+def _hull8_area(x, y, order, hx, hy) -> float:
+    """Area (m^2) of the convex hull of the 8 points ``x, y (8,)`` (Andrew's monotone chain); ``order (8,) int64``,
+    ``hx, hy (>=17,)`` are work arrays."""
+    for r in range(8):
+        q = r
+        while q > 0 and (x[order[q - 1]] > x[r] or (x[order[q - 1]] == x[r] and y[order[q - 1]] > y[r])):
+            order[q] = order[q - 1]
+            q -= 1
+        order[q] = r
+    m = 0
+    for t in range(8):  # lower chain, left to right
+        r = order[t]
+        while m >= 2 and _turn(hx[m - 2], hy[m - 2], hx[m - 1], hy[m - 1], x[r], y[r]) <= 0.0:
+            m -= 1
+        hx[m], hy[m] = x[r], y[r]
+        m += 1
+    floor = m + 1
+    for t in range(6, -1, -1):  # upper chain, right to left
+        r = order[t]
+        while m >= floor and _turn(hx[m - 2], hy[m - 2], hx[m - 1], hy[m - 1], x[r], y[r]) <= 0.0:
+            m -= 1
+        hx[m], hy[m] = x[r], y[r]
+        m += 1
+    m -= 1  # the first point closes the ring
+    return _shoelace(hx, hy, m) if m >= 3 else 0.0
+
+
+@njit(cache=True, inline="always")
+def _footprint_pair(ca, i, ta, cb, j, tb, want, out, k, w, order) -> None:
+    """The measures flagged in ``want (4,) bool`` of the pair ``(a[i], b[j])`` into ``out[:, k]``.
+
+    ``ca (N, 4, 2)``, ``cb (M, 4, 2)``: counter-clockwise footprints; ``ta (11, N)``, ``tb (11, M)``: terms of
+    :func:`_box_terms` (areas ``w l``, volumes, vertical extents); ``w (10, 17) float64`` and ``order (8,) int64``
+    are work arrays. Work is done relative to ``b``'s centre. With ``I`` the footprints' intersection, ``C`` their
+    convex hull and the areas ``A = w l`` (so the union ``U = A_a + A_b - I``, as Poly-MOT's):
+    IoU ``I / U``, GIoU ``IoU - (C - U) / C`` (``IoU`` where ``C`` is 0), not clipped: a tilted box's footprint
+    is smaller than ``w l``, so two nearly equal tilted boxes can score just above 1, as in Poly-MOT; 3D as
+    :func:`_pair_measures`.
+    """
+    ox, oy = tb[_X, j], tb[_Y, j]
+    ax, ay, bx, by, hxs, hys = w[0, :4], w[1, :4], w[2, :4], w[3, :4], w[4, :8], w[5, :8]
+    for r in range(4):
+        ax[r], ay[r] = ca[i, r, 0] - ox, ca[i, r, 1] - oy
+        bx[r], by[r] = cb[j, r, 0] - ox, cb[j, r, 1] - oy
+        hxs[r], hys[r], hxs[4 + r], hys[4 + r] = ax[r], ay[r], bx[r], by[r]
+    inter = 0.0
+    if _shoelace(ax, ay, 4) > 0.0 and _shoelace(bx, by, 4) > 0.0:
+        inter = _clip_area(ax, ay, bx, by, w[6, :16], w[7, :16], w[8, :16], w[9, :16])
+    hull = _hull8_area(hxs, hys, order, w[6], w[7]) if want[_GIOU_BEV] or want[_GIOU_3D] else 0.0
+    union = ta[_AREA, i] + tb[_AREA, j] - inter
+    iou = _ratio(inter, union)
+    out[_IOU_BEV, k] = iou
+    out[_GIOU_BEV, k] = iou - _ratio(hull - union, hull)
+    if want[_IOU_3D] or want[_GIOU_3D]:
+        overlap = max(0.0, min(ta[_HI, i], tb[_HI, j]) - max(ta[_LO, i], tb[_LO, j]))
+        span = max(ta[_HI, i], tb[_HI, j]) - min(ta[_LO, i], tb[_LO, j])
+        inter3 = inter * overlap
+        union3 = ta[_VOL, i] + tb[_VOL, j] - inter3
+        iou3 = _ratio(inter3, union3)
+        out[_IOU_3D, k] = iou3
+        out[_GIOU_3D, k] = iou3 - _ratio(hull * span - union3, hull * span)
+
+
+@njit(cache=True)
+def _footprint_kernel(ca, ta, cb, tb, outer, todo, want, out) -> None:
+    """:func:`_footprint_pair` of the K pairs with ``todo (K,) bool`` set into ``out (4, K)``; pairs as
+    :func:`_measures_kernel`."""
+    w, order = np.empty((10, 17)), np.empty(8, dtype=np.int64)
+    m = tb.shape[1]
+    for k in range(out.shape[1]):
+        if todo[k]:
+            i, j = (k // m, k % m) if outer else (k, k)
+            _footprint_pair(ca, i, ta, cb, j, tb, want, out, k, w, order)
+
+
+def _check_corners(corners: np.ndarray, n: int, name: str) -> np.ndarray:
+    """``corners`` as a C-contiguous ``(n, 4, 2) float64`` array; ``ValueError`` on another shape."""
+    c = np.ascontiguousarray(corners, dtype=np.float64)
+    if c.shape != (n, 4, 2):
+        raise ValueError(f"{name} must have shape {(n, 4, 2)}, got {c.shape}")
+    return c
+
+
+def footprint_similarities(
+    a: np.ndarray,
+    corners_a: np.ndarray,
+    b: np.ndarray,
+    corners_b: np.ndarray,
+    names,
+    pairwise: bool = True,
+    where: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """The measures ``names`` (of :data:`SIMILARITIES`) of boxes whose footprints are the given quadrilaterals.
+
+    a (N, >=7), corners_a (N, 4, 2), b (M, >=7), corners_b (M, 4, 2): boxes and their counter-clockwise
+    footprints (metres, e.g. :func:`bottom_corners`); the boxes give the areas ``w l``, volumes and vertical
+    extents. ``pairwise``: ``{name: (N, M) float64}`` over all pairs (with ``where (N, M) bool`` only the
+    selected ones, others 0); otherwise aligned pairs (N = M), ``{name: (N,) float64}``. Definitions:
+    :func:`_footprint_pair` (equal to the ``pairwise_*`` functions, to rounding, when the footprints are the
+    :func:`bev_corners` rectangles).
+    """
+    want = _want(names)
+    a, b = _check_boxes(a, "a"), _check_boxes(b, "b")
+    ca, cb = _check_corners(corners_a, len(a), "corners_a"), _check_corners(corners_b, len(b), "corners_b")
+    if not pairwise and len(a) != len(b):
+        raise ValueError(f"paired boxes need equal counts, got {len(a)} and {len(b)}")
+    k = len(a) * len(b) if pairwise else len(a)
+    out = np.zeros((4, k))
+    if k:
+        todo = np.ones(k, dtype=np.bool_) if where is None else np.ascontiguousarray(where, dtype=np.bool_).ravel()
+        if todo.shape != (k,):
+            raise ValueError(f"where must have shape {(len(a), len(b))}, got {np.shape(where)}")
+        _footprint_kernel(ca, _box_terms(a), cb, _box_terms(b), pairwise, todo, want, out)
+    shape = (len(a), len(b)) if pairwise else (len(a),)
+    return {n: out[SIMILARITIES.index(n)].reshape(shape) for n in SIMILARITIES if n in set(names)}
 
 
 def _pairwise_measure(name: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:

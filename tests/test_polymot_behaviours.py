@@ -194,6 +194,12 @@ def _raw(name: str = "polymot") -> dict:
             "euler",
             "'preprocessing.measured_yaw' must be one of euler_z, rotation_angle",
         ),
+        (
+            "preprocessing",
+            "footprint",
+            "polygon",
+            "'preprocessing.footprint' must be one of yaw_rectangle, bottom_face",
+        ),
     ],
 )
 def test_new_keys_are_validated(section, key, value, message):
@@ -208,18 +214,20 @@ def test_new_keys_are_validated(section, key, value, message):
         "ctra_form": "arc",
         "bicycle_form": "arc",
         "measured_yaw": "euler_z",
+        "footprint": "yaw_rectangle",
     }[key]
     assert getattr(config_from_dict(raw, "p.yaml"), key) == default
 
 
 def test_polymot_preset_values():
     cfg = config_from_dict(_raw())
-    assert (cfg.assignment, cfg.time_step, cfg.ctra_form, cfg.bicycle_form, cfg.measured_yaw) == (
+    assert (cfg.assignment, cfg.time_step, cfg.ctra_form, cfg.bicycle_form, cfg.measured_yaw, cfg.footprint) == (
         "threshold_margin",
         0.5,
         "piecewise",
         "piecewise",
         "rotation_angle",
+        "bottom_face",
     )
     assert cfg.first_threshold[1] == 1.34 and cfg.first_threshold[4] == 1.69  # bus, pedestrian (HEAD)
 

@@ -177,15 +177,20 @@ def _candidate_costs(
     trk_boxes: np.ndarray,
     trk_labels: np.ndarray,
     stages: list[tuple[tuple[str, ...], np.ndarray]],
+    det_corners: np.ndarray | None = None,
 ) -> list[np.ndarray]:
     """(D, T) cost matrices, one per stage, from ONE compiled geometry pass over the candidate pairs.
 
     stages: per stage, (metric name per class, cost threshold per class (C,)). A pair is a candidate of a
     stage when its classes agree and the similarity bound (:func:`_similarity_bound`) can beat that
     stage's threshold; everything else costs ``_INVALID`` (the bound never prunes a pair that could pass).
+    det_corners (D, 4, 2): the detections' own footprints (:func:`grutrack.geometry.bottom_corners`), measured
+    against the tracks' yaw rectangles by :func:`_footprint_costs`.
     """
     D, T = len(det_boxes), len(trk_boxes)
     costs = np.full((len(stages), D, T), _INVALID)
+    if D and T and det_corners is not None:
+        return _footprint_costs(det_boxes, det_labels, det_corners, trk_boxes, trk_labels, stages, costs)
     if D and T:
         codes = _similarity_codes(tuple(metric for metric, _ in stages))
         thresholds = np.array([thr for _, thr in stages], dtype=np.float64)
@@ -201,6 +206,113 @@ def _candidate_costs(
             costs,
         )
     return list(costs)
+
+
+def _footprint_costs(
+    det_boxes: np.ndarray,
+    det_labels: np.ndarray,
+    det_corners: np.ndarray,
+    trk_boxes: np.ndarray,
+    trk_labels: np.ndarray,
+    stages: list[tuple[tuple[str, ...], np.ndarray]],
+    costs: np.ndarray,
+) -> list[np.ndarray]:
+    """:func:`_candidate_costs` with the detections' footprints ``det_corners (D, 4, 2)`` (metres) measured
+    against the tracks' yaw rectangles (:func:`grutrack.geometry.footprint_similarities`) in one compiled pass
+    (:func:`_footprint_cost_kernel`); ``costs (S, D, T)`` comes pre-set to ``_INVALID`` and is filled in place."""
+    det = geometry._check_boxes(det_boxes, "detection boxes")
+    trk = geometry._check_boxes(trk_boxes, "track boxes")
+    ca = np.ascontiguousarray(det_corners, dtype=np.float64)
+    cb = geometry.bev_corners(trk)
+    _footprint_cost_kernel(
+        det_labels.astype(np.int64, copy=False),
+        trk_labels.astype(np.int64, copy=False),
+        ca,
+        geometry._box_terms(det),
+        _parallelogram_terms(ca),
+        cb,
+        geometry._box_terms(trk),
+        _parallelogram_terms(cb),
+        _similarity_codes(tuple(metric for metric, _ in stages)),
+        np.array([thr for _, thr in stages], dtype=np.float64),
+        costs,
+    )
+    return list(costs)
+
+
+@njit(cache=True)
+def _footprint_cost_kernel(det_labels, trk_labels, ca, ta, fa, cb, tb, fb, codes, thresholds, costs) -> None:
+    """:func:`_cost_kernel` on footprints: ``ca (D, 4, 2)``, ``cb (T, 4, 2)`` parallelograms with the terms
+    ``fa (4, D)``, ``fb (4, T)`` of :func:`_parallelogram_terms`; ``ta``, ``tb`` as there. A pair is a candidate
+    of stage s when its labels agree and :func:`_footprint_bound` can beat ``thresholds[s, label]``."""
+    n_stages = codes.shape[0]
+    out, work, order = np.zeros((4, 1)), np.empty((10, 17)), np.empty(8, dtype=np.int64)
+    want, need = np.zeros(4, dtype=np.bool_), np.zeros(n_stages, dtype=np.bool_)
+    for i in range(det_labels.shape[0]):
+        lab = det_labels[i]
+        for j in range(trk_labels.shape[0]):
+            if trk_labels[j] != lab:
+                continue
+            want[:] = False
+            any_need = False
+            for st in range(n_stages):
+                code = codes[st, lab]
+                need[st] = _footprint_bound(ta, fa, i, tb, fb, j, code) > 1.0 - thresholds[st, lab] - _BOUND_SLACK
+                if need[st]:
+                    want[code] = True
+                    any_need = True
+            if not any_need:
+                continue
+            geometry._footprint_pair(ca, i, ta, cb, j, tb, want, out, 0, work, order)
+            for st in range(n_stages):
+                if need[st]:
+                    costs[st, i, j] = 1.0 - out[codes[st, lab], 0]
+
+
+#: rows of :func:`_parallelogram_terms`
+_PX, _PY, _PR, _PIN, _PAREA = range(5)
+
+
+def _parallelogram_terms(c: np.ndarray) -> np.ndarray:
+    """(5, N) terms of parallelograms ``c (N, 4, 2)`` (metres, counter-clockwise): centre x, y; circumradius about
+    the centre; inradius (half the least width: the area over the longer side, halved); area (m^2)."""
+    centre = c.mean(axis=1)
+    radius = np.linalg.norm(c - centre[:, None], axis=2).max(axis=1)
+    e0, e1 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 1]
+    area = np.abs(e0[:, 0] * e1[:, 1] - e0[:, 1] * e1[:, 0])
+    longest = np.maximum(np.linalg.norm(e0, axis=1), np.linalg.norm(e1, axis=1))
+    inradius = np.where(longest > 0.0, 0.5 * area / np.where(longest > 0.0, longest, 1.0), 0.0)
+    return np.ascontiguousarray(np.stack([centre[:, 0], centre[:, 1], radius, inradius, area]))
+
+
+@njit(cache=True, inline="always")
+def _footprint_bound(ta, fa, i, tb, fb, j, code: int) -> float:
+    """Upper bound of similarity ``code`` of footprint ``i`` of ``fa`` and ``j`` of ``fb`` (terms of
+    :func:`_parallelogram_terms`; ``ta``, ``tb``: :func:`geometry._box_terms` of the boxes), as
+    :func:`_similarity_bound` for parallelograms.
+
+    1 where the footprints' discs meet. Apart: IoU 0; the convex hull holds both footprints (areas P) and the
+    trapezoid between their chords through the centres across the centre line, each at least twice the
+    footprint's inradius r (a parallelogram is symmetric about its centre), so
+    ``C >= max(P_a + P_b, d (r_a + r_b) + (P_a + P_b) / 2)``; then GIoU_bev <= (A_a + A_b) / C - 1 and
+    GIoU_3d <= (V_a + V_b) / (C span) - 1, with A = w l and V = w l h the union's terms
+    (:func:`grutrack.geometry.footprint_similarities`); the trivial 1 where that bound of C is 0.
+    """
+    dx, dy = fa[_PX, i] - fb[_PX, j], fa[_PY, i] - fb[_PY, j]
+    d = np.sqrt(dx * dx + dy * dy)
+    if d <= fa[_PR, i] + fb[_PR, j]:
+        return 1.0
+    if code == geometry._IOU_BEV or code == geometry._IOU_3D:
+        return 0.0
+    area = fa[_PAREA, i] + fb[_PAREA, j]
+    hull = max(area, d * (fa[_PIN, i] + fb[_PIN, j]) + 0.5 * area)
+    if hull <= 0.0:
+        return 1.0
+    if code == geometry._GIOU_3D:
+        span = max(ta[geometry._HI, i], tb[geometry._HI, j]) - min(ta[geometry._LO, i], tb[geometry._LO, j])
+        volume = ta[geometry._VOL, i] + tb[geometry._VOL, j]
+        return min(volume / (hull * span) - 1.0, 1.0) if span > 0.0 else 1.0
+    return min((ta[geometry._AREA, i] + tb[geometry._AREA, j]) / hull - 1.0, 1.0)
 
 
 def associate(
@@ -219,6 +331,7 @@ def associate(
     crowded: tuple[np.ndarray, Callable[[np.ndarray, np.ndarray], np.ndarray]] | None = None,
     track_penalty: np.ndarray | None = None,
     crowded_skip: np.ndarray | None = None,
+    det_corners: np.ndarray | None = None,
 ) -> Matches:
     """Two-stage association of D detections with T (predicted) tracks.
 
@@ -233,13 +346,14 @@ def associate(
     row or column with more than one pair below ``first_threshold`` takes the strict costs, admitted below ``limit``
     (:func:`crowded_stage_one`); track_penalty (T,): added to the stage-1 cost of each track's admissible pairs, up to
     just below the threshold (:func:`penalized`); crowded_skip (T,) bool: tracks that neither make a row crowded nor
-    take the strict cost there (``skip`` of :func:`crowded_stage_one`).
+    take the strict cost there (``skip`` of :func:`crowded_stage_one`); det_corners (D, 4, 2): the detections' own
+    footprints for the IoU / GIoU measures (``preprocessing.footprint: bottom_face``; None: their yaw rectangles).
     """
     solve = ASSIGNMENT[assignment]
     stages = [(tuple(first_metric), first_threshold)]
     if two_stage:
         stages.append(((second_metric,) * len(first_metric), second_threshold))
-    costs = _candidate_costs(det_boxes, det_labels, trk_boxes, trk_labels, stages)
+    costs = _candidate_costs(det_boxes, det_labels, trk_boxes, trk_labels, stages, det_corners)
     if first_override is not None and costs[0].size:
         classes, override = first_override
         costs[0] = np.where(classes[det_labels][:, None], override, costs[0])
@@ -333,35 +447,9 @@ def aligned_extents(
     """
     b = np.array(boxes, dtype=np.float64, ndmin=2)[:, :7]
     k = np.broadcast_to(np.asarray(scale, dtype=np.float64), (len(b),))
-    if quaternion is None:
-        b[:, 3:5] *= k[:, None]
-        c = geometry.bev_corners(b)  # (N, 4, 2)
-    else:
-        R = rotation_matrices(quaternion)  # (N, 3, 3)
-        local = np.stack(
-            [
-                np.array([1, 1, -1, -1]) * (0.5 * k * b[:, 4])[:, None],
-                np.array([-1, 1, 1, -1]) * (0.5 * k * b[:, 3])[:, None],
-                np.broadcast_to((-0.5 * k * b[:, 5])[:, None], (len(b), 4)),
-            ],
-            axis=1,
-        )  # (N, 3, 4)
-        c = (np.einsum("nij,njk->nik", R[:, :2], local) + b[:, :2, None]).transpose(0, 2, 1)
+    b[:, 3:6] *= k[:, None]  # w, l, h
+    c = geometry.bottom_corners(b, quaternion)  # (N, 4, 2)
     return np.concatenate([c.min(axis=1), c.max(axis=1)], axis=1)
-
-
-def rotation_matrices(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices (N, 3, 3) of quaternions ``q (N, 4) [w, x, y, z]`` (normalised first)."""
-    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
-    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        axis=1,
-    )
 
 
 def _rect_area(e: np.ndarray) -> np.ndarray:
@@ -425,13 +513,17 @@ def distance_mask(a: np.ndarray, b: np.ndarray, radius: np.ndarray | float) -> n
 DENSE_METRICS = ("a_giou_3d", "a_giou_bev", "giou_3d", "giou_bev", "iou_3d", "iou_bev")
 
 
-def _dense_similarity(name: str, a: np.ndarray, b: np.ndarray, qa: np.ndarray | None = None) -> np.ndarray:
+def _dense_similarity(
+    name: str, a: np.ndarray, b: np.ndarray, qa: np.ndarray | None = None, ca: np.ndarray | None = None
+) -> np.ndarray:
     """(Na, Nb) similarity ``name`` between boxes a (Na, 9) and b (Nb, 9); ``qa`` (Na, 4) a's own quaternions
-    (A-GIoU footprints only)."""
+    (A-GIoU footprints); ``ca`` (Na, 4, 2) a's own footprints for IoU / GIoU (None: yaw rectangles)."""
     if name == "a_giou_3d":
         return a_giou_3d(a, b, qa)
     if name == "a_giou_bev":
         return a_giou_bev(a, b, qa)
+    if ca is not None:
+        return geometry.footprint_similarities(a, ca, b, geometry.bev_corners(b), [name])[name]
     fn = {
         "giou_3d": geometry.pairwise_giou_3d,
         "giou_bev": geometry.pairwise_bev_giou,
@@ -477,6 +569,7 @@ def gated_costs(
     gate: np.ndarray,
     invalid: float = np.inf,
     det_quaternion: np.ndarray | None = None,
+    det_corners: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Stage-1 and stage-2 cost matrices (D, T) with Fast-Poly's distance gate; cost = 1 - similarity.
 
@@ -487,7 +580,7 @@ def gated_costs(
     is scored with ``second_metric``, even when that pair itself lies outside the gate (Fast-Poly's rows and
     columns come from the union of its per-class distance masks). With some classes ungated: the stage-1 pairs,
     as :func:`associate`. ``det_quaternion`` (D, 4): the detections' own rotations, for their A-GIoU footprints
-    (tracks are yaw-only boxes).
+    (tracks are yaw-only boxes); ``det_corners`` (D, 4, 2): their footprints for IoU / GIoU (None: yaw rectangles).
     """
     D, T = len(det_boxes), len(trk_boxes)
     c1, c2 = np.full((D, T), invalid), np.full((D, T), invalid)
@@ -504,9 +597,16 @@ def gated_costs(
     sub = np.ix_(rows, cols)
     names = {first_metric[c] for c in np.unique(det_labels[rows])} | {second_metric}
     qa = None if det_quaternion is None else det_quaternion[rows]
+    ca = None if det_corners is None else det_corners[rows]
     # each similarity at most its bound: far apart (a diverged track kilometres away) the dense geometry loses
-    # its digits, and the bound, exact there, keeps such a pair from passing a threshold
-    sims = {n: np.minimum(_dense_similarity(n, a, b, qa), _dense_bound(n, a, b)) for n in sorted(names)}
+    # its digits, and the bound, exact there, keeps such a pair from passing a threshold (the yaw rectangles' bound;
+    # the footprints' measures are taken relative to the track's centre)
+    sims = {
+        n: _dense_similarity(n, a, b, qa, ca)
+        if ca is not None and not n.startswith("a_")
+        else np.minimum(_dense_similarity(n, a, b, qa), _dense_bound(n, a, b))
+        for n in sorted(names)
+    }
     first = np.full((len(rows), len(cols)), -np.inf)
     for c in np.unique(det_labels[rows]):
         r = det_labels[rows] == c
@@ -540,6 +640,7 @@ def gated_association(cfg):
             cfg.distance_gate,
             invalid=_INVALID,
             det_quaternion=dets.extra.get("quaternion"),
+            det_corners=dets.extra.get("footprint"),
         )
         return _solve_stages(
             solve, [c1, c2] if cfg.two_stage else [c1], dets.labels, cfg.first_threshold, cfg.second_threshold

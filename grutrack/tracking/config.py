@@ -93,6 +93,7 @@ class TrackerConfig:
     geometry_window: np.ndarray = field(default_factory=lambda: np.ones(7, dtype=np.int64))
     # MCTrack options (defaults: the textbook choices, the pipeline above unchanged)
     nms_order: str = "input"
+    footprint: str = "yaw_rectangle"  # a detection's footprint in IoU / GIoU: yaw_rectangle or bottom_face
     ro_gdiou_weights: np.ndarray = field(default_factory=lambda: np.ones((7, 2)))
     crowded_threshold: np.ndarray = field(default_factory=lambda: np.zeros(7))  # 0: off (stage 1 as it is)
     lost_newborn_penalty: np.ndarray = field(default_factory=lambda: np.zeros(7))  # stage-1 cost added; 0: off
@@ -220,6 +221,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         geometry_filter=v["motion.geometry_filter"],
         geometry_window=v["motion.geometry_window"],
         nms_order=v["preprocessing.nms_order"],
+        footprint=v["preprocessing.footprint"],
         ro_gdiou_weights=v["association.ro_gdiou_weights"],
         crowded_threshold=v["association.crowded_threshold"],
         lost_newborn_penalty=v["association.lost_newborn_penalty"],

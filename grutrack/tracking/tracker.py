@@ -175,6 +175,7 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
             ),
             None if lost is None else np.where(lost, penalty[trk_labels], 0.0),
             lost if skip_lost else None,
+            dets.extra.get("footprint"),
         )
 
     run.wants_tracks = bool(np.any(penalty > 0)) or skip_lost
