@@ -151,12 +151,12 @@ def test_footprint_costs_prune_no_pair_that_could_pass():
         assert measured.sum() < same.sum()  # the bound skipped some far pairs
 
 
-def _polymot(**preprocessing) -> object:
+def _polymot(preset: str = "polymot", **preprocessing) -> object:
     import yaml
 
     from grutrack.tracking.config import preset_path
 
-    raw = yaml.safe_load(preset_path("polymot").read_text())
+    raw = yaml.safe_load(preset_path(preset).read_text())
     raw["preprocessing"].update(preprocessing)
     return config_from_dict(raw)
 
@@ -186,9 +186,10 @@ def test_a_tilted_detection_takes_the_track_its_bottom_face_is_nearer():
     assert chosen == {"bottom_face": [0], "yaw_rectangle": [1]}
 
 
-def test_blend_nms_measures_the_bottom_faces():
-    # two cars end to end, overlapping 0.68 m: BEV IoU of the rectangles 0.082, above polymot's 0.08. The second is
-    # pitched 3 degrees so that its bottom face moves away from the first: their IoU falls below 0.08 and both stay.
+@pytest.mark.parametrize("preset", ["polymot", "fastpoly"])  # blend NMS; scale NMS with rotated IoU for cars
+def test_nms_measures_the_bottom_faces(preset):
+    # two cars end to end, overlapping 0.68 m: BEV IoU of the rectangles 0.082, above the presets' 0.08. The second
+    # is pitched 3 degrees so that its bottom face moves away from the first: their IoU falls below 0.08, both stay.
     car = CLASS_INDEX["car"]
     boxes = np.array([_car(0.0), _car(4.5 - 0.68)])
     for sign in (1.0, -1.0):
@@ -200,8 +201,9 @@ def test_blend_nms_measures_the_bottom_faces():
     face = geometry.footprint_similarities(boxes[:1], corners[:1], boxes[1:], corners[1:], ["iou_bev"])["iou_bev"]
     assert rect > 0.08 > face[0, 0]
     dets = BoxSet(boxes, [0.9, 0.8], [car, car], extra={"quaternion": q})
-    assert len(preprocess_frame(dets, _polymot(footprint="bottom_face"))) == 2
-    assert len(preprocess_frame(dets, _polymot(footprint="yaw_rectangle"))) == 1
+    assert _polymot(preset).footprint == "bottom_face"
+    assert len(preprocess_frame(dets, _polymot(preset, footprint="bottom_face"))) == 2
+    assert len(preprocess_frame(dets, _polymot(preset, footprint="yaw_rectangle"))) == 1
 
 
 def test_without_quaternions_the_bottom_face_is_the_yaw_rectangle():
