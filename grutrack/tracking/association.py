@@ -128,36 +128,45 @@ def _unmatched(n: int, matched: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _cost_kernel(det_labels, trk_labels, ta, tb, codes, thresholds, costs) -> None:
+def _cost_kernel(det_labels, trk_labels, ta, tb, ca, cb, fa, fb, codes, thresholds, costs) -> None:
     """Fill ``costs (S, D, T)`` (pre-set to ``_INVALID``) with ``1 - similarity`` of every candidate pair.
 
     ta (11, D), tb (11, T): :func:`geometry._box_terms` of the detections and the tracks; labels (D,), (T,);
     codes (S, C) int: the similarity (index into ``geometry.SIMILARITIES``) of each stage and class;
     thresholds (S, C): cost thresholds. A pair is a candidate of stage s when its labels agree and the bound of
-    :func:`_similarity_bound` can beat ``thresholds[s, label]``.
+    :func:`_similarity_bound` can beat ``thresholds[s, label]``. With footprints, ``ca (D, 4, 2)`` and
+    ``cb (T, 4, 2)`` (parallelograms, metres) and their terms ``fa (5, D)``, ``fb (5, T)``
+    (:func:`_parallelogram_terms`), pairs are measured by :func:`geometry._footprint_pair` and bounded by
+    :func:`_footprint_bound`; without, ``ca`` is ``(0, 4, 2)``.
     """
-    n_stages = codes.shape[0]
+    n_stages, footprints = codes.shape[0], ca.shape[0] > 0
     out, work, flags = np.zeros((4, 1)), np.empty((12, 16)), np.empty(16, dtype=np.bool_)
-    keys = np.empty(16, dtype=np.int64)
+    keys, fwork, order = np.empty(16, dtype=np.int64), np.empty((10, 17)), np.empty(8, dtype=np.int64)
     want, need = np.zeros(4, dtype=np.bool_), np.zeros(n_stages, dtype=np.bool_)
     for i in range(det_labels.shape[0]):
         lab = det_labels[i]
         for j in range(trk_labels.shape[0]):
             if trk_labels[j] != lab:
                 continue
-            d = _centre_distance(ta, i, tb, j)
+            d = 0.0 if footprints else _centre_distance(ta, i, tb, j)
             want[:] = False
             any_need = False
             for st in range(n_stages):
                 code = codes[st, lab]
-                bound = _similarity_bound(ta, i, tb, j, d, code)
+                if footprints:
+                    bound = _footprint_bound(ta, fa, i, tb, fb, j, code)
+                else:
+                    bound = _similarity_bound(ta, i, tb, j, d, code)
                 need[st] = bound > 1.0 - thresholds[st, lab] - _BOUND_SLACK
                 if need[st]:
                     want[code] = True
                     any_need = True
             if not any_need:
                 continue
-            geometry._pair_measures(ta, i, tb, j, want, out, 0, work, flags, keys)
+            if footprints:
+                geometry._footprint_pair(ca, i, ta, cb, j, tb, want, out, 0, fwork, order)
+            else:
+                geometry._pair_measures(ta, i, tb, j, want, out, 0, work, flags, keys)
             for st in range(n_stages):
                 if need[st]:
                     costs[st, i, j] = 1.0 - out[codes[st, lab], 0]
@@ -185,88 +194,33 @@ def _candidate_costs(
     stage when its classes agree and the similarity bound (:func:`_similarity_bound`) can beat that
     stage's threshold; everything else costs ``_INVALID`` (the bound never prunes a pair that could pass).
     det_corners (D, 4, 2): the detections' own footprints (:func:`grutrack.geometry.bottom_corners`), measured
-    against the tracks' yaw rectangles by :func:`_footprint_costs`.
+    against the tracks' yaw rectangles (:func:`grutrack.geometry.footprint_similarities`).
     """
     D, T = len(det_boxes), len(trk_boxes)
     costs = np.full((len(stages), D, T), _INVALID)
-    if D and T and det_corners is not None:
-        return _footprint_costs(det_boxes, det_labels, det_corners, trk_boxes, trk_labels, stages, costs)
     if D and T:
-        codes = _similarity_codes(tuple(metric for metric, _ in stages))
-        thresholds = np.array([thr for _, thr in stages], dtype=np.float64)
         det = geometry._check_boxes(det_boxes, "detection boxes")
         trk = geometry._check_boxes(trk_boxes, "track boxes")
+        if det_corners is None:
+            ca = cb = np.zeros((0, 4, 2))
+            fa = fb = np.zeros((5, 0))
+        else:
+            ca, cb = np.ascontiguousarray(det_corners, dtype=np.float64), geometry.bev_corners(trk)
+            fa, fb = _parallelogram_terms(ca), _parallelogram_terms(cb)
         _cost_kernel(
             det_labels.astype(np.int64, copy=False),
             trk_labels.astype(np.int64, copy=False),
             geometry._box_terms(det),
             geometry._box_terms(trk),
-            codes,
-            thresholds,
+            ca,
+            cb,
+            fa,
+            fb,
+            _similarity_codes(tuple(metric for metric, _ in stages)),
+            np.array([thr for _, thr in stages], dtype=np.float64),
             costs,
         )
     return list(costs)
-
-
-def _footprint_costs(
-    det_boxes: np.ndarray,
-    det_labels: np.ndarray,
-    det_corners: np.ndarray,
-    trk_boxes: np.ndarray,
-    trk_labels: np.ndarray,
-    stages: list[tuple[tuple[str, ...], np.ndarray]],
-    costs: np.ndarray,
-) -> list[np.ndarray]:
-    """:func:`_candidate_costs` with the detections' footprints ``det_corners (D, 4, 2)`` (metres) measured
-    against the tracks' yaw rectangles (:func:`grutrack.geometry.footprint_similarities`) in one compiled pass
-    (:func:`_footprint_cost_kernel`); ``costs (S, D, T)`` comes pre-set to ``_INVALID`` and is filled in place."""
-    det = geometry._check_boxes(det_boxes, "detection boxes")
-    trk = geometry._check_boxes(trk_boxes, "track boxes")
-    ca = np.ascontiguousarray(det_corners, dtype=np.float64)
-    cb = geometry.bev_corners(trk)
-    _footprint_cost_kernel(
-        det_labels.astype(np.int64, copy=False),
-        trk_labels.astype(np.int64, copy=False),
-        ca,
-        geometry._box_terms(det),
-        _parallelogram_terms(ca),
-        cb,
-        geometry._box_terms(trk),
-        _parallelogram_terms(cb),
-        _similarity_codes(tuple(metric for metric, _ in stages)),
-        np.array([thr for _, thr in stages], dtype=np.float64),
-        costs,
-    )
-    return list(costs)
-
-
-@njit(cache=True)
-def _footprint_cost_kernel(det_labels, trk_labels, ca, ta, fa, cb, tb, fb, codes, thresholds, costs) -> None:
-    """:func:`_cost_kernel` on footprints: ``ca (D, 4, 2)``, ``cb (T, 4, 2)`` parallelograms with the terms
-    ``fa (4, D)``, ``fb (4, T)`` of :func:`_parallelogram_terms`; ``ta``, ``tb`` as there. A pair is a candidate
-    of stage s when its labels agree and :func:`_footprint_bound` can beat ``thresholds[s, label]``."""
-    n_stages = codes.shape[0]
-    out, work, order = np.zeros((4, 1)), np.empty((10, 17)), np.empty(8, dtype=np.int64)
-    want, need = np.zeros(4, dtype=np.bool_), np.zeros(n_stages, dtype=np.bool_)
-    for i in range(det_labels.shape[0]):
-        lab = det_labels[i]
-        for j in range(trk_labels.shape[0]):
-            if trk_labels[j] != lab:
-                continue
-            want[:] = False
-            any_need = False
-            for st in range(n_stages):
-                code = codes[st, lab]
-                need[st] = _footprint_bound(ta, fa, i, tb, fb, j, code) > 1.0 - thresholds[st, lab] - _BOUND_SLACK
-                if need[st]:
-                    want[code] = True
-                    any_need = True
-            if not any_need:
-                continue
-            geometry._footprint_pair(ca, i, ta, cb, j, tb, want, out, 0, work, order)
-            for st in range(n_stages):
-                if need[st]:
-                    costs[st, i, j] = 1.0 - out[codes[st, lab], 0]
 
 
 #: rows of :func:`_parallelogram_terms`

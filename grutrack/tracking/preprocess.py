@@ -199,12 +199,12 @@ def preprocess_frame(dets: BoxSet, cfg) -> BoxSet:
     survivors come class by class, each class by descending score, as Fast-Poly orders them).
 
     With ``preprocessing.footprint: bottom_face`` the kept detections carry ``extra["footprint"] (N, 4, 2)``, their
-    bottom faces on the ground (:func:`geometry.bottom_corners` of their own quaternion; the yaw rectangle where
-    the input has none), which NMS and the association's IoU / GIoU measure."""
+    bottom faces on the ground (:func:`geometry.bottom_corners` of their own quaternion), which NMS and the
+    association's IoU / GIoU measure; detections without quaternions (AV2, LT3D tables) keep the yaw rectangles."""
     dets = score_filter(dets, cfg.score_threshold, strict=cfg.score_filter == "above")
     corners = None
-    if cfg.footprint == "bottom_face":
-        corners = geometry.bottom_corners(dets.boxes, dets.extra.get("quaternion"))
+    if cfg.footprint == "bottom_face" and "quaternion" in dets.extra:  # without quaternions: the yaw rectangles
+        corners = geometry.bottom_corners(dets.boxes, dets.extra["quaternion"])
         dets = BoxSet(dets.boxes, dets.scores, dets.labels, dets.ids, {**dets.extra, "footprint": corners})
     if cfg.nms_method == "blend":
         return dets.subset(
