@@ -186,12 +186,15 @@ def test_a_tilted_detection_takes_the_track_its_bottom_face_is_nearer():
     assert chosen == {"bottom_face": [0], "yaw_rectangle": [1]}
 
 
-@pytest.mark.parametrize("preset", ["polymot", "fastpoly"])  # blend NMS; scale NMS with rotated IoU for cars
+@pytest.mark.parametrize("preset", ["polymot", "fastpoly", "mctrack"])  # blend NMS; Fast-Poly's scale NMS (cars)
 def test_nms_measures_the_bottom_faces(preset):
-    # two cars end to end, overlapping 0.68 m: BEV IoU of the rectangles 0.082, above the presets' 0.08. The second
-    # is pitched 3 degrees so that its bottom face moves away from the first: their IoU falls below 0.08, both stay.
+    # two cars end to end, overlapping so that the BEV IoU of their rectangles is 2 % above the preset's car NMS
+    # threshold t. The second is pitched 3 degrees so that its bottom face moves away from the first: the IoU of the
+    # bottom faces falls below t and both stay.
     car = CLASS_INDEX["car"]
-    boxes = np.array([_car(0.0), _car(4.5 - 0.68)])
+    t = float(np.broadcast_to(_polymot(preset).nms_threshold, (7,))[car])
+    overlap = 1.02 * 16.2 * t / (1.8 * (1.0 + t))  # IoU = 1.8 d / (2 * 1.8 * 4.5 - 1.8 d) = t at d / 1.02
+    boxes = np.array([_car(0.0), _car(4.5 - overlap)])
     for sign in (1.0, -1.0):
         q = np.vstack([quaternion_from_yaw([0.0]), _tilted([0.0], [sign * np.radians(3.0)], [0.0])])
         if np.mean(geometry.bottom_corners(boxes[1:], q[1:])[0, :, 0]) > boxes[1, 0]:
@@ -199,7 +202,7 @@ def test_nms_measures_the_bottom_faces(preset):
     corners = geometry.bottom_corners(boxes, q)
     rect = geometry.paired_bev_iou(boxes[:1], boxes[1:])[0]
     face = geometry.footprint_similarities(boxes[:1], corners[:1], boxes[1:], corners[1:], ["iou_bev"])["iou_bev"]
-    assert rect > 0.08 > face[0, 0]
+    assert rect > t > face[0, 0]
     dets = BoxSet(boxes, [0.9, 0.8], [car, car], extra={"quaternion": q})
     assert _polymot(preset).footprint == "bottom_face"
     assert len(preprocess_frame(dets, _polymot(preset, footprint="bottom_face"))) == 2
