@@ -209,11 +209,18 @@ def test_nms_measures_the_bottom_faces(preset):
     assert len(preprocess_frame(dets, _polymot(preset, footprint="yaw_rectangle"))) == 1
 
 
-def test_without_quaternions_the_bottom_face_is_the_yaw_rectangle():
-    # AV2 / LT3D tables carry no quaternion: the key changes nothing there
+def test_without_tilt_the_rectangle_measures_serve():
+    # AV2 / LT3D tables carry no quaternion, simulated files yaw-only ones: the key changes nothing there
     car = CLASS_INDEX["car"]
     boxes = np.array([_car(0.0, 0.2), _car(3.9, 0.1), _car(20.0)])
     dets = BoxSet(boxes, [0.9, 0.8, 0.7], [car, car, car])
     kept = preprocess_frame(dets, _polymot(footprint="bottom_face"))
     assert "footprint" not in kept.extra  # the rectangle measures, exactly
     assert np.array_equal(kept.boxes, preprocess_frame(dets, _polymot(footprint="yaw_rectangle")).boxes)
+    # nor do yaw-only quaternions (a simulated file's): their bottom faces are the rectangles
+    flat = BoxSet(boxes, [0.9, 0.8, 0.7], [car, car, car], extra={"quaternion": quaternion_from_yaw(boxes[:, 6])})
+    assert "footprint" not in preprocess_frame(flat, _polymot(footprint="bottom_face")).extra
+    tilted = flat.extra["quaternion"].copy()
+    tilted[2] = _tilted([0.0], [0.01], [0.0])[0]  # one box pitched: the frame's footprints are measured
+    kept = preprocess_frame(BoxSet(boxes, [0.9, 0.8, 0.7], [car] * 3, extra={"quaternion": tilted}), _polymot())
+    assert kept.extra["footprint"].shape == (len(kept), 4, 2)

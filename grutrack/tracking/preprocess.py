@@ -200,11 +200,13 @@ def preprocess_frame(dets: BoxSet, cfg) -> BoxSet:
 
     With ``preprocessing.footprint: bottom_face`` the kept detections carry ``extra["footprint"] (N, 4, 2)``, their
     bottom faces on the ground (:func:`geometry.bottom_corners` of their own quaternion), which NMS and the
-    association's IoU / GIoU measure; detections without quaternions (AV2, LT3D tables) keep the yaw rectangles."""
+    association's IoU / GIoU measure. A frame whose boxes all turn about +z only (quaternion x = y = 0), or carry no
+    quaternion (AV2, LT3D tables), keeps the rectangle measures: their bottom faces are those rectangles."""
     dets = score_filter(dets, cfg.score_threshold, strict=cfg.score_filter == "above")
     corners = None
-    if cfg.footprint == "bottom_face" and "quaternion" in dets.extra:  # without quaternions: the yaw rectangles
-        corners = geometry.bottom_corners(dets.boxes, dets.extra["quaternion"])
+    q = dets.extra.get("quaternion")
+    if cfg.footprint == "bottom_face" and q is not None and np.any(q[:, 1:3] != 0.0):  # some box pitched or rolled
+        corners = geometry.bottom_corners(dets.boxes, q)
         dets = BoxSet(dets.boxes, dets.scores, dets.labels, dets.ids, {**dets.extra, "footprint": corners})
     if cfg.nms_method == "blend":
         return dets.subset(
