@@ -73,6 +73,9 @@ from grutrack.tracking.config import preset_path
 from grutrack.tracking.factory import build_tracker
 from grutrack.tracking.tracker import track_scenes
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from densify_detections import densify_file  # noqa: E402
+
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "nuscenes"
 CLASSES = ("bicycle", "bus", "car", "motorcycle", "pedestrian", "trailer", "truck")
 THREE = ("polymot", "fastpoly", "mctrack")
@@ -175,6 +178,12 @@ GROUPS = {
     "fresh7": (tuple(range(10000, 10050)), ("mini_val",)),
     "fresh7_variants": (tuple(range(10000, 10020)), ("mini_val",), (*VARIANTS, "cp_strong")),
 }
+
+#: SYNTHETIC sets made denser and messier, as a real detector's file is (benchmarks/densify_detections.py with its
+#: defaults: 120 boxes more a sample, copies of its boxes moved by N(0, 6 m) and given any of the ten detection
+#: classes and a score U(0.01, 0.3); every score at 2 decimals; 5 % of the boxes repeated exactly; its seed the set's):
+#: group -> (the group whose sets are densified, how many of its first seeds). Made after the last decision.
+DENSE = {"dense": ("fresh7", 10), "dense_variants": ("fresh7_variants", 5), "dense_train": ("fresh6_train", 5)}
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
 #: tracked (split demo_all): group -> (world seeds, edit of the demo's class specs or None, detector profiles).
@@ -780,6 +789,17 @@ CANDIDATES = {
     **{f"+nis{g}": _nis(g) for g in (1.5, 2.0, 3.0)},
     # the robust update only for tracks with at least h matched detections before the update (motion.nis_min_hits)
     **{f"+nis_hits{h}": _nis_hits(h) for h in (3, 4, 6)},
+    # Fast-Poly's termination (a track also dies once the mean of its per-frame scores since birth falls below its
+    # class's delete threshold, Fast-Poly's life_cycle.score.delete_thre): the preset since Decision 14, which
+    # ekf_prev14 takes back (death by age alone)
+    "ekf_prev14": lambda raw: (raw["lifecycle"].update(termination="age"), raw["lifecycle"].pop("delete_threshold")),
+    # buses' stage-1 cost threshold at Fast-Poly's 1.16 (GIoU above -0.16) or halfway, 1.25
+    "+bus116": lambda raw: raw["association"]["first_threshold"].update(bus=1.16),
+    "+bus125": lambda raw: raw["association"]["first_threshold"].update(bus=1.25),
+    # bus detections scored below Fast-Poly's 0.12 dropped
+    "+bus_score012": lambda raw: raw["preprocessing"]["score_threshold"].update(bus=0.12),
+    # a 3 m centre gate for buses (Fast-Poly's gate radius)
+    "+bus_gate3": lambda raw: raw["association"]["distance_gate"].update(bus=3.0),
 }
 
 
@@ -850,10 +870,20 @@ def _world_sets(group: str, cache: Path, data: dict) -> dict[str, tuple[str, Pat
     return out
 
 
+def _simulated(cache: Path, split: str, profile: str, seed: int, nusc) -> Path:
+    """The SYNTHETIC detection file of one set in ``cache``, simulated on first use."""
+    path = cache / f"{split}_{profile}_s{seed}.json"
+    if not path.is_file():
+        simulate_nuscenes(None, "v1.0-mini", split, profile_arg(profile, cache), seed, out=path, nusc=nusc)
+    return path
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="nuScenes data root (holds v1.0-mini)")
-    ap.add_argument("--groups", default="reference,heldout", help="comma list of: " + ", ".join([*GROUPS, *WORLDS]))
+    ap.add_argument(
+        "--groups", default="reference,heldout", help="comma list of: " + ", ".join([*GROUPS, *DENSE, *WORLDS])
+    )
     ap.add_argument("--candidates", default=",".join(CANDIDATES), help="comma list of: " + ", ".join(CANDIDATES))
     ap.add_argument(
         "--base",
@@ -890,7 +920,7 @@ def main(argv=None) -> int:
     if unknown:
         print(f"unknown candidate(s): {', '.join(unknown)}", file=sys.stderr)
         return 2
-    known_groups = (*GROUPS, *WORLDS)
+    known_groups = (*GROUPS, *DENSE, *WORLDS)
     bad_groups = [g for g in args.groups.split(",") if g not in known_groups]
     if bad_groups:
         print(
@@ -914,12 +944,18 @@ def main(argv=None) -> int:
             sets.update({k: (split, args.data / rel) for k, (split, rel) in REFERENCE.items()})
         elif group in WORLDS:
             sets.update(_world_sets(group, cache, data))
+        elif group in DENSE:
+            base, count = DENSE[group]
+            seeds, *rest = GROUPS[base]
+            for key, (split, profile, seed) in generated(seeds[:count], *rest).items():
+                path = _simulated(cache, split, profile, seed, nusc)
+                dense = path.with_name(f"{path.stem}_dense.json")
+                if not dense.is_file():
+                    densify_file(path, dense, seed=seed)
+                sets[f"{key} dense"] = (split, dense)
         else:
             for key, (split, profile, seed) in generated(*GROUPS[group]).items():
-                path = cache / f"{split}_{profile}_s{seed}.json"
-                if not path.is_file():
-                    simulate_nuscenes(None, "v1.0-mini", split, profile_arg(profile, cache), seed, out=path, nusc=nusc)
-                sets[key] = (split, path)
+                sets[key] = (split, _simulated(cache, split, profile, seed, nusc))
 
     presets = {t: t for t in THREE} | {c: candidate_path(c, args.base) for c in names}
     classes: dict[str, dict[str, dict[str, float]]] = {}  # set -> preset -> {"all", class: AMOTA}

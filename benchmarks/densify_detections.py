@@ -80,6 +80,19 @@ def densify(
     return out
 
 
+def densify_file(
+    src: Path, dst: Path, clutter: int = 120, decimals: int = 2, duplicates: float = 0.05, seed: int = 1
+) -> int:
+    """Write ``src`` densified (:func:`densify`, ``np.random.default_rng(seed)``) to ``dst``, atomically, labelled
+    SYNTHETIC; returns the number of boxes. OSError / ValueError / KeyError / TypeError / IndexError on a file that
+    is not a detection submission."""
+    sub = json.loads(Path(src).read_text())
+    results = densify(sub, clutter, decimals, duplicates, np.random.default_rng(seed))
+    note = f"SYNTHETIC: densified from {Path(src).name} by benchmarks/densify_detections.py (seed {seed})"
+    write_json_atomic(dst, {**sub, "results": results, "synthetic": dict(sub.get("synthetic") or {}, note=note)})
+    return sum(len(b) for b in results.values())
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("input", type=Path, help="a nuScenes detection-submission JSON")
@@ -98,16 +111,12 @@ def main(argv=None) -> int:
             print(f"{flag}: expected {expected}, got {getattr(args, flag[2:])}", file=sys.stderr)
             return 2
     try:
-        sub = json.loads(args.input.read_text())
-        results = densify(sub, args.clutter, args.decimals, args.duplicates, np.random.default_rng(args.seed))
+        n = densify_file(args.input, args.output, args.clutter, args.decimals, args.duplicates, args.seed)
     except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
         print(f"{args.input}: expected a nuScenes detection-submission JSON ({exc!r})", file=sys.stderr)
         return 2
-    note = f"SYNTHETIC: densified from {args.input.name} by benchmarks/densify_detections.py (seed {args.seed})"
-    synthetic = dict(sub.get("synthetic") or {}, note=note)
-    write_json_atomic(args.output, {**sub, "results": results, "synthetic": synthetic})
-    n = sum(len(b) for b in results.values())
-    print(f"{args.output}: {n} boxes, {n / max(len(results), 1):.1f} per sample")
+    samples = len(json.loads(args.output.read_text())["results"])
+    print(f"{args.output}: {n} boxes, {n / max(samples, 1):.1f} per sample")
     return 0
 
 
