@@ -104,7 +104,10 @@ def _decoupled_cv(**motion):
             "'association.second_threshold' is required with 'association.two_stage: true'",
         ),
         (
-            lambda r: r["lifecycle"].__setitem__("termination", "average_score"),
+            lambda r: (
+                r["lifecycle"].__setitem__("termination", "average_score"),
+                r["lifecycle"].pop("delete_threshold"),
+            ),
             "'lifecycle.delete_threshold' is required with 'lifecycle.termination: average_score'",
         ),
         (
