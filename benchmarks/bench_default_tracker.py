@@ -30,8 +30,10 @@ four profiles: made after Decision 12, the count on sets no decision saw; Decisi
 ``fresh6`` (seeds 9000-9049 on mini_val, the four profiles: made after Decision 13, its count on unseen sets);
 ``fresh6_train`` (seeds 9000-9024 on mini_train, 8 scenes a set: made after Decision 13, the count on larger unseen
 sets); ``fresh7`` (seeds 10000-10049 on mini_val, the four profiles) and ``fresh7_variants`` (seeds 10000-10019
-on mini_val, the profiles of :data:`VARIANTS` and ``cp_strong``): made after the last decision, the count on sets no
-decision or candidate saw; ``worlds`` and
+on mini_val, the profiles of :data:`VARIANTS` and ``cp_strong``): made after Decision 13, the count on sets no
+decision or candidate had seen; ``dense``, ``dense_variants`` and ``dense_train`` (:data:`DENSE`: the first seeds of
+``fresh7``, ``fresh7_variants`` and ``fresh6_train``, each set made denser and messier by
+benchmarks/densify_detections.py, as a real detector's file is; Decision 14 was taken on them); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles; ``worlds_fresh``, worlds 11-20
 made after Decision 13, its count on larger unseen sets). Candidates:
@@ -182,7 +184,7 @@ GROUPS = {
 #: SYNTHETIC sets made denser and messier, as a real detector's file is (benchmarks/densify_detections.py with its
 #: defaults: 120 boxes more a sample, copies of its boxes moved by N(0, 6 m) and given any of the ten detection
 #: classes and a score U(0.01, 0.3); every score at 2 decimals; 5 % of the boxes repeated exactly; its seed the set's):
-#: group -> (the group whose sets are densified, how many of its first seeds). Made after the last decision.
+#: group -> (the group whose sets are densified, how many of its first seeds). Made after Decision 13.
 DENSE = {"dense": ("fresh7", 10), "dense_variants": ("fresh7_variants", 5), "dense_train": ("fresh6_train", 5)}
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
