@@ -82,15 +82,15 @@ def densify(
 
 def densify_file(
     src: Path, dst: Path, clutter: int = 120, decimals: int = 2, duplicates: float = 0.05, seed: int = 1
-) -> int:
+) -> tuple[int, int]:
     """Write ``src`` densified (:func:`densify`, ``np.random.default_rng(seed)``) to ``dst``, atomically, labelled
-    SYNTHETIC; returns the number of boxes. OSError / ValueError / KeyError / TypeError / IndexError on a file that
-    is not a detection submission."""
+    SYNTHETIC; returns its numbers of boxes and of samples. OSError / ValueError / KeyError / TypeError /
+    IndexError on a file that is not a detection submission."""
     sub = json.loads(Path(src).read_text())
     results = densify(sub, clutter, decimals, duplicates, np.random.default_rng(seed))
     note = f"SYNTHETIC: densified from {Path(src).name} by benchmarks/densify_detections.py (seed {seed})"
     write_json_atomic(dst, {**sub, "results": results, "synthetic": dict(sub.get("synthetic") or {}, note=note)})
-    return sum(len(b) for b in results.values())
+    return sum(len(b) for b in results.values()), len(results)
 
 
 def main(argv=None) -> int:
@@ -111,11 +111,10 @@ def main(argv=None) -> int:
             print(f"{flag}: expected {expected}, got {getattr(args, flag[2:])}", file=sys.stderr)
             return 2
     try:
-        n = densify_file(args.input, args.output, args.clutter, args.decimals, args.duplicates, args.seed)
+        n, samples = densify_file(args.input, args.output, args.clutter, args.decimals, args.duplicates, args.seed)
     except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
         print(f"{args.input}: expected a nuScenes detection-submission JSON ({exc!r})", file=sys.stderr)
         return 2
-    samples = len(json.loads(args.output.read_text())["results"])
     print(f"{args.output}: {n} boxes, {n / max(samples, 1):.1f} per sample")
     return 0
 

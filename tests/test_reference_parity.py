@@ -20,14 +20,10 @@ from pathlib import Path
 
 import pytest
 from support.compare import entry_differences
+from support.tracking import track
 
-from grutrack.data.nusc_detections import load_detections
-from grutrack.data.nuscenes import load_scenes
 from grutrack.evaluation.nuscenes_fast import fast_tracking_eval
 from grutrack.evaluation.track_parity import compare_tracks
-from grutrack.export.nuscenes_json import build_submission
-from grutrack.tracking.factory import build_tracker
-from grutrack.tracking.tracker import track_scenes
 
 #: reference set -> (split, detection file relative to nuscenes/reference)
 SETS = {
@@ -40,19 +36,6 @@ SETS = {
 SET_PARAMS = [pytest.param(n, marks=pytest.mark.slow) if SETS[n][0] == "mini_train" else n for n in SETS]
 #: preset -> prefix of the reference outputs (``<prefix>_<set>.json``)
 TRACKERS = {"polymot": "polymot", "fastpoly": "fastpoly", "mctrack": "mctrack"}
-
-
-def track(nusc, preset: str, split: str, detections: Path) -> tuple[dict, dict[str, str]]:
-    """The preset's submission dict for a split, and sample token -> scene token."""
-    scenes = load_scenes(nusc, split)
-    tokens = [f.token for s in scenes for f in s.frames]
-    tracker = build_tracker("ekf", preset)
-    dets = load_detections(detections, tokens, tracker.cfg.measured_yaw)
-    run = track_scenes(tracker, scenes, dets)
-    return (
-        build_submission(run.results, tokens, tracker.cfg.max_boxes_per_sample),
-        {f.token: s.token for s in scenes for f in s.frames},
-    )
 
 
 def _file(root: Path, name: str) -> Path:

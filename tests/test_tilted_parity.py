@@ -18,13 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
+from support.tracking import track
 
 from grutrack.classes import TRACKING_CLASSES
-from grutrack.data.nusc_detections import load_detections
-from grutrack.data.nuscenes import load_scenes
-from grutrack.export.nuscenes_json import build_submission
-from grutrack.tracking.factory import build_tracker
-from grutrack.tracking.tracker import track_scenes
 
 _SPEC = importlib.util.spec_from_file_location(
     "densify_detections", Path(__file__).parents[1] / "benchmarks/densify_detections.py"
@@ -39,13 +35,10 @@ FILES = {"polymot": (120, 7), "fastpoly": (120, 7), "mctrack": (80, 6)}
 
 
 def _ours(nusc, preset: str, detections: Path) -> tuple[dict[int, list], list[str]]:
-    """The preset's boxes per sample index: (label, (2,) centre from ORIGIN, score, track id); scene token per
-    sample index."""
-    scenes = load_scenes(nusc, "mini_val")
-    tokens = [f.token for s in scenes for f in s.frames]
-    tracker = build_tracker("ekf", preset)
-    run = track_scenes(tracker, scenes, load_detections(detections, tokens, tracker.cfg.measured_yaw))
-    sub = build_submission(run.results, tokens, tracker.cfg.max_boxes_per_sample)
+    """The preset's boxes per sample index (mini_val's samples in scene order): (label, (2,) centre from ORIGIN,
+    score, track id); and the scene token of each sample index."""
+    sub, scene_of = track(nusc, preset, "mini_val", detections)
+    tokens = list(scene_of)
     out = {
         k: [
             (
@@ -58,7 +51,7 @@ def _ours(nusc, preset: str, detections: Path) -> tuple[dict[int, list], list[st
         ]
         for k, t in enumerate(tokens)
     }
-    return out, [s.token for s in scenes for _ in s.frames]
+    return out, [scene_of[t] for t in tokens]
 
 
 @pytest.mark.parametrize("preset", sorted(FILES))
