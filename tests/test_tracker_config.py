@@ -172,6 +172,19 @@ def _decoupled_cv(**motion):
             "no alignment GIoU metric and no distance gate on every class",
         ),
         (
+            lambda r: (
+                r["association"].pop("ro_gdiou_weights"),
+                r["association"].update(
+                    distance_gate=dict.fromkeys(TRACKING_CLASSES, 2.0),
+                    crowded_threshold=NO_CROWD,
+                    crowded_skips_lost_newborns=False,
+                    distance_gate_widens=True,
+                ),
+            ),
+            "'association.distance_gate_widens: true' needs 'association.algorithm: hungarian', no alignment GIoU "
+            "metric and no distance gate on every class",
+        ),
+        (
             lambda r: r["association"].update(
                 first_metric=dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev"), crowded_threshold=NO_CROWD
             ),

@@ -118,6 +118,36 @@ def test_distance_gate_holds_in_both_stages():
     assert _assoc(det, [trl], trk, [trl], distance_gate=np.where(gate > 0, 7.0, 0.0)).dets.tolist() == [0]
 
 
+def test_gate_scale_widens_each_tracks_gate():
+    # the trailer 6 m ahead of its track (test above): outside a 5 m gate, inside it for a track whose gate is
+    # doubled (missed in the frame before); the other track keeps the class's 5 m
+    trl = CLASS_INDEX["trailer"]
+    det, trk = [_box(6.0, 0, w=2.5, l=12.0, h=3.8)], [_box(0, 0, w=2.5, l=12.0, h=3.8)]
+    gate = np.where(np.arange(7) == trl, 5.0, 0.0)
+    kw = dict(first_threshold=np.full(7, 0.3), distance_gate=gate)
+    assert len(_assoc(det, [trl], trk, [trl], gate_scale=np.array([1.0]), **kw).dets) == 0
+    assert _assoc(det, [trl], trk, [trl], gate_scale=np.array([2.0]), **kw).dets.tolist() == [0]
+    two = _assoc(det, [trl], trk * 2, [trl] * 2, gate_scale=np.array([1.0, 2.0]), **kw)
+    assert two.dets.tolist() == [0] and two.tracks.tolist() == [1]
+
+
+def test_distance_gate_widens_with_missed_frames(tmp_path):
+    # a car at 10 m/s along x, detected in frames 0-4, missed in 5 and 6, seen again in frame 7 3 m to the side of
+    # its prediction: a fixed 2 m gate starts a new track there; widened (3 frames since its last detection: 6 m)
+    # the track takes its car back
+    det = [[_box(5.0 * i, 0, vx=10.0)] for i in range(5)] + [[], [], [_box(35.0, 3.0, vx=10.0)]]
+    scene, dets = _scene(det)
+    raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
+    raw["association"]["distance_gate"]["car"] = 2.0
+    ids = {}
+    for widens in (False, True):
+        raw["association"]["distance_gate_widens"] = widens
+        (tmp_path / f"{widens}.yaml").write_text(yaml.safe_dump(raw))
+        run = track_scenes(build_tracker("ekf", tmp_path / f"{widens}.yaml"), [scene], dets)
+        ids[widens] = [run.results[f.token].ids.tolist() for f in (scene.frames[4], scene.frames[7])]
+    assert ids[False] == [[0], [1]] and ids[True] == [[0], [0]]
+
+
 def _scene(dets_per_frame):
     frames = [
         Frame(f"s{i}", 1_000_000 + 500_000 * i, np.zeros(3), np.array([1.0, 0, 0, 0]))

@@ -286,6 +286,7 @@ def associate(
     track_penalty: np.ndarray | None = None,
     crowded_skip: np.ndarray | None = None,
     det_corners: np.ndarray | None = None,
+    gate_scale: np.ndarray | None = None,
 ) -> Matches:
     """Two-stage association of D detections with T (predicted) tracks.
 
@@ -301,7 +302,9 @@ def associate(
     (:func:`crowded_stage_one`); track_penalty (T,): added to the stage-1 cost of each track's admissible pairs, up to
     just below the threshold (:func:`penalized`); crowded_skip (T,) bool: tracks that neither make a row crowded nor
     take the strict cost there (``skip`` of :func:`crowded_stage_one`); det_corners (D, 4, 2): the detections' own
-    footprints for the IoU / GIoU measures (``preprocessing.footprint: bottom_face``; None: their yaw rectangles).
+    footprints for the IoU / GIoU measures (``preprocessing.footprint: bottom_face``; None: their yaw rectangles);
+    gate_scale (T,): each track's gate is its class's ``distance_gate`` times this (None: 1), e.g. the frames since
+    its last detection (``association.distance_gate_widens``).
     """
     solve = ASSIGNMENT[assignment]
     stages = [(tuple(first_metric), first_threshold)]
@@ -312,8 +315,10 @@ def associate(
         classes, override = first_override
         costs[0] = np.where(classes[det_labels][:, None], override, costs[0])
     if distance_gate is not None and np.any(distance_gate > 0) and costs[0].size:
-        radii = np.where(distance_gate > 0, distance_gate, np.inf)[det_labels]
-        inside = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2) < radii[:, None]  # (D, T)
+        radii = np.where(distance_gate > 0, distance_gate, np.inf)[det_labels][:, None]  # (D, 1) metres
+        if gate_scale is not None:
+            radii = radii * gate_scale[None, :]  # (D, T)
+        inside = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2) < radii  # (D, T)
         costs = [np.where(inside, c, _INVALID) for c in costs]
     if crowded is not None and costs[0].size:
         costs[0] = crowded_stage_one(costs[0], det_labels, first_threshold, *crowded, skip=crowded_skip)

@@ -86,6 +86,7 @@ class TrackerConfig:
     nms_scale: np.ndarray = field(default_factory=lambda: np.ones(7))
     nms_distance_gate: np.ndarray = field(default_factory=lambda: np.zeros(7))
     distance_gate: np.ndarray = field(default_factory=lambda: np.zeros(7))
+    distance_gate_widens: bool = False  # a track missed k frames is gated at (k + 1) x distance_gate
     score_update: str = "detection"
     termination: str = "age"
     delete_threshold: np.ndarray = field(default_factory=lambda: np.zeros(7))
@@ -176,6 +177,8 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         )
     if np.any(v["association.lost_newborn_penalty"] > 0):
         _check_lost_newborn(v, source, "'association.lost_newborn_penalty' above 0")
+    if v["association.distance_gate_widens"]:
+        _check_widening_gate(v, source)
     if v["association.crowded_skips_lost_newborns"]:
         _check_lost_newborn(v, source, "'association.crowded_skips_lost_newborns: true'")
         if not np.any(v["association.crowded_threshold"] > 0):
@@ -215,6 +218,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         nms_scale=v["preprocessing.nms_scale"],
         nms_distance_gate=v["preprocessing.nms_distance_gate"],
         distance_gate=v["association.distance_gate"],
+        distance_gate_widens=v["association.distance_gate_widens"],
         score_update=v["lifecycle.score_update"],
         termination=v["lifecycle.termination"],
         delete_threshold=v["lifecycle.delete_threshold"],
@@ -350,6 +354,19 @@ def _check_stage_one(v: dict, given: dict, source: str, pose_why: str, what: str
         raise ConfigError(
             f"{source}: {what} 'association.algorithm: hungarian', no alignment GIoU metric and no distance gate on "
             f"every class ({why})"
+        )
+
+
+def _check_widening_gate(v: dict, source: str) -> None:
+    """``association.distance_gate_widens`` scales the gate of the two-stage Hungarian association
+    (:func:`~grutrack.tracking.association.associate`): refuse it with greedy matching and Fast-Poly's dense
+    association (alignment GIoU, or a gate on every class), whose fixed gate also picks stage 2's rows."""
+    metrics = set(v["association.first_metric"]) | {v["association.second_metric"]}
+    dense = bool(np.all(v["association.distance_gate"] > 0)) or any(m.startswith("a_") for m in metrics)
+    if v["association.algorithm"] != "hungarian" or dense:
+        raise ConfigError(
+            f"{source}: 'association.distance_gate_widens: true' needs 'association.algorithm: hungarian', no "
+            f"alignment GIoU metric and no distance gate on every class (Fast-Poly's gate is fixed)"
         )
 
 
