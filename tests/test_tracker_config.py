@@ -178,11 +178,11 @@ def _decoupled_cv(**motion):
                     distance_gate=dict.fromkeys(TRACKING_CLASSES, 2.0),
                     crowded_threshold=NO_CROWD,
                     crowded_skips_lost_newborns=False,
-                    distance_gate_widens=True,
+                    distance_gate_growth={**dict.fromkeys(TRACKING_CLASSES, "fixed"), "bus": "missed_frames"},
                 ),
             ),
-            "'association.distance_gate_widens: true' needs 'association.algorithm: hungarian', no alignment GIoU "
-            "metric and no distance gate on every class",
+            "'association.distance_gate_growth: missed_frames' needs 'association.algorithm: hungarian', no alignment "
+            "GIoU metric and no distance gate on every class",
         ),
         (
             lambda r: r["association"].update(

@@ -131,21 +131,22 @@ def test_gate_scale_widens_each_tracks_gate():
     assert two.dets.tolist() == [0] and two.tracks.tolist() == [1]
 
 
-def test_distance_gate_widens_with_missed_frames(tmp_path):
+def test_distance_gate_growth_missed_frames(tmp_path):
     # a car at 10 m/s along x, detected in frames 0-4, missed in 5 and 6, seen again in frame 7 3 m to the side of
-    # its prediction: a fixed 2 m gate starts a new track there; widened (3 frames since its last detection: 6 m)
-    # the track takes its car back
+    # its prediction: a fixed 2 m gate starts a new track there; grown with the missed frames (3 frames since its
+    # last detection: 6 m) the track takes its car back; growth for another class leaves the car's gate fixed
     det = [[_box(5.0 * i, 0, vx=10.0)] for i in range(5)] + [[], [], [_box(35.0, 3.0, vx=10.0)]]
     scene, dets = _scene(det)
     raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
-    raw["association"]["distance_gate"]["car"] = 2.0
+    raw["association"]["distance_gate"].update(car=2.0, bus=2.0)
     ids = {}
-    for widens in (False, True):
-        raw["association"]["distance_gate_widens"] = widens
-        (tmp_path / f"{widens}.yaml").write_text(yaml.safe_dump(raw))
-        run = track_scenes(build_tracker("ekf", tmp_path / f"{widens}.yaml"), [scene], dets)
-        ids[widens] = [run.results[f.token].ids.tolist() for f in (scene.frames[4], scene.frames[7])]
-    assert ids[False] == [[0], [1]] and ids[True] == [[0], [0]]
+    for grows in ("none", "car", "bus"):
+        growth = {c: "missed_frames" if c == grows else "fixed" for c in raw["association"]["distance_gate"]}
+        raw["association"]["distance_gate_growth"] = growth
+        (tmp_path / f"{grows}.yaml").write_text(yaml.safe_dump(raw))
+        run = track_scenes(build_tracker("ekf", tmp_path / f"{grows}.yaml"), [scene], dets)
+        ids[grows] = [run.results[f.token].ids.tolist() for f in (scene.frames[4], scene.frames[7])]
+    assert ids == {"none": [[0], [1]], "car": [[0], [0]], "bus": [[0], [1]]}
 
 
 def _scene(dets_per_frame):

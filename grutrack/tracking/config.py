@@ -43,6 +43,7 @@ _NAMED_PER_CLASS = (
     "per_class_geometry_filter",
     "per_class_track_pose",
     "per_class_coast",
+    "per_class_gate_growth",
 )
 #: per-class noise diagonals of the decoupled filters (``motion.position_noise``, ``motion.size_noise``)
 _NOISE_PER_CLASS = ("per_class_position_noise", "per_class_size_noise")
@@ -86,7 +87,8 @@ class TrackerConfig:
     nms_scale: np.ndarray = field(default_factory=lambda: np.ones(7))
     nms_distance_gate: np.ndarray = field(default_factory=lambda: np.zeros(7))
     distance_gate: np.ndarray = field(default_factory=lambda: np.zeros(7))
-    distance_gate_widens: bool = False  # a track missed k frames is gated at (k + 1) x distance_gate
+    # per class fixed or missed_frames (a track missed for k frames is gated at (k + 1) x distance_gate)
+    distance_gate_growth: tuple[str, ...] = ("fixed",) * 7
     score_update: str = "detection"
     termination: str = "age"
     delete_threshold: np.ndarray = field(default_factory=lambda: np.zeros(7))
@@ -177,7 +179,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         )
     if np.any(v["association.lost_newborn_penalty"] > 0):
         _check_lost_newborn(v, source, "'association.lost_newborn_penalty' above 0")
-    if v["association.distance_gate_widens"]:
+    if any(g != "fixed" for g in v["association.distance_gate_growth"]):
         _check_widening_gate(v, source)
     if v["association.crowded_skips_lost_newborns"]:
         _check_lost_newborn(v, source, "'association.crowded_skips_lost_newborns: true'")
@@ -218,7 +220,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         nms_scale=v["preprocessing.nms_scale"],
         nms_distance_gate=v["preprocessing.nms_distance_gate"],
         distance_gate=v["association.distance_gate"],
-        distance_gate_widens=v["association.distance_gate_widens"],
+        distance_gate_growth=v["association.distance_gate_growth"],
         score_update=v["lifecycle.score_update"],
         termination=v["lifecycle.termination"],
         delete_threshold=v["lifecycle.delete_threshold"],
@@ -358,14 +360,14 @@ def _check_stage_one(v: dict, given: dict, source: str, pose_why: str, what: str
 
 
 def _check_widening_gate(v: dict, source: str) -> None:
-    """``association.distance_gate_widens`` scales the gate of the two-stage Hungarian association
+    """``association.distance_gate_growth: missed_frames`` scales the gate of the two-stage Hungarian association
     (:func:`~grutrack.tracking.association.associate`): refuse it with greedy matching and Fast-Poly's dense
     association (alignment GIoU, or a gate on every class), whose fixed gate also picks stage 2's rows."""
     metrics = set(v["association.first_metric"]) | {v["association.second_metric"]}
     dense = bool(np.all(v["association.distance_gate"] > 0)) or any(m.startswith("a_") for m in metrics)
     if v["association.algorithm"] != "hungarian" or dense:
         raise ConfigError(
-            f"{source}: 'association.distance_gate_widens: true' needs 'association.algorithm: hungarian', no "
+            f"{source}: 'association.distance_gate_growth: missed_frames' needs 'association.algorithm: hungarian', no "
             f"alignment GIoU metric and no distance gate on every class (Fast-Poly's gate is fixed)"
         )
 

@@ -149,7 +149,7 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
 
         strict = predicted_pose_costs(cfg.crowded_threshold > 0, cfg)
     penalty, skip_lost = cfg.lost_newborn_penalty, cfg.crowded_skips_lost_newborns and strict is not None
-    widens = cfg.distance_gate_widens and bool(np.any(cfg.distance_gate > 0))
+    widens = np.array([g == "missed_frames" for g in cfg.distance_gate_growth]) & (cfg.distance_gate > 0)  # (C,)
 
     def run(
         dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float, tracks: TrackView | None = None
@@ -177,10 +177,10 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
             None if lost is None else np.where(lost, penalty[trk_labels], 0.0),
             lost if skip_lost else None,
             dets.extra.get("footprint"),
-            None if tracks is None or not widens else tracks.misses.astype(np.float64),
+            None if tracks is None or not widens.any() else np.where(widens[trk_labels], tracks.misses, 1.0),
         )
 
-    run.wants_tracks = bool(np.any(penalty > 0)) or skip_lost or widens
+    run.wants_tracks = bool(np.any(penalty > 0)) or skip_lost or bool(widens.any())
     return run
 
 
