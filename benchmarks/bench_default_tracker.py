@@ -33,7 +33,9 @@ sets); ``fresh7`` (seeds 10000-10049 on mini_val, the four profiles) and ``fresh
 on mini_val, the profiles of :data:`VARIANTS` and ``cp_strong``): made after Decision 13, the count on sets no
 decision or candidate had seen; ``dense``, ``dense_variants`` and ``dense_train`` (:data:`DENSE`: the first seeds of
 ``fresh7``, ``fresh7_variants`` and ``fresh6_train``, each set made denser and messier by
-benchmarks/densify_detections.py, as a real detector's file is; Decision 14 was taken on them); ``worlds`` and
+benchmarks/densify_detections.py, as a real detector's file is; Decisions 14 and 15 were taken on them);
+``dense2``, ``dense2_variants`` and ``dense2_train`` (the next seeds of the same groups, densified alike: made after
+Decision 15, its count on dense sets no decision saw); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles; ``worlds_fresh``, worlds 11-20
 made after Decision 13, its count on larger unseen sets). Candidates:
@@ -185,7 +187,15 @@ GROUPS = {
 #: defaults: 120 boxes more a sample, copies of its boxes moved by N(0, 6 m) and given any of the ten detection
 #: classes and a score U(0.01, 0.3); every score at 2 decimals; 5 % of the boxes repeated exactly; its seed the set's):
 #: group -> (the group whose sets are densified, how many of its first seeds). Made after Decision 13.
-DENSE = {"dense": ("fresh7", 10), "dense_variants": ("fresh7_variants", 5), "dense_train": ("fresh6_train", 5)}
+#: densified groups: name -> (group, first seed's index, count)
+DENSE = {
+    "dense": ("fresh7", 0, 10),
+    "dense_variants": ("fresh7_variants", 0, 5),
+    "dense_train": ("fresh6_train", 0, 5),
+    "dense2": ("fresh7", 10, 10),
+    "dense2_variants": ("fresh7_variants", 5, 5),
+    "dense2_train": ("fresh6_train", 5, 5),
+}
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
 #: tracked (split demo_all): group -> (world seeds, edit of the demo's class specs or None, detector profiles).
@@ -783,6 +793,7 @@ CANDIDATES = {
         lambda raw: raw["association"].pop("crowded_threshold", None),
         lambda raw: raw["association"].pop("ro_gdiou_weights", None),
         lambda raw: raw["association"].pop("crowded_skips_lost_newborns", None),
+        lambda raw: raw["association"].pop("distance_gate_growth", None),  # Fast-Poly's gate is fixed
     ),
     "+young0.4+score_detection": _combine(_young(0.4), lambda raw: raw["lifecycle"].update(score_update="detection")),
     # robust update: a detection's R scaled by NIS / g when its position NIS exceeds g (motion.nis_limit); ekf_prev7
@@ -802,6 +813,20 @@ CANDIDATES = {
     "+bus_score012": lambda raw: raw["preprocessing"]["score_threshold"].update(bus=0.12),
     # a 3 m centre gate for buses (Fast-Poly's gate radius)
     "+bus_gate3": lambda raw: raw["association"]["distance_gate"].update(bus=3.0),
+    # Decision 15: bicycles gated at 2 m, buses at 6 m grown with the frames since the track's last detection
+    # (association.distance_gate_growth), bus detections scored below 0.12 dropped; ekf_prev15 takes it back
+    "ekf_prev15": _combine(
+        lambda raw: raw["association"]["distance_gate"].update(bicycle=0.0, bus=0.0),
+        lambda raw: raw["association"].pop("distance_gate_growth"),
+        lambda raw: raw["preprocessing"]["score_threshold"].update(bus=0.0),
+    ),
+    # ... with the bicycles' gate grown as the buses', the buses' fixed, other radii
+    "+bicycle_gate_growth": lambda raw: raw["association"]["distance_gate_growth"].update(bicycle="missed_frames"),
+    "+bus_gate_fixed": lambda raw: raw["association"]["distance_gate_growth"].update(bus="fixed"),
+    "+bicycle_gate3": lambda raw: raw["association"]["distance_gate"].update(bicycle=3.0),
+    "+bus_gate5_grown": lambda raw: raw["association"]["distance_gate"].update(bus=5.0),
+    # fixed gates for cars (3 m), motorcycles (3 m) and pedestrians (2 m) too
+    "+more_gates": lambda raw: raw["association"]["distance_gate"].update(car=3.0, motorcycle=3.0, pedestrian=2.0),
 }
 
 
@@ -947,9 +972,9 @@ def main(argv=None) -> int:
         elif group in WORLDS:
             sets.update(_world_sets(group, cache, data))
         elif group in DENSE:
-            base, count = DENSE[group]
+            base, start, count = DENSE[group]
             seeds, *rest = GROUPS[base]
-            for key, (split, profile, seed) in generated(seeds[:count], *rest).items():
+            for key, (split, profile, seed) in generated(seeds[start : start + count], *rest).items():
                 path = _simulated(cache, split, profile, seed, nusc)
                 dense = path.with_name(f"{path.stem}_dense.json")
                 if not dense.is_file():

@@ -69,10 +69,14 @@ def test_the_groups_keep_their_sets():
     assert len(val) == 100 and {s for s, _, _ in val.values()} == {"mini_val"}
     train = bench.generated(*bench.GROUPS["variants_train"])
     assert len(train) == 40 and {p for _, p, _ in train.values()} == set(bench.VARIANTS)
-    for group, count in (("dense", 40), ("dense_variants", 25), ("dense_train", 20)):  # Decision 14's dense sets
-        base, seeds = bench.DENSE[group]
-        first, *rest = bench.GROUPS[base]
-        assert len(bench.generated(first[:seeds], *rest)) == count, group
+    made = {}
+    for group, count in (("dense", 40), ("dense_variants", 25), ("dense_train", 20)):  # Decisions 14, 15's dense sets
+        for name in (group, group.replace("dense", "dense2")):  # and the held-out ones after Decision 15
+            base, start, n = bench.DENSE[name]
+            first, *rest = bench.GROUPS[base]
+            made[name] = set(bench.generated(first[start : start + n], *rest).values())
+            assert len(made[name]) == count, name
+        assert not made[group] & made[group.replace("dense", "dense2")], group  # no set in both
 
 
 def test_the_deciding_class_is_the_largest_class_loss_against_the_sets_best_tracker():
