@@ -813,18 +813,23 @@ CANDIDATES = {
     "+bus_score012": lambda raw: raw["preprocessing"]["score_threshold"].update(bus=0.12),
     # a 3 m centre gate for buses (Fast-Poly's gate radius)
     "+bus_gate3": lambda raw: raw["association"]["distance_gate"].update(bus=3.0),
-    # Decision 15: bicycles gated at 2 m, buses at 6 m grown with the frames since the track's last detection
+    # Decision 15: buses gated at 6 m grown with the frames since the track's last detection
     # (association.distance_gate_growth), bus detections scored below 0.12 dropped; ekf_prev15 takes it back
     "ekf_prev15": _combine(
-        lambda raw: raw["association"]["distance_gate"].update(bicycle=0.0, bus=0.0),
+        lambda raw: raw["association"]["distance_gate"].update(bus=0.0),
         lambda raw: raw["association"].pop("distance_gate_growth"),
         lambda raw: raw["preprocessing"]["score_threshold"].update(bus=0.0),
     ),
-    # ... with the bicycles' gate grown as the buses', the buses' fixed, other radii
-    "+bicycle_gate_growth": lambda raw: raw["association"]["distance_gate_growth"].update(bicycle="missed_frames"),
+    # ... with the buses' gate fixed, or 5 m
     "+bus_gate_fixed": lambda raw: raw["association"]["distance_gate_growth"].update(bus="fixed"),
-    "+bicycle_gate3": lambda raw: raw["association"]["distance_gate"].update(bicycle=3.0),
     "+bus_gate5_grown": lambda raw: raw["association"]["distance_gate"].update(bus=5.0),
+    # a bicycle gate, 2 m or 3 m, fixed or grown as the buses' (measured for Decision 15, not adopted: the GRU-KF)
+    "+bicycle_gate2": lambda raw: raw["association"]["distance_gate"].update(bicycle=2.0),
+    "+bicycle_gate3": lambda raw: raw["association"]["distance_gate"].update(bicycle=3.0),
+    "+bicycle_gate2_grown": _combine(
+        lambda raw: raw["association"]["distance_gate"].update(bicycle=2.0),
+        lambda raw: raw["association"]["distance_gate_growth"].update(bicycle="missed_frames"),
+    ),
     # fixed gates for cars (3 m), motorcycles (3 m) and pedestrians (2 m) too
     "+more_gates": lambda raw: raw["association"]["distance_gate"].update(car=3.0, motorcycle=3.0, pedestrian=2.0),
 }

@@ -35,11 +35,12 @@ def test_score_filter_per_class():
     cfg = load_tracker_config("ekf")
     dets = BoxSet(
         np.array([_box(0, 0), _box(10, 0), _box(20, 0)]),
-        np.array([0.10, 0.20, 0.10]),
+        np.array([0.10, 0.20, 0.13]),
         np.array([CAR, CAR, CLASS_INDEX["bus"]]),
     )
     kept = score_filter(dets, cfg.score_threshold)
-    assert kept.scores.tolist() == [0.20, 0.10]  # car threshold 0.16, bus 0.0
+    assert kept.scores.tolist() == [0.20, 0.13]  # car threshold 0.16, bus 0.12
+    assert len(score_filter(BoxSet(dets.boxes[2:], np.array([0.11]), dets.labels[2:]), cfg.score_threshold)) == 0
 
 
 def test_upper_bound_never_below_true_similarity():
