@@ -340,6 +340,14 @@ def _check_ro_gdiou_some(v: dict, given: dict, source: str) -> None:
     )
 
 
+def _not_compiled_two_stage(v: dict) -> bool:
+    """Whether the association is greedy matching or Fast-Poly's dense association (alignment GIoU, or a gate on
+    every class), not the compiled two-stage Hungarian association that the stage-1 options act in."""
+    metrics = set(v["association.first_metric"]) | {v["association.second_metric"]}
+    dense = bool(np.all(v["association.distance_gate"] > 0)) or any(m.startswith("a_") for m in metrics)
+    return v["association.algorithm"] != "hungarian" or dense
+
+
 def _check_stage_one(v: dict, given: dict, source: str, pose_why: str, what: str, why: str) -> None:
     """A Ro_GDIoU option inside stage 1 of the two-stage Hungarian association (``what`` names it in the message):
     refuse MCTrack's pose keys (``pose_why``: why they are not read), greedy matching and Fast-Poly's dense
@@ -350,9 +358,7 @@ def _check_stage_one(v: dict, given: dict, source: str, pose_why: str, what: str
                 f"{source}: '{key}' is read only with 'association.first_metric: ro_gdiou_bev' for every class "
                 f"({pose_why}); remove it"
             )
-    metrics = set(v["association.first_metric"]) | {v["association.second_metric"]}
-    dense = bool(np.all(v["association.distance_gate"] > 0)) or any(m.startswith("a_") for m in metrics)
-    if v["association.algorithm"] != "hungarian" or dense:
+    if _not_compiled_two_stage(v):
         raise ConfigError(
             f"{source}: {what} 'association.algorithm: hungarian', no alignment GIoU metric and no distance gate on "
             f"every class ({why})"
@@ -363,9 +369,7 @@ def _check_widening_gate(v: dict, source: str) -> None:
     """``association.distance_gate_growth: missed_frames`` scales the gate of the two-stage Hungarian association
     (:func:`~grutrack.tracking.association.associate`): refuse it with greedy matching and Fast-Poly's dense
     association (alignment GIoU, or a gate on every class), whose fixed gate also picks stage 2's rows."""
-    metrics = set(v["association.first_metric"]) | {v["association.second_metric"]}
-    dense = bool(np.all(v["association.distance_gate"] > 0)) or any(m.startswith("a_") for m in metrics)
-    if v["association.algorithm"] != "hungarian" or dense:
+    if _not_compiled_two_stage(v):
         raise ConfigError(
             f"{source}: 'association.distance_gate_growth: missed_frames' needs 'association.algorithm: hungarian', no "
             f"alignment GIoU metric and no distance gate on every class (Fast-Poly's gate is fixed)"
@@ -377,10 +381,8 @@ def _check_lost_newborn(v: dict, source: str, what: str) -> None:
     two-stage Hungarian association (:func:`~grutrack.tracking.association.associate`): refuse them with greedy
     matching, Fast-Poly's dense association (alignment GIoU, or a gate on every class) and MCTrack's one-stage
     Ro_GDIoU association."""
-    metrics = set(v["association.first_metric"]) | {v["association.second_metric"]}
-    dense = bool(np.all(v["association.distance_gate"] > 0)) or any(m.startswith("a_") for m in metrics)
     one_stage = all(m == "ro_gdiou_bev" for m in v["association.first_metric"])
-    if v["association.algorithm"] != "hungarian" or dense or one_stage:
+    if _not_compiled_two_stage(v) or one_stage:
         raise ConfigError(
             f"{source}: {what} needs 'association.algorithm: hungarian', no "
             f"alignment GIoU metric, no distance gate on every class and a first_metric other than ro_gdiou_bev "
