@@ -135,8 +135,9 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
     :func:`~grutrack.tracking.ro_gdiou.ro_gdiou_first_stage`; with ``crowded_threshold``, Ro_GDIoU for the
     crowded rows and columns of stage 1 (:func:`~grutrack.tracking.association.crowded_stage_one`); with
     ``lost_newborn_penalty``, the stage-1 costs of lost newborn tracks (:func:`lost_newborns`) raised, and with
-    ``crowded_skips_lost_newborns``, those tracks left out of the crowded test (both ask for the tracks' hits and
-    misses, ``wants_tracks``)."""
+    ``crowded_skips_lost_newborns``, those tracks left out of the crowded test; with ``distance_gate_growth:
+    missed_frames`` for a gated class, each of its tracks gated at its misses times the class's radius (these ask
+    for the tracks' hits and misses, ``wants_tracks``)."""
     if gated_association_needed(cfg):
         return gated_association(cfg)
     first_metric, first_override, strict = cfg.first_metric, None, None
