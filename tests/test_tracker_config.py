@@ -172,6 +172,10 @@ def _decoupled_cv(**motion):
             "no alignment GIoU metric and no distance gate on every class",
         ),
         (
+            lambda r: r["association"]["distance_gate_growth"].__setitem__("bus", "sometimes"),
+            "'association.distance_gate_growth.bus' must be one of fixed, missed_frames, got 'sometimes'",
+        ),
+        (
             lambda r: (
                 r["association"].pop("ro_gdiou_weights"),
                 r["association"].update(
