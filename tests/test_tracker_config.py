@@ -173,7 +173,13 @@ def _decoupled_cv(**motion):
         ),
         (
             lambda r: r["association"]["distance_gate_growth"].__setitem__("bus", "sometimes"),
-            "'association.distance_gate_growth.bus' must be one of fixed, missed_frames, got 'sometimes'",
+            r"'association.distance_gate_growth.bus' must be fixed, missed_frames or a number >= 0 \(metres per "
+            r"second\), got 'sometimes'",
+        ),
+        (
+            lambda r: r["association"]["distance_gate_growth"].__setitem__("bus", -1.5),
+            r"'association.distance_gate_growth.bus' must be fixed, missed_frames or a number >= 0 \(metres per "
+            r"second\), got -1.5",
         ),
         (
             lambda r: (
@@ -185,9 +191,23 @@ def _decoupled_cv(**motion):
                     distance_gate_growth={**dict.fromkeys(TRACKING_CLASSES, "fixed"), "bus": "missed_frames"},
                 ),
             ),
-            "'association.distance_gate_growth: missed_frames' needs 'association.algorithm: hungarian', no alignment "
-            "GIoU metric and no distance gate on every class",
+            "'association.distance_gate_growth' missed_frames or a speed above 0 needs 'association.algorithm: "
+            "hungarian', no alignment GIoU metric and no distance gate on every class",
         ),
+        (
+            lambda r: (
+                r["association"].pop("ro_gdiou_weights"),
+                r["association"].update(
+                    distance_gate=dict.fromkeys(TRACKING_CLASSES, 2.0),
+                    crowded_threshold=NO_CROWD,
+                    crowded_skips_lost_newborns=False,
+                    distance_gate_growth={**dict.fromkeys(TRACKING_CLASSES, "fixed"), "bus": 3.0},
+                ),
+            ),
+            "'association.distance_gate_growth' missed_frames or a speed above 0 needs 'association.algorithm: "
+            "hungarian', no alignment GIoU metric and no distance gate on every class",
+        ),
+
         (
             lambda r: r["association"].update(
                 first_metric=dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev"), crowded_threshold=NO_CROWD

@@ -14,7 +14,7 @@ from grutrack.tracking.association import associate
 from grutrack.tracking.config import PRESET_DIR, load_tracker_config
 from grutrack.tracking.factory import build_tracker
 from grutrack.tracking.preprocess import nms_keep, score_filter
-from grutrack.tracking.tracker import track_scenes
+from grutrack.tracking.tracker import gate_scale, track_scenes
 
 CAR, PED = CLASS_INDEX["car"], CLASS_INDEX["pedestrian"]
 
@@ -132,22 +132,37 @@ def test_gate_scale_widens_each_tracks_gate():
     assert two.dets.tolist() == [0] and two.tracks.tolist() == [1]
 
 
-def test_distance_gate_growth_missed_frames(tmp_path):
+def test_gate_scale_per_class_rule():
+    # classes 0: fixed, 1: missed_frames, 2: 3 m/s on a 4 m radius; tracks missed 1 (matched the frame before) and 3
+    # frames at 0.5 s: fixed 1; missed_frames 1, 3; 3 m/s: (4 + 3 * 0) / 4, (4 + 3 * 1.0) / 4
+    frames, speed, radius = np.array([False, True, False]), np.array([0.0, 0.0, 3.0]), np.array([2.0, 2.0, 4.0])
+    labels, misses = np.array([0, 0, 1, 1, 2, 2]), np.array([1, 3, 1, 3, 1, 3])
+    got = gate_scale(frames, speed, radius, labels, misses, 0.5)
+    assert got.tolist() == [1.0, 1.0, 1.0, 3.0, 1.0, 1.75]
+
+
+@pytest.mark.parametrize(
+    "growth, taken_back",
+    [("fixed", False), ("missed_frames", True), (3.0, True), (0.5, False)],
+)
+def test_distance_gate_growth(tmp_path, growth, taken_back):
     # a car at 10 m/s along x, detected in frames 0-4, missed in 5 and 6, seen again in frame 7 3 m to the side of
     # its prediction: a fixed 2 m gate starts a new track there; grown with the missed frames (3 frames since its
-    # last detection: 6 m) the track takes its car back; growth for another class leaves the car's gate fixed
+    # last detection: 6 m) or at 3 m/s (1 s missed: 5 m) the track takes its car back, at 0.5 m/s (2.5 m) not;
+    # the same growth for another class leaves the car's gate fixed
     det = [[_box(5.0 * i, 0, vx=10.0)] for i in range(5)] + [[], [], [_box(35.0, 3.0, vx=10.0)]]
     scene, dets = _scene(det)
     raw = yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
     raw["association"]["distance_gate"].update(car=2.0, bus=2.0)
     ids = {}
-    for grows in ("none", "car", "bus"):
-        growth = {c: "missed_frames" if c == grows else "fixed" for c in raw["association"]["distance_gate"]}
-        raw["association"]["distance_gate_growth"] = growth
+    for grows in ("car", "bus"):
+        raw["association"]["distance_gate_growth"] = {
+            c: growth if c == grows else "fixed" for c in raw["association"]["distance_gate"]
+        }
         (tmp_path / f"{grows}.yaml").write_text(yaml.safe_dump(raw))
         run = track_scenes(build_tracker("ekf", tmp_path / f"{grows}.yaml"), [scene], dets)
         ids[grows] = [run.results[f.token].ids.tolist() for f in (scene.frames[4], scene.frames[7])]
-    assert ids == {"none": [[0], [1]], "car": [[0], [0]], "bus": [[0], [1]]}
+    assert ids == {"car": [[0], [0] if taken_back else [1]], "bus": [[0], [1]]}
 
 
 def _scene(dets_per_frame):

@@ -303,8 +303,8 @@ def associate(
     just below the threshold (:func:`penalized`); crowded_skip (T,) bool: tracks that neither make a row crowded nor
     take the strict cost there (``skip`` of :func:`crowded_stage_one`); det_corners (D, 4, 2): the detections' own
     footprints for the IoU / GIoU measures (``preprocessing.footprint: bottom_face``; None: their yaw rectangles);
-    gate_scale (T,): each track's gate is its class's ``distance_gate`` times this (None: 1), e.g. the frames since
-    its last detection (``association.distance_gate_growth: missed_frames``).
+    gate_scale (T,): each track's gate is its class's ``distance_gate`` times this (None: 1), grown with the time
+    since its last detection (:func:`grutrack.tracking.tracker.gate_scale`).
     """
     solve = ASSIGNMENT[assignment]
     stages = [(tuple(first_metric), first_threshold)]

@@ -87,8 +87,9 @@ class TrackerConfig:
     nms_scale: np.ndarray = field(default_factory=lambda: np.ones(7))
     nms_distance_gate: np.ndarray = field(default_factory=lambda: np.zeros(7))
     distance_gate: np.ndarray = field(default_factory=lambda: np.zeros(7))
-    # per class fixed or missed_frames (a track missed for k frames is gated at (k + 1) x distance_gate)
-    distance_gate_growth: tuple[str, ...] = ("fixed",) * 7
+    # per class fixed, missed_frames (a track missed for k frames is gated at (k + 1) x distance_gate) or a speed
+    # v in m/s (a track missed for t seconds is gated at distance_gate + v t)
+    distance_gate_growth: tuple[str | float, ...] = ("fixed",) * 7
     score_update: str = "detection"
     termination: str = "age"
     delete_threshold: np.ndarray = field(default_factory=lambda: np.zeros(7))
@@ -179,7 +180,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         )
     if np.any(v["association.lost_newborn_penalty"] > 0):
         _check_lost_newborn(v, source, "'association.lost_newborn_penalty' above 0")
-    if any(g != "fixed" for g in v["association.distance_gate_growth"]):
+    if any(g == "missed_frames" or not isinstance(g, str) and g > 0 for g in v["association.distance_gate_growth"]):
         _check_widening_gate(v, source)
     if v["association.crowded_skips_lost_newborns"]:
         _check_lost_newborn(v, source, "'association.crowded_skips_lost_newborns: true'")
@@ -366,13 +367,15 @@ def _check_stage_one(v: dict, given: dict, source: str, pose_why: str, what: str
 
 
 def _check_widening_gate(v: dict, source: str) -> None:
-    """``association.distance_gate_growth: missed_frames`` scales the gate of the two-stage Hungarian association
-    (:func:`~grutrack.tracking.association.associate`): refuse it with greedy matching and Fast-Poly's dense
-    association (alignment GIoU, or a gate on every class), whose fixed gate also picks stage 2's rows."""
+    """``association.distance_gate_growth`` missed_frames or a speed above 0 scales the gate of the two-stage
+    Hungarian association (:func:`~grutrack.tracking.association.associate`): refuse it with greedy matching and
+    Fast-Poly's dense association (alignment GIoU, or a gate on every class), whose fixed gate also picks stage 2's
+    rows."""
     if _not_compiled_two_stage(v):
         raise ConfigError(
-            f"{source}: 'association.distance_gate_growth: missed_frames' needs 'association.algorithm: hungarian', no "
-            f"alignment GIoU metric and no distance gate on every class (Fast-Poly's gate is fixed)"
+            f"{source}: 'association.distance_gate_growth' missed_frames or a speed above 0 needs "
+            f"'association.algorithm: hungarian', no alignment GIoU metric and no distance gate on every class "
+            f"(Fast-Poly's gate is fixed)"
         )
 
 

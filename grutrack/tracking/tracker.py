@@ -135,9 +135,9 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
     :func:`~grutrack.tracking.ro_gdiou.ro_gdiou_first_stage`; with ``crowded_threshold``, Ro_GDIoU for the
     crowded rows and columns of stage 1 (:func:`~grutrack.tracking.association.crowded_stage_one`); with
     ``lost_newborn_penalty``, the stage-1 costs of lost newborn tracks (:func:`lost_newborns`) raised, and with
-    ``crowded_skips_lost_newborns``, those tracks left out of the crowded test; with ``distance_gate_growth:
-    missed_frames`` for a gated class, each of its tracks gated at its misses times the class's radius (these ask
-    for the tracks' hits and misses, ``wants_tracks``)."""
+    ``crowded_skips_lost_newborns``, those tracks left out of the crowded test; with ``distance_gate_growth``
+    missed_frames or a speed for a gated class, its tracks' gates grown with their misses (:func:`gate_scale`; these
+    ask for the tracks' hits and misses, ``wants_tracks``)."""
     if gated_association_needed(cfg):
         return gated_association(cfg)
     first_metric, first_override, strict = cfg.first_metric, None, None
@@ -150,7 +150,10 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
 
         strict = predicted_pose_costs(cfg.crowded_threshold > 0, cfg)
     penalty, skip_lost = cfg.lost_newborn_penalty, cfg.crowded_skips_lost_newborns and strict is not None
-    widens = np.array([g == "missed_frames" for g in cfg.distance_gate_growth]) & (cfg.distance_gate > 0)  # (C,)
+    gated = cfg.distance_gate > 0  # (C,)
+    frames = np.array([g == "missed_frames" for g in cfg.distance_gate_growth]) & gated  # (C,) bool
+    speed = np.array([0.0 if isinstance(g, str) else float(g) for g in cfg.distance_gate_growth]) * gated  # (C,) m/s
+    widens = frames | (speed > 0)
 
     def run(
         dets: BoxSet, trk_boxes: np.ndarray, trk_labels: np.ndarray, dt: float, tracks: TrackView | None = None
@@ -178,11 +181,28 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
             None if lost is None else np.where(lost, penalty[trk_labels], 0.0),
             lost if skip_lost else None,
             dets.extra.get("footprint"),
-            None if tracks is None or not widens.any() else np.where(widens[trk_labels], tracks.misses, 1.0),
+            None
+            if tracks is None or not widens.any()
+            else gate_scale(frames, speed, cfg.distance_gate, trk_labels, tracks.misses, dt),
         )
 
     run.wants_tracks = bool(np.any(penalty > 0)) or skip_lost or bool(widens.any())
     return run
+
+
+def gate_scale(
+    frames: np.ndarray, speed: np.ndarray, radius: np.ndarray, labels: np.ndarray, misses: np.ndarray, dt: float
+) -> np.ndarray:
+    """(T,) float64 factor on each track's ``distance_gate`` (``association.distance_gate_growth``).
+
+    frames (C,) bool: classes gated at ``misses`` times their radius (missed_frames); speed (C,) m/s, radius (C,) m:
+    classes whose gate grows by ``speed`` times the seconds missed, r' = r + v t with t = (misses - 1) dt; labels (T,)
+    the tracks' classes; misses (T,) int64 frames since each track's last match, this one included (1 for a track
+    matched in the frame before); dt: this frame's interval in seconds. Other classes: 1."""
+    missed_s = (misses - 1) * dt  # (T,) seconds without a detection before this frame
+    r = radius[labels]
+    grown = 1.0 + speed[labels] * missed_s / np.where(r > 0, r, 1.0)  # r' / r
+    return np.where(frames[labels], misses.astype(np.float64), grown)
 
 
 #: seconds a newborn track must have been missed to count as lost: every missed nuScenes keyframe (2 Hz), the
