@@ -35,7 +35,9 @@ decision or candidate had seen; ``dense``, ``dense_variants`` and ``dense_train`
 ``fresh7``, ``fresh7_variants`` and ``fresh6_train``, each set made denser and messier by
 benchmarks/densify_detections.py, as a real detector's file is; Decisions 14 and 15 were taken on them);
 ``dense2``, ``dense2_variants`` and ``dense2_train`` (the next seeds of the same groups, densified alike: made after
-Decision 15, its count on dense sets no decision saw); ``worlds`` and
+Decision 15, its count on dense sets no decision saw; Decision 16 was then taken on them with the first);
+``dense3``, ``dense3_variants`` and ``dense3_train`` (the seeds after those, densified alike: made after Decision
+16, its count on dense sets no decision saw); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles; ``worlds_fresh``, worlds 11-20
 made after Decision 13, its count on larger unseen sets). Candidates:
@@ -195,6 +197,9 @@ DENSE = {
     "dense2": ("fresh7", 10, 10),
     "dense2_variants": ("fresh7_variants", 5, 5),
     "dense2_train": ("fresh6_train", 5, 5),
+    "dense3": ("fresh7", 20, 10),
+    "dense3_variants": ("fresh7_variants", 10, 5),
+    "dense3_train": ("fresh6_train", 10, 5),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
@@ -563,8 +568,9 @@ def _bus_score(threshold: float):
     return lambda raw: raw["preprocessing"]["score_threshold"].update(bus=threshold)
 
 
-def _bus_gate(radius: float, growth: str):
-    """The buses' distance gate at ``radius`` metres, ``growth`` fixed or missed_frames (the other classes fixed)."""
+def _bus_gate(radius: float, growth: str | float):
+    """The buses' distance gate at ``radius`` metres, ``growth`` fixed, missed_frames or a speed in m/s (the other
+    classes fixed)."""
 
     def change(raw):
         a = raw["association"]
@@ -584,6 +590,9 @@ _PREV15 = _combine(
     lambda raw: raw["association"].pop("distance_gate_growth"),
     _bus_score(0.0),
 )
+
+#: Decision 16 taken back: the buses' gate at 6 m grown with the missed frames (Decision 15's preset)
+_PREV16 = _bus_gate(6.0, "missed_frames")
 
 CANDIDATES = {
     "ekf": lambda raw: None,
@@ -848,6 +857,15 @@ CANDIDATES = {
     "ekf_prev15+bus_gate4_fixed": _combine(_PREV15, _bus_gate(4.0, "fixed")),
     "ekf_prev15+bus_gate4_grown": _combine(_PREV15, _bus_gate(4.0, "missed_frames")),
     "ekf_prev15+bus_gate5_grown_score012": _combine(_PREV15, _bus_gate(5.0, "missed_frames"), _bus_score(0.12)),
+    # Decision 16: the buses' gate at 5 m grown at 3 m/s since the track's last detection; ekf_prev16 takes it back
+    # (Decision 15's 6 m grown with the missed frames)
+    "ekf_prev16": _PREV16,
+    # other radii (m) and speeds (m/s) of the buses' gate, measured for Decision 16
+    **{
+        f"+bus_gate{r}_{v}mps": _bus_gate(float(r), float(v))
+        for r, v in ((3, 4), (3, 5), (4, 2), (4, 3), (4, 4), (5, 4), (6, 3))
+    },
+    **{f"+bus_gate{r}_fixed": _bus_gate(float(r), "fixed") for r in (3, 4, 5, 6)},
     # a bicycle gate, 2 m or 3 m, fixed or grown as the buses' (measured for Decision 15, not adopted: the GRU-KF)
     "+bicycle_gate2": lambda raw: raw["association"]["distance_gate"].update(bicycle=2.0),
     "+bicycle_gate3": lambda raw: raw["association"]["distance_gate"].update(bicycle=3.0),
@@ -877,6 +895,7 @@ ADOPTED = (
     "+punish_large2",
     "+young0.5",
     "+nis_hits6",
+    "+bus_gate5",  # its 5 m radius, with the growth of Decision 16
 )
 
 

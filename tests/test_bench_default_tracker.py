@@ -72,12 +72,15 @@ def test_the_groups_keep_their_sets():
     assert len(train) == 40 and {p for _, p, _ in train.values()} == set(bench.VARIANTS)
     made = {}
     for group, count in (("dense", 40), ("dense_variants", 25), ("dense_train", 20)):  # Decisions 14, 15's dense sets
-        for name in (group, group.replace("dense", "dense2")):  # and the held-out ones after Decision 15
+        names = [group.replace("dense", d) for d in ("dense", "dense2", "dense3")]  # held out after Decisions 15, 16
+        for name in names:
             base, start, n = bench.DENSE[name]
             first, *rest = bench.GROUPS[base]
             made[name] = set(bench.generated(first[start : start + n], *rest).values())
             assert len(made[name]) == count, name
-        assert not made[group] & made[group.replace("dense", "dense2")], group  # no set in both
+        for i, a in enumerate(names):
+            for b in names[i + 1 :]:
+                assert not made[a] & made[b], (a, b)  # no set in two groups
 
 
 def test_the_deciding_class_is_the_largest_class_loss_against_the_sets_best_tracker():

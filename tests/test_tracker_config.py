@@ -207,7 +207,6 @@ def _decoupled_cv(**motion):
             "'association.distance_gate_growth' missed_frames or a speed above 0 needs 'association.algorithm: "
             "hungarian', no alignment GIoU metric and no distance gate on every class",
         ),
-
         (
             lambda r: r["association"].update(
                 first_metric=dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev"), crowded_threshold=NO_CROWD

@@ -141,10 +141,7 @@ def test_gate_scale_per_class_rule():
     assert got.tolist() == [1.0, 1.0, 1.0, 3.0, 1.0, 1.75]
 
 
-@pytest.mark.parametrize(
-    "growth, taken_back",
-    [("fixed", False), ("missed_frames", True), (3.0, True), (0.5, False)],
-)
+@pytest.mark.parametrize("growth, taken_back", [("fixed", False), ("missed_frames", True), (3.0, True), (0.5, False)])
 def test_distance_gate_growth(tmp_path, growth, taken_back):
     # a car at 10 m/s along x, detected in frames 0-4, missed in 5 and 6, seen again in frame 7 3 m to the side of
     # its prediction: a fixed 2 m gate starts a new track there; grown with the missed frames (3 frames since its
