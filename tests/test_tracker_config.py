@@ -15,6 +15,27 @@ from grutrack.tracking.config import PRESET_DIR, config_from_dict, load_tracker_
 #: association.crowded_threshold off (the preset's crowded stage 1 taken out where a case tests another rule)
 NO_CROWD = dict.fromkeys(TRACKING_CLASSES, 0.0)
 
+GROWN_GATE_REFUSED = (
+    "'association.distance_gate_growth' missed_frames or a speed above 0 needs 'association.algorithm: "
+    "hungarian', no alignment GIoU metric and no distance gate on every class"
+)
+
+
+def _grown_gate_on_every_class(growth):
+    """A preset edit: a gate on every class (Fast-Poly's dense association) with the buses' gate grown by
+    ``growth``."""
+
+    def edit(r):
+        r["association"].pop("ro_gdiou_weights")
+        r["association"].update(
+            distance_gate=dict.fromkeys(TRACKING_CLASSES, 2.0),
+            crowded_threshold=NO_CROWD,
+            crowded_skips_lost_newborns=False,
+            distance_gate_growth={**dict.fromkeys(TRACKING_CLASSES, "fixed"), "bus": growth},
+        )
+
+    return edit
+
 
 def _raw():
     return yaml.safe_load((PRESET_DIR / "ekf.yaml").read_text())
@@ -181,32 +202,10 @@ def _decoupled_cv(**motion):
             r"'association.distance_gate_growth.bus' must be fixed, missed_frames or a number >= 0 \(metres per "
             r"second\), got -1.5",
         ),
-        (
-            lambda r: (
-                r["association"].pop("ro_gdiou_weights"),
-                r["association"].update(
-                    distance_gate=dict.fromkeys(TRACKING_CLASSES, 2.0),
-                    crowded_threshold=NO_CROWD,
-                    crowded_skips_lost_newborns=False,
-                    distance_gate_growth={**dict.fromkeys(TRACKING_CLASSES, "fixed"), "bus": "missed_frames"},
-                ),
-            ),
-            "'association.distance_gate_growth' missed_frames or a speed above 0 needs 'association.algorithm: "
-            "hungarian', no alignment GIoU metric and no distance gate on every class",
-        ),
-        (
-            lambda r: (
-                r["association"].pop("ro_gdiou_weights"),
-                r["association"].update(
-                    distance_gate=dict.fromkeys(TRACKING_CLASSES, 2.0),
-                    crowded_threshold=NO_CROWD,
-                    crowded_skips_lost_newborns=False,
-                    distance_gate_growth={**dict.fromkeys(TRACKING_CLASSES, "fixed"), "bus": 3.0},
-                ),
-            ),
-            "'association.distance_gate_growth' missed_frames or a speed above 0 needs 'association.algorithm: "
-            "hungarian', no alignment GIoU metric and no distance gate on every class",
-        ),
+        *[
+            (_grown_gate_on_every_class(growth), GROWN_GATE_REFUSED)  # Fast-Poly's dense association
+            for growth in ("missed_frames", 3.0)
+        ],
         (
             lambda r: r["association"].update(
                 first_metric=dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev"), crowded_threshold=NO_CROWD
