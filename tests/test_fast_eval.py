@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from support.compare import entry_differences, flatten
 from support.fast_synth import corrupt_submission, gt_submission
+from support.tracking import track
 
 from grutrack.evaluation.nuscenes_fast import evaluate_tracks, exact_center_distances, fast_tracking_eval, load_tracks
 
@@ -516,22 +517,9 @@ def test_invalid_submissions_fail_like_the_devkit(nusc_mini, mini_val_gt, defect
 
 
 # ----- the real tracker's output: EKF on the real PointPillars detections, and the synthetic demo ------------
-def _tracked_submission(nusc, split: str, detections) -> dict[str, Any]:
-    from grutrack.data.nusc_detections import load_detections
-    from grutrack.data.nuscenes import load_scenes
-    from grutrack.export.nuscenes_json import build_submission
-    from grutrack.tracking.factory import build_tracker
-    from grutrack.tracking.tracker import track_scenes
-
-    scenes = load_scenes(nusc, split)
-    tokens = [f.token for s in scenes for f in s.frames]
-    run = track_scenes(build_tracker("ekf"), scenes, load_detections(detections, tokens))
-    return build_submission(run.results, tokens)
-
-
 @pytest.mark.slow  # the ekf on the real file end to end is quick in test_track_nuscenes, the parity in the cases above
 def test_ekf_on_pointpillars_mini_val(nusc_mini, pointpillars_mini_val):
-    sub = _tracked_submission(nusc_mini, "mini_val", pointpillars_mini_val)
+    sub, _ = track(nusc_mini, "ekf", "mini_val", pointpillars_mini_val)
     assert_parity(nusc_mini, sub, "mini_val")
 
 
@@ -562,7 +550,7 @@ def test_ekf_on_simulated_demo_val(tmp_path, capsys):
         == 0
     )
     nusc = open_nuscenes(data, "v1.0-demo")
-    sub = _tracked_submission(nusc, "demo_val", dets)
+    sub, _ = track(nusc, "ekf", "demo_val", dets)
     assert_parity(nusc, sub, "demo_val")
     # what `grutrack evaluate` prints of the demo says it is SYNTHETIC
     common = ["--dataroot", str(data), "--version", "v1.0-demo", "--split", "demo_val"]
@@ -747,7 +735,7 @@ def test_fast_tracking_eval_main_on_a_submission_file(nusc_root, pointpillars_mi
     from grutrack.evaluation.devkit_plugin import FastTrackingEval
     from grutrack.evaluation.nuscenes_fast import fast_tracking_eval as fast
 
-    sub = _tracked_submission(open_nuscenes(nusc_root, "v1.0-mini"), "mini_val", pointpillars_mini_val)
+    sub, _ = track(open_nuscenes(nusc_root, "v1.0-mini"), "ekf", "mini_val", pointpillars_mini_val)
     path = tmp_path / "sub.json"
     path.write_text(json.dumps(sub))
     import contextlib
