@@ -139,6 +139,10 @@ def test_gate_scale_per_class_rule():
     labels, misses = np.array([0, 0, 1, 1, 2, 2]), np.array([1, 3, 1, 3, 1, 3])
     got = gate_scale(frames, speed, radius, labels, misses, 0.5)
     assert got.tolist() == [1.0, 1.0, 1.0, 3.0, 1.0, 1.75]
+    # the speed's gate depends on the missed time, not the frame rate: 1 s missed at 10 Hz (11 frames since the last
+    # match) is 1.75 too, while missed_frames counts the frames (11)
+    at_10hz = gate_scale(frames, speed, radius, np.array([1, 2]), np.array([11, 11]), 0.1)
+    assert at_10hz.tolist() == pytest.approx([11.0, 1.75])
 
 
 @pytest.mark.parametrize("growth, taken_back", [("fixed", False), ("missed_frames", True), (3.0, True), (0.5, False)])

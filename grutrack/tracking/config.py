@@ -180,7 +180,8 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         )
     if np.any(v["association.lost_newborn_penalty"] > 0):
         _check_lost_newborn(v, source, "'association.lost_newborn_penalty' above 0")
-    if any(g == "missed_frames" or not isinstance(g, str) and g > 0 for g in v["association.distance_gate_growth"]):
+    frames, speed = gate_growth_rules(v["association.distance_gate_growth"])
+    if frames.any() or np.any(speed > 0):
         _check_widening_gate(v, source)
     if v["association.crowded_skips_lost_newborns"]:
         _check_lost_newborn(v, source, "'association.crowded_skips_lost_newborns: true'")
@@ -339,6 +340,15 @@ def _check_ro_gdiou_some(v: dict, given: dict, source: str) -> None:
         "'association.first_metric: ro_gdiou_bev' for some classes needs",
         "it is stage 1 of the two-stage association",
     )
+
+
+def gate_growth_rules(growth: tuple[str | float, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The per-class rules of ``association.distance_gate_growth`` (values ``fixed``, ``missed_frames`` or a speed):
+    (C,) bool, the classes gated at (k + 1) x their radius after k missed frames, and (C,) float64 m/s, the speed
+    their radius grows by with the missed time (0: not by speed)."""
+    frames = np.array([g == "missed_frames" for g in growth], dtype=bool)
+    speed = np.array([0.0 if isinstance(g, str) else float(g) for g in growth], dtype=np.float64)
+    return frames, speed
 
 
 def _not_compiled_two_stage(v: dict) -> bool:

@@ -19,7 +19,7 @@ from threadpoolctl import threadpool_limits
 from grutrack.boxes import empty_boxes
 from grutrack.data.scene import BoxSet, Scene
 from grutrack.tracking.association import Matches, associate, gated_association, gated_association_needed
-from grutrack.tracking.config import TrackerConfig
+from grutrack.tracking.config import TrackerConfig, gate_growth_rules
 from grutrack.tracking.lifecycle import lifecycle_kernel
 from grutrack.tracking.preprocess import preprocess_frame
 
@@ -151,8 +151,8 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
         strict = predicted_pose_costs(cfg.crowded_threshold > 0, cfg)
     penalty, skip_lost = cfg.lost_newborn_penalty, cfg.crowded_skips_lost_newborns and strict is not None
     gated = cfg.distance_gate > 0  # (C,)
-    frames = np.array([g == "missed_frames" for g in cfg.distance_gate_growth]) & gated  # (C,) bool
-    speed = np.array([0.0 if isinstance(g, str) else float(g) for g in cfg.distance_gate_growth]) * gated  # (C,) m/s
+    frames, speed = gate_growth_rules(cfg.distance_gate_growth)  # (C,) bool, (C,) m/s
+    frames, speed = frames & gated, speed * gated
     widens = frames | (speed > 0)
 
     def run(
