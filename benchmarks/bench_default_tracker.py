@@ -37,7 +37,9 @@ benchmarks/densify_detections.py, as a real detector's file is; Decisions 14 and
 ``dense2``, ``dense2_variants`` and ``dense2_train`` (the next seeds of the same groups, densified alike: made after
 Decision 15, its count on dense sets no decision saw; Decision 16 was then taken on them with the first);
 ``dense3``, ``dense3_variants`` and ``dense3_train`` (the seeds after those, densified alike: made after Decision
-16, its count on dense sets no decision saw); ``worlds`` and
+16, its count on dense sets no decision saw; Decision 17 was then taken on the first two); ``dense4``,
+``dense4_variants`` and ``dense4_train`` (the seeds after those, densified alike: made after Decision 17's choice,
+its count on dense sets no decision saw); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles; ``worlds_fresh``, worlds 11-20
 made after Decision 13, its count on larger unseen sets). Candidates:
@@ -200,6 +202,9 @@ DENSE = {
     "dense3": ("fresh7", 20, 10),
     "dense3_variants": ("fresh7_variants", 10, 5),
     "dense3_train": ("fresh6_train", 10, 5),
+    "dense4": ("fresh7", 30, 10),
+    "dense4_variants": ("fresh7_variants", 15, 5),
+    "dense4_train": ("fresh6_train", 15, 5),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
@@ -860,15 +865,23 @@ CANDIDATES = {
     # Decision 16: the buses' gate at 5 m grown at 3 m/s since the track's last detection; ekf_prev16 takes it back
     # (Decision 15's 6 m grown with the missed frames)
     "ekf_prev16": _PREV16,
+    # Decision 17: the bicycles' 2 m gate; ekf_prev17 takes it back (Decision 16's preset)
+    "ekf_prev17": lambda raw: raw["association"]["distance_gate"].update(bicycle=0.0),
     # other radii (m) and speeds (m/s) of the buses' gate, measured for Decision 16
     **{
         f"+bus_gate{r}_{v}mps": _bus_gate(float(r), float(v))
         for r, v in ((3, 4), (3, 5), (4, 2), (4, 3), (4, 4), (5, 4), (6, 3))
     },
     **{f"+bus_gate{r}_fixed": _bus_gate(float(r), "fixed") for r in (3, 4, 5, 6)},
-    # a bicycle gate, 2 m or 3 m, fixed or grown as the buses' (measured for Decision 15, not adopted: the GRU-KF)
+    # a bicycle gate: 2 m (Decision 17, adopted; measured for Decisions 15 and 16 and left out then for the GRU-KF),
+    # 2.5 m, 3 m, or 2 m grown with the missed frames or at 1 m/s
     "+bicycle_gate2": lambda raw: raw["association"]["distance_gate"].update(bicycle=2.0),
     "+bicycle_gate3": lambda raw: raw["association"]["distance_gate"].update(bicycle=3.0),
+    "+bicycle_gate2_5": lambda raw: raw["association"]["distance_gate"].update(bicycle=2.5),
+    "+bicycle_gate2_1mps": _combine(
+        lambda raw: raw["association"]["distance_gate"].update(bicycle=2.0),
+        lambda raw: raw["association"]["distance_gate_growth"].update(bicycle=1.0),
+    ),
     "+bicycle_gate2_grown": _combine(
         lambda raw: raw["association"]["distance_gate"].update(bicycle=2.0),
         lambda raw: raw["association"]["distance_gate_growth"].update(bicycle="missed_frames"),
@@ -896,6 +909,7 @@ ADOPTED = (
     "+young0.5",
     "+nis_hits6",
     "+bus_gate5",  # its 5 m radius, with the growth of Decision 16
+    "+bicycle_gate2",  # Decision 17
 )
 
 
