@@ -39,7 +39,9 @@ Decision 15, its count on dense sets no decision saw; Decision 16 was then taken
 ``dense3``, ``dense3_variants`` and ``dense3_train`` (the seeds after those, densified alike: made after Decision
 16, its count on dense sets no decision saw; Decision 17 was then taken on the first two); ``dense4``,
 ``dense4_variants`` and ``dense4_train`` (the seeds after those, densified alike: made after Decision 17's choice,
-its count on dense sets no decision saw); ``worlds`` and
+its count on dense sets no decision saw; Decision 18 was then taken on the first two); ``dense5`` and ``dense5_train``
+(the last seeds of ``fresh7`` and ``fresh6_train``, densified alike: made after Decision 18's choice, its count on
+dense sets no decision saw); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles; ``worlds_fresh``, worlds 11-20
 made after Decision 13, its count on larger unseen sets). Candidates:
@@ -205,6 +207,8 @@ DENSE = {
     "dense4": ("fresh7", 30, 10),
     "dense4_variants": ("fresh7_variants", 15, 5),
     "dense4_train": ("fresh6_train", 15, 5),
+    "dense5": ("fresh7", 40, 10),
+    "dense5_train": ("fresh6_train", 20, 5),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
@@ -589,6 +593,11 @@ def _bus_gate(radius: float, growth: str | float):
     return change
 
 
+def _bus_delete(threshold: float):
+    """Buses' ``lifecycle.delete_threshold`` (a track dies once the mean of its per-frame scores falls below it)."""
+    return lambda raw: raw["lifecycle"]["delete_threshold"].update(bus=threshold)
+
+
 #: Decision 15 taken back: no bus gate, no grown gate, every bus detection kept (Decision 14's preset)
 _PREV15 = _combine(
     lambda raw: raw["association"]["distance_gate"].update(bus=0.0),
@@ -867,6 +876,10 @@ CANDIDATES = {
     "ekf_prev16": _PREV16,
     # Decision 17: the bicycles' 2 m gate; ekf_prev17 takes it back (Decision 16's preset)
     "ekf_prev17": lambda raw: raw["association"]["distance_gate"].update(bicycle=0.0),
+    # Decision 18: buses' tracks die once their mean score falls below 0.14; ekf_prev18 takes it back (Fast-Poly's
+    # 0.08, Decision 17's preset); other thresholds measured for it
+    "ekf_prev18": _bus_delete(0.08),
+    **{f"+bus_delete{round(v * 100):03d}": _bus_delete(v) for v in (0.1, 0.12, 0.16, 0.2, 0.25, 0.3)},
     # other radii (m) and speeds (m/s) of the buses' gate, measured for Decision 16
     **{
         f"+bus_gate{r}_{v}mps": _bus_gate(float(r), float(v))
