@@ -98,7 +98,7 @@ def test_compare_tracks_cli(nusc_root, nusc_reference, tmp_path, capsys):
 #: the default preset's AMOTA on the reference sets (docs/results/default_tracker.md gives the evidence for its
 #: choices against the three trackers); the trackers' own AMOTA is read from the reference metrics
 EKF_AMOTA = {
-    "mini_val_centerpoint_sim_s7": 0.8893,
+    "mini_val_centerpoint_sim_s7": 0.8983,
     "mini_val_pointpillars_sim_s7": 0.6690,
     "pointpillars_mini_val": 0.2020,
     "mini_train_centerpoint_sim_s7": 0.8860,
