@@ -608,6 +608,12 @@ _PREV15 = _combine(
 #: Decision 16 taken back: the buses' gate at 6 m grown with the missed frames (Decision 15's preset)
 _PREV16 = _bus_gate(6.0, "missed_frames")
 
+
+def _PREV17(raw) -> None:
+    """Decision 17 taken back: no bicycle gate (Decision 16's preset)."""
+    raw["association"]["distance_gate"].update(bicycle=0.0)
+
+
 CANDIDATES = {
     "ekf": lambda raw: None,
     "ekf_before": lambda raw: None,
@@ -875,7 +881,10 @@ CANDIDATES = {
     # (Decision 15's 6 m grown with the missed frames)
     "ekf_prev16": _PREV16,
     # Decision 17: the bicycles' 2 m gate; ekf_prev17 takes it back (Decision 16's preset)
-    "ekf_prev17": lambda raw: raw["association"]["distance_gate"].update(bicycle=0.0),
+    "ekf_prev17": _PREV17,
+    # Decision 16's bicycles with written-score changes instead of the gate (measured for Decision 17)
+    "ekf_prev17+young0.3": _combine(_PREV17, _young(0.3)),
+    "ekf_prev17+bic_punish1": _combine(_PREV17, _punish({"bicycle": 1})),
     # Decision 18: buses' tracks die once their mean score falls below 0.14; ekf_prev18 takes it back (Fast-Poly's
     # 0.08, Decision 17's preset); other thresholds measured for it
     "ekf_prev18": _bus_delete(0.08),
@@ -891,6 +900,14 @@ CANDIDATES = {
     "+bicycle_gate2": lambda raw: raw["association"]["distance_gate"].update(bicycle=2.0),
     "+bicycle_gate3": lambda raw: raw["association"]["distance_gate"].update(bicycle=3.0),
     "+bicycle_gate2_5": lambda raw: raw["association"]["distance_gate"].update(bicycle=2.5),
+    "+bicycle_gate1": lambda raw: raw["association"]["distance_gate"].update(bicycle=1.0),
+    "+bicycle_gate1_5": lambda raw: raw["association"]["distance_gate"].update(bicycle=1.5),
+    "+bicycle_gate4": lambda raw: raw["association"]["distance_gate"].update(bicycle=4.0),
+    # no bicycle gate, a tighter stage-1 threshold instead (measured for Decision 17)
+    "+bic_thr13": _combine(
+        lambda raw: raw["association"]["distance_gate"].update(bicycle=0.0),
+        lambda raw: raw["association"]["first_threshold"].update(bicycle=1.3),
+    ),
     "+bicycle_gate2_1mps": _combine(
         lambda raw: raw["association"]["distance_gate"].update(bicycle=2.0),
         lambda raw: raw["association"]["distance_gate_growth"].update(bicycle=1.0),
