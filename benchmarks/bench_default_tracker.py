@@ -593,6 +593,11 @@ def _bus_gate(radius: float, growth: str | float):
     return change
 
 
+def _bicycle_gate(radius: float):
+    """The bicycles' distance gate at ``radius`` metres (0: none), fixed unless a candidate grows it."""
+    return lambda raw: raw["association"]["distance_gate"].update(bicycle=radius)
+
+
 def _bus_delete(threshold: float):
     """Buses' ``lifecycle.delete_threshold`` (a track dies once the mean of its per-frame scores falls below it)."""
     return lambda raw: raw["lifecycle"]["delete_threshold"].update(bus=threshold)
@@ -608,10 +613,10 @@ _PREV15 = _combine(
 #: Decision 16 taken back: the buses' gate at 6 m grown with the missed frames (Decision 15's preset)
 _PREV16 = _bus_gate(6.0, "missed_frames")
 
-
-def _PREV17(raw) -> None:
-    """Decision 17 taken back: no bicycle gate (Decision 16's preset)."""
-    raw["association"]["distance_gate"].update(bicycle=0.0)
+#: Decision 17 taken back: no bicycle gate (Decision 16's preset)
+_PREV17 = _bicycle_gate(0.0)
+#: the bicycle gates measured (candidate name suffix, radius in metres)
+_BICYCLE_RADII = (("1", 1.0), ("1_5", 1.5), ("2", 2.0), ("2_5", 2.5), ("3", 3.0), ("4", 4.0))
 
 
 CANDIDATES = {
@@ -896,25 +901,15 @@ CANDIDATES = {
     },
     **{f"+bus_gate{r}_fixed": _bus_gate(float(r), "fixed") for r in (3, 4, 5, 6)},
     # a bicycle gate: 2 m (Decision 17, adopted; measured for Decisions 15 and 16 and left out then for the GRU-KF),
-    # 2.5 m, 3 m, or 2 m grown with the missed frames or at 1 m/s
-    "+bicycle_gate2": lambda raw: raw["association"]["distance_gate"].update(bicycle=2.0),
-    "+bicycle_gate3": lambda raw: raw["association"]["distance_gate"].update(bicycle=3.0),
-    "+bicycle_gate2_5": lambda raw: raw["association"]["distance_gate"].update(bicycle=2.5),
-    "+bicycle_gate1": lambda raw: raw["association"]["distance_gate"].update(bicycle=1.0),
-    "+bicycle_gate1_5": lambda raw: raw["association"]["distance_gate"].update(bicycle=1.5),
-    "+bicycle_gate4": lambda raw: raw["association"]["distance_gate"].update(bicycle=4.0),
+    # 1, 1.5, 2.5, 3 and 4 m, or 2 m grown with the missed frames or at 1 m/s
+    **{f"+bicycle_gate{name}": _bicycle_gate(r) for name, r in _BICYCLE_RADII},
     # no bicycle gate, a tighter stage-1 threshold instead (measured for Decision 17)
-    "+bic_thr13": _combine(
-        lambda raw: raw["association"]["distance_gate"].update(bicycle=0.0),
-        lambda raw: raw["association"]["first_threshold"].update(bicycle=1.3),
-    ),
+    "+bic_thr13": _combine(_PREV17, lambda raw: raw["association"]["first_threshold"].update(bicycle=1.3)),
     "+bicycle_gate2_1mps": _combine(
-        lambda raw: raw["association"]["distance_gate"].update(bicycle=2.0),
-        lambda raw: raw["association"]["distance_gate_growth"].update(bicycle=1.0),
+        _bicycle_gate(2.0), lambda raw: raw["association"]["distance_gate_growth"].update(bicycle=1.0)
     ),
     "+bicycle_gate2_grown": _combine(
-        lambda raw: raw["association"]["distance_gate"].update(bicycle=2.0),
-        lambda raw: raw["association"]["distance_gate_growth"].update(bicycle="missed_frames"),
+        _bicycle_gate(2.0), lambda raw: raw["association"]["distance_gate_growth"].update(bicycle="missed_frames")
     ),
     # the trailers' 5 m gate grown as the buses'
     "+trailer_gate_grown": lambda raw: raw["association"]["distance_gate_growth"].update(trailer="missed_frames"),

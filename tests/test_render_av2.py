@@ -406,10 +406,14 @@ def test_av2_report_embeds_key_frames_of_the_worst_log(rendered, tmp_path):
         side = int(LAYOUT.panel * 0.45)
         assert im.size == (4 * side + 3 * 6, side + 24)
         strip = np.asarray(im.convert("RGB")).astype(int)
-    # the id-switch rings are in the strip: a ring drawn at 0.45 scale covers about 50 magenta pixels, fewer where it
-    # overlaps a box or another ring (2 rings: 101 with Decision 16's preset, 99 with Decision 18's); none without rings
-    n_switches = sum(len(f["id_switches"]) for f in worst["frames"] if f["frame"] in shown)
-    assert n_switches >= 1 and _near(strip, IDS_RGB, 60).sum() > 40 * n_switches
+    # the id-switch rings are in their own frame's panel: a ring drawn at 0.45 scale covers about 50 magenta pixels,
+    # fewer where it overlaps a box (the worst log's two rings: 51 and 48); a panel without a switch has none
+    switches = {f["frame"]: len(f["id_switches"]) for f in worst["frames"] if f["frame"] in shown}
+    assert sum(switches.values()) >= 1
+    for i, frame in enumerate(shown):
+        panel = strip[24:, i * (side + 6) : i * (side + 6) + side]
+        magenta = _near(panel, IDS_RGB, 60).sum()
+        assert magenta > 40 * switches[frame] if switches[frame] else magenta == 0, (frame, switches[frame], magenta)
 
 
 def test_nusc_test_report_says_it_has_no_key_frames(tmp_path, capsys):
