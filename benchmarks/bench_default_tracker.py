@@ -187,6 +187,10 @@ GROUPS = {
     "fresh6_train": (tuple(range(9000, 9025)), ("mini_train",)),
     "fresh7": (tuple(range(10000, 10050)), ("mini_val",)),
     "fresh7_variants": (tuple(range(10000, 10020)), ("mini_val",), (*VARIANTS, "cp_strong")),
+    # made after Decision 19, for dense sets no decision saw
+    "fresh8": (tuple(range(12000, 12020)), ("mini_val",)),
+    "fresh8_variants": (tuple(range(12000, 12010)), ("mini_val",), (*VARIANTS, "cp_strong")),
+    "fresh8_train": (tuple(range(12000, 12010)), ("mini_train",)),
 }
 
 #: SYNTHETIC sets made denser and messier, as a real detector's file is (benchmarks/densify_detections.py with its
@@ -209,6 +213,9 @@ DENSE = {
     "dense4_train": ("fresh6_train", 15, 5),
     "dense5": ("fresh7", 40, 10),
     "dense5_train": ("fresh6_train", 20, 5),
+    "dense6": ("fresh8", 0, 10),
+    "dense6_variants": ("fresh8_variants", 0, 5),
+    "dense6_train": ("fresh8_train", 0, 5),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
@@ -269,11 +276,13 @@ def _nms_order(raw):  # detections numbered in NMS's score order
 def _stage_one_ro_gdiou(a: dict, classes) -> None:
     """``association`` ``a`` with Ro_GDIoU as the first metric of ``classes``: their crowded rule off (stage 1 is
     Ro_GDIoU already; the config refuses both), and with it the lost newborns' skip when no class keeps the rule
-    or every class is on Ro_GDIoU (MCTrack's one-stage association)."""
+    or every class is on Ro_GDIoU (MCTrack's one-stage association, which has no size gate either)."""
     if "crowded_threshold" in a:
         a["crowded_threshold"] = {**a["crowded_threshold"], **dict.fromkeys(classes, 0.0)}
     if not any(v > 0 for v in a.get("crowded_threshold", {}).values()) or set(classes) == set(CLASSES):
         a.pop("crowded_skips_lost_newborns", None)
+    if set(classes) == set(CLASSES):
+        a.pop("size_gate", None)
 
 
 def _ro_gdiou(raw):  # Ro_GDIoU one stage, MCTrack's weights and thresholds, predicted pose
@@ -598,6 +607,12 @@ def _bicycle_gate(radius: float):
     return lambda raw: raw["association"]["distance_gate"].update(bicycle=radius)
 
 
+def _size_gate(ratio: float):
+    """Every class's ``association.size_gate`` at ``ratio`` (0: off): a pair is scored only when the smaller
+    footprint area is at least this fraction of the larger."""
+    return lambda raw: raw["association"].update(size_gate=dict.fromkeys(raw["association"]["distance_gate"], ratio))
+
+
 def _bus_delete(threshold: float):
     """Buses' ``lifecycle.delete_threshold`` (a track dies once the mean of its per-frame scores falls below it)."""
     return lambda raw: raw["lifecycle"]["delete_threshold"].update(bus=threshold)
@@ -856,6 +871,7 @@ CANDIDATES = {
         lambda raw: raw["association"].pop("ro_gdiou_weights", None),
         lambda raw: raw["association"].pop("crowded_skips_lost_newborns", None),
         lambda raw: raw["association"].pop("distance_gate_growth", None),  # Fast-Poly's gate is fixed
+        lambda raw: raw["association"].pop("size_gate", None),  # its dense costs have no size gate
     ),
     "+young0.4+score_detection": _combine(_young(0.4), lambda raw: raw["lifecycle"].update(score_update="detection")),
     # robust update: a detection's R scaled by NIS / g when its position NIS exceeds g (motion.nis_limit); ekf_prev7
@@ -894,6 +910,10 @@ CANDIDATES = {
     # 0.08, Decision 17's preset); other thresholds measured for it
     "ekf_prev18": _bus_delete(0.08),
     **{f"+bus_delete{round(v * 100):03d}": _bus_delete(v) for v in (0.1, 0.12, 0.16, 0.2, 0.25, 0.3)},
+    # Decision 19: every class's size gate at 0.3; ekf_prev19 takes it back (Decision 18's preset); 0.5 and 0.7
+    # measured for it
+    "ekf_prev19": _size_gate(0.0),
+    **{f"+size_gate{round(v * 10):02d}": _size_gate(v) for v in (0.5, 0.7)},
     # other radii (m) and speeds (m/s) of the buses' gate, measured for Decision 16
     **{
         f"+bus_gate{r}_{v}mps": _bus_gate(float(r), float(v))

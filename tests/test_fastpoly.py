@@ -374,11 +374,12 @@ def test_a_gate_on_some_classes_gates_both_stages_of_the_compiled_path(nusc_mini
     assert ekf.cfg.distance_gate.max() > 0 and not gated_association_needed(ekf.cfg)
     gates = [ekf.cfg.distance_gate, np.where(np.arange(7) == 2, 0.0, 2.0)]  # the preset's; all but car at 2 m
     # the crowded rows' Ro_GDIoU (the preset's cars and pedestrians) and a gate grown with the missed time (the
-    # preset's buses) are part of the compiled path only
+    # preset's buses) and the size gate are part of the compiled path only
     plain = {
         "crowded_threshold": np.zeros(7),
         "crowded_skips_lost_newborns": False,
         "distance_gate_growth": ("fixed",) * 7,
+        "size_gate": np.zeros(7),
     }
     for gate in gates:
         sparse = build_tracker("ekf")

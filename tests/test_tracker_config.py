@@ -207,6 +207,30 @@ def _decoupled_cv(**motion):
             for growth in ("missed_frames", 3.0)
         ],
         (
+            lambda r: (
+                _grown_gate_on_every_class("fixed")(r),
+                r["association"].__setitem__("size_gate", {**dict.fromkeys(TRACKING_CLASSES, 0.0), "bus": 0.3}),
+            ),
+            "'association.size_gate' above 0 needs 'association.algorithm: hungarian', no alignment GIoU metric, no "
+            "distance gate on every class",
+        ),
+        (
+            lambda r: r["association"].update(
+                first_metric=dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev"),
+                two_stage=False,
+                distance_gate=dict.fromkeys(TRACKING_CLASSES, 0.0),
+                distance_gate_growth=dict.fromkeys(TRACKING_CLASSES, "fixed"),
+                crowded_threshold=NO_CROWD,
+                crowded_skips_lost_newborns=False,
+                size_gate=dict.fromkeys(TRACKING_CLASSES, 0.3),
+            ),
+            "'association.size_gate' above 0 needs .* a first_metric other than ro_gdiou_bev for some class",
+        ),
+        (
+            lambda r: r["association"].__setitem__("size_gate", {**dict.fromkeys(TRACKING_CLASSES, 0.0), "car": 1.5}),
+            r"'association.size_gate.car' must be a number in \[0, 1\], got 1.5",
+        ),
+        (
             lambda r: r["association"].update(
                 first_metric=dict.fromkeys(TRACKING_CLASSES, "ro_gdiou_bev"), crowded_threshold=NO_CROWD
             ),

@@ -10,7 +10,7 @@ from support.association_bounds import similarity_upper_bound
 from grutrack import geometry
 from grutrack.classes import CLASS_INDEX
 from grutrack.data.scene import BoxSet, Frame, Scene
-from grutrack.tracking.association import associate
+from grutrack.tracking.association import associate, size_consistent
 from grutrack.tracking.config import PRESET_DIR, load_tracker_config
 from grutrack.tracking.factory import build_tracker
 from grutrack.tracking.preprocess import nms_keep, score_filter
@@ -117,6 +117,36 @@ def test_distance_gate_holds_in_both_stages():
     m = _assoc(det, [trl], trk, [trl], first_threshold=tight, distance_gate=gate)
     assert len(m.dets) == 0 and m.unmatched_tracks.tolist() == [0]
     assert _assoc(det, [trl], trk, [trl], distance_gate=np.where(gate > 0, 7.0, 0.0)).dets.tolist() == [0]
+
+
+def test_size_consistent_compares_footprint_areas_against_each_tracks_ratio():
+    # footprints 8.1 m^2 (car), 33 m^2 (bus, 11 x 3) and 0.49 m^2 (pedestrian): the car against the bus is a ratio
+    # of 0.245, the pedestrian against the car 0.06; ratio 0 admits every pair, 0.2 the car for the bus track
+    dets = np.array([_box(0, 0), _box(0, 0, w=0.7, l=0.7)])
+    trks = np.array([_box(0, 0, w=3.0, l=11.0), _box(0, 0)])
+    assert size_consistent(dets, trks, np.zeros(2)).all()
+    assert size_consistent(dets, trks, np.array([0.2, 0.2])).tolist() == [[True, True], [False, False]]
+    assert size_consistent(dets, trks, np.array([0.25, 0.07])).tolist() == [[False, True], [False, False]]
+    assert size_consistent(dets, trks, np.array([1.0, 1.0]))[0, 1]  # equal areas pass any ratio
+
+
+def test_size_gate_holds_in_both_stages_and_per_class():
+    # a car-sized box labelled bus inside a bus track's footprint: BEV and 3D GIoU 0.245 (cost 0.755, below
+    # either stage's threshold), refused by a 0.3 bus size gate in both stages; the gate of another class
+    # leaves the pair, and a bus-sized detection 1 m off is still taken
+    bus = CLASS_INDEX["bus"]
+    trk = [_box(0, 0, w=3.0, l=11.0, h=3.5)]
+    det = [_box(2.0, 0, h=3.5)]
+    assert _assoc(det, [bus], trk, [bus]).dets.tolist() == [0]
+    gate = np.where(np.arange(7) == bus, 0.3, 0.0)
+    m = _assoc(det, [bus], trk, [bus], size_gate=gate)
+    assert len(m.dets) == 0 and m.unmatched_tracks.tolist() == [0]
+    stage2 = dict(first_threshold=np.full(7, 0.1))  # stage 1 refuses the pair, stage 2 alone matches it
+    assert _assoc(det, [bus], trk, [bus], **stage2).dets.tolist() == [0]
+    assert len(_assoc(det, [bus], trk, [bus], size_gate=gate, **stage2).dets) == 0
+    assert _assoc(det, [bus], trk, [bus], size_gate=np.where(gate > 0, 0.0, 0.3)).dets.tolist() == [0]
+    own = [_box(1.0, 0, w=2.9, l=10.5, h=3.4)]
+    assert _assoc(own, [bus], trk, [bus], size_gate=gate).dets.tolist() == [0]
 
 
 def test_gate_scale_widens_each_tracks_gate():

@@ -3,7 +3,8 @@
 Stage 1 scores every same-class (detection, track) pair with its class's similarity (3D or BEV GIoU/IoU),
 cost = 1 - similarity, and accepts assignments whose cost is below the class threshold. Stage 2 repeats
 this with one similarity (BEV GIoU by default) on what stage 1 left unmatched. Different classes never match,
-nor, in either stage, a pair farther apart than its class's distance gate (``association.distance_gate``).
+nor, in either stage, a pair farther apart than its class's distance gate (``association.distance_gate``) or
+whose footprint areas differ by more than its class's size gate (``association.size_gate``, :func:`size_consistent`).
 
 Two assignment rules (tracker preset key ``association.assignment``), both over the admissible pairs
 (cost < threshold):
@@ -287,6 +288,7 @@ def associate(
     crowded_skip: np.ndarray | None = None,
     det_corners: np.ndarray | None = None,
     gate_scale: np.ndarray | None = None,
+    size_gate: np.ndarray | None = None,
 ) -> Matches:
     """Two-stage association of D detections with T (predicted) tracks.
 
@@ -304,7 +306,9 @@ def associate(
     take the strict cost there (``skip`` of :func:`crowded_stage_one`); det_corners (D, 4, 2): the detections' own
     footprints for the IoU / GIoU measures (``preprocessing.footprint: bottom_face``; None: their yaw rectangles);
     gate_scale (T,): each track's gate is its class's ``distance_gate`` times this (None: 1), grown with the time
-    since its last detection (:func:`grutrack.tracking.tracker.gate_scale`).
+    since its last detection (:func:`grutrack.tracking.tracker.gate_scale`); size_gate (C,) in [0, 1], 0 = none:
+    a pair is scored, in either stage, only when its footprint areas agree within its class's ratio
+    (:func:`size_consistent`).
     """
     solve = ASSIGNMENT[assignment]
     stages = [(tuple(first_metric), first_threshold)]
@@ -320,11 +324,28 @@ def associate(
             radii = radii * gate_scale[None, :]  # (D, T)
         inside = np.linalg.norm(det_boxes[:, None, :3] - trk_boxes[None, :, :3], axis=2) < radii  # (D, T)
         costs = [np.where(inside, c, _INVALID) for c in costs]
+    if size_gate is not None and np.any(size_gate > 0) and costs[0].size:
+        alike = size_consistent(det_boxes, trk_boxes, size_gate[trk_labels])  # (D, T)
+        costs = [np.where(alike, c, _INVALID) for c in costs]
     if crowded is not None and costs[0].size:
         costs[0] = crowded_stage_one(costs[0], det_labels, first_threshold, *crowded, skip=crowded_skip)
     if track_penalty is not None and costs[0].size and np.any(track_penalty > 0):
         costs[0] = penalized(costs[0], first_threshold[det_labels], track_penalty)
     return _solve_stages(solve, costs, det_labels, first_threshold, second_threshold)
+
+
+def size_consistent(det_boxes: np.ndarray, trk_boxes: np.ndarray, ratio: np.ndarray) -> np.ndarray:
+    """(D, T) bool: the pairs whose BEV footprint areas agree, ``min(a_d, a_t) >= ratio * max(a_d, a_t)``.
+
+    det_boxes (D, 9), trk_boxes (T, 9): canonical boxes, a = w l in square metres (the track's filtered size);
+    ratio (T,) in [0, 1], each track's class's ``association.size_gate`` (0: every pair agrees). A box of another
+    object's size near a track (a neighbour's box given this class, a fragment) is refused however close it lies,
+    while an object's own detections, whose size errors are a few tens of per cent, pass."""
+    a_d = det_boxes[:, 3] * det_boxes[:, 4]  # (D,) m^2
+    a_t = trk_boxes[:, 3] * trk_boxes[:, 4]  # (T,) m^2
+    small = np.minimum(a_d[:, None], a_t[None, :])
+    large = np.maximum(a_d[:, None], a_t[None, :])
+    return small >= ratio[None, :] * large
 
 
 def penalized(cost: np.ndarray, threshold: np.ndarray, penalty: np.ndarray) -> np.ndarray:

@@ -90,6 +90,7 @@ class TrackerConfig:
     # per class fixed, missed_frames (a track missed for k frames is gated at (k + 1) x distance_gate) or a speed
     # v in m/s (a track missed for t seconds is gated at distance_gate + v t)
     distance_gate_growth: tuple[str | float, ...] = ("fixed",) * 7
+    size_gate: np.ndarray = field(default_factory=lambda: np.zeros(7))  # footprint-area ratio in [0, 1]; 0: off
     score_update: str = "detection"
     termination: str = "age"
     delete_threshold: np.ndarray = field(default_factory=lambda: np.zeros(7))
@@ -183,6 +184,8 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
     frames, speed = gate_growth_rules(v["association.distance_gate_growth"])
     if frames.any() or np.any(speed > 0):
         _check_widening_gate(v, source)
+    if np.any(v["association.size_gate"] > 0):
+        _check_size_gate(v, source)
     if v["association.crowded_skips_lost_newborns"]:
         _check_lost_newborn(v, source, "'association.crowded_skips_lost_newborns: true'")
         if not np.any(v["association.crowded_threshold"] > 0):
@@ -223,6 +226,7 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
         nms_distance_gate=v["preprocessing.nms_distance_gate"],
         distance_gate=v["association.distance_gate"],
         distance_gate_growth=v["association.distance_gate_growth"],
+        size_gate=v["association.size_gate"],
         score_update=v["lifecycle.score_update"],
         termination=v["lifecycle.termination"],
         delete_threshold=v["lifecycle.delete_threshold"],
@@ -386,6 +390,20 @@ def _check_widening_gate(v: dict, source: str) -> None:
             f"{source}: 'association.distance_gate_growth' missed_frames or a speed above 0 needs "
             f"'association.algorithm: hungarian', no alignment GIoU metric and no distance gate on every class "
             f"(Fast-Poly's gate is fixed)"
+        )
+
+
+def _check_size_gate(v: dict, source: str) -> None:
+    """``association.size_gate`` masks the pairs of both stages of the two-stage Hungarian association
+    (:func:`~grutrack.tracking.association.associate`): refuse it with greedy matching, Fast-Poly's dense
+    association (alignment GIoU, or a gate on every class) and MCTrack's one-stage Ro_GDIoU association, which
+    would ignore it."""
+    one_stage = all(m == "ro_gdiou_bev" for m in v["association.first_metric"])
+    if _not_compiled_two_stage(v) or one_stage:
+        raise ConfigError(
+            f"{source}: 'association.size_gate' above 0 needs 'association.algorithm: hungarian', no alignment "
+            f"GIoU metric, no distance gate on every class and a first_metric other than ro_gdiou_bev for some "
+            f"class (it gates the pairs of the two-stage association)"
         )
 
 

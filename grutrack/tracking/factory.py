@@ -209,6 +209,7 @@ def remap_config(cfg: TrackerConfig, index: np.ndarray) -> TrackerConfig:
         nms_distance_gate=cfg.nms_distance_gate[index],
         distance_gate=cfg.distance_gate[index],
         distance_gate_growth=tuple(cfg.distance_gate_growth[i] for i in index),
+        size_gate=cfg.size_gate[index],
         delete_threshold=cfg.delete_threshold[index],
         geometry_filter=tuple(cfg.geometry_filter[i] for i in index),
         coast_yaw_rate=tuple(cfg.coast_yaw_rate[i] for i in index),

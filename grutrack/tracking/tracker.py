@@ -184,6 +184,7 @@ def two_stage_association(cfg: TrackerConfig) -> AssociateFn:
             None
             if tracks is None or not widens.any()
             else gate_scale(frames, speed, cfg.distance_gate, trk_labels, tracks.misses, dt),
+            cfg.size_gate,
         )
 
     run.wants_tracks = bool(np.any(penalty > 0)) or skip_lost or bool(widens.any())
