@@ -215,7 +215,7 @@ DENSE = {
     "dense5_train": ("fresh6_train", 20, 5),
     "dense6": ("fresh8", 0, 10),
     "dense6_variants": ("fresh8_variants", 0, 5),
-    "dense6_train": ("fresh8_train", 0, 5),
+    "dense6_train": ("fresh8_train", 0, 3),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
