@@ -41,7 +41,9 @@ Decision 15, its count on dense sets no decision saw; Decision 16 was then taken
 ``dense4_variants`` and ``dense4_train`` (the seeds after those, densified alike: made after Decision 17's choice,
 its count on dense sets no decision saw; Decision 18 was then taken on the first two); ``dense5`` and ``dense5_train``
 (the last seeds of ``fresh7`` and ``fresh6_train``, densified alike: made after Decision 18's choice, its count on
-dense sets no decision saw); ``worlds`` and
+dense sets no decision saw; Decision 19 was then measured on every dense group before); ``dense6``,
+``dense6_variants`` and ``dense6_train`` (new seeds, ``fresh8``, ``fresh8_variants`` and ``fresh8_train``,
+densified alike: made after Decision 19's choice, its count on dense sets no decision saw); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles; ``worlds_fresh``, worlds 11-20
 made after Decision 13, its count on larger unseen sets). Candidates:
