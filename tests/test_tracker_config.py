@@ -49,6 +49,7 @@ def test_ekf_preset_values():
     assert cfg.punish_num.tolist() == [2, 2, 1, 2, 1, 2, 2]  # all but car and pedestrian coast two frames
     assert cfg.algorithm == "hungarian" and cfg.min_hits.tolist() == [1] * 7  # Poly-MOT's min_hit 1
     assert np.isinf(cfg.max_distance).all()  # the greedy gate: not read by hungarian, so not in the preset
+    assert cfg.size_gate.tolist() == [0.3] * 7  # Decision 19: a pair's footprint areas within a factor 1 / 0.3
 
 
 def test_baseline_presets():
