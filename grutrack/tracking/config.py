@@ -36,6 +36,8 @@ NEEDED_WITH = {
     "motion.position_noise": ("motion.filter", "decoupled_cv"),
     "motion.size_noise": ("motion.filter", "decoupled_cv"),
 }
+#: where the lost-newborn keys act (the reason :func:`_check_two_stage_pairs` gives)
+_STAGE_ONE = "it acts in stage 1 of the two-stage association"
 #: per-class settings that are names (kept as tuples; the numeric ones become (7,) arrays)
 _NAMED_PER_CLASS = (
     "per_class_metric",
@@ -180,14 +182,16 @@ def config_from_dict(raw: dict, source: str = "<dict>") -> TrackerConfig:
             f"(greedy matching is one stage)"
         )
     if np.any(v["association.lost_newborn_penalty"] > 0):
-        _check_lost_newborn(v, source, "'association.lost_newborn_penalty' above 0")
+        _check_two_stage_pairs(v, source, "'association.lost_newborn_penalty' above 0", _STAGE_ONE)
     frames, speed = gate_growth_rules(v["association.distance_gate_growth"])
     if frames.any() or np.any(speed > 0):
         _check_widening_gate(v, source)
     if np.any(v["association.size_gate"] > 0):
-        _check_size_gate(v, source)
+        _check_two_stage_pairs(
+            v, source, "'association.size_gate' above 0", "it gates the pairs of the two-stage association"
+        )
     if v["association.crowded_skips_lost_newborns"]:
-        _check_lost_newborn(v, source, "'association.crowded_skips_lost_newborns: true'")
+        _check_two_stage_pairs(v, source, "'association.crowded_skips_lost_newborns: true'", _STAGE_ONE)
         if not np.any(v["association.crowded_threshold"] > 0):
             raise ConfigError(
                 f"{source}: 'association.crowded_skips_lost_newborns: true' needs 'association.crowded_threshold' "
@@ -393,31 +397,18 @@ def _check_widening_gate(v: dict, source: str) -> None:
         )
 
 
-def _check_size_gate(v: dict, source: str) -> None:
-    """``association.size_gate`` masks the pairs of both stages of the two-stage Hungarian association
-    (:func:`~grutrack.tracking.association.associate`): refuse it with greedy matching, Fast-Poly's dense
-    association (alignment GIoU, or a gate on every class) and MCTrack's one-stage Ro_GDIoU association, which
-    would ignore it."""
-    one_stage = all(m == "ro_gdiou_bev" for m in v["association.first_metric"])
-    if _not_compiled_two_stage(v) or one_stage:
-        raise ConfigError(
-            f"{source}: 'association.size_gate' above 0 needs 'association.algorithm: hungarian', no alignment "
-            f"GIoU metric, no distance gate on every class and a first_metric other than ro_gdiou_bev for some "
-            f"class (it gates the pairs of the two-stage association)"
-        )
-
-
-def _check_lost_newborn(v: dict, source: str, what: str) -> None:
-    """The lost-newborn keys (``what``: the key and its value as the message names them) act in stage 1 of the
-    two-stage Hungarian association (:func:`~grutrack.tracking.association.associate`): refuse them with greedy
-    matching, Fast-Poly's dense association (alignment GIoU, or a gate on every class) and MCTrack's one-stage
-    Ro_GDIoU association."""
+def _check_two_stage_pairs(v: dict, source: str, what: str, why: str) -> None:
+    """Keys that act on the pairs of the two-stage Hungarian association
+    (:func:`~grutrack.tracking.association.associate`; ``what``: the key and its value as the message names them,
+    ``why``: where they act): the lost-newborn keys in stage 1, ``association.size_gate`` in both stages. Refuse
+    them with greedy matching, Fast-Poly's dense association (alignment GIoU, or a gate on every class) and
+    MCTrack's one-stage Ro_GDIoU association, which would ignore them."""
     one_stage = all(m == "ro_gdiou_bev" for m in v["association.first_metric"])
     if _not_compiled_two_stage(v) or one_stage:
         raise ConfigError(
             f"{source}: {what} needs 'association.algorithm: hungarian', no "
             f"alignment GIoU metric, no distance gate on every class and a first_metric other than ro_gdiou_bev "
-            f"for some class (it acts in stage 1 of the two-stage association)"
+            f"for some class ({why})"
         )
 
 
