@@ -612,7 +612,7 @@ def _bicycle_gate(radius: float):
 def _size_gate(ratio: float):
     """Every class's ``association.size_gate`` at ``ratio`` (0: off): a pair is scored only when the smaller
     footprint area is at least this fraction of the larger."""
-    return lambda raw: raw["association"].update(size_gate=dict.fromkeys(raw["association"]["distance_gate"], ratio))
+    return lambda raw: raw["association"].update(size_gate=dict.fromkeys(CLASSES, ratio))
 
 
 def _bus_delete(threshold: float):

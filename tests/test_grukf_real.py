@@ -18,7 +18,7 @@ the default `ekf` preset's (within a standard error) and above Poly-MOT's EKF (`
 mean AMOTP 0.0155 m below the preset's (0.0126 m on these ten); the real file above the preset's. The bounds guard
 those relations: mean AMOTA not more than 0.001 below the preset's, mean AMOTP at least 0.01 m below it (ten sets:
 one association event in a row of parked motorcycles moves a set's AMOTP by 0.03 m or more; networks re-trained by
-the same recipe for a changed preset have measured 0.0155-0.0211 m on the twenty), the real file within 0.002 of
+the same recipe for a changed preset have measured 0.0155-0.0242 m on the twenty), the real file within 0.002 of
 it."""
 
 from __future__ import annotations
