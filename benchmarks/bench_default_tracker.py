@@ -43,7 +43,9 @@ its count on dense sets no decision saw; Decision 18 was then taken on the first
 (the last seeds of ``fresh7`` and ``fresh6_train``, densified alike: made after Decision 18's choice, its count on
 dense sets no decision saw; Decision 19 was then measured on every dense group before); ``dense6``,
 ``dense6_variants`` and ``dense6_train`` (new seeds, ``fresh8``, ``fresh8_variants`` and ``fresh8_train``,
-densified alike: made after Decision 19's choice, its count on dense sets no decision saw); ``worlds`` and
+densified alike: made after Decision 19's choice, its count on dense sets no decision saw); ``dense7``,
+``dense7_variants`` and ``dense7_train`` (the next seeds of the same groups, densified alike: made after Decision
+19's note, a second count of Decision 19 on dense sets no decision saw); ``worlds`` and
 ``towed`` (:data:`WORLDS`: SYNTHETIC demo worlds of 20 scenes, every scene tracked, the four profiles; ``towed``
 with a third of the trailers towed; ``worlds_variants`` with the variant profiles; ``worlds_fresh``, worlds 11-20
 made after Decision 13, its count on larger unseen sets). Candidates:
@@ -218,6 +220,9 @@ DENSE = {
     "dense6": ("fresh8", 0, 10),
     "dense6_variants": ("fresh8_variants", 0, 5),
     "dense6_train": ("fresh8_train", 0, 3),
+    "dense7": ("fresh8", 10, 10),
+    "dense7_variants": ("fresh8_variants", 5, 5),
+    "dense7_train": ("fresh8_train", 3, 3),
 }
 
 #: SYNTHETIC demo worlds (grutrack.data.demo, the main job's dataset), ``WORLD_SCENES`` scenes each, every scene
