@@ -126,6 +126,15 @@ def test_model_pt_holds_the_best_validated_step_and_last_pt_the_last(small_train
     model, last = read_checkpoint(final), read_checkpoint(tmp_path / "last.pt")
     assert _same(model["model"], v.seen[best][1])
     assert _same(last["model"], v.seen[-1][1])
+    # every validated network is kept, loadable as a network, with its step and validation AMOTA
+    from grutrack.motion.checkpoint import load_network
+
+    kept = sorted(p.name for p in (tmp_path / "validated").iterdir())
+    assert kept == sorted(f"step_{i}.pt" for i in range(7))
+    for i, (value, weights) in enumerate(v.seen):
+        doc = read_checkpoint(tmp_path / "validated" / f"step_{i}.pt")
+        assert _same(doc["model"], weights) and doc["selected"] == {"step": i, "val_amota": value}
+    load_network(tmp_path / "validated" / f"step_{best}.pt")
     assert model["selected"] == {"rule": "best_val_amota", "step": best, "val_amota": max(values)}
     rec = ValidationRecord.read(tmp_path / "validation.json")
     assert (rec.rule, rec.selected_step, rec.selected_amota) == ("best_val_amota", best, max(values))
@@ -268,6 +277,7 @@ def test_cli_holds_scenes_out_of_training_and_validates_on_them(
     cfg, _ = read_config("training", "grukf")
     cfg.update(
         validation_scenes=2,
+        validation_draws=2,
         select_checkpoint="best_val_amota",
         val_every=3,
         lr=3e-3,
@@ -311,7 +321,10 @@ def test_cli_holds_scenes_out_of_training_and_validates_on_them(
     rec = ValidationRecord.read(tmp_path / "ck" / "validation.json")
     assert rec.scenes == held and rec.split == "mini_train" and rec.held_out
     # validated with the command's detections and one simulated set per resampling profile (AMOTA their mean)
-    assert rec.detection_sets == ["given", "centerpoint", "pointpillars", "centerpoint_velfail"]
+    assert rec.detection_sets == [
+        "given",
+        *(f"{p}{d}" for p in ("centerpoint", "pointpillars", "centerpoint_velfail") for d in ("", "_1")),
+    ]
     assert 0.5 < rec.reference_amota < 1.0
     # with gain_prior ekf and the preset's motion config for the network's classes, the untrained GRU-KF is the
     # preset's EKF: its validation AMOTA (step 0) is the reference's up to float32 rounding
@@ -409,3 +422,41 @@ def test_av2_training_validates_on_a_held_out_log_with_the_datasets_hota(av2_roo
         ds.score_tracks("val", scenes, results, 500)
         == ds.evaluate(tmp_path / "t.pkl", "val", workers=1).overall["hota"]
     )
+
+
+def test_validation_draws_have_their_own_seeds_and_names(monkeypatch):
+    """``validation_draws``: per resample profile that many sets, named ``<profile>``, ``<profile>_1``, ...,
+    drawn with seeds no training epoch of this or another config seed draws."""
+    from grutrack.training import resample, run
+    from grutrack.training.config import load_train_config
+
+    seeds = [resample.validation_seed(1, d) for d in range(5)]
+    assert seeds[0] == resample.resample_seed(1, 0) and len(set(seeds)) == 5
+    trained = {resample.resample_seed(s, e) for s in range(4) for e in range(1, 1000)}
+    assert not trained & {resample.validation_seed(s, d) for s in range(4) for d in range(100)}
+    with pytest.raises(ValueError):
+        resample.validation_seed(1, resample.RESAMPLE_SEED_BASE)
+
+    class Drawn:  # a resampler that returns what it was asked to draw
+        def __init__(self, dataset, split, scenes, yaw):
+            pass
+
+        def __call__(self, profile, seed):
+            return (profile, seed)
+
+    monkeypatch.setattr(resample, "DetectionResampler", Drawn)
+    cfg = load_train_config("grukf", {"validation_draws": 3, "resample_profiles": ["centerpoint", "pointpillars"]})
+    sets = run._validation_sets(cfg, None, "mini_train", [], {"t": "given"}, "euler_z")
+    assert sets == {
+        "given": {"t": "given"},
+        **{
+            f"centerpoint{s}": ("centerpoint", resample.validation_seed(cfg.seed, d))
+            for d, s in enumerate(["", "_1", "_2"])
+        },
+        **{
+            f"pointpillars{s}": ("pointpillars", resample.validation_seed(cfg.seed, d))
+            for d, s in enumerate(["", "_1", "_2"])
+        },
+    }
+    assert load_train_config("grukf").validation_draws == 5  # the default recipe: 1 + 3 profiles x 5 = 16 sets
+    assert load_train_config("paper").validation_draws == 1

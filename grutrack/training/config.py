@@ -41,6 +41,7 @@ class TrainConfig:
     sources: tuple = ()  # extra training sources (grutrack/training/sources.py), mappings
     scenes_per_step: int = 1  # scenes per optimizer step (1: the paper's), the network batched over them
     validation_scenes: int = 0  # training-split scenes held out for validation when no --val-split is given
+    validation_draws: int = 1  # simulated detection sets per resample profile on those scenes
     select_checkpoint: str = "last"  # model.pt: "last", "best_val_amota" or "best_val_amota_1se" (selection.py)
     resample_mix: str = "epoch"  # resampled profiles take turns by "epoch" or are mixed over the "scene"s
     training_classes: str = "tracked"  # the classes whose tracks train the network: "tracked" or "own_model"

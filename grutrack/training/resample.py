@@ -31,6 +31,16 @@ def resample_seed(cfg_seed: int, epoch: int) -> int:
     return RESAMPLE_SEED_BASE * (cfg_seed + 1) + epoch
 
 
+def validation_seed(cfg_seed: int, draw: int) -> int:
+    """The simulator seed of validation draw ``draw`` (>= 0) of a profile for a training config seed: draw 0
+    ``resample_seed(cfg_seed, 0)`` (epoch 0 trains on the given detections, so training never draws it), the
+    next ones counting down from it, below every epoch's seed of this config seed and above the last config
+    seed's (``draw`` < RESAMPLE_SEED_BASE)."""
+    if not 0 <= draw < RESAMPLE_SEED_BASE:
+        raise ValueError(f"validation draw {draw}: expected 0 <= draw < {RESAMPLE_SEED_BASE}")
+    return resample_seed(cfg_seed, 0) - draw
+
+
 class DetectionResampler:
     """Simulated detections (canonical, by frame token) of the training scenes of any dataset: the dataset's
     own simulator writes them in its detection format and its own reader reads them back (one reader per

@@ -159,15 +159,18 @@ def _held_out(cfg, config_arg: str, dataset, split: str, scenes: list) -> list:
 
 
 def _validation_sets(cfg, dataset, split: str, held: list, dets: dict, yaw: str) -> dict:
-    """Detection sets of the held-out scenes: the command's detections and, with ``resample_profiles``, one set
-    simulated with each profile (seed ``resample_seed(seed, 0)``, which training never draws: epoch 0 trains on the
-    command's detections), so that validation sees every kind of detector error the training does."""
-    from grutrack.training.resample import DetectionResampler, resample_seed
+    """Detection sets of the held-out scenes: the command's detections and, with ``resample_profiles``,
+    ``validation_draws`` sets simulated with each profile (seeds :func:`~grutrack.training.resample.validation_seed`,
+    which training never draws), so that validation sees every kind of detector error the training does, each
+    over several draws of its noise. Names: the profile's (its first draw), then ``<profile>_<draw>``."""
+    from grutrack.training.resample import DetectionResampler, validation_seed
 
     sets = {"given": dets}
     sim = DetectionResampler(dataset, split, held, yaw)
     for profile in cfg.resample_profiles:
-        sets[Path(profile).stem] = sim(profile, resample_seed(cfg.seed, 0))
+        for draw in range(cfg.validation_draws):
+            name = Path(profile).stem + (f"_{draw}" if draw else "")
+            sets[name] = sim(profile, validation_seed(cfg.seed, draw))
     return sets
 
 

@@ -331,11 +331,24 @@ class Trainer:
     def _save_validated(self) -> Path:
         """After a validation: last.pt at the validated step, then best.pt when the rule chose its network. In this
         order best.pt never holds a step beyond last.pt's, so that a resumed run, which replays its log's
-        validations, finds the network it selects in best.pt (or, stopped between the two writes, at hand)."""
+        validations, finds the network it selects in best.pt (or, stopped between the two writes, at hand). The
+        validated network is also kept as ``validated/step_<step>.pt`` (:meth:`_write_validated`)."""
         path = self.save()
+        self._write_validated()
         if self._best_due:
             self._write_best()
         return path
+
+    def _write_validated(self) -> None:
+        """``validated/step_<step>.pt``: the network just validated (a network checkpoint, about 1.7 MB, as
+        best.pt), so that every point of the learning curve can be tracked and scored on other data after the run
+        (``grutrack track --checkpoint``; docs/results/grukf_eval/README.md#validation-draws)."""
+        row = self.log.steps[-1]
+        folder = self.out / "validated"
+        folder.mkdir(exist_ok=True)
+        network_checkpoint(
+            self.net, train_config=asdict(self.cfg), selected=CheckpointSelection(row.step, row.val_amota)
+        ).write(folder / f"step_{row.step}.pt")
 
     # -- validation and the selected checkpoint --------------------------------------------------------------
     def _validate_start(self) -> None:
