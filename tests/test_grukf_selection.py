@@ -114,6 +114,8 @@ def test_model_pt_holds_the_best_validated_step_and_last_pt_the_last(small_train
     scenes, dets = small_training_set
     v = ScriptedValidator()
     assert isinstance(v, Validator) and isinstance(ScriptedSetsValidator(), Validator)  # the trainer's protocol
+    (tmp_path / "validated").mkdir()
+    (tmp_path / "validated" / "step_99.pt").write_bytes(b"an earlier run's")  # removed by a run from its start
     t = _trainer(scenes, dets, tmp_path, v, select_checkpoint="best_val_amota")
     final = t.run()
     log = TrainingLog.read(tmp_path / "train_log.csv")
@@ -173,6 +175,10 @@ def test_a_resumed_run_selects_what_the_uninterrupted_run_selects(small_training
     c.run()
     ma, mb = read_checkpoint(tmp_path / "a" / "model.pt"), read_checkpoint(tmp_path / "b" / "model.pt")
     assert ma["selected"] == mb["selected"] and _same(ma["model"], mb["model"])
+    # the resumed run keeps the networks it validated before the interruption, and adds the later ones
+    kept = {p.name: read_checkpoint(p)["model"] for p in (tmp_path / "a" / "validated").iterdir()}
+    resumed = {p.name: read_checkpoint(p)["model"] for p in (tmp_path / "b" / "validated").iterdir()}
+    assert set(kept) == set(resumed) and all(_same(kept[k], resumed[k]) for k in kept)
     assert (tmp_path / "a" / "validation.json").read_text() == (tmp_path / "b" / "validation.json").read_text()
 
 

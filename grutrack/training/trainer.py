@@ -277,6 +277,7 @@ class Trainer:
         self.out.mkdir(parents=True, exist_ok=True)
         with self._sigint_deferred():
             if self.validate is not None and self.state.step == 0 and not self.log.steps:
+                self._clear_validated()
                 self._phase = "finishing the validation before the first step, then saving last.pt"
                 self._validate_start()
                 self._stop_if_interrupted(self._save_validated())
@@ -338,6 +339,12 @@ class Trainer:
         if self._best_due:
             self._write_best()
         return path
+
+    def _clear_validated(self) -> None:
+        """A run starting from its first step removes the ``validated/step_<step>.pt`` an earlier run left in its
+        folder, so that every network there is this run's (a resumed run keeps its own)."""
+        for path in (self.out / "validated").glob("step_*.pt"):
+            path.unlink()
 
     def _write_validated(self) -> None:
         """``validated/step_<step>.pt``: the network just validated (a network checkpoint, about 1.7 MB, as
