@@ -157,7 +157,10 @@ def test_select_last_writes_the_last_step_and_says_so(small_training_set, tmp_pa
 
 def test_without_validation_the_record_names_the_last_step(small_training_set, tmp_path):
     scenes, dets = small_training_set
+    (tmp_path / "validated").mkdir()
+    (tmp_path / "validated" / "step_3.pt").write_bytes(b"an earlier run's")
     final = _trainer(scenes, dets, tmp_path, None, select_checkpoint="best_val_amota", epochs=1).run()
+    assert not list((tmp_path / "validated").iterdir())  # no network validated, none left from before
     rec = ValidationRecord.read(tmp_path / "validation.json")
     assert (rec.rule, rec.selected_step, rec.reference_amota) == ("last", 2, None)
     assert read_checkpoint(final)["train_state"]["step"] == 2

@@ -276,8 +276,9 @@ class Trainer:
         saved, it lets model.pt and validation.json be written and the run ends as usual."""
         self.out.mkdir(parents=True, exist_ok=True)
         with self._sigint_deferred():
-            if self.validate is not None and self.state.step == 0 and not self.log.steps:
+            if self.state.step == 0 and not self.log.steps:
                 self._clear_validated()
+            if self.validate is not None and self.state.step == 0 and not self.log.steps:
                 self._phase = "finishing the validation before the first step, then saving last.pt"
                 self._validate_start()
                 self._stop_if_interrupted(self._save_validated())
