@@ -921,6 +921,12 @@ CANDIDATES = {
     # measured for it
     "ekf_prev19": _size_gate(0.0),
     **{f"+size_gate{round(v * 10):02d}": _size_gate(v) for v in (0.5, 0.7)},
+    # buses' position noise R (x, y) 0.5 and 0.25 m^2 instead of Poly-MOT's 1, measured after Decision 19's second
+    # held-out count (its failing-velocity buses), not adopted
+    **{
+        f"+bus_rxy{name}": _class_motion("bus", f"bus_rxy{name}", R=[r, r, 1.0, 1.0, 1.0, 1.0, 0.1, 2.0, 2.0])
+        for name, r in (("05", 0.5), ("025", 0.25))
+    },
     # other radii (m) and speeds (m/s) of the buses' gate, measured for Decision 16
     **{
         f"+bus_gate{r}_{v}mps": _bus_gate(float(r), float(v))
