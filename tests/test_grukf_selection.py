@@ -329,7 +329,7 @@ def test_cli_holds_scenes_out_of_training_and_validates_on_them(
     assert len([r for r in log.steps if r.step > 0]) == 6 and not {r.scene for r in log.steps} & set(held)
     rec = ValidationRecord.read(tmp_path / "ck" / "validation.json")
     assert rec.scenes == held and rec.split == "mini_train" and rec.held_out
-    # validated with the command's detections and one simulated set per resampling profile (AMOTA their mean)
+    # validated with the command's detections and two simulated sets per resampling profile (AMOTA their mean)
     assert rec.detection_sets == [
         "given",
         *(f"{p}{d}" for p in ("centerpoint", "pointpillars", "centerpoint_velfail") for d in ("", "_1")),
@@ -354,6 +354,8 @@ def test_cli_holds_scenes_out_of_training_and_validates_on_them(
     [
         ("validation_scenes", -1, "'validation_scenes' must be an integer from 0 to 1000, got -1"),
         ("validation_scenes", 2.5, "'validation_scenes' must be an integer from 0 to 1000, got 2.5"),
+        ("validation_draws", 0, "'validation_draws' must be an integer from 1 to 100, got 0"),
+        ("validation_draws", 1.5, "'validation_draws' must be an integer from 1 to 100, got 1.5"),
         (
             "select_checkpoint",
             "best",
@@ -469,3 +471,21 @@ def test_validation_draws_have_their_own_seeds_and_names(monkeypatch):
     }
     assert load_train_config("grukf").validation_draws == 5  # the default recipe: 1 + 3 profiles x 5 = 16 sets
     assert load_train_config("paper").validation_draws == 1
+
+
+def test_a_bad_validation_draws_exits_2_with_one_line(nusc_root, tmp_path, capsys):
+    import yaml
+
+    from grutrack.cli import main
+    from grutrack.config_loader import read_config
+
+    cfg, _ = read_config("training", "grukf")
+    cfg["validation_draws"] = 0
+    (tmp_path / "bad.yaml").write_text(yaml.safe_dump(cfg))
+    argv = ["train", "--dataroot", str(nusc_root), "--version", "v1.0-mini", "--split", "mini_train"]
+    argv += ["--detections", str(tmp_path / "none.json"), "--config", str(tmp_path / "bad.yaml")]
+    assert main([*argv, "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"grutrack train: error: {tmp_path / 'bad.yaml'}: 'validation_draws' must be an integer from 1 to 100, got 0"
+    ]
